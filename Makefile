@@ -1,0 +1,33 @@
+# Two commands from nothing: `make demo` and `make test` (each creates .venv first).
+VENV ?= .venv
+PYTHON ?= python3
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.monet-installed
+# The ROS wheels re-exec Python with their library path; never inherit another venv's state.
+unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
+
+.PHONY: venv demo test lint bench clean
+
+venv: $(STAMP)
+
+$(STAMP): requirements.txt setup.py
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
+	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
+	$(PY) -c "import rclpy, torch, cv2, mcap, rosbags; print('environment ready: torch', torch.__version__)"
+	touch $(STAMP)
+
+demo: $(STAMP)
+	$(PY) -m monet_ros.cli demo
+
+test: $(STAMP)
+	$(PY) -m pytest
+
+lint: $(STAMP)
+	$(PY) -m ruff check .
+
+bench: $(STAMP)
+	for script in bench/*.py; do $(PY) $$script || exit 1; done
+
+clean:
+	rm -rf $(VENV) build install log *.egg-info

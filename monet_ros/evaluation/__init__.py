@@ -1,0 +1,1 @@
+"""PCK, reprojection error, report tables and plots."""

@@ -1,0 +1,1 @@
+"""Multi-camera geometry: cameras, rig files, epipolar geometry, triangulation (no ROS)."""

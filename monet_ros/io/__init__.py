@@ -1,0 +1,1 @@
+"""MCAP / rosbag2 reading and writing, ROS <-> numpy message conversion."""

@@ -1,0 +1,1 @@
+"""Losses (epipolar divergence), datasets from recordings, pseudo-labels and training."""

@@ -1,0 +1,1 @@
+"""Heatmap keypoint detectors (CPM, Hourglass, a small fast net), codec and checkpoints."""

@@ -1,0 +1,1 @@
+"""Thin rclpy nodes: detector, fusion, learner, player."""

@@ -1,0 +1,1 @@
+"""Synthetic calibrated rig and articulated subject renderer."""

@@ -1,0 +1,44 @@
+"""ament_python package: library, config/ and launch/ to share/, executables to lib/."""
+from glob import glob
+import os
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'monet_ros'
+
+# Executables run as `ros2 run monet_ros <name>`; setup.cfg puts them in lib/monet_ros.
+EXECUTABLES = {
+    'monet': 'monet_ros.cli:main',
+}
+
+
+def share_files(folder):
+    """data_files entries that install `folder` (recursively) under share/monet_ros."""
+    entries = []
+    for path in sorted(glob(os.path.join(folder, '**', '*'), recursive=True)):
+        if os.path.isfile(path):
+            entries.append((os.path.join('share', PACKAGE, os.path.dirname(path)), [path]))
+    return entries
+
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*', 'bench']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
+        ('share/' + PACKAGE, ['package.xml']),
+        *share_files('config'),
+        *share_files('launch'),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='monet_ros developers',
+    maintainer_email='dev@monet-ros.invalid',
+    description='Live multi-camera keypoint tracking with MONET (epipolar divergence).',
+    license='BSD-3-Clause',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [f'{name} = {target}' for name, target in EXECUTABLES.items()],
+    },
+)

@@ -1,0 +1,1 @@
+"""Test utilities shared across layers (importable as `helpers`)."""
