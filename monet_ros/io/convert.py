@@ -19,8 +19,13 @@ from .fields import (
     keypoint_cloud_fields,
     split_stamp,
 )
-from .images import any_image_to_numpy, compressed_image_to_numpy, encode_compressed, \
-    image_fields, image_to_numpy
+from .images import (
+    any_image_to_numpy,
+    compressed_image_to_numpy,
+    encode_compressed,
+    image_fields,
+    image_to_numpy,
+)
 from .markers import skeleton_marker_specs
 
 __all__ = [

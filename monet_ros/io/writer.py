@@ -11,7 +11,8 @@ import io
 import os
 from pathlib import Path
 
-from mcap.writer import CompressionType, Writer as McapWriter
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 import numpy as np
 import yaml
 
@@ -59,7 +60,7 @@ class BagWriter:
     """
 
     def __init__(self, path, compression='none', chunk_size=4 * 1024 * 1024):
-        from rosbags.typesys import get_typestore, Stores
+        from rosbags.typesys import Stores, get_typestore
 
         self.path = Path(path)
         if compression not in _COMPRESSION:
