@@ -9,6 +9,7 @@ and a damaged chunk (bad CRC, bad compression, cut records) costs only that chun
 record header is corrupt or the file is cut, scanning resumes at the next chunk the summary
 index knows, or else at the next byte offset that parses as a valid chunk header.
 """
+import bisect
 import io
 import os
 import struct
@@ -132,8 +133,9 @@ def parse_channel(body):
 
 class McapScan:
     """Stream one MCAP file: `events()` yields ('schema', Schema), ('channel', Channel) and
-    ('chunk', start_time, [messages]) / ('message', msg) items in file order, where a
-    message is (channel_id, sequence, log_time, publish_time, data).
+    ('chunk', start_time, [schema/channel events], [messages], file offset) and
+    ('message', msg) items in file order, where a message is
+    (channel_id, sequence, log_time, publish_time, data).
 
     report: an object with error(file, text) and crc_error(file) methods.
     skip_chunk(offset): True to seek past the chunk at that file offset without reading it
@@ -210,7 +212,7 @@ class McapScan:
             if f.read(8) != MAGIC:
                 self._error('bad MCAP magic at the start of the file (reading what parses)')
             self.open_summary(f)
-            pos = 8
+            pos, prev, visited = 8, 7, set()
             while pos < self.size:
                 f.seek(pos)
                 head = f.read(9)
@@ -219,22 +221,39 @@ class McapScan:
                                 '(truncated)')
                     break
                 op, length = _REC_HEAD.unpack(head)
-                if op not in _KNOWN_OPS and op < 0x80 or pos + 9 + length > self.size:
-                    what = ('runs past the end of the file (truncated?)'
-                            if pos + 9 + length > self.size else 'has an unknown opcode')
-                    nxt = self._next_start(f, pos)
+                end = pos + 9 + length
+                problem = None
+                if end > self.size:
+                    problem = 'runs past the end of the file (truncated?)'
+                elif op not in _KNOWN_OPS and op < 0x80:
+                    problem = 'has an unknown opcode'
+                elif op in (OP_FOOTER, OP_DATA_END):
+                    if length == (20 if op == OP_FOOTER else 4) and \
+                            self._indexed_chunk_between(pos, self.size) is None:
+                        break                          # the summary section follows
+                    problem = 'is a misplaced end-of-data record'
+                else:
+                    skipped = self._indexed_chunk_between(pos, end)
+                    if skipped is not None:
+                        problem = f'would jump over the indexed chunk at byte {skipped}'
+                if problem is not None:
+                    # resume at the next valid chunk after the last good record start
+                    nxt = self._next_start(f, prev)
+                    if nxt is None or nxt == pos or nxt in visited:
+                        nxt = self._next_start(f, pos)
+                    if nxt in visited:
+                        nxt = None
                     self._error(f'record at byte {pos} (opcode 0x{op:02x}, length {length}) '
-                                f'{what}; ' + (f'resuming at byte {nxt}' if nxt is not None
-                                               else 'nothing readable after it'))
+                                f'{problem}; ' + (f'resuming at byte {nxt}' if nxt is not None
+                                                  else 'nothing readable after it'))
                     if nxt is None:
                         break
-                    pos = nxt
+                    visited.add(nxt)
+                    prev, pos = pos, nxt
                     continue
-                if op in (OP_FOOTER, OP_DATA_END):
-                    break                              # the summary section follows
                 if op == OP_CHUNK:
                     if skip_chunk is not None and skip_chunk(pos):
-                        pos += 9 + length
+                        prev, pos = pos, end
                         continue
                     body = memoryview(f.read(length))
                     item = self._chunk(body, pos)
@@ -242,7 +261,7 @@ class McapScan:
                         nxt = self._next_start(f, pos)
                         if nxt is None:
                             break
-                        pos = nxt
+                        prev, pos = pos, nxt
                         continue
                     yield item
                 elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE):
@@ -250,7 +269,18 @@ class McapScan:
                     item = self._record(op, body, pos)
                     if item is not None:
                         yield item
-                pos += 9 + length
+                prev, pos = pos, end
+
+    def _indexed_chunk_between(self, lo, hi):
+        """An indexed chunk offset strictly inside (lo, hi) that really holds a chunk."""
+        k = bisect.bisect_right(self._chunk_offsets, lo)
+        while k < len(self._chunk_offsets) and self._chunk_offsets[k] < hi:
+            off = self._chunk_offsets[k]
+            with open(self.path, 'rb') as g:
+                if self._looks_like_chunk(g, off):
+                    return off
+            k += 1
+        return None
 
     def _record(self, op, body, pos):
         try:
@@ -284,4 +314,4 @@ class McapScan:
                 messages.append(item[1])
             else:
                 defs.append(item)
-        return ('chunk', start, defs, messages)
+        return ('chunk', start, defs, messages, pos)

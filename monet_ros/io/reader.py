@@ -8,6 +8,7 @@ needed, e.g. tf2_msgs). Nothing in a damaged bag crashes the reader: undecodable
 messages that fail to decode, damaged chunks and truncated files are counted and named in
 `reader.report` (a ReadReport) while every readable message is still given.
 """
+import bisect
 from collections import Counter
 import contextlib
 from dataclasses import dataclass
@@ -147,6 +148,26 @@ class _Decoders:
         if schema.name not in types:
             return None, f'schema {schema.name} does not define {schema.name}'
         return types[schema.name], None
+
+
+def _suffix_min_starts(summary):
+    """[(chunk offset, min message_start_time over chunks at >= that offset)] from the
+    summary's chunk index, by offset."""
+    items = sorted((ci.chunk_start_offset, ci.message_start_time)
+                   for ci in summary.chunk_indexes)
+    out, low = [], None
+    for offset, start in reversed(items):
+        low = start if low is None else min(low, start)
+        out.append((offset, low))
+    return out[::-1] or [(0, 0)]
+
+
+def _start_bound(later_start, offset):
+    """Lowest start time of the indexed chunks at or after `offset` (inf if none/unknown)."""
+    if not later_start:
+        return float('inf')
+    k = bisect.bisect_left(later_start, (offset, -1))
+    return later_start[k][1] if k < len(later_start) else float('inf')
 
 
 class BagReader:
@@ -323,6 +344,7 @@ class BagReader:
             return ch, schema
 
         heap, seq = [], 0
+        later_start = []          # (offset, min start time of chunks at >= offset) from index
 
         def push(message):
             nonlocal seq
@@ -350,10 +372,14 @@ class BagReader:
                     yield heapq.heappop(heap)
                 push(event[1])
             else:
-                _, start, defs, msgs = event
+                _, start, defs, msgs, offset = event
                 for d_kind, rec in defs:
                     (schemas if d_kind == 'schema' else channels)[rec.id] = rec
-                while heap and heap[0][0] <= start:
+                if scan.summary is not None and not later_start:
+                    later_start.extend(_suffix_min_starts(scan.summary))
+                # nothing still to come starts before `bound`: release up to it
+                bound = min(start, _start_bound(later_start, offset))
+                while heap and heap[0][0] <= bound:
                     yield heapq.heappop(heap)
                 for m in msgs:
                     push(m)
