@@ -133,7 +133,7 @@ def parse_channel(body):
 
 class McapScan:
     """Stream one MCAP file: `events()` yields ('schema', Schema), ('channel', Channel) and
-    ('chunk', start_time, [schema/channel events], [messages], file offset) and
+    ('chunk', start_time, [schema/channel events], [messages], file offset, crc ok) and
     ('message', msg) items in file order, where a message is
     (channel_id, sequence, log_time, publish_time, data).
 
@@ -300,7 +300,9 @@ class McapScan:
         except (ChunkError, struct.error) as exc:
             self._error(f'chunk at byte {pos} skipped: {exc}')
             return None
+        crc_ok = True
         if self.validate_crcs and crc != 0 and zlib.crc32(data) != crc:
+            crc_ok = False
             self.report.crc_error(self.path)
             self._error(f'chunk at byte {pos}: CRC mismatch (data damaged; messages kept, '
                         'each may fail to decode)')
@@ -314,4 +316,4 @@ class McapScan:
                 messages.append(item[1])
             else:
                 defs.append(item)
-        return ('chunk', start, defs, messages, pos)
+        return ('chunk', start, defs, messages, pos, crc_ok)

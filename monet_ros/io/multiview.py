@@ -50,7 +50,10 @@ def iter_multiview_frames(reader, image_topics, slop_ns=0, rig=None, decode=True
     topic_to_cam = _topic_map(image_topics, rig)
     cams = list(dict.fromkeys(topic_to_cam.values()))
     known = set(reader.topics)
-    absent = {topic_to_cam[t] for t in topic_to_cam if t not in known}
+    # cameras whose topic the bag does not have never hold frames back (only knowable when
+    # the bag lists its topics: metadata.yaml or intact summaries)
+    absent = {topic_to_cam[t] for t in topic_to_cam
+              if t not in known and getattr(reader, 'topics_complete', True)}
     rig_by_name = {c.name: c for c in rig} if rig is not None else None
     slop_ns = int(slop_ns)
     last_stamp = {c: None for c in cams}
@@ -88,7 +91,11 @@ def iter_multiview_frames(reader, image_topics, slop_ns=0, rig=None, decode=True
 
     for m in reader.messages(topics=list(topic_to_cam)):
         cam = topic_to_cam[m.topic]
-        s = m.stamp_ns
+        try:
+            s = m.stamp_ns
+        except (AttributeError, TypeError, ValueError) as exc:   # schema without a header
+            reader.report.skip(m.topic, f'no usable header stamp: {exc}')
+            continue
         last_stamp[cam] = s if last_stamp[cam] is None else max(last_stamp[cam], s)
         best, best_d = None, None
         for group in pending:

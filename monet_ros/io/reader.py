@@ -141,7 +141,8 @@ class _Decoders:
             return None, f'schema encoding {schema.encoding!r} is not supported (ros2msg only)'
         from mcap_ros2._dynamic import generate_dynamic
         try:
-            with contextlib.redirect_stdout(io.StringIO()):     # it prints parse errors
+            with contextlib.redirect_stdout(io.StringIO()), \
+                    contextlib.redirect_stderr(io.StringIO()):  # it prints parse errors
                 types = generate_dynamic(schema.name, bytes(schema.data).decode())
         except Exception as exc:    # noqa: BLE001 - any parser failure: report the topic
             return None, f'schema {schema.name} does not parse: {type(exc).__name__}: {exc}'
@@ -264,6 +265,8 @@ class BagReader:
                 types.setdefault(ch.topic, schema.name if schema else '')
                 if summary.statistics is not None:
                     counts[ch.topic] += summary.statistics.channel_message_counts.get(cid, 0)
+        # the listing is complete when metadata.yaml or every file's summary gave it
+        self.topics_complete = self.metadata is not None or summary_ok
         for topic, msgtype in types.items():
             if topic not in topics:
                 topics[topic] = TopicInfo(topic, msgtype, counts[topic] if summary_ok else None)
@@ -288,10 +291,12 @@ class BagReader:
         report = ReadReport(self.files)
         for file, text in self._problems:
             report.error(file, text)
-        if want is not None:
+        if want is not None and self.topics_complete:
             report.missing_topics = sorted(want - set(self._topics))
         self.report = report
-        streams = [self._file_stream(i, f, want, report) for i, f in enumerate(self.files)]
+        seen = set()
+        streams = [self._file_stream(i, f, want, report, seen)
+                   for i, f in enumerate(self.files)]
         last = -1
         for item in heapq.merge(*streams):
             log_time, _, _, topic, channel, schema, pub_time, data = item
@@ -313,8 +318,10 @@ class BagReader:
                     continue
             report.messages[topic] += 1
             yield BagMessage(topic, msgtype, log_time, pub_time, data, msg)
+        if want is not None:
+            report.missing_topics = sorted(want - set(self._topics) - seen)
 
-    def _file_stream(self, index, path, want, report):
+    def _file_stream(self, index, path, want, report, seen):
         """Messages of one file as sortable tuples, log-time ordered chunk by chunk."""
         scan = McapScan(path, report, self.validate_crcs)
         schemas, channels = {}, {}
@@ -333,17 +340,22 @@ class BagReader:
                            for cid in ci.message_index_offsets)
 
         def resolve(cid):
+            summary = scan.summary
             ch = channels.get(cid)
-            if ch is None and scan.summary is not None:
-                ch = scan.summary.channels.get(cid)
+            if ch is None and summary is not None:
+                ch = summary.channels.get(cid)
             if ch is None:
                 return None, None
             schema = schemas.get(ch.schema_id)
-            if schema is None and scan.summary is not None:
-                schema = scan.summary.schemas.get(ch.schema_id)
+            if schema is None and summary is not None:
+                schema = summary.schemas.get(ch.schema_id)
+            if schema is None and ch.schema_id != 0 and summary is not None and \
+                    cid in summary.channels:        # damaged channel record: the summary's
+                ch = summary.channels[cid]
+                schema = schemas.get(ch.schema_id) or summary.schemas.get(ch.schema_id)
             return ch, schema
 
-        heap, seq = [], 0
+        heap, seq, summary_noted = [], 0, False
         later_start = []          # (offset, min start time of chunks at >= offset) from index
 
         def push(message):
@@ -362,19 +374,30 @@ class BagReader:
             heapq.heappush(heap, (log_time, index, seq, ch.topic, ch, schema, pub_time, data))
 
         for event in scan.events(skip_chunk):
+            if scan.summary_problem is not None and not summary_noted:
+                summary_noted = True
+                report.error(path, f'no usable summary/index ({scan.summary_problem}); '
+                                   'read sequentially')
             kind = event[0]
             if kind == 'schema':
                 schemas[event[1].id] = event[1]
             elif kind == 'channel':
                 channels[event[1].id] = event[1]
+                seen.add(event[1].topic)
             elif kind == 'message':
                 while heap and heap[0][0] <= event[1][2]:
                     yield heapq.heappop(heap)
                 push(event[1])
             else:
-                _, start, defs, msgs, offset = event
+                _, start, defs, msgs, offset, crc_ok = event
                 for d_kind, rec in defs:
+                    if not crc_ok and scan.summary is not None and rec.id in (
+                            scan.summary.schemas if d_kind == 'schema'
+                            else scan.summary.channels):
+                        continue              # a damaged chunk's copy: keep the summary's
                     (schemas if d_kind == 'schema' else channels)[rec.id] = rec
+                    if d_kind == 'channel':
+                        seen.add(rec.topic)
                 if scan.summary is not None and not later_start:
                     later_start.extend(_suffix_min_starts(scan.summary))
                 # nothing still to come starts before `bound`: release up to it

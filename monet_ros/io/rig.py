@@ -72,14 +72,19 @@ def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None)
         return len(roots) == 1 and (world_frame is None or roots == {world_frame})
 
     for m in reader.messages(topics=info_topics + static_topics):
-        if m.topic in info_topics:
-            infos.setdefault(m.topic, m.msg)
-        else:
-            for tr in m.msg.transforms:
-                q, p = tr.transform.rotation, tr.transform.translation
-                tree[str(tr.child_frame_id)] = (
-                    str(tr.header.frame_id), quaternion_to_matrix(q.x, q.y, q.z, q.w),
-                    np.array([p.x, p.y, p.z], np.float64))
+        try:
+            if m.topic in info_topics:
+                str(m.msg.header.frame_id)      # usable CameraInfo (fields checked later)
+                infos.setdefault(m.topic, m.msg)
+            else:
+                for tr in m.msg.transforms:
+                    q, p = tr.transform.rotation, tr.transform.translation
+                    tree[str(tr.child_frame_id)] = (
+                        str(tr.header.frame_id), quaternion_to_matrix(q.x, q.y, q.z, q.w),
+                        np.array([p.x, p.y, p.z], np.float64))
+        except (AttributeError, TypeError, ValueError) as exc:
+            reader.report.skip(m.topic, f'unusable for the rig: {exc}')
+            continue
         if resolved():
             break
     missing = [t for t in info_topics if t not in infos]

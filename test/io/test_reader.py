@@ -1,15 +1,16 @@
 """open_bag on written bags: round trip of every typed helper, bare .mcap, compression,
 ordering, and the named errors/reports for bad input."""
 from helpers.io_bags import make_camera, smooth_images
-from mcap.writer import CompressionType, Writer as McapWriter
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
 import numpy as np
 import pytest
-from rosbags.typesys import get_typestore, Stores
+from rosbags.typesys import Stores, get_typestore
 
 from monet_ros.io import (
-    any_image_to_numpy,
     BagError,
     BagWriter,
+    any_image_to_numpy,
     camera_from_camera_info,
     cloud_to_keypoints3d,
     image_msg_to_heatmaps,

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from monet_ros.io import BagWriter, open_bag, rig_from_bag, RigFromBagError
+from monet_ros.io import BagWriter, RigFromBagError, open_bag, rig_from_bag
 
 T0 = 5_000_000_000
 
