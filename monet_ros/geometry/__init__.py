@@ -1,4 +1,20 @@
 """Multi-camera geometry: cameras, rig files, epipolar geometry, triangulation (no ROS)."""
 from monet_ros.geometry.camera import Camera, CameraError, crop_transform
+from monet_ros.geometry.epipolar import (
+    apply_homography,
+    epipolar_lines,
+    fundamental_from_params,
+    fundamental_matrix,
+    rectification_homographies,
+    rectifying_rotation,
+    relative_pose,
+    skew_matrix,
+    stereo_rectify,
+)
 
-__all__ = ['Camera', 'CameraError', 'crop_transform']
+__all__ = [
+    'Camera', 'CameraError', 'crop_transform',
+    'apply_homography', 'epipolar_lines', 'fundamental_from_params', 'fundamental_matrix',
+    'rectification_homographies', 'rectifying_rotation', 'relative_pose', 'skew_matrix',
+    'stereo_rectify',
+]
