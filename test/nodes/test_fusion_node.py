@@ -30,7 +30,7 @@ class Frame:
     def __init__(self, rig, X, index, rng, noise, silent=()):
         self.stamp = T0 + index * 33_000_000
         self.X = X
-        self.centres, self.messages = {}, []
+        self.centres, self.messages, self.maxima = {}, [], {}
         for v, cam in enumerate(rig):
             uv = cv2_project(cam, X)
             box = subject_box(uv, cam.width, cam.height, GRID[0] / GRID[1])
@@ -45,6 +45,7 @@ class Frame:
             if cam.name in silent:
                 continue
             heat = gaussian_heatmaps(p, GRID[::-1], sigma=1.5, peak=PEAKS[v])
+            self.maxima[cam.name] = heat.max(axis=(1, 2))
             self.messages.append((cam.name, heatmaps_to_image_msg(heat, self.stamp, cam.name),
                                   camera_info_from_camera(cam.crop(box, GRID), self.stamp,
                                                           cam.name)))
@@ -113,7 +114,8 @@ def test_fuses_excludes_the_wrong_view_and_reports_true_errors(ros_env, rig_file
         k = cloud_to_keypoints3d(cloud)
         assert (k['num_views'] == 3).all(), 'the wrong view must be excluded'
         np.testing.assert_array_equal(k['keypoint'], np.arange(14))
-        np.testing.assert_allclose(k['confidence'], np.mean([0.9, 0.8, 0.7]), atol=1e-4)
+        expected = np.mean([frame.maxima[n] for n in good], axis=0)
+        np.testing.assert_allclose(k['confidence'], expected, atol=1e-5)
         errors = np.stack([np.linalg.norm(cv2_project(cams[n], k['X']) - frame.centres[n],
                                           axis=1) for n in good])
         np.testing.assert_allclose(k['reprojection_error'], errors.mean(axis=0), atol=2e-3)
