@@ -23,10 +23,17 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 from std_msgs.msg import String
 
 from monet_ros.config import ConfigError, setting, validate_config
-from monet_ros.io import (camera_from_camera_info, camera_info_from_camera,
-                          cloud_to_keypoints3d, compressed_image_to_numpy, header_stamp_ns,
-                          heatmaps_to_image_msg, image_to_numpy, numpy_to_image_msg)
-from monet_ros.models import CheckpointError, decode_heatmaps, Detector
+from monet_ros.io import (
+    camera_from_camera_info,
+    camera_info_from_camera,
+    cloud_to_keypoints3d,
+    compressed_image_to_numpy,
+    header_stamp_ns,
+    heatmaps_to_image_msg,
+    image_to_numpy,
+    numpy_to_image_msg,
+)
+from monet_ros.models import CheckpointError, Detector, decode_heatmaps
 from monet_ros.models.crop import crop_images
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT

@@ -14,12 +14,10 @@ def load_node_rig(path):
         raise FileNotFoundError(f'rig {path}: no such file or folder')
     if path.is_dir() or path.suffix == '.mcap':
         from monet_ros.io import rig_from_bag
-        cameras = rig_from_bag(path)
-    else:
-        from monet_ros.geometry import load_rig
-        cameras = load_rig(path)
-    frame_id = getattr(cameras, 'frame_id', None) or DEFAULT_FRAME
-    return list(cameras), frame_id
+        return list(rig_from_bag(path)), DEFAULT_FRAME
+    from monet_ros.geometry import read_rig
+    cameras, frame_id = read_rig(path)
+    return list(cameras), frame_id or DEFAULT_FRAME
 
 
 def select_cameras(owner, rig, names, minimum=1):
