@@ -1,1 +1,7 @@
 """PCK, reprojection error, report tables and plots."""
+from monet_ros.evaluation.pck import normalised_distances, pck, PCK_THRESHOLDS, PCKResult
+from monet_ros.evaluation.report import (EvalSummary, csv_table, load_summaries, markdown_table,
+                                         MODE_ORDER, write_report)
+
+__all__ = ['normalised_distances', 'pck', 'PCK_THRESHOLDS', 'PCKResult', 'EvalSummary',
+           'csv_table', 'load_summaries', 'markdown_table', 'MODE_ORDER', 'write_report']
