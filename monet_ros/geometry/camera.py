@@ -1,0 +1,233 @@
+"""Pinhole camera with the OpenCV distortion model, and the crop/scale virtual camera.
+
+Convention (DESIGN.md): x_pixel ~ K (R X + t), world -> camera; pixel (u, v) = column u,
+row v, pixel centres on integers; distortion D in OpenCV order
+(k1, k2, p1, p2[, k3[, k4, k5, k6[, s1, s2, s3, s4]]]).
+"""
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+# Accepted distortion vector lengths (OpenCV: 4, 5, 8, 12; 14 = tilted sensor, unsupported).
+DIST_LENGTHS = (0, 4, 5, 8, 12)
+_ROTATION_TOL = 1e-6
+
+
+class CameraError(ValueError):
+    """A camera parameter is invalid; `.field` names the offending field."""
+
+    def __init__(self, camera, field_name, message):
+        self.camera = camera
+        self.field = field_name
+        super().__init__(f'camera {camera!r}: field {field_name!r}: {message}')
+
+
+def _matrix(value, shape, camera, field_name):
+    try:
+        array = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise CameraError(camera, field_name, f'not numeric ({exc})') from None
+    if array.size == int(np.prod(shape)) and array.ndim <= 2 and len(shape) == 1:
+        array = array.reshape(shape)
+    if array.shape != shape:
+        raise CameraError(camera, field_name, f'expected shape {shape}, got {array.shape}')
+    if not np.all(np.isfinite(array)):
+        raise CameraError(camera, field_name, 'contains NaN or infinity')
+    array.setflags(write=False)
+    return array
+
+
+def crop_transform(box, out_size):
+    """3x3 affine S of a crop + scale: original pixels -> crop pixels.
+
+    box: (x0, y0, x1, y1) in pixel-EDGE coordinates (the full W x H image is (0, 0, W, H));
+    out_size: (W_out, H_out). Pixel centres are integers, so
+    u' = (u + 0.5 - x0) * W_out / (x1 - x0) - 0.5 (same for v with y0, y1, H_out).
+    `cv2.warpAffine(image, S[:2], out_size)` produces exactly this crop.
+    """
+    x0, y0, x1, y1 = (float(v) for v in np.asarray(box, dtype=np.float64).reshape(4))
+    w_out, h_out = (float(v) for v in out_size)
+    if not (x1 > x0 and y1 > y0):
+        raise ValueError(f'crop box {tuple(box)} must have x1 > x0 and y1 > y0')
+    if not (w_out > 0 and h_out > 0):
+        raise ValueError(f'crop out_size {tuple(out_size)} must be positive (W, H)')
+    sx = w_out / (x1 - x0)
+    sy = h_out / (y1 - y0)
+    return np.array([[sx, 0.0, (0.5 - x0) * sx - 0.5],
+                     [0.0, sy, (0.5 - y0) * sy - 0.5],
+                     [0.0, 0.0, 1.0]])
+
+
+def _distortion_terms(d, x, y):
+    """Radial factor and tangential/prism offsets of the OpenCV model at ideal (x, y)."""
+    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
+    r2 = x * x + y * y
+    r4 = r2 * r2
+    r6 = r4 * r2
+    radial = (1 + k1 * r2 + k2 * r4 + k3 * r6) / (1 + k4 * r2 + k5 * r4 + k6 * r6)
+    dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
+    dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
+    return radial, dx, dy
+
+
+@dataclass(frozen=True, eq=False)
+class Camera:
+    """A calibrated camera: x_pixel ~ K (R X + t) with OpenCV lens distortion `dist`.
+
+    Arrays are float64 and read-only: K (3, 3) upper triangular (skew K[0, 1] allowed,
+    positive focal lengths, K[2] = [0, 0, 1]), dist (0 | 4 | 5 | 8 | 12,), R (3, 3) rotation,
+    t (3,). width, height in pixels; topic is the image topic (optional).
+    """
+
+    name: str
+    K: np.ndarray
+    dist: np.ndarray
+    R: np.ndarray
+    t: np.ndarray
+    width: int
+    height: int
+    topic: str | None = None
+    _d12: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        name = self.name
+        if not isinstance(name, str) or not name:
+            raise CameraError(name, 'name', 'must be a non-empty string')
+        K = _matrix(self.K, (3, 3), name, 'K')
+        if K[0, 0] <= 0 or K[1, 1] <= 0:
+            raise CameraError(name, 'K', f'focal lengths must be positive, got fx={K[0, 0]}, '
+                              f'fy={K[1, 1]}')
+        if K[1, 0] != 0 or not np.array_equal(K[2], [0.0, 0.0, 1.0]):
+            raise CameraError(name, 'K', 'must be upper triangular with last row [0, 0, 1]')
+        dist = np.array(self.dist if self.dist is not None else [], dtype=np.float64).ravel()
+        if dist.size not in DIST_LENGTHS:
+            raise CameraError(name, 'dist', f'length must be one of {DIST_LENGTHS} '
+                              f'(OpenCV order k1 k2 p1 p2 k3 k4 k5 k6 s1..s4), got {dist.size}')
+        if not np.all(np.isfinite(dist)):
+            raise CameraError(name, 'dist', 'contains NaN or infinity')
+        dist.setflags(write=False)
+        R = _matrix(self.R, (3, 3), name, 'R')
+        ortho = np.abs(R @ R.T - np.eye(3)).max()
+        if ortho > _ROTATION_TOL or np.linalg.det(R) <= 0:
+            raise CameraError(name, 'R', f'not a rotation (|R R^T - I| = {ortho:.3g}, '
+                              f'det = {np.linalg.det(R):.6g})')
+        t = _matrix(self.t, (3,), name, 't')
+        for key in ('width', 'height'):
+            value = getattr(self, key)
+            if isinstance(value, bool) or int(value) != value or value <= 0:
+                raise CameraError(name, key, f'must be a positive integer, got {value!r}')
+            object.__setattr__(self, key, int(value))
+        if self.topic is not None and not isinstance(self.topic, str):
+            raise CameraError(name, 'topic', f'must be a string or None, got {self.topic!r}')
+        d12 = np.zeros(12)
+        d12[:dist.size] = dist
+        for key, value in (('K', K), ('dist', dist), ('R', R), ('t', t), ('_d12', d12)):
+            object.__setattr__(self, key, value)
+
+    def __eq__(self, other):
+        if not isinstance(other, Camera):
+            return NotImplemented
+        return (self.name == other.name and self.width == other.width
+                and self.height == other.height and self.topic == other.topic
+                and all(np.array_equal(getattr(self, k), getattr(other, k))
+                        for k in ('K', 'dist', 'R', 't')))
+
+    __hash__ = None
+
+    @property
+    def P(self):
+        """(3, 4) projection matrix K [R | t] (ideal pinhole, no distortion)."""
+        return self.K @ np.hstack([self.R, self.t[:, None]])
+
+    @property
+    def center(self):
+        """(3,) camera centre in world coordinates, -R^T t."""
+        return -self.R.T @ self.t
+
+    @property
+    def has_distortion(self):
+        return bool(np.any(self.dist != 0))
+
+    def replace(self, **changes):
+        """A copy with some fields changed (validated again)."""
+        return replace(self, **changes)
+
+    def without_distortion(self):
+        """The same camera with dist = () (ideal pinhole)."""
+        return replace(self, dist=np.zeros(0))
+
+    def to_camera(self, X):
+        """World points (..., 3) -> camera coordinates (..., 3)."""
+        X = np.asarray(X, dtype=np.float64)
+        return X @ self.R.T + self.t
+
+    def distort_normalized(self, xy):
+        """Ideal normalised coordinates (..., 2) -> distorted normalised coordinates."""
+        xy = np.asarray(xy, dtype=np.float64)
+        if not self.has_distortion:
+            return xy.copy()
+        x, y = xy[..., 0], xy[..., 1]
+        radial, dx, dy = _distortion_terms(self._d12, x, y)
+        return np.stack([x * radial + dx, y * radial + dy], axis=-1)
+
+    def normalized_to_pixels(self, xy):
+        """Normalised image coordinates (..., 2) -> pixels through K (honours skew)."""
+        xy = np.asarray(xy, dtype=np.float64)
+        K = self.K
+        u = K[0, 0] * xy[..., 0] + K[0, 1] * xy[..., 1] + K[0, 2]
+        v = K[1, 1] * xy[..., 1] + K[1, 2]
+        return np.stack([u, v], axis=-1)
+
+    def pixels_to_normalized(self, uv):
+        """Pixels (..., 2) -> normalised image coordinates through K^-1 (honours skew)."""
+        uv = np.asarray(uv, dtype=np.float64)
+        K = self.K
+        y = (uv[..., 1] - K[1, 2]) / K[1, 1]
+        x = (uv[..., 0] - K[0, 2] - K[0, 1] * y) / K[0, 0]
+        return np.stack([x, y], axis=-1)
+
+    def project(self, X):
+        """World points X (N, 3) -> pixels (N, 2) with lens distortion (cv2.projectPoints
+        model, plus K's skew). Points at depth 0 give inf/NaN; no visibility test.
+        """
+        Xc = self.to_camera(X)
+        xy = Xc[..., :2] / Xc[..., 2:3]
+        return self.normalized_to_pixels(self.distort_normalized(xy))
+
+    def undistort_normalized(self, xy, iterations=100, tol=1e-15):
+        """Distorted normalised coordinates (..., 2) -> ideal ones (fixed-point inversion of
+        the distortion model, as cv2.undistortPoints but iterated to convergence)."""
+        xy0 = np.asarray(xy, dtype=np.float64)
+        if not self.has_distortion:
+            return xy0.copy()
+        x0, y0 = xy0[..., 0], xy0[..., 1]
+        x, y = x0.copy(), y0.copy()
+        for _ in range(iterations):
+            radial, dx, dy = _distortion_terms(self._d12, x, y)
+            x_new = (x0 - dx) / radial
+            y_new = (y0 - dy) / radial
+            with np.errstate(invalid='ignore'):
+                change = np.nanmax(np.abs(np.concatenate([(x_new - x).ravel(),
+                                                          (y_new - y).ravel(), [0.0]])))
+            x, y = x_new, y_new
+            if change <= tol:
+                break
+        return np.stack([x, y], axis=-1)
+
+    def undistort_points(self, uv):
+        """Observed pixels uv (N, 2) -> ideal pinhole pixels (N, 2) of the same K.
+
+        Inverse of `project`'s distortion, iterated to convergence; honours the skew in K.
+        NaN rows stay NaN. Without distortion the input is returned (as a copy).
+        """
+        uv = np.asarray(uv, dtype=np.float64)
+        if not self.has_distortion:
+            return uv.copy()
+        return self.normalized_to_pixels(self.undistort_normalized(self.pixels_to_normalized(uv)))
+
+    def crop(self, box, out_size):
+        """Virtual camera of a crop/scale of this camera's image: K' = S K with
+        S = crop_transform(box, out_size); same dist, R, t; (width, height) = out_size."""
+        S = crop_transform(box, out_size)
+        w_out, h_out = out_size
+        return replace(self, K=S @ self.K, width=int(w_out), height=int(h_out))

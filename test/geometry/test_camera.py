@@ -1,0 +1,159 @@
+"""Camera projection/undistortion vs OpenCV, validation errors, crop virtual camera."""
+import cv2
+from helpers.rigs import random_camera, random_points
+import numpy as np
+import pytest
+
+from monet_ros.geometry import Camera, CameraError, crop_transform
+
+
+@pytest.mark.parametrize('dist_len', [0, 4, 5, 8, 12])
+def test_project_matches_cv2_project_points(dist_len):
+    rng = np.random.default_rng(dist_len)
+    for _ in range(5):
+        cam = random_camera(rng, dist_len=dist_len)
+        X = random_points(rng, 200)
+        ours = cam.project(X)
+        rvec = cv2.Rodrigues(cam.R)[0]
+        ref = cv2.projectPoints(X, rvec, cam.t, cam.K, cam.dist if dist_len else None)[0]
+        np.testing.assert_allclose(ours, ref[:, 0], atol=1e-7)
+
+
+def test_p_and_center():
+    rng = np.random.default_rng(1)
+    cam = random_camera(rng, distortion=False)
+    X = random_points(rng, 50)
+    Xh = np.hstack([X, np.ones((50, 1))]) @ cam.P.T
+    np.testing.assert_allclose(Xh[:, :2] / Xh[:, 2:], cam.project(X), atol=1e-9)
+    np.testing.assert_allclose(cam.R @ cam.center + cam.t, 0, atol=1e-12)
+    assert cam.P.shape == (3, 4)
+
+
+def test_skew_honoured_in_projection():
+    rng = np.random.default_rng(2)
+    cam = random_camera(rng, skew=3.5)
+    X = random_points(rng, 100)
+    Xc = X @ cam.R.T + cam.t
+    # distorted normalised coordinates from OpenCV with an identity K, then our skewed K
+    xy = cv2.projectPoints(X, cv2.Rodrigues(cam.R)[0], cam.t, np.eye(3), cam.dist)[0][:, 0]
+    uv = (np.hstack([xy, np.ones((100, 1))]) @ cam.K.T)[:, :2]
+    np.testing.assert_allclose(cam.project(X), uv, atol=1e-7)
+    assert np.all(Xc[:, 2] > 0)
+
+
+@pytest.mark.parametrize('dist_len, skew', [(5, 0.0), (8, 0.0), (12, 0.0), (5, 4.0)])
+def test_undistort_inverts_project(dist_len, skew):
+    rng = np.random.default_rng(3 + dist_len)
+    cam = random_camera(rng, dist_len=dist_len, skew=skew)
+    X = random_points(rng, 300)
+    observed = cam.project(X)
+    ideal = cam.without_distortion().project(X)
+    np.testing.assert_allclose(cam.undistort_points(observed), ideal, atol=1e-9)
+    if skew == 0.0:
+        ref = cv2.undistortPoints(observed[:, None], cam.K, cam.dist, P=cam.K,
+                                  criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS,
+                                            100, 1e-15))[:, 0]
+        np.testing.assert_allclose(cam.undistort_points(observed), ref, atol=1e-6)
+
+
+def test_undistort_keeps_nan_rows():
+    cam = random_camera(np.random.default_rng(4))
+    uv = np.array([[600.0, 500.0], [np.nan, np.nan], [10.0, 20.0]])
+    out = cam.undistort_points(uv)
+    assert np.all(np.isnan(out[1])) and np.all(np.isfinite(out[[0, 2]]))
+
+
+def _valid_kwargs():
+    return dict(name='c', K=np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]]),
+                dist=np.zeros(5), R=np.eye(3), t=np.zeros(3), width=640, height=480)
+
+
+@pytest.mark.parametrize('field, value', [
+    ('K', np.eye(2)),
+    ('K', np.array([[-800.0, 0, 320], [0, 800, 240], [0, 0, 1]])),
+    ('K', np.array([[800.0, 0, 320], [0, 800, 240], [0, 1, 1]])),
+    ('dist', np.zeros(6)),
+    ('R', np.diag([1.0, 1.0, -1.0])),
+    ('R', np.ones((3, 3))),
+    ('t', np.zeros(4)),
+    ('t', np.array([0.0, np.nan, 0.0])),
+    ('width', 0),
+    ('height', 2.5),
+    ('name', ''),
+])
+def test_invalid_fields_are_named(field, value):
+    kwargs = _valid_kwargs()
+    kwargs[field] = value
+    with pytest.raises(CameraError) as info:
+        Camera(**kwargs)
+    assert info.value.field == field
+    assert repr(field) in str(info.value)
+
+
+def test_camera_is_frozen_and_arrays_read_only():
+    cam = Camera(**_valid_kwargs())
+    with pytest.raises(AttributeError):
+        cam.width = 10
+    with pytest.raises(ValueError):
+        cam.K[0, 0] = 1.0
+    assert cam == Camera(**_valid_kwargs())
+    assert cam != cam.replace(t=np.array([0.0, 0.0, 1.0]))
+
+
+def test_crop_transform_formula():
+    S = crop_transform((100, 50, 300, 250), (46, 46))
+    uv = np.array([[100 - 0.5, 50 - 0.5], [300 - 0.5, 250 - 0.5], [150.25, 77.0]])
+    out = (np.hstack([uv, np.ones((3, 1))]) @ S.T)[:, :2]
+    # the box's edges map to the crop's edges (-0.5 and W_out - 0.5)
+    np.testing.assert_allclose(out[0], [-0.5, -0.5])
+    np.testing.assert_allclose(out[1], [45.5, 45.5])
+    np.testing.assert_allclose(out[2], [(150.25 + 0.5 - 100) * 46 / 200 - 0.5,
+                                        (77.0 + 0.5 - 50) * 46 / 200 - 0.5])
+    full = crop_transform((0, 0, 640, 480), (640, 480))
+    np.testing.assert_allclose(full, np.eye(3))
+    with pytest.raises(ValueError):
+        crop_transform((10, 10, 5, 20), (46, 46))
+
+
+@pytest.mark.parametrize('box, out_size', [((37.0, 21.0, 237.0, 171.0), (92, 69)),
+                                           ((-20.5, 10.25, 300.0, 230.0), (368, 368)),
+                                           ((0, 0, 320, 240), (640, 480))])
+def test_warp_affine_with_s_moves_points_as_s_says(box, out_size):
+    """A linear ramp image f(u, v) warped with S[:2] must equal f(S^-1 (u', v')) at every
+    interior crop pixel (bilinear interpolation is exact on a linear function; OpenCV uses
+    1/32-pixel coordinate precision). A half-pixel convention error would be ~0.5 px."""
+    h, w = 240, 320
+    v, u = np.mgrid[0:h, 0:w].astype(np.float64)
+    fu = u.astype(np.float32)
+    fv = v.astype(np.float32)
+    S = crop_transform(box, out_size)
+    wu = cv2.warpAffine(fu, S[:2], out_size, flags=cv2.INTER_LINEAR, borderValue=np.nan)
+    wv = cv2.warpAffine(fv, S[:2], out_size, flags=cv2.INTER_LINEAR, borderValue=np.nan)
+    vo, uo = np.mgrid[0:out_size[1], 0:out_size[0]].astype(np.float64)
+    src = np.stack([uo.ravel(), vo.ravel(), np.ones(uo.size)])
+    src = np.linalg.solve(S, src)
+    inside = ((src[0] >= 0) & (src[0] <= w - 1) & (src[1] >= 0) & (src[1] <= h - 1))
+    assert inside.sum() > 100
+    err_u = np.abs(wu.ravel()[inside] - src[0][inside])
+    err_v = np.abs(wv.ravel()[inside] - src[1][inside])
+    assert err_u.max() < 1 / 16 and err_v.max() < 1 / 16
+
+
+def test_crop_camera_projects_into_crop_pixels():
+    rng = np.random.default_rng(5)
+    cam = random_camera(rng)
+    box, out_size = (400.0, 300.0, 900.0, 700.0), (46, 46)
+    heat = cam.crop(box, out_size)
+    S = crop_transform(box, out_size)
+    X = random_points(rng, 100)
+    full = cam.project(X)
+    expected = (np.hstack([full, np.ones((100, 1))]) @ S.T)[:, :2]
+    np.testing.assert_allclose(heat.project(X), expected, atol=1e-9)
+    np.testing.assert_allclose(heat.K, S @ cam.K)
+    assert (heat.width, heat.height) == out_size
+    np.testing.assert_array_equal(heat.dist, cam.dist)
+    np.testing.assert_array_equal(heat.R, cam.R)
+    # undistortion in the crop camera equals undistort-then-crop
+    np.testing.assert_allclose(
+        heat.undistort_points(heat.project(X)),
+        (np.hstack([cam.undistort_points(full), np.ones((100, 1))]) @ S.T)[:, :2], atol=1e-9)
