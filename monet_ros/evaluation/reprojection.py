@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monet_ros.geometry import reprojection_error, triangulate
+from monet_ros.geometry import project_views, reprojection_error, triangulate
 
 
 @dataclass(frozen=True)
@@ -85,11 +85,6 @@ def multiview_reprojection(detections, cameras, gt3d=None):
 
 
 def project_points(X, cameras):
-    """(N, 3) world points -> (V, N, 2) pixels in each camera; NaN rows stay NaN."""
-    X = np.asarray(X, dtype=np.float64)
-    out = np.full((len(cameras), len(X), 2), np.nan)
-    ok = np.all(np.isfinite(X), axis=1)
-    if ok.any():
-        for v, cam in enumerate(cameras):                               # V calls, batched in N
-            out[v, ok] = cam.project(X[ok])
-    return out
+    """(N, 3) world points -> (V, N, 2) pixels in each camera (geometry.project_views);
+    NaN points stay NaN."""
+    return project_views(cameras, np.asarray(X, dtype=np.float64))

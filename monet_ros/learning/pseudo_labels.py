@@ -43,7 +43,7 @@ def _inside(points, cameras, margin=0.0):
 
 def _in_front(X, cameras):
     """(N, 3) -> (V, N) bool: point in front of each camera."""
-    depth = np.stack([(X @ cam.R.T + cam.t)[:, 2] for cam in cameras])
+    depth = np.stack([cam.to_camera(X)[:, 2] for cam in cameras])
     return depth > 1e-9
 
 
@@ -179,7 +179,7 @@ def track_step(grays_a, grays_b, X, cameras, config):
     grays_*: V grayscale images at the current and the next instant; X (C, 3) current points.
     Returns (X_next (C, 3), labels (V, C, 2) kept views' projections, kept (V, C) bool).
     """
-    V, C = len(cameras), len(X)
+    V = len(cameras)
     start = project_to_views(X, cameras)                                  # (V, C, 2)
     flowed = np.stack([_flow(grays_a[v], grays_b[v], start[v], config) for v in range(V)])
     X_next, inliers = triangulate_robust(flowed, cameras, threshold_px=config.ransac_px,

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from monet_ros.evaluation import normalised_distances, pck, PCK_THRESHOLDS
+from monet_ros.evaluation import PCK_THRESHOLDS, normalised_distances, pck
 
 
 def test_perfect_predictions_score_one_everywhere():

@@ -1,37 +1,49 @@
-"""Small procedural rigs and scenes for training/evaluation tests (no files)."""
+"""Random calibrated rigs looking at a common working volume, for geometry tests."""
+import cv2
 import numpy as np
 
 from monet_ros.geometry import Camera
 
 
-def look_at(center, target=(0.0, 0.0, 1.0), up=(0.0, 0.0, 1.0)):
-    """(R, t) of a camera at `center` looking at `target` (OpenCV axes: y down)."""
-    center = np.asarray(center, dtype=np.float64)
-    z = np.asarray(target, dtype=np.float64) - center
+def look_at(center, target, up=(0.0, 0.0, 1.0)):
+    """Rotation (world -> camera, OpenCV axes: z forward, y down) of a camera at `center`
+    looking at `target`."""
+    z = np.asarray(target, float) - np.asarray(center, float)
     z /= np.linalg.norm(z)
     x = np.cross(z, up)
+    if np.linalg.norm(x) < 1e-6:
+        x = np.cross(z, (1.0, 0.0, 0.0))
     x /= np.linalg.norm(x)
     y = np.cross(z, x)
-    R = np.stack([x, y, z])
-    return R, -R @ center
+    return np.stack([x, y, z])
 
 
-def ring_rig(num_views=6, radius=4.0, width=160, height=120, focal=150.0, dist=None,
-             height_m=1.2, jitter=0.0, seed=0):
-    """Cameras on a circle around the origin looking at (0, 0, 1)."""
-    rng = np.random.default_rng(seed)
-    cameras = []
-    for v in range(num_views):
-        a = 2 * np.pi * v / num_views + jitter * rng.uniform(-1, 1)
-        center = (radius * np.cos(a), radius * np.sin(a), height_m + 0.3 * np.sin(3 * a))
-        R, t = look_at(center)
-        K = np.array([[focal, 0, width / 2 - 0.5 + 3 * v], [0, focal, height / 2 - 0.5 - 2 * v],
-                      [0, 0, 1]])
-        cameras.append(Camera(f'cam{v}', K, dist if dist is not None else np.zeros(5), R, t,
-                              width, height))
-    return cameras
+def random_camera(rng, name='cam', distortion=True, skew=0.0, radius=3.0, width=1280,
+                  height=960, dist_len=5):
+    """A camera on a sphere of `radius` around the origin, looking at it (roll jitter)."""
+    direction = rng.normal(size=3)
+    direction[2] = abs(direction[2]) * 0.5
+    direction /= np.linalg.norm(direction)
+    center = direction * radius
+    R = look_at(center, rng.normal(scale=0.1, size=3))
+    roll = cv2.Rodrigues(np.array([0.0, 0.0, rng.uniform(-0.3, 0.3)]))[0]
+    R = roll @ R
+    t = -R @ center
+    f = rng.uniform(800, 1400)
+    K = np.array([[f, skew, width / 2 + rng.uniform(-30, 30)],
+                  [0.0, f * rng.uniform(0.97, 1.03), height / 2 + rng.uniform(-30, 30)],
+                  [0.0, 0.0, 1.0]])
+    dist = np.zeros(dist_len)
+    if distortion and dist_len:
+        scales = [0.1, 0.05, 0.002, 0.002, 0.02, 0.02, 0.01, 0.01, 0.002, 0.002, 0.002, 0.002]
+        dist = rng.uniform(-1, 1, size=dist_len) * np.array(scales[:dist_len])
+    return Camera(name=name, K=K, dist=dist, R=R, t=t, width=width, height=height)
 
 
-def random_points(n, seed=0, spread=0.4, center=(0.0, 0.0, 1.0)):
-    rng = np.random.default_rng(seed)
-    return np.asarray(center) + rng.uniform(-spread, spread, size=(n, 3))
+def random_rig(rng, num_views, **kwargs):
+    return [random_camera(rng, name=f'cam{i}', **kwargs) for i in range(num_views)]
+
+
+def random_points(rng, n, scale=0.5):
+    """(n, 3) points in the working volume around the origin."""
+    return rng.uniform(-scale, scale, size=(n, 3))

@@ -1,9 +1,9 @@
 """Augmented crops keep images, labels and virtual cameras consistent with each other."""
+from helpers.ring import random_points, ring_rig
 import numpy as np
-from helpers.rigs import random_points, ring_rig
 import pytest
 
-from monet_ros.learning.dataset import AugmentConfig, boxes_from_points, CropCache, fill_boxes
+from monet_ros.learning.dataset import AugmentConfig, CropCache, boxes_from_points, fill_boxes
 from monet_ros.learning.recording import Recording
 
 
