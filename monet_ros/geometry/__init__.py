@@ -1,4 +1,34 @@
 """Multi-camera geometry: cameras, rig files, epipolar geometry, triangulation (no ROS)."""
-from monet_ros.geometry.camera import Camera, CameraError, crop_transform
+from monet_ros.geometry.camera import (
+    Camera,
+    CameraError,
+    crop_transform,
+    project_views,
+    stack_cameras,
+)
+from monet_ros.geometry.epipolar import (
+    apply_homography,
+    epipolar_lines,
+    fundamental_from_params,
+    fundamental_matrix,
+    rectification_homographies,
+    rectifying_rotation,
+    relative_pose,
+    skew_matrix,
+    stereo_rectify,
+)
+from monet_ros.geometry.rig import RigError, load_rig, read_rig, save_rig
+from monet_ros.geometry.triangulation import (
+    reprojection_error,
+    triangulate,
+    triangulate_robust,
+)
 
-__all__ = ['Camera', 'CameraError', 'crop_transform']
+__all__ = [
+    'Camera', 'CameraError', 'crop_transform', 'project_views', 'stack_cameras',
+    'apply_homography', 'epipolar_lines', 'fundamental_from_params', 'fundamental_matrix',
+    'rectification_homographies', 'rectifying_rotation', 'relative_pose', 'skew_matrix',
+    'stereo_rectify',
+    'RigError', 'load_rig', 'read_rig', 'save_rig',
+    'reprojection_error', 'triangulate', 'triangulate_robust',
+]

@@ -231,3 +231,30 @@ class Camera:
         S = crop_transform(box, out_size)
         w_out, h_out = out_size
         return replace(self, K=S @ self.K, width=int(w_out), height=int(h_out))
+
+
+def stack_cameras(cameras):
+    """Stacked parameters of a rig: dict of K (V, 3, 3), R (V, 3, 3), t (V, 3), d12 (V, 12)
+    (distortion padded to 12 coefficients)."""
+    return {'K': np.stack([c.K for c in cameras]), 'R': np.stack([c.R for c in cameras]),
+            't': np.stack([c.t for c in cameras]), 'd12': np.stack([c._d12 for c in cameras])}
+
+
+def project_views(cameras, X):
+    """Project points into every camera of a rig at once (same model as Camera.project).
+
+    X: (..., N, 3) world points (leading dims are batch); returns (..., V, N, 2) pixels.
+    """
+    p = cameras if isinstance(cameras, dict) else stack_cameras(cameras)
+    X = np.asarray(X, dtype=np.float64)
+    Xc = np.einsum('vij,...nj->...vni', p['R'], X) + p['t'][:, None, :]
+    x = Xc[..., 0] / Xc[..., 2]
+    y = Xc[..., 1] / Xc[..., 2]
+    d = tuple(p['d12'].T[:, :, None])  # 12 arrays (V, 1), broadcast over (..., V, N)
+    radial, dx, dy = _distortion_terms(d, x, y)
+    xd = x * radial + dx
+    yd = y * radial + dy
+    K = p['K'][:, None]  # (V, 1, 3, 3)
+    u = K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2]
+    v = K[..., 1, 1] * yd + K[..., 1, 2]
+    return np.stack([u, v], axis=-1)

@@ -1,0 +1,211 @@
+"""Multi-view triangulation: confidence-weighted DLT (one batched SVD), robust variants
+(Pose2Sim-style worst-camera exclusion, RANSAC over views) and reprojection error.
+
+Shapes: points2d (V, N, 2) observed (distorted) pixels, NaN = missing; weights (V, N) >= 0
+(0 or NaN = missing); cameras: list of V Camera; X (N, 3) world points, NaN = not
+triangulated.
+"""
+from itertools import combinations
+from math import comb
+
+import numpy as np
+
+from monet_ros.geometry.camera import project_views, stack_cameras
+
+
+def _prepare(points2d, cameras, weights):
+    """Validate shapes; -> (observed (V,N,2), ideal (V,N,2) with 0 at missing, w (V,N))."""
+    obs = np.asarray(points2d, dtype=np.float64)
+    V = len(cameras)
+    if obs.ndim != 3 or obs.shape[0] != V or obs.shape[2] != 2:
+        raise ValueError(f'points2d must have shape (V={V}, N, 2), got {obs.shape}')
+    if weights is None:
+        w = np.ones(obs.shape[:2])
+    else:
+        w = np.array(weights, dtype=np.float64)
+        if w.shape != obs.shape[:2]:
+            raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
+        if np.any(w < 0):
+            raise ValueError('weights must be >= 0 (0 or NaN = missing)')
+    missing = ~np.all(np.isfinite(obs), axis=2) | ~np.isfinite(w) | (w <= 0)
+    w = np.where(missing, 0.0, w)
+    ideal = np.stack([cam.undistort_points(obs[v]) for v, cam in enumerate(cameras)])
+    ideal[missing] = 0.0
+    return obs, ideal, w
+
+
+def dlt_rows(ideal, P):
+    """Unweighted DLT rows B (V, N, 2, 4): u P[2] - P[0] and v P[2] - P[1] per view/point.
+
+    ideal: (V, N, 2) undistorted pixels; P: (V, 3, 4)."""
+    return ideal[..., None] * P[:, None, 2:3, :] - P[:, None, 0:2, :]
+
+
+def solve_dlt(B, w):
+    """Weighted DLT from rows B (V, N, 2, 4) and weights w (..., V, N) -> X (..., N, 3).
+
+    Stacks A (..., N, 2V, 4) with zero rows for zero weights and solves all keypoints (and
+    leading batch entries) with ONE batched np.linalg.svd; NaN where < 2 weighted views."""
+    V, N = B.shape[:2]
+    A = w[..., None, None] * B  # (..., V, N, 2, 4)
+    A = np.moveaxis(A, -4, -3).reshape(*A.shape[:-4], N, 2 * V, 4)
+    n_views = np.sum(w > 0, axis=-2)  # (..., N)
+    if 2 * V < 4:
+        return np.full((*n_views.shape, 3), np.nan)
+    _, _, vh = np.linalg.svd(A, full_matrices=False)
+    h = vh[..., -1, :]
+    with np.errstate(divide='ignore', invalid='ignore'):
+        X = h[..., :3] / h[..., 3:]
+    X[n_views < 2] = np.nan
+    return X
+
+
+def _projections(cameras):
+    return np.stack([cam.P for cam in cameras])
+
+
+def triangulate(points2d, cameras, weights=None):
+    """Confidence-weighted DLT triangulation of N keypoints seen by V cameras.
+
+    points2d: (V, N, 2) observed pixels (NaN = missing); weights: (V, N) >= 0 or None
+    (rows of view v are scaled by weights[v], as Pose2Sim's weighted triangulation).
+    Points are undistorted first. One batched SVD over a (N, 2V, 4) stack.
+    Returns X (N, 3), NaN where fewer than 2 views are present."""
+    _, ideal, w = _prepare(points2d, cameras, weights)
+    return solve_dlt(dlt_rows(ideal, _projections(cameras)), w)
+
+
+def _view_errors(rig, X, obs):
+    """Pixel distances (..., V, N) between the projections of X (..., N, 3) and obs (V, N, 2)."""
+    return np.linalg.norm(project_views(rig, X) - obs, axis=-1)
+
+
+def reprojection_error(X, points2d, cameras):
+    """Reprojection error (V, N) in pixels of X (N, 3) against points2d (V, N, 2), with
+    distortion; NaN where the observation or the point is missing."""
+    X = np.asarray(X, dtype=np.float64)
+    obs = np.asarray(points2d, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != 3 or obs.shape != (len(cameras), X.shape[0], 2):
+        raise ValueError(f'expected X (N, 3) and points2d (V={len(cameras)}, N, 2), got '
+                         f'{X.shape} and {obs.shape}')
+    return _view_errors(stack_cameras(cameras), X, obs)
+
+
+def _mean_used_error(err, used):
+    """Mean error over used views: err, used (S, V, n) -> (S, n); inf when < 2 used."""
+    n_used = used.sum(axis=-2)
+    total = np.where(used, err, 0.0).sum(axis=-2)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        mean = total / n_used
+    mean[(n_used < 2) | ~np.isfinite(mean)] = np.inf
+    return mean
+
+
+def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
+    V, N = w.shape
+    avail = w > 0
+    n_avail = avail.sum(axis=0)
+    X = np.full((N, 3), np.nan)
+    inliers = np.zeros((V, N), dtype=bool)
+    current = avail.copy()  # best view subset found so far, per keypoint
+    todo = np.arange(N)
+    for k in range(V - min_views + 1):
+        todo = todo[n_avail[todo] - k >= min_views]
+        if todo.size == 0:
+            break
+        if comb(V, k) <= max_subsets:  # every subset with k views left out (as Pose2Sim)
+            drop = np.zeros((comb(V, k), V), dtype=bool)
+            for s, idx in enumerate(combinations(range(V), k)):
+                drop[s, list(idx)] = True
+            used = avail[None, :, todo] & ~drop[:, :, None]
+        else:  # greedy: leave one more view out of the best subset of the previous level
+            used = current[None, :, todo] & ~np.eye(V, dtype=bool)[:, :, None]
+        Xs = solve_dlt(B[:, todo], w[None, :, todo] * used)  # (S, n, 3)
+        mean = _mean_used_error(_view_errors(rig, Xs, obs[:, todo]), used)
+        best = np.argmin(mean, axis=0)
+        cols = np.arange(todo.size)
+        ok = mean[best, cols] <= threshold_px
+        X[todo[ok]] = Xs[best[ok], cols[ok]]
+        best_used = used[best, :, cols].T  # (V, n)
+        inliers[:, todo[ok]] = best_used[:, ok]
+        current[:, todo] = best_used
+        todo = todo[~ok]
+    return X, inliers
+
+
+def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
+    V, N = w.shape
+    avail = w > 0
+    X = np.full((N, 3), np.nan)
+    inliers = np.zeros((V, N), dtype=bool)
+    todo = np.flatnonzero(avail.sum(axis=0) >= max(2, min_views))
+    if todo.size == 0:
+        return X, inliers
+    n = todo.size
+    cols = np.arange(n)
+    if comb(V, 2) <= max_hypotheses:  # every view pair
+        pick = np.array(list(combinations(range(V), 2)))[:, None, :].repeat(n, axis=1)
+    else:  # random distinct available views per hypothesis and keypoint
+        keys = rng.random((max_hypotheses, n, V))
+        keys[:, ~avail[:, todo].T] = np.inf
+        pick = np.argpartition(keys, 2, axis=-1)[..., :2]
+    a, b = pick[..., 0], pick[..., 1]  # (H, n)
+    valid = avail[a, todo] & avail[b, todo]
+    # two-view DLT per hypothesis: only the 4 rows of the pair (H, n, 4, 4), one SVD
+    A = np.concatenate([B[a, todo], B[b, todo]], axis=-2) * np.concatenate(
+        [np.repeat(w[a, todo][..., None], 2, -1), np.repeat(w[b, todo][..., None], 2, -1)],
+        axis=-1)[..., None]
+    _, _, vh = np.linalg.svd(A)
+    with np.errstate(divide='ignore', invalid='ignore'):
+        Xh = vh[..., -1, :3] / vh[..., -1, 3:]
+    err = _view_errors(rig, Xh, obs[:, todo])  # (H, V, n)
+    inl = (err < threshold_px) & avail[None, :, todo]
+    count = inl.sum(axis=1).astype(np.float64)
+    mean_inl = np.where(inl, err, 0.0).sum(axis=1) / np.maximum(count, 1)
+    score = np.where(valid & np.isfinite(mean_inl), count - mean_inl / (threshold_px * 2), -1)
+    best_inl = inl[np.argmax(score, axis=0), :, cols].T  # (V, n)
+    for _ in range(2):  # refine on the consensus set, re-select inliers
+        Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+        err_r = _view_errors(rig, Xr, obs[:, todo])
+        new_inl = (err_r < threshold_px) & avail[:, todo]
+        new_inl = np.where(new_inl.sum(axis=0) >= 2, new_inl, best_inl)
+        if np.array_equal(new_inl, best_inl):
+            break
+        best_inl = new_inl
+    Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+    ok = best_inl.sum(axis=0) >= max(2, min_views)
+    X[todo[ok]] = Xr[ok]
+    inliers[:, todo[ok]] = best_inl[:, ok]
+    return X, inliers
+
+
+def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_views=2,
+                       method='exclusion', max_subsets=100, max_hypotheses=64, seed=0):
+    """Outlier-robust triangulation, batched over keypoints.
+
+    method='exclusion' (Pose2Sim's rule): triangulate with all available views; while the
+    mean reprojection error over the used views exceeds threshold_px, leave out k = 1, 2, ...
+    views and keep the subset with the lowest mean error, until it is <= threshold_px
+    (else NaN) or fewer than min_views would remain. Every subset of k left-out views is
+    tried while C(V, k) <= max_subsets (exactly Pose2Sim's search); beyond that the search
+    is greedy (one more view left out of the previous level's best subset). Each level is
+    one batched SVD over all candidate subsets x pending keypoints.
+    method='ransac': two-view hypotheses (every pair when C(V, 2) <= max_hypotheses,
+    otherwise max_hypotheses random pairs per keypoint, seeded), inliers = views with
+    reprojection error < threshold_px; the hypothesis with most inliers (then lowest mean
+    inlier error) wins and is refined by weighted DLT on its inliers; NaN with fewer than
+    min_views inliers.
+    Returns (X (N, 3), inlier_mask (V, N) bool of the views used)."""
+    if min_views < 2:
+        raise ValueError(f'min_views must be >= 2, got {min_views}')
+    if not threshold_px > 0:
+        raise ValueError(f'threshold_px must be > 0, got {threshold_px}')
+    obs, ideal, w = _prepare(points2d, cameras, weights)
+    B = dlt_rows(ideal, _projections(cameras))
+    rig = stack_cameras(cameras)
+    if method == 'exclusion':
+        return _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets)
+    if method == 'ransac':
+        rng = np.random.default_rng(seed)
+        return _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng)
+    raise ValueError(f"method must be 'exclusion' or 'ransac', got {method!r}")

@@ -1,0 +1,71 @@
+"""Clean start and exit of the node executables.
+
+`run_node(factory)` initialises rclpy, builds the node (a bad parameter, file or model is
+a clear one-line error and exit code 2), spins it, and on SIGINT / SIGTERM / Ctrl-C
+destroys it and shuts rclpy down, exiting 0.
+"""
+import os
+from pathlib import Path
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+EXIT_OK = 0
+EXIT_BAD_START = 2
+
+FASTDDS_PROFILE = 'fastdds_profile.xml'
+
+
+def share_config(name):
+    """Path of a file in the package's config/ (source checkout or installed share/)."""
+    here = Path(__file__).resolve().parents[2] / 'config' / name
+    if here.is_file():
+        return here
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        return Path(get_package_share_directory('monet_ros')) / 'config' / name
+    except Exception:  # noqa: BLE001 (no ament index: pip wheels without the marker)
+        return here
+
+
+def use_large_data_profile():
+    """Point Fast DDS at config/fastdds_profile.xml (64 MB shared memory) unless the user
+    already chose a profile. Must run before the first rclpy.init of the process."""
+    if 'FASTRTPS_DEFAULT_PROFILES_FILE' not in os.environ:
+        profile = share_config(FASTDDS_PROFILE)
+        if profile.is_file():
+            os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
+
+
+def start_error(name, error):
+    """Print a start-up error as one clear line on stderr."""
+    print(f'{name}: error: {error}', file=sys.stderr, flush=True)
+
+
+def run_node(factory, name, args=None, large_data=False):
+    """Run the node built by `factory()` until shutdown; return the process exit code.
+
+    Errors while building the node (ValueError subclasses such as ConfigError, RigError,
+    CheckpointError, and OSError for missing files) print one line and return 2.
+    """
+    if large_data:
+        use_large_data_profile()
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = factory()
+        except (ValueError, OSError) as error:
+            start_error(name, error)
+            return EXIT_BAD_START
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return EXIT_OK

@@ -1,0 +1,194 @@
+"""Triangulation vs OpenCV and brute-force references on random rigs."""
+from itertools import combinations
+
+import cv2
+from helpers.rigs import random_points, random_rig
+import numpy as np
+import pytest
+
+from monet_ros.geometry import (
+    project_views,
+    reprojection_error,
+    triangulate,
+    triangulate_robust,
+)
+
+
+def _observe(cams, X):
+    return np.stack([c.project(X) for c in cams])
+
+
+def _loop_dlt(points2d, cams, weights):
+    """Reference: per-keypoint weighted DLT with explicit loops (as Pose2Sim writes it)."""
+    V, N, _ = points2d.shape
+    out = np.full((N, 3), np.nan)
+    for n in range(N):
+        rows = []
+        for v in range(V):
+            uv = cams[v].undistort_points(points2d[v, n][None])[0]
+            if np.all(np.isfinite(uv)) and weights[v, n] > 0:
+                P = cams[v].P
+                rows += [(P[0] - uv[0] * P[2]) * weights[v, n],
+                         (P[1] - uv[1] * P[2]) * weights[v, n]]
+        if len(rows) >= 4:
+            h = np.linalg.svd(np.array(rows))[2][-1]
+            out[n] = h[:3] / h[3]
+    return out
+
+
+def test_project_views_matches_camera_project():
+    rng = np.random.default_rng(0)
+    cams = random_rig(rng, 5, dist_len=8)
+    X = random_points(rng, 30)
+    np.testing.assert_allclose(project_views(cams, X), _observe(cams, X), atol=1e-9)
+    Xb = random_points(rng, 60).reshape(2, 30, 3)
+    out = project_views(cams, Xb)
+    assert out.shape == (2, 5, 30, 2)
+    np.testing.assert_allclose(out[1], _observe(cams, Xb[1]), atol=1e-9)
+
+
+def test_two_view_matches_cv2_triangulate_points():
+    rng = np.random.default_rng(1)
+    cams = random_rig(rng, 2)
+    X = random_points(rng, 100)
+    obs = _observe(cams, X) + rng.normal(scale=1.0, size=(2, 100, 2))
+    ours = triangulate(obs, cams)
+    und = [cv2.undistortPoints(obs[v][:, None], c.K, c.dist, P=c.K,
+                               criteria=(cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS,
+                                         100, 1e-15))[:, 0] for v, c in enumerate(cams)]
+    Xh = cv2.triangulatePoints(cams[0].P, cams[1].P, und[0].T, und[1].T)
+    ref = (Xh[:3] / Xh[3]).T
+    np.testing.assert_allclose(ours, ref, atol=1e-6)
+
+
+def test_exact_recovery_with_distortion_and_missing_views():
+    rng = np.random.default_rng(2)
+    cams = random_rig(rng, 6, dist_len=5)
+    X = random_points(rng, 200)
+    obs = _observe(cams, X)
+    obs[rng.random((6, 200)) < 0.3] = np.nan
+    obs[:, 0] = np.nan
+    obs[1:, 1] = np.nan  # one view only
+    obs[2:, 2] = np.nan  # exactly two views
+    obs[:2, 2] = _observe(cams[:2], X[2:3])[:, 0]
+    out = triangulate(obs, cams)
+    n_views = np.isfinite(obs[..., 0]).sum(0)
+    assert np.all(np.isnan(out[n_views < 2]))
+    np.testing.assert_allclose(out[n_views >= 2], X[n_views >= 2], atol=1e-8)
+    assert n_views[2] == 2 and np.all(np.isfinite(out[2]))
+
+
+def test_weighted_batched_equals_per_keypoint_loop():
+    rng = np.random.default_rng(3)
+    cams = random_rig(rng, 5, dist_len=5)
+    X = random_points(rng, 40)
+    obs = _observe(cams, X) + rng.normal(scale=2.0, size=(5, 40, 2))
+    weights = rng.uniform(0.0, 1.0, size=(5, 40))
+    weights[weights < 0.2] = 0.0
+    weights[0, :3] = np.nan
+    ref = _loop_dlt(obs, cams, np.nan_to_num(weights))
+    out = triangulate(obs, cams, weights)
+    np.testing.assert_allclose(out, ref, atol=1e-9, equal_nan=True)
+    # weights matter: the unweighted solution differs on noisy data
+    assert np.nanmax(np.abs(triangulate(obs, cams) - out)) > 1e-4
+
+
+def test_reprojection_error_vs_cv2():
+    rng = np.random.default_rng(4)
+    cams = random_rig(rng, 3)
+    X = random_points(rng, 20)
+    obs = _observe(cams, X) + rng.normal(size=(3, 20, 2))
+    obs[1, 5] = np.nan
+    X[7] = np.nan
+    err = reprojection_error(X, obs, cams)
+    for v, c in enumerate(cams):
+        proj = cv2.projectPoints(np.nan_to_num(X), cv2.Rodrigues(c.R)[0], c.t, c.K,
+                                 c.dist)[0][:, 0]
+        ref = np.linalg.norm(proj - obs[v], axis=1)
+        ok = np.isfinite(err[v])
+        np.testing.assert_allclose(err[v][ok], ref[ok], atol=1e-7)
+    assert np.isnan(err[1, 5]) and np.all(np.isnan(err[:, 7]))
+    assert np.isfinite(err).sum() == 3 * 20 - 1 - 3
+
+
+def _pose2sim_reference(obs, cams, weights, threshold, min_views):
+    """Per-keypoint transcription of Pose2Sim's triangulation_from_best_cameras."""
+    V, N, _ = obs.shape
+    out = np.full((N, 3), np.nan)
+    for n in range(N):
+        avail = [v for v in range(V) if weights[v, n] > 0 and np.isfinite(obs[v, n, 0])]
+        for k in range(V - min_views + 1):
+            if V - len(avail) + k > V - min_views:
+                break
+            best = (np.inf, None)
+            for off in combinations(range(V), k):
+                use = [v for v in avail if v not in off]
+                if len(use) < 2:
+                    continue
+                Xn = _loop_dlt(obs[use][:, n:n + 1], [cams[v] for v in use],
+                               weights[use][:, n:n + 1])[0]
+                e = np.mean([np.linalg.norm(cams[v].project(Xn[None])[0] - obs[v, n])
+                             for v in use])
+                if e < best[0]:
+                    best = (e, Xn)
+            if best[0] <= threshold:
+                out[n] = best[1]
+                break
+    return out
+
+
+def _outlier_data(rng, V, N, noise=0.5, rate=0.15, offset=50.0):
+    cams = random_rig(rng, V, dist_len=5)
+    X = random_points(rng, N)
+    obs = _observe(cams, X) + rng.normal(scale=noise, size=(V, N, 2))
+    bad = rng.random((V, N)) < rate
+    obs[bad] += offset
+    return cams, X, obs, bad
+
+
+def test_exclusion_matches_pose2sim_rule():
+    rng = np.random.default_rng(5)
+    cams, X, obs, bad = _outlier_data(rng, 5, 60, rate=0.25, offset=40.0)
+    weights = rng.uniform(0.3, 1.0, size=(5, 60))
+    weights[rng.random((5, 60)) < 0.1] = 0.0
+    ref = _pose2sim_reference(obs, cams, weights, threshold=4.0, min_views=2)
+    out, inl = triangulate_robust(obs, cams, weights, threshold_px=4.0, min_views=2)
+    np.testing.assert_allclose(out, ref, atol=1e-9, equal_nan=True)
+    assert np.isnan(out).any(axis=1).sum() < 60 and np.isfinite(out).all(axis=1).sum() > 40
+    # the accepted subsets have a mean reprojection error within the threshold
+    err = reprojection_error(out, obs, cams)
+    ok = np.isfinite(out[:, 0])
+    mean = np.nanmean(np.where(inl, err, np.nan), axis=0)
+    assert np.all(mean[ok] <= 4.0)
+    assert not inl[:, ~ok].any()
+
+
+@pytest.mark.parametrize('method', ['exclusion', 'ransac'])
+@pytest.mark.parametrize('V', [8, 35])
+def test_robust_rejects_gross_outliers(method, V):
+    rng = np.random.default_rng(V)
+    cams, X, obs, bad = _outlier_data(rng, V, 14, rate=0.1)
+    plain = triangulate(obs, cams)
+    out, inl = triangulate_robust(obs, cams, threshold_px=2.0, min_views=2, method=method)
+    err_plain = np.linalg.norm(plain - X, axis=1)
+    err = np.linalg.norm(out - X, axis=1)
+    assert np.all(np.isfinite(err))
+    assert np.median(err) < 0.5 * np.median(err_plain)
+    # every gross outlier is flagged, and few good views are lost
+    assert not np.any(inl & bad)
+    assert (inl | bad).mean() > 0.95
+
+
+def test_robust_min_views_and_nan():
+    rng = np.random.default_rng(9)
+    cams, X, obs, bad = _outlier_data(rng, 4, 10, rate=0.0)
+    obs[2:, 0] = np.nan  # 2 views left for keypoint 0
+    obs[1:, 1] = np.nan  # 1 view
+    for method in ('exclusion', 'ransac'):
+        out, inl = triangulate_robust(obs, cams, min_views=3, method=method)
+        assert np.all(np.isnan(out[:2])) and not inl[:, :2].any()
+        np.testing.assert_allclose(out[2:], X[2:], atol=5e-3)
+    with pytest.raises(ValueError, match='method'):
+        triangulate_robust(obs, cams, method='magic')
+    with pytest.raises(ValueError, match='points2d'):
+        triangulate(obs[:3], cams)

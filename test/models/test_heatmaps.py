@@ -1,0 +1,77 @@
+"""Heatmap codec: Gaussian targets against a brute-force formula, sub-pixel decode round trip."""
+import numpy as np
+import pytest
+import torch
+
+from monet_ros.models import decode_heatmaps, labelled_mask, render_heatmaps
+
+
+def brute_force_gaussian(u, v, size, sigma):
+    h, w = size
+    out = np.zeros(size)
+    for row in range(h):
+        for col in range(w):
+            out[row, col] = np.exp(-((col - u) ** 2 + (row - v) ** 2) / (2 * sigma ** 2))
+    return out
+
+
+def test_render_matches_brute_force_and_masks_nan():
+    points = np.array([[[10.3, 20.7], [np.nan, np.nan], [-1.5, 3.25], [5.0, np.nan]]])
+    heat = render_heatmaps(points, (46, 40), sigma=1.5)
+    assert isinstance(heat, np.ndarray) and heat.shape == (1, 4, 46, 40)
+    assert heat.dtype == np.float64, 'float64 in, float64 out'
+    assert render_heatmaps(points.astype(np.float32), (46, 40), 1.5).dtype == np.float32
+    np.testing.assert_allclose(heat[0, 0], brute_force_gaussian(10.3, 20.7, (46, 40), 1.5),
+                               atol=1e-6)
+    np.testing.assert_allclose(heat[0, 2], brute_force_gaussian(-1.5, 3.25, (46, 40), 1.5),
+                               atol=1e-6)
+    assert not heat[0, 1].any() and not heat[0, 3].any(), 'unlabelled -> all-zero map'
+    np.testing.assert_array_equal(labelled_mask(points), [[True, False, True, False]])
+
+
+def test_render_torch_keeps_type_and_device():
+    points = torch.tensor([[[3.0, 4.0]]], dtype=torch.float64)
+    heat = render_heatmaps(points, (8, 8), sigma=1.0)
+    assert isinstance(heat, torch.Tensor) and heat.dtype == torch.float64
+    assert heat[0, 0, 4, 3] == 1.0
+    with pytest.raises(ValueError, match='sigma'):
+        render_heatmaps(points, (8, 8), sigma=0)
+    with pytest.raises(ValueError, match=r'\(B, C, 2\)'):
+        render_heatmaps(points[0], (8, 8), sigma=1)
+
+
+@pytest.mark.parametrize('sigma', [1.0, 1.5, 2.0, 3.0])
+def test_decode_round_trip_subpixel(sigma):
+    rng = np.random.default_rng(int(sigma * 10))
+    h, w = 46, 64
+    # Many random sub-pixel points over the whole map, borders included.
+    points = np.stack([rng.uniform(0, w - 1, (8, 64)), rng.uniform(0, h - 1, (8, 64))], -1)
+    heat = render_heatmaps(torch.from_numpy(points), (h, w), sigma)
+    peaks, confidence = decode_heatmaps(heat)
+    error = np.abs(peaks.numpy() - points)
+    assert error.max() < 0.1, f'worst sub-pixel error {error.max():.4f} px'
+    # confidence = the maximum value of each map
+    np.testing.assert_allclose(confidence.numpy(), heat.numpy().max(axis=(2, 3)), rtol=1e-6)
+    # the plain argmax is much worse: sub-pixel refinement is doing the work
+    flat = heat.reshape(8, 64, -1).argmax(-1).numpy()
+    argmax = np.stack([flat % w, flat // w], -1)
+    assert np.abs(argmax - points).mean() > 0.2
+
+
+def test_decode_scaled_and_numpy():
+    points = np.array([[[12.25, 7.8], [0.2, 45.6]]])
+    heat = 0.37 * render_heatmaps(points, (46, 46), sigma=2.0)
+    peaks, confidence = decode_heatmaps(heat)
+    assert isinstance(peaks, np.ndarray) and peaks.shape == (1, 2, 2)
+    np.testing.assert_allclose(peaks, points, atol=0.01)
+    np.testing.assert_allclose(confidence, heat.max(axis=(2, 3)), rtol=1e-6)
+
+
+def test_decode_picks_the_higher_of_two_peaks_and_handles_empty_maps():
+    a = render_heatmaps(np.array([[[10.4, 10.0]]]), (32, 32), 1.5)
+    b = render_heatmaps(np.array([[[25.0, 20.6]]]), (32, 32), 1.5)
+    heat = np.concatenate([0.5 * a + 0.9 * b, np.zeros_like(a)], axis=1)
+    peaks, confidence = decode_heatmaps(heat)
+    np.testing.assert_allclose(peaks[0, 0], [25.0, 20.6], atol=0.05)
+    assert confidence[0, 0] == pytest.approx(heat[0, 0].max())
+    assert confidence[0, 1] == 0.0 and np.isfinite(peaks[0, 1]).all()

@@ -1,0 +1,73 @@
+"""Stamp synchroniser: exact and slop matching, partial groups on timeout, order, late items."""
+from monet_ros.nodes.sync import StampSynchronizer
+
+
+class FakeClock:
+    """A hand-advanced monotonic clock (time is an input of the synchroniser)."""
+
+    def __init__(self):
+        self.now = 0.0
+
+    def __call__(self):
+        return self.now
+
+
+def test_exact_match_releases_complete_groups_in_order():
+    sync = StampSynchronizer(['a', 'b', 'c'], clock=FakeClock())
+    assert sync.add('a', 100, 'a1') == []
+    assert sync.add('b', 200, 'b2') == []
+    assert sync.add('b', 100, 'b1') == []
+    [group] = sync.add('c', 100, 'c1')
+    assert group.stamp_ns == 100 and group.items == {'a': 'a1', 'b': 'b1', 'c': 'c1'}
+    assert group.missing == ()
+    # 200 is still open; an item of 100 is now late.
+    assert sync.add('a', 100, 'again') == [] and sync.stats.late == 1
+    assert [len(p.items) for p in sync.pending] == [1]
+
+
+def test_slop_matches_nearest_and_rejects_beyond():
+    sync = StampSynchronizer(['a', 'b'], slop_ns=5, clock=FakeClock())
+    sync.add('a', 1000, 'a0')
+    sync.add('a', 1020, 'a1')
+    [group] = sync.add('b', 1018, 'b1')     # nearest within 5 ns: 1020, releasing 1000 too
+    assert group.stamp_ns == 1020 and group.items == {'a': 'a1', 'b': 'b1'}
+    assert sync.stats.dropped == 1         # the 1000 group had 1 of 2 keys (min_keys = all)
+    sync.add('a', 2000, 'a2')
+    assert sync.add('b', 2006, 'b2') == []  # 6 ns apart > slop: a new group
+    assert [g.stamp_ns for g in sync.pending] == [2000, 2006]
+
+
+def test_timeout_releases_partial_group_when_a_key_is_silent():
+    clock = FakeClock()
+    sync = StampSynchronizer(['a', 'b', 'c'], timeout_s=0.2, min_keys=2, clock=clock)
+    sync.add('a', 10, 'a')
+    sync.add('b', 10, 'b')
+    assert sync.poll() == []
+    clock.now = 0.25
+    [group] = sync.poll()
+    assert group.missing == ('c',) and set(group.items) == {'a', 'b'}
+    assert sync.stats.partial == 1
+    # A lone item times out and is dropped (fewer than min_keys).
+    sync.add('a', 20, 'a')
+    clock.now = 1.0
+    assert sync.poll() == [] and sync.stats.dropped == 1
+
+
+def test_pending_is_bounded():
+    sync = StampSynchronizer(['a', 'b'], max_pending=3, clock=FakeClock())
+    for stamp in range(10):
+        sync.add('a', stamp, stamp)
+    assert len(sync.pending) == 3 and sync.stats.dropped == 7
+    sync.add('z', 1, 1)
+    assert sync.stats.unknown_key == 1
+
+
+def test_expected_subset_completes_without_waiting_for_a_silent_key():
+    sync = StampSynchronizer(['a', 'b', 'c'], min_keys=2, timeout_s=10, clock=FakeClock())
+    sync.set_expected(['a', 'b'])
+    sync.add('a', 5, 'a')
+    [group] = sync.add('b', 5, 'b')
+    assert group.missing == ('c',) and sync.stats.partial == 1
+    sync.set_expected([])                   # back to all keys
+    sync.add('a', 6, 'a')
+    assert sync.add('b', 6, 'b') == []
