@@ -120,10 +120,12 @@ class ViewBatch:
     instants: np.ndarray
     views: np.ndarray
 
-    def to_heatmap(self, points):
-        """(N, C, 2) original pixels -> heatmap pixels (NaN kept)."""
+    def to_heatmap(self, points, index=slice(None)):
+        """(N, C, 2) original pixels -> heatmap pixels (NaN kept) of the samples
+        self[index] (a slice or index array selecting N samples)."""
         p = np.asarray(points, dtype=np.float64)
-        return np.einsum('nij,ncj->nci', self.A[:, :2, :2], p) + self.A[:, None, :2, 2]
+        A = self.A[index]
+        return np.einsum('nij,ncj->nci', A[:, :2, :2], p) + A[:, None, :2, 2]
 
 
 class CropCache:
