@@ -17,6 +17,7 @@ def add_arguments(parser):
                         help='evaluate on the held-out tail used in training, or everything')
     parser.add_argument('--from-json', help='re-render the report from a results.json')
     parser.add_argument('--device', default=None, help='torch device (default: CUDA if present)')
+    parser.add_argument('--threads', type=int, default=0, help='torch CPU threads (0 = default)')
 
 
 def run(args):
@@ -24,11 +25,14 @@ def run(args):
 
     from monet_ros.evaluation import load_summaries, markdown_table, write_report
     from monet_ros.evaluation.evaluate import evaluate_detector
-    from monet_ros.learning.recording import load_recording, RecordingError
+    from monet_ros.learning.recording import RecordingError, load_recording
     from monet_ros.learning.trainer import crop_boxes
     from monet_ros.models import CheckpointError
     from monet_ros.models.detector import Detector
 
+    if args.threads:
+        import torch
+        torch.set_num_threads(args.threads)
     if args.from_json:
         summaries = load_summaries(args.from_json)
     else:
@@ -53,7 +57,7 @@ def run(args):
             for rec in named or recordings:
                 if list(rec.keypoints) != list(meta['keypoints']):
                     print(f'monet eval: {path}: keypoints {meta["keypoints"]} differ from '
-                          f'{rec.name}\'s skeleton', file=sys.stderr)
+                          f"{rec.name}'s skeleton", file=sys.stderr)
                     return 1
                 start = meta.get('held_out_from_stamp_ns')
                 if args.instants == 'all' or start is None:

@@ -16,9 +16,9 @@ def add_arguments(parser):
     parser.add_argument('data', help='recording: `monet synth` output folder, rosbag2 folder '
                         'or .mcap file')
     parser.add_argument('--out', required=True, help='output folder (checkpoints, log)')
-    parser.add_argument('--rig', help='rig file (default: the data folder\'s rig.yaml, else '
-                        'the bag\'s CameraInfo + /tf_static)')
-    parser.add_argument('--labels', help='labels CSV (default: the data folder\'s labels.csv)')
+    parser.add_argument('--rig', help="rig file (default: the data folder's rig.yaml, else "
+                        "the bag's CameraInfo + /tf_static)")
+    parser.add_argument('--labels', help="labels CSV (default: the data folder's labels.csv)")
     parser.add_argument('--ground-truth', help='ground_truth.npz (for ground-truth crop boxes)')
     parser.add_argument('--skeleton', default='human14', help='skeleton preset or YAML file')
     parser.add_argument('--max-instants', type=int, default=0,
@@ -26,6 +26,9 @@ def add_arguments(parser):
     parser.add_argument('--resume', action='store_true',
                         help='continue from OUT/trainer_state.pt')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar')
+    parser.add_argument('--threads', type=int, default=0,
+                        help='torch CPU threads (0 = torch default; 1 is fastest on a busy '
+                        'machine)')
     group = parser.add_argument_group('training configuration (TrainConfig)')
     for f in fields(TrainConfig):
         flag = '--' + f.name.replace('_', '-')
@@ -42,10 +45,13 @@ def config_from_args(args):
 
 
 def run(args):
-    from monet_ros.learning.recording import load_recording, RecordingError
+    from monet_ros.learning.recording import RecordingError, load_recording
     from monet_ros.learning.trainer import Trainer, TrainingData
     from monet_ros.models import build_model
 
+    if args.threads:
+        import torch
+        torch.set_num_threads(args.threads)
     try:
         config = config_from_args(args)
     except ConfigError as error:

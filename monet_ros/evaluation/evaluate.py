@@ -9,8 +9,8 @@ views without RANSAC and reprojected (evaluation.reprojection).
 import numpy as np
 
 from monet_ros.evaluation.pck import normalised_distances, pck
-from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.evaluation.report import EvalSummary
+from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.geometry import crop_transform, project_views
 from monet_ros.learning.pseudo_labels import project_to_views
 from monet_ros.models import decode_heatmaps

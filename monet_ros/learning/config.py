@@ -5,7 +5,7 @@ parameters and `monet train` as command-line options.
 """
 from dataclasses import asdict, dataclass, fields
 
-from monet_ros.config import config_from_mapping, ConfigError, setting, validate_config
+from monet_ros.config import ConfigError, config_from_mapping, setting, validate_config
 from monet_ros.learning.dataset import AugmentConfig
 from monet_ros.learning.pseudo_labels import TrackingConfig
 
@@ -35,12 +35,12 @@ MODE_SPECS = {
 
 @dataclass(frozen=True)
 class TrainConfig:
-    mode: str = setting('monet', 'training mode (a row of the paper\'s Table 1)', choices=MODES)
+    mode: str = setting('monet', "training mode (a row of the paper's Table 1)", choices=MODES)
     architecture: str = setting('small', 'detector architecture',
                                 choices=('small', 'cpm', 'hourglass'))
-    input_size: int = setting(0, 'square network input side (px); 0 = the architecture\'s',
+    input_size: int = setting(0, "square network input side (px); 0 = the architecture's",
                               minimum=0)
-    width: int = setting(0, 'channel width of the small/cpm nets; 0 = the architecture\'s',
+    width: int = setting(0, "channel width of the small/cpm nets; 0 = the architecture's",
                          minimum=0)
     steps: int = setting(2000, 'training steps', minimum=1)
     batch_labelled: int = setting(8, 'labelled view crops per step', minimum=1)
@@ -95,7 +95,7 @@ class TrainConfig:
         if self.device != 'auto' and not (self.device == 'cpu' or
                                           self.device.startswith('cuda')):
             raise ConfigError('TrainConfig', 'device',
-                              f"expected auto, cpu, cuda or cuda:N, got {self.device!r}")
+                              f'expected auto, cpu, cuda or cuda:N, got {self.device!r}')
 
     @property
     def spec(self):

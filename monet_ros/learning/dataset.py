@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from monet_ros.geometry import crop_transform
+from monet_ros.models.detector import images_to_tensor
 
 
 @dataclass(frozen=True)
@@ -207,7 +208,7 @@ class CropCache:
         K = self.S_heat[None] @ S_crop @ Kc
         R = Rz @ self.R[views]
         t = np.einsum('nij,nj->ni', Rz, self.t[views])
-        tensor = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)
+        tensor = images_to_tensor(images)              # the detector's own conversion
         tensor = photometric(tensor, augment, rng)
         return ViewBatch(tensor, A, K, R, t, instants, views)
 

@@ -10,8 +10,8 @@ Modes (config.mode) are the paper's rows: supervised (L_L), spatial / spatiotemp
 (L_L + lambda_p L_B on augmented labels), bootstrap1 / bootstrap2 (the same, plus one or two
 rounds of detections -> RANSAC triangulation -> reprojection as labels, at evenly spaced
 steps), monet (L_L + lambda_p L_B on spatial pseudo-labels + lambda_e L_E on unlabeled
-instants after a warm-up of epipolar_warmup x steps without L_E). State (weights, Adam, schedule, step, RNG, pseudo-labels) is checkpointed
-atomically and resumes exactly.
+instants, after a warm-up of epipolar_warmup x steps without L_E). State (weights, Adam,
+schedule, step, RNG, pseudo-labels) is checkpointed atomically and resumes exactly.
 """
 import csv
 import json
@@ -25,14 +25,17 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from monet_ros.geometry import project_views
 from monet_ros.learning.config import TrainConfig
-from monet_ros.learning.dataset import boxes_from_points, CropCache, fill_boxes
+from monet_ros.learning.dataset import CropCache, boxes_from_points, fill_boxes
 from monet_ros.learning.epipolar import multiview_epipolar_loss
 from monet_ros.learning.losses import masked_heatmap_mse, objective
-from monet_ros.learning.pseudo_labels import (bootstrap_pseudo_labels, PseudoLabels,
-                                              spatial_pseudo_labels,
-                                              spatiotemporal_pseudo_labels)
+from monet_ros.learning.pseudo_labels import (
+    PseudoLabels,
+    bootstrap_pseudo_labels,
+    project_to_views,
+    spatial_pseudo_labels,
+    spatiotemporal_pseudo_labels,
+)
 from monet_ros.models import build_model, decode_heatmaps, save_checkpoint
 
 STATE_FORMAT = 'monet_ros.trainer_state/1'
@@ -71,17 +74,14 @@ def crop_boxes(recording, source, aspect, margin):
     if source == 'ground_truth':
         if recording.gt3d is None:
             raise ValueError(f'{recording.name}: box_source ground_truth needs ground truth')
-        points = project_views(recording.cameras, recording.gt3d)          # (T, V, C, 2)
+        C = recording.num_keypoints
+        points = project_to_views(recording.gt3d.reshape(-1, 3), recording.cameras)
+        points = points.reshape(V, T, C, 2).transpose(1, 0, 2, 3)          # visible only
     elif source == 'labels':
         spatial = spatial_pseudo_labels(recording.labels, recording.cameras).points
         points = np.where(np.isfinite(recording.labels), recording.labels, spatial)
     else:
         points = np.full((T, V, 1, 2), np.nan)
-    sizes = np.array([[c.width, c.height] for c in recording.cameras], dtype=np.float64)
-    with np.errstate(invalid='ignore'):
-        inside = (points[..., 0] >= -0.5) & (points[..., 1] >= -0.5) & \
-            (points[..., 0] <= sizes[None, :, None, 0]) & (points[..., 1] <= sizes[None, :, None, 1])
-    points = np.where(inside[..., None], points, np.nan)
     return fill_boxes(boxes_from_points(points, aspect=aspect, margin=margin),
                       recording.cameras)
 
@@ -419,6 +419,8 @@ class Trainer:
                         getattr(config, name) != value:
                     raise ValueError(f'{path}: config field {name} is {value!r} in the saved '
                                      f'state but {getattr(config, name)!r} now')
+        for stale in Path(out_dir).rglob('.*.tmp'):      # temporaries of a killed write
+            stale.unlink()
         trainer = cls(config, data, out_dir, device=device)
         trainer.model.load_state_dict(state['model'])
         trainer.optimizer.load_state_dict(state['optimizer'])

@@ -1,7 +1,7 @@
 """A tiny learnable multiview scene in memory: coloured blobs moving in front of a ring rig."""
-from helpers.ring import ring_rig
 import numpy as np
 
+from helpers.ring import ring_rig
 from monet_ros.learning.recording import Recording
 
 COLOURS = np.array([[255, 40, 40], [40, 255, 40], [60, 60, 255], [255, 255, 40],
