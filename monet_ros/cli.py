@@ -11,6 +11,7 @@ import sys
 SUBCOMMANDS = {
     'train': 'train',
     'eval': 'eval',
+    'demo': 'demo',
 }
 
 
