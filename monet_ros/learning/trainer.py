@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.learning.config import TrainConfig
 from monet_ros.learning.dataset import CropCache, boxes_from_points, fill_boxes
 from monet_ros.learning.epipolar import multiview_epipolar_loss
@@ -223,7 +224,7 @@ class Trainer:
                                    replace=len(self.data.unlabeled_instants) < c.batch_unlabeled)
             views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
             pairs = np.stack([np.repeat(inst, k), views.ravel()], axis=1)
-            parts.append(('E', pairs))
+            parts.append(('E', pairs, k))
         return parts
 
     @property
@@ -238,13 +239,14 @@ class Trainer:
 
     # ----------------------------------------------------------------- losses
     def _terms(self, parts, rng, augment):
-        """Loss terms of one batch plan (list of (kind, (N, 2) pairs))."""
-        pairs = np.concatenate([p for _, p in parts])
+        """Loss terms of one batch plan: list of (kind, (N, 2) (instant, view) pairs[, views
+        per instant for 'E'], kind in 'L' (labels), 'B' (pseudo-labels), 'E' (epipolar)."""
+        pairs = np.concatenate([p[1] for p in parts])
         batch = self.data.cache.views(pairs[:, 0], pairs[:, 1], rng, augment)
         stages = self.model(batch.images.to(self.device, non_blocking=True))
         terms = {}
         start = 0
-        for kind, p in parts:
+        for kind, p, *rest in parts:
             n = len(p)
             sl = slice(start, start + n)
             if kind in ('L', 'B'):
@@ -253,7 +255,7 @@ class Trainer:
                 terms[kind] = masked_heatmap_mse([s[sl] for s in stages], heat_pts,
                                                  self.config.sigma)
             else:
-                k = min(self.config.views_per_instant, self.data.recording.num_views)
+                k = rest[0]
                 heat = nonnegative(stages[-1][sl])
                 B = n // k
                 f32 = dict(dtype=torch.float32, device=self.device)
@@ -306,13 +308,37 @@ class Trainer:
                 k = min(c.views_per_instant, V)
                 inst = self.rng.choice(self.data.unlabeled_instants, size=max(1, num // k))
                 views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
-                parts.append(('E', np.stack([np.repeat(inst, k), views.ravel()], axis=1)))
+                parts.append(('E', np.stack([np.repeat(inst, k), views.ravel()], axis=1), k))
         finally:
             self.rng = saved
         self.model.eval()
         terms = self._terms(parts, None, None)
         self.model.train()
         return {k: float(v) for k, v in terms.items()}
+
+    @torch.no_grad()
+    def validate(self, instants=None, max_instants=16):
+        """Unsupervised validation on some instants (default: the held-out split, at most
+        max_instants evenly spread): mean epipolar divergence over all views and the
+        reprojection error (px) of the all-view triangulation of the detections. Needs no
+        ground truth (for the online learner's model selection)."""
+        if instants is None:
+            held = self.data.held_out
+            instants = held[np.linspace(0, len(held) - 1, min(max_instants, len(held)))
+                            .round().astype(int)] if len(held) else held
+        instants = np.asarray(instants, dtype=np.int64)
+        if instants.size == 0:
+            return {}
+        points, _ = self.detect(instants)
+        reproj = multiview_reprojection(points, self.data.cameras).consistency_stats
+        V = self.data.recording.num_views
+        pairs = np.stack(np.meshgrid(instants, np.arange(V), indexing='ij'), -1).reshape(-1, 2)
+        was_training = self.model.training
+        self.model.eval()
+        terms = self._terms([('E', pairs, V)], None, None)
+        self.model.train(was_training)
+        return {'epipolar_divergence': float(terms['E']), 'reprojection_px': reproj.mean,
+                'reprojection_std_px': reproj.std, 'instants': int(instants.size)}
 
     # ----------------------------------------------------------------- bootstrapping
     def bootstrap_steps(self):

@@ -98,3 +98,15 @@ def test_config_errors_name_the_field():
         TrainConfig(lambda_e=-1.0)
     with pytest.raises(ConfigError, match='input_size'):
         TrainConfig(input_size=50)
+
+
+def test_validate_reports_divergence_and_reprojection(recording):
+    config = TrainConfig(mode='spatial', steps=30, **TINY)
+    data = TrainingData(recording, config, (48, 48), (12, 12))
+    trainer = Trainer(config, data)
+    before = trainer.validate()
+    trainer.run(progress=False)
+    after = trainer.validate()
+    assert before['instants'] == after['instants'] == 6
+    assert after['reprojection_px'] < before['reprojection_px']
+    assert after['epipolar_divergence'] >= 0.0
