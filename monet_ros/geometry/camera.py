@@ -256,7 +256,8 @@ def project_views(cameras, X):
     X = np.asarray(X, dtype=np.float64)
     Xh = np.concatenate([X, np.ones_like(X[..., :1])], axis=-1)[..., None, :, :]
     if not p['d12'].any():  # pinhole rig: one matmul with P
-        h = Xh @ p['P'].swapaxes(-1, -2)  # (..., V, N, 3)
+        P = p['P'] if 'P' in p else p['K'] @ np.concatenate([p['R'], p['t'][..., None]], -1)
+        h = Xh @ P.swapaxes(-1, -2)  # (..., V, N, 3)
         return h[..., :2] / h[..., 2:]
     Xc = Xh @ np.concatenate([p['R'], p['t'][:, :, None]], axis=-1).swapaxes(-1, -2)
     x = Xc[..., 0] / Xc[..., 2]

@@ -177,15 +177,15 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     mean_inl = np.where(inl, err, 0.0).sum(axis=1) / np.maximum(count, 1)
     score = np.where(valid & np.isfinite(mean_inl), count - mean_inl / (threshold_px * 2), -1)
     best_inl = inl[np.argmax(score, axis=0), :, cols].T  # (V, n)
-    for _ in range(2):  # refine on the consensus set, re-select inliers
-        Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+    Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+    for _ in range(2):  # re-select the inliers of the refined point, refine again
         err_r = _view_errors(rig, Xr, obs[:, todo])
         new_inl = (err_r < threshold_px) & avail[:, todo]
         new_inl = np.where(new_inl.sum(axis=0) >= 2, new_inl, best_inl)
         if np.array_equal(new_inl, best_inl):
             break
         best_inl = new_inl
-    Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+        Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
     ok = best_inl.sum(axis=0) >= max(2, min_views)
     X[todo[ok]] = Xr[ok]
     inliers[:, todo[ok]] = best_inl[:, ok]
