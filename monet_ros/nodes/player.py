@@ -44,6 +44,9 @@ class PlayerConfig:
     wait_for_subscribers: int = setting(0, 'before playing, wait until every replayed image '
                                         'and camera_info topic has this many subscribers '
                                         '(0 = do not wait)', minimum=0)
+    start_delay_s: float = setting(0.0, 'wait this long before playing (after the subscribers): '
+                                   'lets late discovery finish so no first frame is lost',
+                                   minimum=0.0)
     shutdown_when_done: bool = setting(False, 'exit when the bag has been played (no loop)')
 
     def __post_init__(self):
@@ -120,6 +123,8 @@ class PlayerNode(Node):
         try:
             if self.config.wait_for_subscribers:
                 self.wait_for_subscribers()
+            if self.stopping.wait(self.config.start_delay_s):
+                return
             while not self.stopping.is_set():
                 self.play_once()
                 self.loops += 1

@@ -32,13 +32,14 @@ def small_bag(tmp_path):
 def collect_all(ros):
     images = {n: ros.collect(f'/{n}/image_raw', Image, 50) for n in ('cam0', 'cam1')}
     infos = ros.collect('/cam0/camera_info', CameraInfo, 50)
+    ros.collect('/cam1/camera_info', CameraInfo, 50)   # the player waits for every topic
     clock = ros.collect('/clock', Clock, 50)
     return images, infos, clock
 
 
 def test_replays_every_message_in_order_with_its_bytes(ros_env, small_bag):
     params = dict(bag=str(small_bag), rate=2.0, wait_for_subscribers=1,
-                  shutdown_when_done=True)
+                  start_delay_s=1.0, shutdown_when_done=True)
     with RosHarness(ros_env) as ros:
         images, infos, clock = collect_all(ros)
         with NodeProcess('player', ros_env, params) as player:
@@ -59,7 +60,8 @@ def test_replays_every_message_in_order_with_its_bytes(ros_env, small_bag):
 
 def test_start_offset_loop_and_sigterm(ros_env, small_bag):
     params = dict(bag=str(small_bag), rate=4.0, loop=True, start_offset_s=0.2,
-                  topics=['/cam0/image_raw'], clock=False, wait_for_subscribers=1)
+                  topics=['/cam0/image_raw'], clock=False, wait_for_subscribers=1,
+                  start_delay_s=1.0)
     with RosHarness(ros_env) as ros:
         images = ros.collect('/cam0/image_raw', Image, 50)
         with NodeProcess('player', ros_env, params) as player:
