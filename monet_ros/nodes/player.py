@@ -9,6 +9,7 @@ remapped with ordinary ROS remapping (`--ros-args -r /cam0/image_raw:=/left/imag
 """
 from dataclasses import dataclass
 import importlib
+import struct
 import sys
 import threading
 import time
@@ -51,6 +52,18 @@ class PlayerConfig:
 
     def __post_init__(self):
         validate_config(self)
+
+
+_CDR_STAMP = struct.Struct('<iI')
+
+
+def cdr_header_stamp_ns(data):
+    """header.stamp (ns) of a little-endian CDR message that starts with a std_msgs/Header
+    (Image, CompressedImage, CameraInfo, ...): 4 bytes of encapsulation, then sec, nanosec."""
+    if len(data) < 12 or bytes(data[:2]) != b'\x00\x01':
+        return None
+    sec, nanosec = _CDR_STAMP.unpack_from(data, 4)
+    return sec * 1_000_000_000 + nanosec
 
 
 def message_class(msgtype):
@@ -97,11 +110,14 @@ class PlayerNode(Node):
         for topic, reason in self.skipped.items():
             self.get_logger().warning(f'not replaying {topic}: {reason}')
         self.image_topics = [t for t in self.pubs if available[t].msgtype in IMAGE_TYPES]
+        self.image_set = set(self.image_topics)
         self.clock_pub = self.create_publisher(Clock, '/clock', STREAM_OUT) \
             if config.clock else None
         self.published = 0
         self.loops = 0
-        self.listeners = []       # callables(topic, log_time_ns, wall_time) per message
+        self.listeners = []       # callables(topic, stamp_ns, wall_time) per image message
+        self.gate = None          # callable(previous_frame_stamp_ns) blocking until the next
+        #                           frame may go (lockstep replay in `monet pipeline`)
         self.done = threading.Event()
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self.play, name='player', daemon=True)
@@ -144,6 +160,7 @@ class PlayerNode(Node):
     def play_once(self):
         start_wall = None
         first_log = None
+        frame_log, frame_stamp = None, None   # log time and stamp of the current image frame
         offset_ns = int(self.config.start_offset_s * 1e9)
         for item in self.reader.messages(list(self.pubs), decode=False):
             if self.stopping.is_set():
@@ -159,15 +176,23 @@ class PlayerNode(Node):
                 delay = due - time.monotonic()
                 if delay > 0 and self.stopping.wait(delay):
                     return
+            image = item.topic in self.image_set
+            if image and item.log_time_ns != frame_log:
+                if self.gate is not None and frame_stamp is not None:
+                    self.gate(frame_stamp)
+                frame_log = item.log_time_ns
             if self.clock_pub is not None:
                 self.clock_pub.publish(Clock(clock=Time(
                     sec=item.log_time_ns // 1_000_000_000,
                     nanosec=item.log_time_ns % 1_000_000_000)))
-            self.pubs[item.topic].publish(bytes(item.data))
-            now = time.monotonic()
+            data = bytes(item.data)
+            self.pubs[item.topic].publish(data)
             self.published += 1
-            for listener in self.listeners:
-                listener(item.topic, item.log_time_ns, now)
+            if image:
+                frame_stamp = cdr_header_stamp_ns(data) or item.log_time_ns
+                now = time.monotonic()
+                for listener in self.listeners:
+                    listener(item.topic, frame_stamp, now)
 
     def destroy_node(self):
         self.stopping.set()
