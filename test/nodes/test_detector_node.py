@@ -146,7 +146,7 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
         got = stream.roundtrip(T0 + 2, images, node)
         tracked = []
         for cam in rig:
-            uv = cv2_project(cam, X)
+            uv = cv2_project(cam, X.astype(np.float32))    # the cloud carries float32
             lo, hi = uv.min(axis=0), uv.max(axis=0)
             pad = 0.3 * (hi - lo)
             tracked.append(expected_box((*(lo - pad + 0.5), *(hi + pad + 0.5)), aspect))
@@ -185,3 +185,15 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
     for v, cam in enumerate(rig):     # still the second model's weights
         np.testing.assert_allclose(image_msg_to_heatmaps(got_after[cam.name][0]), new[v],
                                    atol=1e-4)
+
+
+@pytest.mark.parametrize('change, message', [
+    ({'model': '/nonexistent/model.pt'}, '/nonexistent/model.pt: checkpoint file not found'),
+    ({'cameras': ['cam0', 'cam7']}, "parameter 'cameras': unknown camera 'cam7'"),
+])
+def test_bad_parameters_fail_at_start(ros_env, setup, change, message):
+    _, rig_path, first, _, _ = setup
+    params = {'rig': str(rig_path), 'model': str(first), **change}
+    with NodeProcess('detector', ros_env, params) as node:
+        assert node.wait(timeout=90) == 2, node.output()
+        assert message in node.output()
