@@ -41,6 +41,8 @@ def add_arguments(parser):
     parser.add_argument('--device', default='', help="torch device ('' = auto)")
     parser.add_argument('--workdir', help='where the demo recording and model are cached '
                         '(default: ~/.cache/monet_ros/demo)')
+    parser.add_argument('--start-delay', type=float, default=0.5,
+                        help='seconds between start-up and the first frame (discovery)')
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
 
 
@@ -141,7 +143,7 @@ def run(args):
     summary = Summary()
     rclpy.init(args=['--ros-args'])
     nodes = []
-    detector = None
+    detector = executor = None
     try:
         try:
             transport = image_transport(args.bag)
@@ -155,7 +157,7 @@ def run(args):
             nodes.append(detector)
             player = PlayerNode(overrides=dict(
                 bag=str(args.bag), rate=0.0 if args.lockstep else args.rate, loop=args.loop,
-                wait_for_subscribers=1, start_delay_s=0.5,
+                wait_for_subscribers=1, start_delay_s=args.start_delay,
                 topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]))
             nodes.append(player)
         except (ValueError, OSError) as error:
@@ -189,6 +191,11 @@ def run(args):
         pass
     finally:
         for node in nodes:
+            if isinstance(node, PlayerNode):
+                node.stopping.set()           # no publishing into a closing context
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
     print(f'monet pipeline: {args.bag}: {summary.line(detector=detector)}', flush=True)

@@ -222,6 +222,7 @@ class FusionNode(Node):
             values=[KeyValue(key=k, value=str(v)) for k, v in (
                 ('frames', self.frames), ('partial_frames', self.partial_frames),
                 ('dropped_frames', self.sync.stats.dropped), ('late_views', self.sync.stats.late),
+                ('time_resets', self.sync.stats.resets),
                 ('fusion_ms_median', f'{fusion_ms:.3f}'))])
         msg.status.append(summary)
         for name, stats in self.stats.items():

@@ -38,7 +38,9 @@ class PlayerConfig:
     topics: tuple[str, ...] = setting((), 'topics to replay (default: every image, '
                                       'compressed image and camera_info topic, and /tf_static)')
     rate: float = setting(1.0, 'playback speed factor (0 = as fast as possible)', minimum=0.0)
-    loop: bool = setting(False, 'start again at the end')
+    loop: bool = setting(False, 'start again at the end; every pass after the first shifts the '
+                         'header stamps (and /clock) by the recording length plus one frame, '
+                         'so time keeps running forward')
     start_offset_s: float = setting(0.0, 'skip this many seconds from the start of the bag',
                                     minimum=0.0)
     clock: bool = setting(True, 'publish /clock with the bag time')
@@ -64,6 +66,18 @@ def cdr_header_stamp_ns(data):
         return None
     sec, nanosec = _CDR_STAMP.unpack_from(data, 4)
     return sec * 1_000_000_000 + nanosec
+
+
+def shift_cdr_header_stamp(data, shift_ns):
+    """A copy of a header-first CDR message with header.stamp moved by shift_ns (messages
+    without a little-endian header are returned unchanged)."""
+    stamp = cdr_header_stamp_ns(data)
+    if stamp is None:
+        return data
+    stamp += shift_ns
+    out = bytearray(data)
+    _CDR_STAMP.pack_into(out, 4, stamp // 1_000_000_000, stamp % 1_000_000_000)
+    return bytes(out)
 
 
 def message_class(msgtype):
@@ -118,6 +132,7 @@ class PlayerNode(Node):
         self.listeners = []       # callables(topic, stamp_ns, wall_time) per image message
         self.gate = None          # callable(previous_frame_stamp_ns) blocking until the next
         #                           frame may go (lockstep replay in `monet pipeline`)
+        self.span = (2 ** 63, 0, 0)   # first, last image log time and frames of pass 1
         self.done = threading.Event()
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self.play, name='player', daemon=True)
@@ -142,22 +157,33 @@ class PlayerNode(Node):
             if self.stopping.wait(self.config.start_delay_s):
                 return
             while not self.stopping.is_set():
-                self.play_once()
+                self.play_once(self.loops * self.loop_shift_ns)
                 self.loops += 1
                 if not self.config.loop:
                     break
         except Exception as error:  # noqa: BLE001 - report, never kill the process silently
-            self.get_logger().error(f'playback stopped: {type(error).__name__}: {error}')
+            if not self.stopping.is_set() and self.context.ok():
+                self.get_logger().error(f'playback stopped: {type(error).__name__}: {error}')
         finally:
             self.done.set()
             report = getattr(self.reader, 'report', None)
-            if report is not None and not report.ok:
-                self.get_logger().warning(f'{self.config.bag}: {report.summary()}')
-            self.get_logger().info(f'played {self.published} messages ({self.loops} passes)')
+            if self.context.ok():
+                if report is not None and not report.ok:
+                    self.get_logger().warning(f'{self.config.bag}: {report.summary()}')
+                self.get_logger().info(f'played {self.published} messages ({self.loops} '
+                                       'passes)')
             if self.config.shutdown_when_done and not self.stopping.is_set():
                 self.context.try_shutdown()
 
-    def play_once(self):
+    @property
+    def loop_shift_ns(self):
+        """Stamp shift per loop pass: the span of the first pass plus one frame period."""
+        first, last, frames = self.span
+        period = (last - first) // max(frames - 1, 1) if frames > 1 else 1_000_000
+        return last - first + period
+
+    def play_once(self, shift_ns=0):
+        """One pass over the bag; shift_ns is added to header stamps and /clock."""
         start_wall = None
         first_log = None
         frame_log, frame_stamp = None, None   # log time and stamp of the current image frame
@@ -177,15 +203,21 @@ class PlayerNode(Node):
                 if delay > 0 and self.stopping.wait(delay):
                     return
             image = item.topic in self.image_set
+            if shift_ns == 0 and image:
+                self.span = (min(self.span[0], item.log_time_ns),
+                             max(self.span[1], item.log_time_ns),
+                             self.span[2] + (item.log_time_ns != frame_log))
             if image and item.log_time_ns != frame_log:
                 if self.gate is not None and frame_stamp is not None:
                     self.gate(frame_stamp)
                 frame_log = item.log_time_ns
             if self.clock_pub is not None:
-                self.clock_pub.publish(Clock(clock=Time(
-                    sec=item.log_time_ns // 1_000_000_000,
-                    nanosec=item.log_time_ns % 1_000_000_000)))
+                clock_ns = item.log_time_ns + shift_ns
+                self.clock_pub.publish(Clock(clock=Time(sec=clock_ns // 1_000_000_000,
+                                                        nanosec=clock_ns % 1_000_000_000)))
             data = bytes(item.data)
+            if shift_ns and item.topic not in LATCHED_TOPICS:
+                data = shift_cdr_header_stamp(data, shift_ns)
             self.pubs[item.topic].publish(data)
             self.published += 1
             if image:

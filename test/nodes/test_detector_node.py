@@ -107,7 +107,7 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
     rig, rig_path, first, second, images = setup
     aspect = INPUT[1] / INPUT[0]
     params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
-                  track_timeout_s=30.0, device='cpu')
+                  track_timeout_s=3600.0, device='cpu')
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = Stream(ros, rig)
         for heat_pub, info_pub in stream.pubs.values():

@@ -68,8 +68,11 @@ def test_start_offset_loop_and_sigterm(ros_env, small_bag):
             assert ros.spin_until(lambda: len(images) >= 9, timeout=60, process=player)
             assert player.stop(signal.SIGTERM) == 0, player.output()
     stamps = [(header_stamp_ns(m) - T0) // PERIOD for m in images]
-    # frames 4..7 (0.2 s = 4 frames skipped), then again from frame 4 on every pass
-    assert stamps[:9] == [4, 5, 6, 7, 4, 5, 6, 7, 4]
+    pixels = [int(image_to_numpy(m)[0, 0, 1]) for m in images]
+    # frames 4..7 (0.2 s = 4 frames skipped), then again from frame 4 on every pass ...
+    assert pixels[:9] == [4, 5, 6, 7, 4, 5, 6, 7, 4]
+    # ... with stamps shifted by the length of a pass (4 frames) so that time runs on
+    assert stamps[:9] == [4, 5, 6, 7, 8, 9, 10, 11, 12]
 
 
 def test_bad_bag_and_unknown_topic_fail_at_start(ros_env, small_bag, tmp_path):
