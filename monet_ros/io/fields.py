@@ -204,7 +204,8 @@ def cloud_to_keypoints3d(msg):
 def quaternion_to_matrix(x, y, z, w):
     """Unit quaternion (x, y, z, w) -> (3, 3) rotation matrix (normalised first)."""
     q = np.array([x, y, z, w], np.float64)
-    norm = np.linalg.norm(q)
+    with np.errstate(over='ignore', invalid='ignore'):
+        norm = np.linalg.norm(q)
     if not np.isfinite(norm) or norm < 1e-12:
         raise ValueError(f'invalid quaternion {q.tolist()}')
     x, y, z, w = q / norm

@@ -54,6 +54,7 @@ class StampSynchronizer:
             raise ValueError(f'min_keys must be in 1..{len(self.keys)}, got {min_keys}')
         self.max_pending = int(max_pending)
         self.clock = clock
+        self.expected = set(self.keys)  # keys a group needs to be complete (see set_expected)
         self.pending = []          # open groups sorted by stamp
         self.last_released = None  # stamp of the newest released group
         self.stats = SyncStats()
@@ -87,7 +88,7 @@ class StampSynchronizer:
         else:
             group.items[key] = item
         released = []
-        if len(group.items) == len(self.keys):
+        if self.expected.issubset(group.items):
             # A complete group releases it and every older open group.
             index = self.pending.index(group)
             for older in self.pending[:index + 1]:
@@ -96,6 +97,12 @@ class StampSynchronizer:
         while len(self.pending) > self.max_pending:
             released.extend(self._release(self.pending.pop(0)))
         return released + self.poll()
+
+    def set_expected(self, keys):
+        """Complete groups need only these keys from now on (e.g. drop a silent camera so
+        that the others are not held back by the timeout); all keys when `keys` is empty."""
+        keys = set(keys) & set(self.keys)
+        self.expected = keys or set(self.keys)
 
     def poll(self):
         """Release the open groups whose timeout expired (and everything older)."""

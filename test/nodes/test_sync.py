@@ -60,3 +60,14 @@ def test_pending_is_bounded():
     assert len(sync.pending) == 3 and sync.stats.dropped == 7
     sync.add('z', 1, 1)
     assert sync.stats.unknown_key == 1
+
+
+def test_expected_subset_completes_without_waiting_for_a_silent_key():
+    sync = StampSynchronizer(['a', 'b', 'c'], min_keys=2, timeout_s=10, clock=FakeClock())
+    sync.set_expected(['a', 'b'])
+    sync.add('a', 5, 'a')
+    [group] = sync.add('b', 5, 'b')
+    assert group.missing == ('c',) and sync.stats.partial == 1
+    sync.set_expected([])                   # back to all keys
+    sync.add('a', 6, 'a')
+    assert sync.add('b', 6, 'b') == []

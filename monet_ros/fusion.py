@@ -1,0 +1,150 @@
+"""Multiview fusion core: heatmaps of V views -> 3D keypoints (no ROS).
+
+Used by the fusion node and by the offline `monet process`. A heatmap is an image of a
+virtual camera (K_heat = S K, S the crop/scale of the source image), so a sub-pixel peak
+in heatmap pixels maps back to source-image pixels through S^-1; triangulation, its
+inlier threshold and the reported reprojection errors are all in source-image pixels.
+"""
+from dataclasses import dataclass
+import time
+
+import numpy as np
+
+from monet_ros.config import setting, validate_config
+from monet_ros.geometry import reprojection_error, triangulate_robust
+from monet_ros.models import decode_heatmaps
+
+# Largest |S[0, 1]|, |S[1, 0]|, |S[2] - (0, 0, 1)| accepted for a crop/scale S.
+_CROP_TOL = 1e-6
+
+
+@dataclass(frozen=True)
+class FusionConfig:
+    """Triangulation settings shared by the fusion node and `monet process`."""
+    confidence_threshold: float = setting(
+        0.1, 'heatmap peak value below which a view of a keypoint is ignored', minimum=0.0)
+    threshold_px: float = setting(
+        15.0, 'reprojection error (source-image pixels) above which a view is an outlier',
+        minimum=0.0, exclusive_minimum=True)
+    min_views: int = setting(2, 'fewest inlier views to triangulate a keypoint', minimum=2)
+    method: str = setting('exclusion', 'outlier rejection: worst-view exclusion or RANSAC',
+                          choices=('exclusion', 'ransac'))
+
+    def __post_init__(self):
+        validate_config(self)
+
+
+@dataclass
+class FusionResult:
+    """One frame's fused keypoints. C keypoints, V views (in the order of the cameras given).
+
+    X (C, 3) world points, NaN where not triangulated; confidence (C,) mean peak value of
+    the inlier views; reprojection_error (C,) mean over the inlier views (source px);
+    num_views (C,) inlier count; inliers (V, C) bool; view_errors (V, C) source px of the
+    inlier views (NaN elsewhere); points2d (V, C, 2) decoded peaks in source px (NaN where
+    below the confidence threshold); peak_confidence (V, C); seconds: wall time.
+    """
+    X: np.ndarray
+    confidence: np.ndarray
+    reprojection_error: np.ndarray
+    num_views: np.ndarray
+    inliers: np.ndarray
+    view_errors: np.ndarray
+    points2d: np.ndarray
+    peak_confidence: np.ndarray
+    seconds: float = 0.0
+
+    def view_mean_errors(self):
+        """(V,) mean reprojection error of each view over its inlier keypoints (NaN: none)."""
+        counts = np.isfinite(self.view_errors).sum(axis=1)
+        sums = np.nansum(self.view_errors, axis=1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
+
+
+def heat_to_source(K_heat, K_source):
+    """S (V, 3, 3) with K_heat = S K_source, checked to be a crop/scale (positive scales,
+    no rotation/shear). K_* (V, 3, 3). Raises ValueError naming the view index."""
+    K_heat = np.asarray(K_heat, np.float64).reshape(-1, 3, 3)
+    K_source = np.asarray(K_source, np.float64).reshape(-1, 3, 3)
+    S = K_heat @ np.linalg.inv(K_source)
+    off = np.abs(np.stack([S[:, 0, 1], S[:, 1, 0], S[:, 2, 0], S[:, 2, 1], S[:, 2, 2] - 1],
+                          axis=1))
+    scale = np.maximum(np.abs(S[:, 0, 0]), 1.0)
+    bad = (off.max(axis=1) > _CROP_TOL * scale) | (S[:, 0, 0] <= 0) | (S[:, 1, 1] <= 0)
+    if np.any(bad):
+        view = int(np.flatnonzero(bad)[0])
+        raise ValueError(f'view {view}: heatmap K is not a crop/scale of the source K '
+                         f'(S = K_heat K^-1 = {np.round(S[view], 6).tolist()})')
+    return S
+
+
+def heat_to_source_points(peaks, S):
+    """Heatmap pixels (V, C, 2) -> source-image pixels (V, C, 2) through S^-1 (V, 3, 3)."""
+    peaks = np.asarray(peaks, np.float64)
+    # S is a per-axis scale + offset: u = (u' - S[0, 2]) / S[0, 0], v likewise.
+    scale = np.stack([S[:, 0, 0], S[:, 1, 1]], axis=-1)[:, None, :]
+    offset = np.stack([S[:, 0, 2], S[:, 1, 2]], axis=-1)[:, None, :]
+    return (peaks - offset) / scale
+
+
+def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig()):
+    """Robust triangulation of decoded peaks.
+
+    points2d (V, C, 2) source-image pixels; peak_confidence (V, C); cameras: V source
+    cameras (Camera). Views below config.confidence_threshold are left out; the rest are
+    weighted by confidence. Returns a FusionResult.
+    """
+    start = time.perf_counter()
+    points2d = np.asarray(points2d, np.float64).copy()
+    conf = np.asarray(peak_confidence, np.float64)
+    if points2d.ndim != 3 or points2d.shape[-1] != 2 or conf.shape != points2d.shape[:2]:
+        raise ValueError(f'points2d must be (V, C, 2) and confidence (V, C), got '
+                         f'{points2d.shape} and {conf.shape}')
+    if len(cameras) != points2d.shape[0]:
+        raise ValueError(f'{len(cameras)} cameras for {points2d.shape[0]} views')
+    weak = ~(conf >= config.confidence_threshold) | ~np.isfinite(points2d).all(axis=-1)
+    points2d[weak] = np.nan
+    weights = np.where(weak, 0.0, conf)
+    X, inliers = triangulate_robust(points2d, cameras, weights=weights,
+                                    threshold_px=config.threshold_px,
+                                    min_views=config.min_views, method=config.method)
+    X = np.asarray(X, np.float64)
+    inliers = np.asarray(inliers, bool) & ~weak & np.isfinite(X).all(axis=1)[None, :]
+    errors = np.asarray(reprojection_error(X, points2d, cameras), np.float64)
+    view_errors = np.where(inliers, errors, np.nan)
+    num_views = inliers.sum(axis=0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        mean_error = np.where(num_views > 0, np.nansum(view_errors, axis=0)
+                              / np.maximum(num_views, 1), np.nan)
+        confidence = np.where(num_views > 0, (conf * inliers).sum(axis=0)
+                              / np.maximum(num_views, 1), 0.0)
+    return FusionResult(X=X, confidence=confidence, reprojection_error=mean_error,
+                        num_views=num_views.astype(np.uint32), inliers=inliers,
+                        view_errors=view_errors, points2d=points2d, peak_confidence=conf,
+                        seconds=time.perf_counter() - start)
+
+
+def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig()):
+    """Heatmaps of V views -> FusionResult.
+
+    heatmaps: (V, C, h, w) array, or a list of V (C, h_v, w_v) arrays when grids differ;
+    K_heat (V, 3, 3): intrinsics of each heatmap's virtual camera (its camera_info);
+    cameras: V source cameras (rig: K, dist, R, t of the full image).
+    """
+    start = time.perf_counter()
+    S = heat_to_source(K_heat, np.stack([cam.K for cam in cameras]))
+    if isinstance(heatmaps, np.ndarray) and heatmaps.ndim == 4:
+        peaks, conf = decode_heatmaps(heatmaps)
+    else:
+        shapes = {np.shape(h) for h in heatmaps}
+        if len(shapes) == 1:
+            peaks, conf = decode_heatmaps(np.stack(heatmaps))
+        else:  # views with different grids: decode each view (V is small)
+            decoded = [decode_heatmaps(np.asarray(h)[None]) for h in heatmaps]
+            peaks = np.concatenate([np.asarray(p) for p, _ in decoded])
+            conf = np.concatenate([np.asarray(c) for _, c in decoded])
+    points = heat_to_source_points(np.asarray(peaks, np.float64), S)
+    result = fuse_points(points, np.asarray(conf, np.float64), cameras, config)
+    result.seconds = time.perf_counter() - start
+    return result

@@ -1,0 +1,113 @@
+"""rig_from_bag: the cameras of a recording from its CameraInfo topics and /tf_static
+(or from a rig file)."""
+import numpy as np
+
+from .fields import camera_from_camera_info, quaternion_to_matrix
+from .multiview import camera_name_for_topic
+from .reader import BagError, BagReader, open_bag
+
+CAMERA_INFO = 'sensor_msgs/msg/CameraInfo'
+IMAGE_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
+TF_TYPE = 'tf2_msgs/msg/TFMessage'
+
+
+class RigFromBagError(BagError):
+    """The bag does not define a complete rig (the message names what is missing)."""
+
+
+def _pose_in_root(frame, tree, world_frame):
+    """Pose (R, t) of `frame` in the root of its TF chain (or in world_frame):
+    x_root = R x_frame + t. Returns (R, t, root)."""
+    R, t = np.eye(3), np.zeros(3)
+    seen = {frame}
+    while frame in tree and frame != world_frame:
+        parent, Rp, tp = tree[frame]
+        R, t = Rp @ R, Rp @ t + tp
+        frame = parent
+        if frame in seen:
+            raise RigFromBagError(f'/tf_static has a cycle through frame {frame!r}')
+        seen.add(frame)
+    return R, t, frame
+
+
+def _image_topic(reader, name):
+    """The image topic of camera `name` (same first name; raw preferred over compressed)."""
+    candidates = [t for t in reader.topics_of_type(*IMAGE_TYPES)
+                  if camera_name_for_topic(t) == name]
+    candidates.sort(key=lambda t: (reader.topics[t].msgtype != 'sensor_msgs/msg/Image', t))
+    return candidates[0] if candidates else None
+
+
+def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None):
+    """list[Camera] of a bag, sorted by name.
+
+    With rig_file: monet_ros.geometry.load_rig(rig_file). Otherwise intrinsics from the
+    first message of each CameraInfo topic (camera name = the topic's first name, e.g.
+    /cam01/camera_info -> cam01) and extrinsics from the /tf_static transforms that chain
+    the CameraInfo's header.frame_id to world_frame (default: the common root frame). A
+    TF transform parent -> child is the child's pose: x_parent = R x_child + t; the camera
+    gets world -> camera R_c = R^T, t_c = -R^T t. Camera.topic = the camera's image topic.
+    path: a bag path or a BagReader. Raises RigFromBagError naming what is missing.
+    """
+    if rig_file is not None:
+        from monet_ros.geometry import load_rig
+        return load_rig(rig_file)
+    reader = path if isinstance(path, BagReader) else open_bag(path)
+    info_topics = sorted(camera_info_topics or reader.topics_of_type(CAMERA_INFO))
+    if not info_topics:
+        raise RigFromBagError(f'bag {reader.path} has no CameraInfo topic; pass a rig file')
+    tf_topics = reader.topics_of_type(TF_TYPE)
+    static_topics = [t for t in tf_topics if t.endswith('tf_static')]
+    infos, tree = {}, {}
+
+    def resolved():
+        """All CameraInfos seen and every camera frame chains to one (the wanted) root."""
+        if len(infos) < len(info_topics):
+            return False
+        roots = set()
+        for m in infos.values():
+            if str(m.header.frame_id) not in tree:
+                return False
+            roots.add(_pose_in_root(str(m.header.frame_id), tree, world_frame)[2])
+        return len(roots) == 1 and (world_frame is None or roots == {world_frame})
+
+    for m in reader.messages(topics=info_topics + static_topics):
+        try:
+            if m.topic in info_topics:
+                str(m.msg.header.frame_id)      # usable CameraInfo (fields checked later)
+                infos.setdefault(m.topic, m.msg)
+            else:
+                for tr in m.msg.transforms:
+                    q, p = tr.transform.rotation, tr.transform.translation
+                    tree[str(tr.child_frame_id)] = (
+                        str(tr.header.frame_id), quaternion_to_matrix(q.x, q.y, q.z, q.w),
+                        np.array([p.x, p.y, p.z], np.float64))
+        except (AttributeError, TypeError, ValueError) as exc:
+            reader.report.skip(m.topic, f'unusable for the rig: {exc}')
+            continue
+        if resolved():
+            break
+    missing = [t for t in info_topics if t not in infos]
+    if missing:
+        raise RigFromBagError(f'bag {reader.path}: no readable CameraInfo message on '
+                              f'{", ".join(missing)}')
+    cameras, roots = [], {}
+    for topic in info_topics:
+        msg = infos[topic]
+        name = camera_name_for_topic(topic)
+        frame = str(msg.header.frame_id)
+        if frame not in tree:
+            raise RigFromBagError(
+                f'bag {reader.path}: camera {name} (frame {frame!r}, {topic}) has no '
+                f'transform in {static_topics or "/tf_static (absent)"}; pass a rig file')
+        Rwc, twc, root = _pose_in_root(frame, tree, world_frame)
+        if world_frame is not None and root != world_frame:
+            raise RigFromBagError(f'bag {reader.path}: frame {frame!r} of camera {name} does '
+                                  f'not chain to {world_frame!r} (its root is {root!r})')
+        roots[name] = root
+        cameras.append(camera_from_camera_info(msg, name, Rwc.T, -Rwc.T @ twc,
+                                               topic=_image_topic(reader, name)))
+    if len(set(roots.values())) > 1:
+        raise RigFromBagError(f'bag {reader.path}: cameras are in different TF trees '
+                              f'{roots}; pass world_frame or a rig file')
+    return sorted(cameras, key=lambda c: c.name)

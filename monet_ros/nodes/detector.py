@@ -1,0 +1,358 @@
+"""detector node: camera images -> /monet/<cam>/heatmaps + /monet/<cam>/camera_info.
+
+One or several cameras per node; the newest frame of every camera with a new frame is run
+through the network in one batched forward pass (monet_ros.models.Detector). The crop
+follows the subject (projection of the latest /monet/keypoints3d, when the rig gives the
+extrinsics), else `box`, else the full frame. The outputs keep the source stamp; the
+camera_info is the heatmap's virtual camera (K_heat = S K). A frame replaced before it
+was processed is counted as dropped; a bad message is counted and logged, never fatal.
+The checkpoint is hot-reloaded from /monet/model (std_msgs/String JSON {path, sha256}).
+"""
+from dataclasses import dataclass
+import hashlib
+import json
+from pathlib import Path
+import sys
+import time
+
+import cv2
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
+from std_msgs.msg import String
+
+from monet_ros.config import ConfigError, setting, validate_config
+from monet_ros.io import (
+    camera_from_camera_info,
+    camera_info_from_camera,
+    cloud_to_keypoints3d,
+    compressed_image_to_numpy,
+    header_stamp_ns,
+    heatmaps_to_image_msg,
+    image_to_numpy,
+    numpy_to_image_msg,
+)
+from monet_ros.models import CheckpointError, Detector, decode_heatmaps
+from monet_ros.models.crop import crop_images
+from monet_ros.nodes.params import declare_config
+from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
+from monet_ros.nodes.rig import load_node_rig, select_cameras
+from monet_ros.nodes.runner import run_node
+from monet_ros.tracking import subject_boxes
+
+
+@dataclass(frozen=True)
+class DetectorConfig:
+    model: str = setting('', 'detector checkpoint (.pt); required')
+    cameras: tuple[str, ...] = setting((), 'cameras of this node (default: all of the rig); '
+                                       'several cameras are batched in one forward pass')
+    rig: str = setting('', 'rig file or recording: camera names, image topics and the '
+                       'extrinsics used to crop around /monet/keypoints3d (optional)')
+    image_topic: str = setting('', 'image topic template, {camera} = name (default: the rig '
+                               'camera topic, else /{camera}/image_raw)')
+    camera_info_topic: str = setting('', 'camera_info topic template (default: camera_info '
+                                     'beside the image topic)')
+    transport: str = setting('raw', 'raw = sensor_msgs/Image; compressed = CompressedImage '
+                             'on <image_topic>/compressed', choices=('raw', 'compressed'))
+    box: tuple[float, ...] = setting((), 'fixed crop box x0 y0 x1 y1 (pixel edges) when no '
+                                     'subject is tracked (default: full frame)', length=(0, 4))
+    track: bool = setting(True, 'crop around the projection of the latest /monet/keypoints3d')
+    track_margin: float = setting(0.3, 'tracked box margin, fraction of its size per side',
+                                  minimum=0.0)
+    track_timeout_s: float = setting(1.0, 'keypoints3d older than this are not used for the '
+                                     'crop', minimum=0.0)
+    min_track_keypoints: int = setting(3, 'fewest projected keypoints for a tracked crop',
+                                       minimum=1)
+    batch_wait_ms: float = setting(15.0, 'with several cameras: wait this long for the other '
+                                   "cameras' frames before running a partial batch",
+                                   minimum=0.0)
+    overlay: bool = setting(False, 'also publish /monet/<cam>/overlay (rgb8 crop, heatmaps, '
+                            'peaks)')
+    device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
+    threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0)
+
+    def __post_init__(self):
+        validate_config(self)
+
+
+def sha256_file(path):
+    digest = hashlib.sha256()
+    with open(path, 'rb') as stream:
+        for block in iter(lambda: stream.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class CameraSlot:
+    """Per-camera state: the newest unprocessed frame, intrinsics and counters."""
+
+    def __init__(self, name, rig_camera, image_topic, info_topic):
+        self.name = name
+        self.rig_camera = rig_camera
+        self.image_topic = image_topic
+        self.info_topic = info_topic
+        self.pending = None          # (msg, arrival monotonic)
+        self.info_key = None
+        self.camera = None           # Camera from the latest camera_info (rig extrinsics)
+        self.received = self.processed = self.dropped = self.bad = 0
+        self.last_bad = ''
+
+
+class DetectorNode(Node):
+    def __init__(self, overrides=None, node_name='detector', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.config = config = declare_config(self, DetectorConfig, overrides)
+        if config.threads:
+            import torch
+            torch.set_num_threads(config.threads)
+        if not config.model:
+            raise ConfigError(self.get_name(), 'model', 'is required (a checkpoint path)')
+        if config.box:
+            x0, y0, x1, y1 = config.box
+            if not (x1 > x0 and y1 > y0):
+                raise ConfigError(self.get_name(), 'box', f'needs x1 > x0 and y1 > y0, got '
+                                  f'{list(config.box)}')
+        rig = []
+        if config.rig:
+            rig, _ = load_node_rig(config.rig)
+            rig_cameras = select_cameras(self.get_name(), rig, config.cameras)
+        elif not config.cameras:
+            raise ConfigError(self.get_name(), 'cameras', 'is required when no rig is given')
+        else:
+            rig_cameras = [None] * len(config.cameras)
+        names = [c.name for c in rig_cameras] if config.rig else list(config.cameras)
+        self.detector = self.load_detector(config.model)
+        self.model_sha256 = sha256_file(config.model)
+        self.slots = []
+        for name, rig_camera in zip(names, rig_cameras):
+            image_topic = (config.image_topic.format(camera=name) if config.image_topic
+                           else (rig_camera.topic if rig_camera is not None and rig_camera.topic
+                                 else f'/{name}/image_raw'))
+            info_topic = (config.camera_info_topic.format(camera=name)
+                          if config.camera_info_topic
+                          else image_topic.rsplit('/', 1)[0] + '/camera_info')
+            self.slots.append(CameraSlot(name, rig_camera, image_topic, info_topic))
+        self.pubs = {}
+        for slot in self.slots:
+            if config.transport == 'compressed':
+                self.create_subscription(CompressedImage, slot.image_topic + '/compressed',
+                                         lambda m, s=slot: self.on_image(s, m), IMAGE_IN)
+            else:
+                self.create_subscription(Image, slot.image_topic,
+                                         lambda m, s=slot: self.on_image(s, m), IMAGE_IN)
+            self.create_subscription(CameraInfo, slot.info_topic,
+                                     lambda m, s=slot: self.on_camera_info(s, m), STREAM_IN)
+            self.pubs[slot.name] = (
+                self.create_publisher(Image, f'/monet/{slot.name}/heatmaps', STREAM_OUT),
+                self.create_publisher(CameraInfo, f'/monet/{slot.name}/camera_info',
+                                      STREAM_OUT),
+                self.create_publisher(Image, f'/monet/{slot.name}/overlay', STREAM_OUT)
+                if config.overlay else None)
+        self.keypoints = None        # (X (N, 3), arrival monotonic)
+        self.create_subscription(PointCloud2, '/monet/keypoints3d', self.on_keypoints,
+                                 STREAM_IN)
+        self.create_subscription(String, '/monet/model', self.on_model, LATCHED)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', STREAM_OUT)
+        self.create_timer(max(config.batch_wait_ms, 1.0) / 1e3, self.flush)
+        self.create_timer(1.0, self.publish_diagnostics)
+        self.batches = 0
+        self.forward_seconds = []
+        self.model_reloads = self.model_rejects = 0
+        self.get_logger().info(
+            f'detecting {len(self.slots)} camera(s) '
+            f'{[(s.name, s.image_topic) for s in self.slots]} with '
+            f'{self.detector.metadata.get("architecture")} ({len(self.detector.keypoints)} '
+            f'keypoints, heatmaps {self.detector.heatmap_size}) on {self.detector.device}')
+
+    def load_detector(self, path):
+        if not Path(path).is_file():
+            raise CheckpointError(f'{path}: checkpoint file not found (parameter model)')
+        return Detector.from_checkpoint(path, device=self.config.device or None)
+
+    # ------------------------------------------------------------------ input
+    def bad_message(self, slot, topic, error):
+        slot.bad += 1
+        slot.last_bad = f'{topic}: {error}'
+        self.get_logger().warning(f'{topic}: bad message ({error}); {slot.bad} so far',
+                                  throttle_duration_sec=5.0)
+
+    def on_camera_info(self, slot, msg):
+        key = (tuple(msg.k), tuple(msg.d), msg.width, msg.height, msg.distortion_model)
+        if key == slot.info_key:
+            return
+        try:
+            R = slot.rig_camera.R if slot.rig_camera is not None else None
+            t = slot.rig_camera.t if slot.rig_camera is not None else None
+            slot.camera = camera_from_camera_info(msg, slot.name, R, t)
+            slot.info_key = key
+        except ValueError as error:
+            self.bad_message(slot, slot.info_topic, error)
+
+    def on_image(self, slot, msg):
+        slot.received += 1
+        if slot.pending is not None:
+            slot.dropped += 1          # a newer frame replaces the unprocessed one
+        slot.pending = (msg, time.monotonic())
+        if all(s.pending is not None for s in self.slots):
+            self.process()
+
+    def on_keypoints(self, msg):
+        try:
+            self.keypoints = (cloud_to_keypoints3d(msg)['X'], time.monotonic())
+        except ValueError as error:
+            self.get_logger().warning(f'/monet/keypoints3d: bad message ({error})',
+                                      throttle_duration_sec=5.0)
+
+    def flush(self):
+        """Run a partial batch when a frame waited longer than batch_wait_ms."""
+        oldest = min((s.pending[1] for s in self.slots if s.pending is not None), default=None)
+        if oldest is not None and time.monotonic() - oldest >= self.config.batch_wait_ms / 1e3:
+            self.process()
+
+    # ------------------------------------------------------------------ detection
+    def decode(self, slot, msg):
+        """(image (H, W, 3) uint8 rgb, Camera) of a message, or None (counted as bad)."""
+        topic = slot.image_topic + ('/compressed' if self.config.transport == 'compressed'
+                                    else '')
+        try:
+            image = (compressed_image_to_numpy(msg) if isinstance(msg, CompressedImage)
+                     else image_to_numpy(msg))
+            if image.ndim == 2:
+                image = np.repeat(image[..., None], 3, axis=2)
+            if image.dtype != np.uint8 or image.shape[2] != 3:
+                raise ValueError(f'need an 8-bit colour or mono image, got {image.dtype} '
+                                 f'{image.shape}')
+            camera = slot.camera or slot.rig_camera
+            if camera is None:
+                raise ValueError(f'no camera_info on {slot.info_topic} yet')
+            if (camera.width, camera.height) != (image.shape[1], image.shape[0]):
+                raise ValueError(f'image is {image.shape[1]}x{image.shape[0]} but the camera '
+                                 f'is {camera.width}x{camera.height}')
+        except ValueError as error:
+            self.bad_message(slot, topic, error)
+            return None
+        return image, camera
+
+    def crop_boxes(self, cameras):
+        """(V, 4) boxes or None per view: tracked subject, else `box`, else full frame."""
+        boxes = np.full((len(cameras), 4), np.nan)
+        fresh = (self.keypoints is not None and time.monotonic() - self.keypoints[1]
+                 <= self.config.track_timeout_s)
+        if self.config.track and fresh and all(s.rig_camera is not None for s in self.slots):
+            boxes = subject_boxes(cameras, self.keypoints[0], self.config.track_margin,
+                                  self.config.min_track_keypoints)
+        for v, camera in enumerate(cameras):
+            if np.isnan(boxes[v]).any():
+                boxes[v] = self.config.box if self.config.box else (0, 0, camera.width,
+                                                                    camera.height)
+        return boxes
+
+    def process(self):
+        work = []
+        for slot in self.slots:
+            if slot.pending is None:
+                continue
+            msg, _ = slot.pending
+            slot.pending = None
+            decoded = self.decode(slot, msg)
+            if decoded is not None:
+                work.append((slot, msg, *decoded))
+        if not work:
+            return
+        cameras = [w[3] for w in work]
+        boxes = self.detector.boxes_for(cameras, self.crop_boxes(cameras))
+        start = time.perf_counter()
+        heatmaps, heat_cameras = self.detector.predict([w[2] for w in work], cameras, boxes,
+                                                       keep_aspect=False)
+        self.forward_seconds = (self.forward_seconds + [time.perf_counter() - start])[-100:]
+        self.batches += 1
+        for (slot, msg, image, _), heat, heat_cam, box in zip(work, heatmaps, heat_cameras,
+                                                              boxes):
+            stamp = header_stamp_ns(msg)
+            frame_id = msg.header.frame_id
+            heat_pub, info_pub, overlay_pub = self.pubs[slot.name]
+            info_pub.publish(camera_info_from_camera(heat_cam, stamp, frame_id))
+            heat_pub.publish(heatmaps_to_image_msg(heat, stamp, frame_id))
+            if overlay_pub is not None:
+                overlay_pub.publish(numpy_to_image_msg(self.overlay(image, box, heat), stamp,
+                                                       frame_id))
+            slot.processed += 1
+
+    def overlay(self, image, box, heat):
+        """rgb8 network-input crop with the channel-max heatmap blended in and the peaks."""
+        h_in, w_in = self.detector.input_size
+        crop = crop_images([image], box[None], (w_in, h_in))[0]
+        peak_map = cv2.resize(heat.max(axis=0), (w_in, h_in), interpolation=cv2.INTER_LINEAR)
+        colour = cv2.applyColorMap(np.clip(peak_map * 255, 0, 255).astype(np.uint8),
+                                   cv2.COLORMAP_JET)[..., ::-1]
+        out = cv2.addWeighted(crop, 0.6, colour, 0.4, 0)
+        peaks, conf = decode_heatmaps(heat[None])
+        h, w = heat.shape[1:]
+        scale = np.array([w_in / w, h_in / h])
+        for (u, v), c in zip((peaks[0] + 0.5) * scale - 0.5, conf[0]):
+            if c > 0.1:
+                cv2.circle(out, (int(round(u)), int(round(v))), 3, (255, 255, 255), -1)
+        return np.ascontiguousarray(out)
+
+    # ------------------------------------------------------------------ hot reload
+    def on_model(self, msg):
+        """/monet/model: {"path": ..., "sha256": ...}; verify, load, swap; else keep the old
+        weights and say why."""
+        try:
+            info = json.loads(msg.data)
+            path = Path(info['path'])
+            expected = str(info['sha256']).lower()
+        except (ValueError, KeyError, TypeError) as error:
+            return self.reject_model(f'not a JSON object with path and sha256 ({error})')
+        if not path.is_file():
+            return self.reject_model(f'{path}: checkpoint file not found')
+        actual = sha256_file(path)
+        if actual == self.model_sha256:
+            return None   # already running these weights (e.g. the latched announcement)
+        if actual != expected:
+            return self.reject_model(f'{path}: sha256 {actual[:12]}... does not match the '
+                                     f'announced {expected[:12]}...')
+        try:
+            detector = self.load_detector(path)
+        except (CheckpointError, ValueError, OSError) as error:
+            return self.reject_model(str(error))
+        if list(detector.keypoints) != list(self.detector.keypoints):
+            return self.reject_model(f'{path}: keypoints {detector.keypoints} differ from the '
+                                     f'running model {self.detector.keypoints}')
+        self.detector, self.model_sha256 = detector, actual
+        self.model_reloads += 1
+        self.get_logger().info(f'loaded new weights {path} (step {info.get("step")}, '
+                               f'sha256 {actual[:12]}...)')
+        return None
+
+    def reject_model(self, reason):
+        self.model_rejects += 1
+        self.get_logger().error(f'/monet/model rejected, keeping the current weights: {reason}')
+
+    # ------------------------------------------------------------------ diagnostics
+    def publish_diagnostics(self):
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        forward_ms = 1e3 * float(np.median(self.forward_seconds)) if self.forward_seconds \
+            else 0.0
+        for slot in self.slots:
+            level = DiagnosticStatus.OK if slot.processed else DiagnosticStatus.WARN
+            msg.status.append(DiagnosticStatus(
+                level=level, name=f'monet detector: {slot.name}', hardware_id=slot.name,
+                message=f'{slot.processed} frames, {slot.dropped} dropped, {slot.bad} bad',
+                values=[KeyValue(key=k, value=str(v)) for k, v in (
+                    ('received', slot.received), ('processed', slot.processed),
+                    ('dropped_stale', slot.dropped), ('bad_messages', slot.bad),
+                    ('forward_ms_median', f'{forward_ms:.2f}'),
+                    ('model_sha256', self.model_sha256), ('model_reloads', self.model_reloads),
+                    ('model_rejects', self.model_rejects), ('last_bad_message', slot.last_bad))]))
+        self.pub_diag.publish(msg)
+
+
+def main(args=None):
+    return run_node(DetectorNode, 'detector', args, large_data=True)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

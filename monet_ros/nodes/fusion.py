@@ -1,0 +1,250 @@
+"""fusion node: heatmaps of every rig camera -> /monet/keypoints3d, /monet/skeleton,
+/diagnostics.
+
+Subscribes /monet/<cam>/heatmaps (Image 32FC<C>) + /monet/<cam>/camera_info (the heatmap's
+virtual camera, same stamp) for each camera, pairs them per camera by exact stamp, groups
+the cameras by stamp (exact or within `slop_ms`), and calls the fusion core
+(monet_ros.fusion.fuse_heatmaps). A silent camera is waited for `timeout_s`, then left out
+(fewer views) and reported in /diagnostics; after `silent_after_s` frames no longer wait.
+"""
+from collections import OrderedDict
+from dataclasses import dataclass
+import sys
+import time
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+import numpy as np
+from rclpy.node import Node
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from visualization_msgs.msg import MarkerArray
+
+from monet_ros.config import ConfigError, config_subset, setting
+from monet_ros.fusion import FusionConfig, fuse_heatmaps
+from monet_ros.io import (
+    header_stamp_ns,
+    image_msg_to_heatmaps,
+    keypoints3d_to_cloud,
+    skeleton_marker_array,
+)
+from monet_ros.nodes.params import declare_config
+from monet_ros.nodes.qos import STREAM_IN, STREAM_OUT
+from monet_ros.nodes.rig import load_node_rig, select_cameras
+from monet_ros.nodes.runner import run_node
+from monet_ros.nodes.sync import StampSynchronizer
+from monet_ros.skeleton import load_skeleton
+
+# Unpaired heatmaps / camera_info kept per camera while waiting for their partner.
+_PAIR_BACKLOG = 30
+
+
+@dataclass(frozen=True)
+class FusionNodeConfig(FusionConfig):
+    rig: str = setting('', 'rig file (any format load_rig reads) or a recording whose '
+                       'camera_info + /tf_static give the rig; required')
+    cameras: tuple[str, ...] = setting((), 'rig cameras to fuse (default: all of the rig)')
+    skeleton: str = setting('human14', 'skeleton preset or YAML path: heatmap channel order '
+                            'and bones of /monet/skeleton')
+    frame_id: str = setting('', 'frame of the outputs (default: the rig frame)')
+    heatmap_topic: str = setting('/monet/{camera}/heatmaps', 'heatmap topic per camera')
+    camera_info_topic: str = setting('/monet/{camera}/camera_info',
+                                     'heatmap virtual camera_info topic per camera')
+    slop_ms: float = setting(0.0, 'stamp tolerance between cameras (0 = exact)', minimum=0.0)
+    timeout_s: float = setting(0.3, 'wait this long for missing cameras of a frame, then '
+                               'fuse the others', minimum=0.0)
+    silent_after_s: float = setting(2.0, 'a camera without heatmaps this long is silent: '
+                                    'frames stop waiting for it', minimum=0.0,
+                                    exclusive_minimum=True)
+    diagnostics_period_s: float = setting(1.0, 'period of /diagnostics', minimum=0.0,
+                                          exclusive_minimum=True)
+
+
+class CameraStats:
+    """Per-camera counters reported in /diagnostics."""
+
+    def __init__(self):
+        self.received = 0
+        self.bad = 0
+        self.unpaired = 0
+        self.fused = 0
+        self.last_seen = None
+        self.errors = []          # recent per-frame mean reprojection errors (px)
+        self.last_bad = ''
+
+    def mean_error(self):
+        finite = [e for e in self.errors if np.isfinite(e)]
+        return float(np.mean(finite)) if finite else float('nan')
+
+
+class FusionNode(Node):
+    def __init__(self, overrides=None, node_name='fusion', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.config = config = declare_config(self, FusionNodeConfig, overrides)
+        self.core_config = config_subset(config, FusionConfig)
+        if not config.rig:
+            raise ConfigError(self.get_name(), 'rig', 'is required (a rig file or recording)')
+        rig, rig_frame = load_node_rig(config.rig)
+        self.cameras = select_cameras(self.get_name(), rig, config.cameras, minimum=2)
+        if config.min_views > len(self.cameras):
+            raise ConfigError(self.get_name(), 'min_views',
+                              f'{config.min_views} > the {len(self.cameras)} cameras fused')
+        self.names = [cam.name for cam in self.cameras]
+        self.skeleton = load_skeleton(config.skeleton)
+        self.frame_id = config.frame_id or rig_frame
+        self.stats = {name: CameraStats() for name in self.names}
+        self.frames = 0
+        self.partial_frames = 0
+        self.fusion_seconds = []
+        self.last_result = None
+        self.last_stamp_ns = None
+        self.listeners = []       # callables(stamp_ns, result) (the pipeline's summary)
+        self.sync = StampSynchronizer(self.names, slop_ns=int(config.slop_ms * 1e6),
+                                      timeout_s=config.timeout_s, min_keys=config.min_views)
+        self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.names}
+        for name in self.names:
+            self.create_subscription(
+                Image, config.heatmap_topic.format(camera=name),
+                lambda msg, n=name: self.on_message(n, 0, msg), STREAM_IN)
+            self.create_subscription(
+                CameraInfo, config.camera_info_topic.format(camera=name),
+                lambda msg, n=name: self.on_message(n, 1, msg), STREAM_IN)
+        self.pub_points = self.create_publisher(PointCloud2, '/monet/keypoints3d', STREAM_OUT)
+        self.pub_skeleton = self.create_publisher(MarkerArray, '/monet/skeleton', STREAM_OUT)
+        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', STREAM_OUT)
+        self.create_timer(0.02, self.on_poll)
+        self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
+        self.get_logger().info(
+            f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
+            f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}')
+
+    # ------------------------------------------------------------------ input
+    def on_message(self, name, kind, msg):
+        """kind 0 = heatmaps, 1 = camera_info: pair the two by exact stamp, then sync."""
+        stats = self.stats[name]
+        stamp = header_stamp_ns(msg)
+        mine, other = self.pending[name][kind], self.pending[name][1 - kind]
+        if kind == 0:
+            stats.received += 1
+            stats.last_seen = time.monotonic()
+        if stamp in other:
+            partner = other.pop(stamp)
+            heat_msg, info_msg = (msg, partner) if kind == 0 else (partner, msg)
+            self.on_pair(name, stamp, heat_msg, info_msg)
+        else:
+            mine[stamp] = msg
+            while len(mine) > _PAIR_BACKLOG:
+                mine.popitem(last=False)
+                stats.unpaired += 1
+        for group in self.sync.poll():
+            self.fuse(group)
+
+    def on_pair(self, name, stamp, heat_msg, info_msg):
+        try:
+            heat = image_msg_to_heatmaps(heat_msg)
+            if heat.shape[0] != self.skeleton.num_keypoints:
+                raise ValueError(f'{heat.shape[0]} channels, the skeleton '
+                                 f'{self.skeleton.name} has {self.skeleton.num_keypoints}')
+            if (info_msg.width, info_msg.height) != (heat.shape[2], heat.shape[1]):
+                raise ValueError(f'camera_info is {info_msg.width}x{info_msg.height}, the '
+                                 f'heatmap {heat.shape[2]}x{heat.shape[1]}')
+            K = np.asarray(info_msg.k, np.float64).reshape(3, 3)
+            if not np.all(np.isfinite(heat)) or not np.all(np.isfinite(K)) or K[2, 2] != 1:
+                raise ValueError('non-finite heatmap values or invalid K')
+        except ValueError as error:
+            self.bad_message(name, error)
+            return
+        for group in self.sync.add(name, stamp, (heat, K)):
+            self.fuse(group)
+
+    def bad_message(self, name, error):
+        stats = self.stats[name]
+        stats.bad += 1
+        stats.last_bad = str(error)
+        self.get_logger().warning(f'{self.config.heatmap_topic.format(camera=name)}: bad '
+                                  f'message ({error}); {stats.bad} so far',
+                                  throttle_duration_sec=5.0)
+
+    def on_poll(self):
+        now = time.monotonic()
+        live = [n for n, s in self.stats.items()
+                if s.last_seen is not None and now - s.last_seen < self.config.silent_after_s]
+        self.sync.set_expected(live)
+        for group in self.sync.poll():
+            self.fuse(group)
+
+    # ------------------------------------------------------------------ fusion
+    def fuse(self, group):
+        views = [i for i, name in enumerate(self.names) if name in group.items]
+        cameras = [self.cameras[i] for i in views]
+        heat = [group.items[self.names[i]][0] for i in views]
+        K_heat = np.stack([group.items[self.names[i]][1] for i in views])
+        try:
+            result = fuse_heatmaps(heat, K_heat, cameras, self.core_config)
+        except ValueError as error:
+            # e.g. a camera_info whose K is not a crop of the rig camera: name the view.
+            message = str(error)
+            if message.startswith('view '):
+                index = int(message.split()[1].rstrip(':'))
+                self.bad_message(cameras[index].name, message)
+            else:
+                self.get_logger().error(f'fusion failed at stamp {group.stamp_ns}: {error}')
+            return
+        self.frames += 1
+        self.partial_frames += bool(group.missing)
+        self.fusion_seconds = (self.fusion_seconds + [result.seconds])[-100:]
+        errors = result.view_mean_errors()
+        for k, i in enumerate(views):
+            stats = self.stats[self.names[i]]
+            stats.fused += 1
+            stats.errors = (stats.errors + [float(errors[k])])[-100:]
+        self.last_result, self.last_stamp_ns = result, group.stamp_ns
+        self.pub_points.publish(keypoints3d_to_cloud(
+            group.stamp_ns, self.frame_id, result.X, result.confidence,
+            result.reprojection_error, result.num_views))
+        self.pub_skeleton.publish(skeleton_marker_array(
+            group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices))
+        for listener in self.listeners:
+            listener(group.stamp_ns, result)
+
+    # ------------------------------------------------------------------ diagnostics
+    def publish_diagnostics(self):
+        now = time.monotonic()
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        fusion_ms = 1e3 * float(np.median(self.fusion_seconds)) if self.fusion_seconds else 0.0
+        summary = DiagnosticStatus(
+            level=DiagnosticStatus.OK, name='monet fusion', hardware_id=self.frame_id,
+            message=f'{self.frames} frames fused ({self.partial_frames} with missing cameras)',
+            values=[KeyValue(key=k, value=str(v)) for k, v in (
+                ('frames', self.frames), ('partial_frames', self.partial_frames),
+                ('dropped_frames', self.sync.stats.dropped), ('late_views', self.sync.stats.late),
+                ('fusion_ms_median', f'{fusion_ms:.3f}'))])
+        msg.status.append(summary)
+        for name, stats in self.stats.items():
+            silent_for = None if stats.last_seen is None else now - stats.last_seen
+            error = stats.mean_error()
+            if stats.last_seen is None:
+                level, text = DiagnosticStatus.WARN, 'silent: no heatmaps received yet'
+            elif silent_for >= self.config.silent_after_s:
+                level, text = DiagnosticStatus.WARN, f'silent for {silent_for:.1f} s'
+            else:
+                level, text = DiagnosticStatus.OK, f'mean reprojection error {error:.2f} px'
+            if stats.bad and level == DiagnosticStatus.OK:
+                text += f'; {stats.bad} bad messages'
+            msg.status.append(DiagnosticStatus(
+                level=level, name=f'monet fusion: {name}', hardware_id=name, message=text,
+                values=[KeyValue(key=k, value=str(v)) for k, v in (
+                    ('mean_reprojection_error_px', f'{error:.4f}'),
+                    ('received', stats.received), ('fused', stats.fused),
+                    ('bad_messages', stats.bad), ('unpaired', stats.unpaired),
+                    ('silent_for_s', 'never seen' if silent_for is None
+                     else f'{silent_for:.2f}'),
+                    ('last_bad_message', stats.last_bad))]))
+        self.pub_diag.publish(msg)
+
+
+def main(args=None):
+    return run_node(FusionNode, 'fusion', args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

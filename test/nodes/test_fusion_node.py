@@ -1,0 +1,189 @@
+"""The fusion executable in its own process, fed real heatmap + camera_info messages."""
+import signal
+
+from diagnostic_msgs.msg import DiagnosticArray
+from helpers.ros import NodeProcess, RosHarness
+from helpers.scenes import cv2_project, gaussian_heatmaps, ring_rig, subject_box, to_crop
+import numpy as np
+import pytest
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from visualization_msgs.msg import MarkerArray
+
+from monet_ros.geometry import save_rig
+from monet_ros.io import (
+    camera_info_from_camera,
+    cloud_to_keypoints3d,
+    header_stamp_ns,
+    heatmaps_to_image_msg,
+)
+from monet_ros.skeleton import load_skeleton
+
+GRID = (48, 64)      # heatmap (w, h)
+T0 = 1_700_000_000_000_000_000
+PEAKS = [0.9, 0.8, 0.95, 0.7]
+WRONG = 2
+
+
+class Frame:
+    """Heatmap + camera_info messages of every camera for one stamp, and the truth."""
+
+    def __init__(self, rig, X, index, rng, noise, silent=()):
+        self.stamp = T0 + index * 33_000_000
+        self.X = X
+        self.centres, self.messages, self.maxima = {}, [], {}
+        for v, cam in enumerate(rig):
+            uv = cv2_project(cam, X)
+            box = subject_box(uv, cam.width, cam.height, GRID[0] / GRID[1])
+            p = to_crop(uv, box, GRID)
+            if v == WRONG:
+                p = p + np.where(p < np.array(GRID) / 2, 12.0, -12.0)
+            else:
+                p = p + rng.normal(0, noise, p.shape)
+            x0, y0, x1, y1 = box
+            scale = np.array([GRID[0] / (x1 - x0), GRID[1] / (y1 - y0)])
+            self.centres[cam.name] = (p + 0.5) / scale - 0.5 + np.array([x0, y0])
+            if cam.name in silent:
+                continue
+            heat = gaussian_heatmaps(p, GRID[::-1], sigma=1.5, peak=PEAKS[v])
+            self.maxima[cam.name] = heat.max(axis=(1, 2))
+            self.messages.append((cam.name, heatmaps_to_image_msg(heat, self.stamp, cam.name),
+                                  camera_info_from_camera(cam.crop(box, GRID), self.stamp,
+                                                          cam.name)))
+
+
+@pytest.fixture
+def rig_file(tmp_path):
+    rig = ring_rig(4)
+    path = tmp_path / 'rig.yaml'
+    save_rig(path, rig, frame_id='world')
+    return rig, path
+
+
+def start_fusion(env, rig_path, **params):
+    return NodeProcess('fusion', env, dict(rig=str(rig_path), skeleton='human14', **params))
+
+
+def publishers(ros, names):
+    return {n: (ros.publisher(f'/monet/{n}/heatmaps', Image),
+                ros.publisher(f'/monet/{n}/camera_info', CameraInfo)) for n in names}
+
+
+def send(pubs, frame):
+    for name, heat, info in frame.messages:
+        pubs[name][1].publish(info)
+        pubs[name][0].publish(heat)
+
+
+def fused_frames(diagnostics):
+    """'frames' of the fusion summary in the latest /diagnostics message (0 if none)."""
+    for status in diagnostics[-1].status if diagnostics else ():
+        if status.name == 'monet fusion':
+            return int({kv.key: kv.value for kv in status.values}['frames'])
+    return 0
+
+
+def run_frames(ros, node, pubs, frames, clouds, timeout=30.0):
+    """Publish each frame until its keypoints3d comes back; returns {stamp: cloud}."""
+    got = {}
+    for frame in frames:
+        def arrived(stamp=frame.stamp):
+            got.update({header_stamp_ns(c): c for c in clouds})
+            return stamp in got
+        for _ in range(int(timeout / 0.5)):
+            send(pubs, frame)
+            if ros.spin_until(arrived, timeout=0.5, process=node):
+                break
+        assert arrived(), f'no keypoints3d for stamp {frame.stamp}\n{node.output()}'
+    return got
+
+
+def test_fuses_excludes_the_wrong_view_and_reports_true_errors(ros_env, rig_file):
+    rig, path = rig_file
+    rng = np.random.default_rng(7)
+    X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], size=(14, 3))
+    frames = [Frame(rig, X, i, rng, noise=0.0 if i % 2 == 0 else 0.3) for i in range(4)]
+    with RosHarness(ros_env) as ros, start_fusion(ros_env, path, timeout_s=2.0) as node:
+        clouds = ros.collect('/monet/keypoints3d', PointCloud2)
+        markers = ros.collect('/monet/skeleton', MarkerArray)
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        pubs = publishers(ros, [c.name for c in rig])
+        for heat_pub, info_pub in pubs.values():
+            ros.wait_for_subscribers(heat_pub, process=node)
+            ros.wait_for_subscribers(info_pub, process=node)
+        got = run_frames(ros, node, pubs, frames, clouds)
+        ros.spin_until(lambda: markers and fused_frames(diagnostics) >= len(frames),
+                       timeout=10, process=node)
+        assert node.stop(signal.SIGINT) == 0, node.output()
+
+    good = [c.name for v, c in enumerate(rig) if v != WRONG]
+    cams = {c.name: c for c in rig}
+    for i, frame in enumerate(frames):
+        cloud = got[frame.stamp]
+        assert cloud.header.frame_id == 'world'
+        k = cloud_to_keypoints3d(cloud)
+        assert (k['num_views'] == 3).all(), 'the wrong view must be excluded'
+        np.testing.assert_array_equal(k['keypoint'], np.arange(14))
+        expected = np.mean([frame.maxima[n] for n in good], axis=0)
+        np.testing.assert_allclose(k['confidence'], expected, atol=1e-5)
+        errors = np.stack([np.linalg.norm(cv2_project(cams[n], k['X']) - frame.centres[n],
+                                          axis=1) for n in good])
+        np.testing.assert_allclose(k['reprojection_error'], errors.mean(axis=0), atol=2e-3)
+        if i % 2 == 0:   # exact Gaussians: within 1 mm of the truth
+            assert np.abs(k['X'] - X).max() < 1e-3
+        else:            # noisy views: the reported error is real, not zero
+            assert errors.mean() > 0.5
+    assert markers[-1].markers[1].points, 'bones of the skeleton are published'
+    assert len(load_skeleton('human14').bones) * 2 == len(markers[-1].markers[1].points)
+    status = {s.name: s for s in diagnostics[-1].status}
+    values = {kv.key: kv.value for kv in status[f'monet fusion: cam{WRONG}'].values}
+    assert values['mean_reprojection_error_px'] == 'nan'   # never an inlier
+    values = {kv.key: kv.value for kv in status['monet fusion: cam0'].values}
+    assert np.isfinite(float(values['mean_reprojection_error_px']))
+
+
+def test_keeps_publishing_when_a_camera_goes_silent(ros_env, rig_file):
+    rig, path = rig_file
+    rng = np.random.default_rng(8)
+    X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], size=(14, 3))
+    frames = [Frame(rig, X, 0, rng, 0.0)]
+    frames += [Frame(rig, X, i, rng, 0.0, silent=('cam1',)) for i in range(1, 4)]
+    with RosHarness(ros_env) as ros, start_fusion(ros_env, path, timeout_s=0.2,
+                                                  silent_after_s=0.5,
+                                                  diagnostics_period_s=0.2) as node:
+        clouds = ros.collect('/monet/keypoints3d', PointCloud2)
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        pubs = publishers(ros, [c.name for c in rig])
+        for heat_pub, _ in pubs.values():
+            ros.wait_for_subscribers(heat_pub, process=node)
+        got = run_frames(ros, node, pubs, frames, clouds)
+        ros.spin_for(0.6)
+        assert node.stop(signal.SIGTERM) == 0, node.output()
+    late = cloud_to_keypoints3d(got[frames[-1].stamp])
+    assert (late['num_views'] == 2).all()          # cam1 silent, cam2 wrong: 2 views left
+    assert np.abs(late['X'] - X).max() < 1e-3
+    status = {s.name: s for s in diagnostics[-1].status}
+    assert 'silent' in status['monet fusion: cam1'].message
+    assert status['monet fusion: cam1'].level == b'\x01'  # WARN
+
+
+@pytest.mark.parametrize('change, message', [
+    ({'cameras': ['cam0', 'cam9']}, "parameter 'cameras': unknown camera 'cam9'"),
+    ({'min_views': 5}, "parameter 'min_views': 5 > the 4 cameras fused"),
+    ({'rig': '/nonexistent/rig.yaml'}, 'rig /nonexistent/rig.yaml: no such file'),
+])
+def test_bad_parameters_fail_at_start(ros_env, rig_file, change, message):
+    _, path = rig_file
+    params = {'rig': str(path), **change}
+    with NodeProcess('fusion', ros_env, params) as node:
+        code = node.wait(timeout=60)
+        output = node.output()
+    assert code == 2, output
+    assert message in output
+
+
+def test_rig_with_one_camera_fails_at_start(ros_env, tmp_path):
+    path = tmp_path / 'one.yaml'
+    save_rig(path, ring_rig(1))
+    with NodeProcess('fusion', ros_env, {'rig': str(path)}) as node:
+        assert node.wait(timeout=60) == 2
+        assert "parameter 'cameras': needs at least 2 cameras" in node.output()

@@ -1,0 +1,95 @@
+"""Fusion core: heatmaps of cropped virtual cameras -> 3D keypoints, against known points."""
+import cv2
+from helpers.scenes import cv2_project, gaussian_heatmaps, ring_rig, subject_box, to_crop
+import numpy as np
+import pytest
+
+from monet_ros.fusion import FusionConfig, fuse_heatmaps, fuse_points, heat_to_source
+
+GRID = (48, 64)  # heatmap (w, h)
+
+
+def scene(rng, count=4, keypoints=14):
+    rig = ring_rig(count)
+    X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], size=(keypoints, 3))
+    return rig, X
+
+
+def render(rig, X, wrong=(), noise=0.0, rng=None, peaks=None):
+    """Heatmaps (V, C, h, w), K_heat (V, 3, 3) and the Gaussian centres in source pixels."""
+    heat, K_heat, centres = [], [], []
+    for v, cam in enumerate(rig):
+        uv = cv2_project(cam, X)
+        box = subject_box(uv, cam.width, cam.height, GRID[0] / GRID[1])
+        p = to_crop(uv, box, GRID)
+        if v in wrong:  # a confidently wrong view: 12 heatmap px toward the centre
+            p = p + np.where(p < np.array(GRID) / 2, 12.0, -12.0)
+        if noise:
+            p = p + rng.normal(0, noise, p.shape)
+        x0, y0, x1, y1 = box
+        scale = np.array([GRID[0] / (x1 - x0), GRID[1] / (y1 - y0)])
+        centres.append((p + 0.5) / scale - 0.5 + np.array([x0, y0]))
+        heat.append(gaussian_heatmaps(p, GRID[::-1], sigma=1.5,
+                                      peak=1.0 if peaks is None else peaks[v]))
+        K_heat.append(cam.crop(box, GRID).K)
+    return np.stack(heat), np.stack(K_heat), np.stack(centres)
+
+
+def test_exact_heatmaps_give_the_points_and_exclude_the_wrong_view():
+    rng = np.random.default_rng(0)
+    rig, X = scene(rng)
+    heat, K_heat, _ = render(rig, X, wrong=(2,), peaks=[0.9, 0.8, 0.95, 0.7])
+    result = fuse_heatmaps(heat, K_heat, rig, FusionConfig())
+    assert np.abs(result.X - X).max() < 1e-4          # 0.1 mm on a 2 m rig
+    assert result.inliers[2].sum() == 0 and result.inliers[[0, 1, 3]].all()
+    assert (result.num_views == 3).all()
+    # confidence = mean over the inlier views of each map's maximum value
+    expected = heat[[0, 1, 3]].max(axis=(2, 3)).mean(axis=0)
+    np.testing.assert_allclose(result.confidence, expected, atol=1e-6)
+    assert np.nanmax(result.reprojection_error) < 1e-3
+    assert np.isnan(result.view_mean_errors()[2])
+
+
+def test_reported_errors_equal_an_opencv_recomputation():
+    rng = np.random.default_rng(1)
+    rig, X = scene(rng)
+    heat, K_heat, centres = render(rig, X, wrong=(0,), noise=0.3, rng=rng)
+    result = fuse_heatmaps(heat, K_heat, rig, FusionConfig(threshold_px=15.0))
+    good = [1, 2, 3]
+    errors = np.stack([np.linalg.norm(cv2_project(rig[v], result.X) - centres[v], axis=1)
+                       for v in good])
+    np.testing.assert_allclose(result.reprojection_error, errors.mean(axis=0), atol=2e-3)
+    np.testing.assert_allclose(result.view_mean_errors()[good], errors.mean(axis=1), atol=2e-3)
+    assert errors.mean() > 0.5  # the noise is visible: the check compares real numbers
+
+
+def test_confidence_threshold_and_min_views():
+    rng = np.random.default_rng(2)
+    rig, X = scene(rng, count=3)
+    heat, K_heat, _ = render(rig, X, peaks=[1.0, 1.0, 0.05])
+    result = fuse_heatmaps(heat, K_heat, rig, FusionConfig(confidence_threshold=0.1))
+    assert (result.num_views == 2).all() and not result.inliers[2].any()
+    result = fuse_heatmaps(heat, K_heat, rig, FusionConfig(confidence_threshold=0.1,
+                                                           min_views=3))
+    assert np.isnan(result.X).all() and (result.num_views == 0).all()
+
+
+def test_points_with_different_grids_and_ransac():
+    rng = np.random.default_rng(3)
+    rig, X = scene(rng, count=5)
+    uv = np.stack([cv2_project(cam, X) for cam in rig])
+    uv[4] += 80.0
+    result = fuse_points(uv, np.ones(uv.shape[:2]), rig, FusionConfig(method='ransac'))
+    assert np.abs(result.X - X).max() < 1e-6 and not result.inliers[4].any()
+
+
+def test_heat_camera_must_be_a_crop_of_the_source():
+    rig = ring_rig(2)
+    K_heat = np.stack([rig[0].crop((10, 20, 330, 260), (48, 64)).K, rig[1].K.copy()])
+    S = heat_to_source(K_heat, np.stack([c.K for c in rig]))
+    np.testing.assert_allclose(S[1], np.eye(3), atol=1e-12)
+    rotated = K_heat.copy()
+    rotated[1] = rig[1].K @ cv2.Rodrigues(np.array([0.0, 0.0, 0.1]))[0]
+    rotated[1] /= rotated[1][2, 2]
+    with pytest.raises(ValueError, match='view 1: heatmap K is not a crop/scale'):
+        heat_to_source(rotated, np.stack([c.K for c in rig]))
