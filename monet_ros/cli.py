@@ -10,6 +10,7 @@ import sys
 # Subcommand name -> module under monet_ros.commands. Keep in the order of DESIGN.md.
 SUBCOMMANDS = {
     'synth': 'synth',
+    'demo': 'demo',
 }
 
 

@@ -88,6 +88,8 @@ class Camera:
     height: int
     topic: str | None = None
     _d12: np.ndarray = field(init=False, repr=False)
+    _P: np.ndarray = field(init=False, repr=False)
+    _distorted: bool = field(init=False, repr=False)
 
     def __post_init__(self):
         name = self.name
@@ -121,8 +123,12 @@ class Camera:
             raise CameraError(name, 'topic', f'must be a string or None, got {self.topic!r}')
         d12 = np.zeros(12)
         d12[:dist.size] = dist
-        for key, value in (('K', K), ('dist', dist), ('R', R), ('t', t), ('_d12', d12)):
+        P = K @ np.hstack([R, t[:, None]])
+        P.setflags(write=False)
+        for key, value in (('K', K), ('dist', dist), ('R', R), ('t', t), ('_d12', d12),
+                           ('_P', P)):
             object.__setattr__(self, key, value)
+        object.__setattr__(self, '_distorted', bool(np.any(dist != 0)))
 
     def __eq__(self, other):
         if not isinstance(other, Camera):
@@ -136,8 +142,8 @@ class Camera:
 
     @property
     def P(self):
-        """(3, 4) projection matrix K [R | t] (ideal pinhole, no distortion)."""
-        return self.K @ np.hstack([self.R, self.t[:, None]])
+        """(3, 4) projection matrix K [R | t] (ideal pinhole, no distortion; read-only)."""
+        return self._P
 
     @property
     def center(self):
@@ -146,7 +152,7 @@ class Camera:
 
     @property
     def has_distortion(self):
-        return bool(np.any(self.dist != 0))
+        return self._distorted
 
     def replace(self, **changes):
         """A copy with some fields changed (validated again)."""
@@ -234,10 +240,11 @@ class Camera:
 
 
 def stack_cameras(cameras):
-    """Stacked parameters of a rig: dict of K (V, 3, 3), R (V, 3, 3), t (V, 3), d12 (V, 12)
-    (distortion padded to 12 coefficients)."""
+    """Stacked parameters of a rig: dict of K (V, 3, 3), R (V, 3, 3), t (V, 3), P (V, 3, 4),
+    d12 (V, 12) (distortion padded to 12 coefficients)."""
     return {'K': np.stack([c.K for c in cameras]), 'R': np.stack([c.R for c in cameras]),
-            't': np.stack([c.t for c in cameras]), 'd12': np.stack([c._d12 for c in cameras])}
+            't': np.stack([c.t for c in cameras]), 'P': np.stack([c.P for c in cameras]),
+            'd12': np.stack([c._d12 for c in cameras])}
 
 
 def project_views(cameras, X):
@@ -247,7 +254,11 @@ def project_views(cameras, X):
     """
     p = cameras if isinstance(cameras, dict) else stack_cameras(cameras)
     X = np.asarray(X, dtype=np.float64)
-    Xc = np.einsum('vij,...nj->...vni', p['R'], X) + p['t'][:, None, :]
+    Xh = np.concatenate([X, np.ones_like(X[..., :1])], axis=-1)[..., None, :, :]
+    if not p['d12'].any():  # pinhole rig: one matmul with P
+        h = Xh @ p['P'].swapaxes(-1, -2)  # (..., V, N, 3)
+        return h[..., :2] / h[..., 2:]
+    Xc = Xh @ np.concatenate([p['R'], p['t'][:, :, None]], axis=-1).swapaxes(-1, -2)
     x = Xc[..., 0] / Xc[..., 2]
     y = Xc[..., 1] / Xc[..., 2]
     d = tuple(p['d12'].T[:, :, None])  # 12 arrays (V, 1), broadcast over (..., V, N)

@@ -29,7 +29,10 @@ def _prepare(points2d, cameras, weights):
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
     missing = ~np.all(np.isfinite(obs), axis=2) | ~np.isfinite(w) | (w <= 0)
     w = np.where(missing, 0.0, w)
-    ideal = np.stack([cam.undistort_points(obs[v]) for v, cam in enumerate(cameras)])
+    ideal = obs.copy()
+    for v, cam in enumerate(cameras):
+        if cam.has_distortion:
+            ideal[v] = cam.undistort_points(obs[v])
     ideal[missing] = 0.0
     return obs, ideal, w
 
@@ -107,7 +110,8 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
     n_avail = avail.sum(axis=0)
     X = np.full((N, 3), np.nan)
     inliers = np.zeros((V, N), dtype=bool)
-    current = avail.copy()  # best view subset found so far, per keypoint
+    current = avail.copy()  # best view subset found so far, per keypoint (V, N)
+    current_err = np.zeros((V, N))  # its per-view reprojection errors
     todo = np.arange(N)
     for k in range(V - min_views + 1):
         todo = todo[n_avail[todo] - k >= min_views]
@@ -117,11 +121,16 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
             drop = np.zeros((comb(V, k), V), dtype=bool)
             for s, idx in enumerate(combinations(range(V), k)):
                 drop[s, list(idx)] = True
-            used = avail[None, :, todo] & ~drop[:, :, None]
-        else:  # greedy: leave one more view out of the best subset of the previous level
-            used = current[None, :, todo] & ~np.eye(V, dtype=bool)[:, :, None]
+            used = avail[None, :, todo] & ~drop[:, :, None]  # (S, V, n)
+        else:  # leave out the worst view (largest error) of the previous level's best subset
+            err = np.where(current[:, todo], current_err[:, todo], -np.inf)
+            worst = np.argmax(err, axis=0)
+            used = current[:, todo].copy()
+            used[worst, np.arange(todo.size)] = False
+            used = used[None]
         Xs = solve_dlt(B[:, todo], w[None, :, todo] * used)  # (S, n, 3)
-        mean = _mean_used_error(_view_errors(rig, Xs, obs[:, todo]), used)
+        err = _view_errors(rig, Xs, obs[:, todo])  # (S, V, n)
+        mean = _mean_used_error(err, used)
         best = np.argmin(mean, axis=0)
         cols = np.arange(todo.size)
         ok = mean[best, cols] <= threshold_px
@@ -129,6 +138,7 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         best_used = used[best, :, cols].T  # (V, n)
         inliers[:, todo[ok]] = best_used[:, ok]
         current[:, todo] = best_used
+        current_err[:, todo] = err[best, :, cols].T
         todo = todo[~ok]
     return X, inliers
 
@@ -144,20 +154,23 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     n = todo.size
     cols = np.arange(n)
     if comb(V, 2) <= max_hypotheses:  # every view pair
-        pick = np.array(list(combinations(range(V), 2)))[:, None, :].repeat(n, axis=1)
-    else:  # random distinct available views per hypothesis and keypoint
-        keys = rng.random((max_hypotheses, n, V))
-        keys[:, ~avail[:, todo].T] = np.inf
-        pick = np.argpartition(keys, 2, axis=-1)[..., :2]
-    a, b = pick[..., 0], pick[..., 1]  # (H, n)
+        pairs = np.array(list(combinations(range(V), 2)))
+        a = np.repeat(pairs[:, :1], n, axis=1)
+        b = np.repeat(pairs[:, 1:], n, axis=1)
+    else:  # two distinct random available views per hypothesis and keypoint
+        order = np.argsort(~avail[:, todo], axis=0, kind='stable')  # available views first
+        n_avail = avail[:, todo].sum(axis=0)
+        r1 = (rng.random((max_hypotheses, n)) * n_avail).astype(int)
+        r2 = (rng.random((max_hypotheses, n)) * (n_avail - 1)).astype(int)
+        r2 += r2 >= r1
+        a, b = order[r1, cols], order[r2, cols]  # (H, n)
     valid = avail[a, todo] & avail[b, todo]
-    # two-view DLT per hypothesis: only the 4 rows of the pair (H, n, 4, 4), one SVD
-    A = np.concatenate([B[a, todo], B[b, todo]], axis=-2) * np.concatenate(
-        [np.repeat(w[a, todo][..., None], 2, -1), np.repeat(w[b, todo][..., None], 2, -1)],
-        axis=-1)[..., None]
-    _, _, vh = np.linalg.svd(A)
-    with np.errstate(divide='ignore', invalid='ignore'):
-        Xh = vh[..., -1, :3] / vh[..., -1, 3:]
+    # two-view hypothesis per pair: the 4 DLT rows, solved with X inhomogeneous (3x3)
+    A = np.concatenate([B[a, todo], B[b, todo]], axis=-2)  # (H, n, 4, 4)
+    AtA = A[..., :3].swapaxes(-1, -2) @ A[..., :3]
+    Atb = -(A[..., :3].swapaxes(-1, -2) @ A[..., 3:])
+    AtA[~valid] = np.eye(3)
+    Xh = np.linalg.solve(AtA, Atb)[..., 0]
     err = _view_errors(rig, Xh, obs[:, todo])  # (H, V, n)
     inl = (err < threshold_px) & avail[None, :, todo]
     count = inl.sum(axis=1).astype(np.float64)
@@ -180,17 +193,18 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
 
 
 def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_views=2,
-                       method='exclusion', max_subsets=100, max_hypotheses=64, seed=0):
+                       method='exclusion', max_subsets=20, max_hypotheses=20, seed=0):
     """Outlier-robust triangulation, batched over keypoints.
 
     method='exclusion' (Pose2Sim's rule): triangulate with all available views; while the
     mean reprojection error over the used views exceeds threshold_px, leave out k = 1, 2, ...
     views and keep the subset with the lowest mean error, until it is <= threshold_px
     (else NaN) or fewer than min_views would remain. Every subset of k left-out views is
-    tried while C(V, k) <= max_subsets (exactly Pose2Sim's search); beyond that the search
-    is greedy (one more view left out of the previous level's best subset). Each level is
-    one batched SVD over all candidate subsets x pending keypoints.
-    method='ransac': two-view hypotheses (every pair when C(V, 2) <= max_hypotheses,
+    tried while C(V, k) <= max_subsets (exactly Pose2Sim's search); beyond that the view
+    with the largest reprojection error in the previous level's best subset is left out
+    (one candidate per keypoint). Each level is one batched SVD over all candidate
+    subsets x pending keypoints.
+    method='ransac': two-view linear hypotheses (every pair when C(V, 2) <= max_hypotheses,
     otherwise max_hypotheses random pairs per keypoint, seeded), inliers = views with
     reprojection error < threshold_px; the hypothesis with most inliers (then lowest mean
     inlier error) wins and is refined by weighted DLT on its inliers; NaN with fewer than
