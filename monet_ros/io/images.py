@@ -77,6 +77,8 @@ def image_to_numpy(msg):
     yuv422), (H, W, 3) uint16 rgb for rgb16/bgr16/bayer_*16, (H, W) for single-channel
     encodings (mono8, mono16, 8UC1, 16UC1, 32FC1, ...), (H, W, C) for other nC encodings
     (e.g. 32FC14 heatmaps). Raises ImageDecodeError on unknown encodings or short data.
+    rgb8 / mono / float images are zero-copy views of the message data (read-only when the
+    message came from a bag): copy before writing into them.
     """
     enc = str(msg.encoding).lower()
     arr = raw_image_array(msg)

@@ -35,8 +35,24 @@ class ChunkError(ValueError):
 
 
 def read_summary(f, size):
-    """The file's Summary via the mcap library, or (None, reason) when absent/damaged."""
+    """The file's Summary via the mcap library, or (None, reason) when absent or damaged
+    (the footer's summary CRC is checked, so a summary that is used can be trusted)."""
     try:
+        if size < 8 + 29 + 8:
+            return None, 'the file is too short for a summary'
+        f.seek(size - 8 - 29)
+        footer = f.read(29)
+        op, length, summary_start, _offsets, crc = struct.unpack('<BQQQI', footer)
+        if op != OP_FOOTER or length != 20:
+            return None, 'no footer at the end of the file (truncated?)'
+        if summary_start == 0:
+            return None, 'the file has no summary section'
+        if not 8 <= summary_start < size - 8 - 29:
+            return None, f'footer points to a summary at byte {summary_start}, outside the file'
+        if crc != 0:
+            f.seek(summary_start)
+            if zlib.crc32(f.read(size - 8 - 29 - summary_start + 1 + 8 + 8 + 8)) != crc:
+                return None, 'summary section CRC mismatch'
         f.seek(0)
         summary = SeekingReader(f, record_size_limit=size).get_summary()
     except Exception as exc:        # noqa: BLE001 - any damage means: no usable summary
@@ -143,7 +159,7 @@ class McapScan:
     (a mismatch is reported; the chunk's messages are still given, each may fail to decode).
     """
 
-    def __init__(self, path, report, validate_crcs=True):
+    def __init__(self, path, report, validate_crcs=False):
         self.path = str(path)
         self.report = report
         self.validate_crcs = validate_crcs

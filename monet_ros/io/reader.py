@@ -19,6 +19,7 @@ import re
 
 import yaml
 
+from .fast_cdr import fast_decoder
 from .mcap_scan import McapScan
 
 
@@ -125,11 +126,12 @@ class _Decoders:
         self._cache = {}
 
     def get(self, schema, message_encoding):
-        """(decode function or None, reason when None)."""
+        """(decode function or None, reason when None, zero_copy: the function takes a
+        memoryview)."""
         if message_encoding != 'cdr':
-            return None, f'message encoding {message_encoding!r} is not cdr'
+            return None, f'message encoding {message_encoding!r} is not cdr', False
         if schema is None:
-            return None, 'the channel has no schema'
+            return None, 'the channel has no schema', False
         key = (schema.name, schema.encoding, bytes(schema.data))
         if key not in self._cache:
             self._cache[key] = self._build(schema)
@@ -138,17 +140,26 @@ class _Decoders:
     @staticmethod
     def _build(schema):
         if schema.encoding != 'ros2msg':
-            return None, f'schema encoding {schema.encoding!r} is not supported (ros2msg only)'
+            return (None, f'schema encoding {schema.encoding!r} is not supported '
+                          '(ros2msg only)', False)
+        try:
+            text = bytes(schema.data).decode()
+        except UnicodeDecodeError as exc:
+            return None, f'schema {schema.name} is not text: {exc}', False
+        fast = fast_decoder(schema.name, text)
+        if fast is not None:
+            return fast, None, True
         from mcap_ros2._dynamic import generate_dynamic
         try:
             with contextlib.redirect_stdout(io.StringIO()), \
                     contextlib.redirect_stderr(io.StringIO()):  # it prints parse errors
-                types = generate_dynamic(schema.name, bytes(schema.data).decode())
+                types = generate_dynamic(schema.name, text)
         except Exception as exc:    # noqa: BLE001 - any parser failure: report the topic
-            return None, f'schema {schema.name} does not parse: {type(exc).__name__}: {exc}'
+            return (None, f'schema {schema.name} does not parse: {type(exc).__name__}: {exc}',
+                    False)
         if schema.name not in types:
-            return None, f'schema {schema.name} does not define {schema.name}'
-        return types[schema.name], None
+            return None, f'schema {schema.name} does not define {schema.name}', False
+        return types[schema.name], None, False
 
 
 def _suffix_min_starts(summary):
@@ -174,7 +185,7 @@ def _start_bound(later_start, offset):
 class BagReader:
     """Reader of one bag (see open_bag). Re-iterable; `report` describes the last read."""
 
-    def __init__(self, path, validate_crcs=True):
+    def __init__(self, path, validate_crcs=False):
         self.path = Path(path)
         self.validate_crcs = validate_crcs
         self.metadata = None
@@ -306,13 +317,13 @@ class BagReader:
             msgtype = schema.name if schema is not None else ''
             msg = None
             if decode:
-                fn, reason = self._decoders.get(schema, channel.message_encoding)
+                fn, reason, zero_copy = self._decoders.get(schema, channel.message_encoding)
                 if fn is None:
                     report.undecodable_topics.setdefault(topic, reason)
                     report.skip(topic, reason)
                     continue
                 try:
-                    msg = fn(bytes(data))
+                    msg = fn(data if zero_copy else bytes(data))
                 except Exception as exc:    # noqa: BLE001 - a bad message costs only itself
                     report.skip(topic, f'decode failed: {type(exc).__name__}: {exc}')
                     continue
@@ -340,19 +351,17 @@ class BagReader:
                            for cid in ci.message_index_offsets)
 
         def resolve(cid):
+            # the summary's definitions first (CRC-checked, written last); the data
+            # section's where the summary is absent or lacks the id
             summary = scan.summary
-            ch = channels.get(cid)
-            if ch is None and summary is not None:
-                ch = summary.channels.get(cid)
+            ch = summary.channels.get(cid) if summary is not None else None
+            if ch is None:
+                ch = channels.get(cid)
             if ch is None:
                 return None, None
-            schema = schemas.get(ch.schema_id)
-            if schema is None and summary is not None:
-                schema = summary.schemas.get(ch.schema_id)
-            if schema is None and ch.schema_id != 0 and summary is not None and \
-                    cid in summary.channels:        # damaged channel record: the summary's
-                ch = summary.channels[cid]
-                schema = schemas.get(ch.schema_id) or summary.schemas.get(ch.schema_id)
+            schema = summary.schemas.get(ch.schema_id) if summary is not None else None
+            if schema is None:
+                schema = schemas.get(ch.schema_id)
             return ch, schema
 
         heap, seq, summary_noted = [], 0, False
@@ -389,12 +398,8 @@ class BagReader:
                     yield heapq.heappop(heap)
                 push(event[1])
             else:
-                _, start, defs, msgs, offset, crc_ok = event
+                _, start, defs, msgs, offset, _crc_ok = event
                 for d_kind, rec in defs:
-                    if not crc_ok and scan.summary is not None and rec.id in (
-                            scan.summary.schemas if d_kind == 'schema'
-                            else scan.summary.channels):
-                        continue              # a damaged chunk's copy: keep the summary's
                     (schemas if d_kind == 'schema' else channels)[rec.id] = rec
                     if d_kind == 'channel':
                         seen.add(rec.topic)
@@ -420,8 +425,13 @@ class BagReader:
                 f'topics={len(self._topics)})')
 
 
-def open_bag(path, validate_crcs=True):
+def open_bag(path, validate_crcs=False):
     """A BagReader for a rosbag2 folder (metadata.yaml + .mcap files) or a bare .mcap file.
+
+    validate_crcs: also check every chunk's CRC (costs ~1 s per GB on these machines;
+    mismatches are reported, the messages still given). The summary's CRC is always
+    checked: a damaged summary is not used (the file is read sequentially instead).
+    Image / CompressedImage payloads are zero-copy views of the chunk read from disk.
 
     Raises BagError naming the path when it does not exist, is empty or unreadable, or
     holds no .mcap file; damage inside the files never raises (see BagReader.report)."""
