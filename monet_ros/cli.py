@@ -10,7 +10,11 @@ import sys
 # Subcommand name -> module under monet_ros.commands. Keep in the order of DESIGN.md.
 SUBCOMMANDS = {
     'synth': 'synth',
+    'train': 'train',
+    'eval': 'eval',
     'demo': 'demo',
+    'process': 'process',
+    'pipeline': 'pipeline',
 }
 
 
