@@ -330,12 +330,13 @@ message data.
 ## Use
 
 ```bash
-monet train --recording {result.out}/recording --rig {result.out}/rig.yaml \\
-    --labels {result.out}/labels.csv --skeleton {config.skeleton} ...
-monet eval ... --ground-truth {result.out}/ground_truth.npz
+monet train {result.out} --out {result.out}/train_monet --skeleton {config.skeleton} --mode monet
+monet eval {result.out}/train_monet/model.pt --data {result.out} --out {result.out}/eval \\
+    --skeleton {config.skeleton}
 ```
 
-(see `monet train --help` / `monet eval --help` for the options of your version)
+(`monet train --help` / `monet eval --help` list the options; the folder's rig.yaml,
+labels.csv and ground_truth.npz are found automatically.)
 
 ## Settings
 
