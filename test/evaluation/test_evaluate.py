@@ -35,7 +35,7 @@ def test_evaluate_detector_matches_independent_computation():
         heat, heat_cams = detector.predict(rec.images(t), rec.cameras, boxes[t])
         peaks, _ = decode_heatmaps(heat)
         image_pts = []
-        for v, (cam, hc) in enumerate(zip(rec.cameras, heat_cams)):
+        for v, hc in enumerate(heat_cams):
             gt_heat, _ = cv2.projectPoints(rec.gt3d[t], cv2.Rodrigues(hc.R)[0], hc.t, hc.K,
                                            hc.dist)
             distances.append(np.linalg.norm(peaks[v] - gt_heat[:, 0], axis=1) / 12.0)
