@@ -10,6 +10,8 @@ import sys
 # Subcommand name -> module under monet_ros.commands. Keep in the order of DESIGN.md.
 SUBCOMMANDS = {
     'demo': 'demo',
+    'process': 'process',
+    'pipeline': 'pipeline',
 }
 
 
