@@ -3,7 +3,7 @@ from helpers.recordings import noise_recording, small_checkpoint
 import numpy as np
 
 from monet_ros.cli import main as monet
-from monet_ros.fusion import fuse_heatmaps, FusionConfig
+from monet_ros.fusion import FusionConfig, fuse_heatmaps
 from monet_ros.io import cloud_to_keypoints3d, open_bag
 from monet_ros.models import Detector
 
