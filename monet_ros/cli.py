@@ -9,7 +9,11 @@ import sys
 
 # Subcommand name -> module under monet_ros.commands. Keep in the order of DESIGN.md.
 SUBCOMMANDS = {
+    'train': 'train',
+    'eval': 'eval',
     'demo': 'demo',
+    'process': 'process',
+    'pipeline': 'pipeline',
 }
 
 

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from monet_ros.geometry import crop_transform
+from monet_ros.models.detector import images_to_tensor
 
 
 @dataclass(frozen=True)
@@ -120,10 +121,12 @@ class ViewBatch:
     instants: np.ndarray
     views: np.ndarray
 
-    def to_heatmap(self, points):
-        """(N, C, 2) original pixels -> heatmap pixels (NaN kept)."""
+    def to_heatmap(self, points, index=slice(None)):
+        """(N, C, 2) original pixels -> heatmap pixels (NaN kept) of the samples
+        self[index] (a slice or index array selecting N samples)."""
         p = np.asarray(points, dtype=np.float64)
-        return np.einsum('nij,ncj->nci', self.A[:, :2, :2], p) + self.A[:, None, :2, 2]
+        A = self.A[index]
+        return np.einsum('nij,ncj->nci', A[:, :2, :2], p) + A[:, None, :2, 2]
 
 
 class CropCache:
@@ -205,7 +208,7 @@ class CropCache:
         K = self.S_heat[None] @ S_crop @ Kc
         R = Rz @ self.R[views]
         t = np.einsum('nij,nj->ni', Rz, self.t[views])
-        tensor = torch.from_numpy(images).permute(0, 3, 1, 2).float().div_(255.0)
+        tensor = images_to_tensor(images)              # the detector's own conversion
         tensor = photometric(tensor, augment, rng)
         return ViewBatch(tensor, A, K, R, t, instants, views)
 

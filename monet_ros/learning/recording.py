@@ -69,34 +69,6 @@ class Recording:
                          None if self.gt3d is None else self.gt3d[idx])
 
 
-def labels_array(rows, stamps, camera_names, keypoints, source='labels'):
-    """Label rows (stamp_ns, camera, keypoint, u, v) -> (T, V, C, 2) array, NaN elsewhere.
-
-    Rows naming an unknown stamp, camera or keypoint raise a RecordingError naming the row;
-    accepts tuples/lists or objects with those attributes / dict keys."""
-    t_index = {int(s): i for i, s in enumerate(stamps)}
-    v_index = {n: i for i, n in enumerate(camera_names)}
-    c_index = {n: i for i, n in enumerate(keypoints)}
-    out = np.full((len(stamps), len(camera_names), len(keypoints), 2), np.nan)
-    for n, row in enumerate(rows):
-        if isinstance(row, dict):
-            values = [row[k] for k in ('stamp_ns', 'camera', 'keypoint', 'u', 'v')]
-        elif hasattr(row, 'stamp_ns'):
-            values = [getattr(row, k) for k in ('stamp_ns', 'camera', 'keypoint', 'u', 'v')]
-        else:
-            values = list(row)
-        stamp, camera, keypoint, u, v = values
-        where = f'{source}: row {n + 1} ({stamp}, {camera}, {keypoint})'
-        if int(stamp) not in t_index:
-            raise RecordingError(f'{where}: stamp not in the recording')
-        if camera not in v_index:
-            raise RecordingError(f'{where}: camera not in the rig {list(camera_names)}')
-        if keypoint not in c_index:
-            raise RecordingError(f'{where}: keypoint not in the skeleton')
-        out[t_index[int(stamp)], v_index[camera], c_index[keypoint]] = (float(u), float(v))
-    return out
-
-
 def load_ground_truth(path, stamps, num_keypoints):
     """ground_truth.npz (stamps_ns (T',), points3d (T', C, 3)) -> (T, C, 3) for `stamps`."""
     path = Path(path)
@@ -121,3 +93,74 @@ def load_ground_truth(path, stamps, num_keypoints):
         if j is not None:
             out[i] = points[j]
     return out
+
+
+def find_recording_parts(path):
+    """A `monet synth` output folder (recording/, rig.yaml, labels.csv, ground_truth.npz)
+    or a bag path -> dict bag, rig, labels, ground_truth (None where absent)."""
+    path = Path(path)
+    parts = {'bag': path, 'rig': None, 'labels': None, 'ground_truth': None}
+    if path.is_dir() and (path / 'recording').exists():
+        parts['bag'] = path / 'recording'
+        for key, name in (('rig', 'rig.yaml'), ('labels', 'labels.csv'),
+                          ('ground_truth', 'ground_truth.npz')):
+            if (path / name).is_file():
+                parts[key] = path / name
+    return parts
+
+
+def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='human14',
+                   slop_ns=0, max_instants=None, name=None):
+    """Decode a recording (rosbag2 folder, .mcap, or a `monet synth` output folder) into memory.
+
+    rig: rig file (default: the folder's rig.yaml, else CameraInfo + /tf_static of the bag);
+    labels: labels CSV (default: the folder's labels.csv; none = no labels); ground_truth:
+    ground_truth.npz (default: the folder's). Instants that lack a view are skipped (and
+    counted in the returned recording's `skipped`). skeleton: keypoint names / preset.
+    """
+    from monet_ros.io import iter_multiview_frames, open_bag, rig_from_bag
+    from monet_ros.labels import read_labels
+    from monet_ros.skeleton import load_skeleton
+
+    parts = find_recording_parts(path)
+    rig = rig or parts['rig']
+    labels = labels or parts['labels']
+    ground_truth = ground_truth or parts['ground_truth']
+    keypoints = tuple(load_skeleton(skeleton).keypoints) if isinstance(skeleton, (str, Path)) \
+        else tuple(skeleton)
+    reader = open_bag(parts['bag'])
+    cameras = rig_from_bag(reader, rig_file=rig)
+    names = [c.name for c in cameras]
+    topics = {c.name: c.topic or f'/{c.name}/image_raw' for c in cameras}
+    stamps, frames, skipped = [], {n: [] for n in names}, 0
+    for frame in iter_multiview_frames(reader, topics, slop_ns=slop_ns):
+        if frame.missing:
+            skipped += 1
+            continue
+        for cam in cameras:
+            image = frame.images[cam.name]
+            if image.ndim == 2:
+                image = np.repeat(image[..., None], 3, axis=2)
+            if image.shape[:2] != (cam.height, cam.width) or image.dtype != np.uint8:
+                raise RecordingError(f'{parts["bag"]}: camera {cam.name} image at '
+                                     f'{frame.stamp_ns} is {image.shape} {image.dtype}, rig '
+                                     f'says {cam.width}x{cam.height} uint8')
+            frames[cam.name].append(image)
+        stamps.append(int(frame.stamp_ns))
+        if max_instants and len(stamps) >= max_instants:
+            break
+    if not stamps:
+        raise RecordingError(f'{parts["bag"]}: no complete multiview instant on {topics}')
+    stamps = np.array(stamps, dtype=np.int64)
+    label_array = np.full((len(stamps), len(names), len(keypoints), 2), np.nan)
+    if labels is not None:
+        table = read_labels(labels, keypoints)
+        index = {int(s): i for i, s in enumerate(stamps)}
+        for stamp in table.stamps:
+            if int(stamp) in index:
+                label_array[index[int(stamp)]] = table.points(stamp, names)
+    gt = load_ground_truth(ground_truth, stamps, len(keypoints)) if ground_truth else None
+    recording = Recording(name or Path(path).name, cameras, stamps,
+                          [np.stack(frames[n]) for n in names], keypoints, label_array, gt)
+    recording.skipped = skipped
+    return recording

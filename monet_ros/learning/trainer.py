@@ -1,0 +1,520 @@
+"""The semi-supervised trainer: a reusable object with a step() API.
+
+    data = TrainingData(recording, config)        # splits, crops, labels, virtual cameras
+    trainer = Trainer(config, data, out_dir)      # or Trainer.resume(out_dir, data)
+    while trainer.step_count < config.steps:
+        terms = trainer.step()                    # {'loss', 'L', 'E', 'B', 'lr', 'step'}
+    trainer.save()
+
+Modes (config.mode) are the paper's rows: supervised (L_L), spatial / spatiotemporal
+(L_L + lambda_p L_B on augmented labels), bootstrap1 / bootstrap2 (the same, plus one or two
+rounds of detections -> RANSAC triangulation -> reprojection as labels, at evenly spaced
+steps), monet (L_L + lambda_e L_E on unlabeled instants, after a warm-up of
+epipolar_warmup x steps without L_E, + lambda_p L_B on spatial pseudo-labels and, with
+monet_bootstrap_rounds > 0, the bootstrapping prior: rounds of bootstrapped labels).
+State (weights, Adam, schedule, step, RNG, pseudo-labels) is checkpointed atomically and
+resumes exactly.
+"""
+import csv
+import json
+import os
+from pathlib import Path
+import sys
+import tempfile
+import time
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from monet_ros.evaluation.reprojection import multiview_reprojection
+from monet_ros.learning.config import TrainConfig
+from monet_ros.learning.dataset import CropCache, boxes_from_points, fill_boxes
+from monet_ros.learning.epipolar import multiview_epipolar_loss
+from monet_ros.learning.losses import masked_heatmap_mse, objective
+from monet_ros.learning.pseudo_labels import (
+    PseudoLabels,
+    bootstrap_pseudo_labels,
+    project_to_views,
+    spatial_pseudo_labels,
+    spatiotemporal_pseudo_labels,
+)
+from monet_ros.models import build_model, decode_heatmaps, save_checkpoint
+
+STATE_FORMAT = 'monet_ros.trainer_state/1'
+LOG_FIELDS = ('step', 'loss', 'L', 'E', 'B', 'lr', 'pseudo_labels', 'seconds')
+
+
+def nonnegative(heat):
+    """(..., h, w) heatmaps shifted so that each map's minimum is 0: the input of L_E.
+
+    The epipolar divergence clamps negative values; on raw network outputs an all-negative
+    map is an empty distribution with zero divergence, a degenerate minimum that wrecks the
+    heatmaps. Shifting by the minimum keeps each map's shape (and its row maxima's order)."""
+    return heat - heat.amin(dim=(-2, -1), keepdim=True)
+
+
+def pick_device(name):
+    if name == 'auto':
+        return torch.device('cuda' if torch.cuda.is_available() else 'cpu')
+    return torch.device(name)
+
+
+def split_instants(num_instants, eval_fraction):
+    """(train (T_tr,), held_out (T_ev,)) index arrays: the held-out split is the contiguous
+    tail of the recording, so tracking and training never see it."""
+    n_eval = int(np.ceil(num_instants * eval_fraction)) if eval_fraction > 0 else 0
+    n_eval = min(n_eval, num_instants - 1)
+    return np.arange(num_instants - n_eval), np.arange(num_instants - n_eval, num_instants)
+
+
+def crop_boxes(recording, source, aspect, margin):
+    """(T, V, 4) crop boxes: from ground-truth projections, from the (triangulated) labels,
+    or the full frame; instants without one take the nearest instant's box of that view."""
+    T, V = recording.num_instants, recording.num_views
+    if source == 'auto':
+        source = 'ground_truth' if recording.gt3d is not None else 'labels'
+    if source == 'ground_truth':
+        if recording.gt3d is None:
+            raise ValueError(f'{recording.name}: box_source ground_truth needs ground truth')
+        C = recording.num_keypoints
+        points = project_to_views(recording.gt3d.reshape(-1, 3), recording.cameras)
+        points = points.reshape(V, T, C, 2).transpose(1, 0, 2, 3)          # visible only
+    elif source == 'labels':
+        spatial = spatial_pseudo_labels(recording.labels, recording.cameras).points
+        points = np.where(np.isfinite(recording.labels), recording.labels, spatial)
+    else:
+        points = np.full((T, V, 1, 2), np.nan)
+    return fill_boxes(boxes_from_points(points, aspect=aspect, margin=margin),
+                      recording.cameras)
+
+
+class TrainingData:
+    """A recording prepared for training: train / held-out split, crops, label arrays.
+
+    labels (T, V, C, 2) are the recording's labels on the train split (NaN on the held-out
+    split); every index below is an instant of the full recording."""
+
+    def __init__(self, recording, config, input_size, heatmap_size):
+        self.recording = recording
+        self.config = config
+        self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
+        self.labels = recording.labels.copy()
+        self.labels[self.held_out] = np.nan
+        labelled = np.isfinite(self.labels[..., 0]).any(axis=2)             # (T, V)
+        self.labelled_instants = np.flatnonzero(labelled.any(axis=1))
+        self.unlabeled_instants = np.setdiff1d(self.train, self.labelled_instants)
+        if self.labelled_instants.size == 0:
+            raise ValueError(f'{recording.name}: no labelled instant in the training split')
+        h_in, w_in = input_size
+        self.boxes = crop_boxes(recording, config.box_source, w_in / h_in, config.box_margin)
+        self.cache = CropCache(recording, self.boxes, input_size, heatmap_size,
+                               config.cache_scale)
+
+    @property
+    def cameras(self):
+        return self.recording.cameras
+
+    def initial_pseudo_labels(self, spec, tracking):
+        """Spatial (and spatiotemporal) pseudo-labels of the train split, (T, V, C, 2)."""
+        T, V, C, _ = self.labels.shape
+        points = np.full((T, V, C, 2), np.nan)
+        if not spec.spatial:
+            return points
+        spatial = spatial_pseudo_labels(self.labels, self.cameras)
+        points = spatial.points.copy()
+        if spec.temporal:
+            seeds = np.full((len(self.train), C, 3), np.nan)
+            seeds[:] = spatial.points3d[self.train]
+            frames = _Frames(self.recording, self.train)
+            tracked = spatiotemporal_pseudo_labels(frames, self.cameras, seeds, tracking)
+            fill = np.isnan(points[self.train])
+            points[self.train] = np.where(fill, tracked.points, points[self.train])
+        points[self.held_out] = np.nan
+        return points
+
+
+class _Frames:
+    """Indexable view of some instants' images (for optical-flow tracking)."""
+
+    def __init__(self, recording, instants):
+        self.recording, self.instants = recording, instants
+
+    def __len__(self):
+        return len(self.instants)
+
+    def __getitem__(self, i):
+        return self.recording.images(int(self.instants[i]))
+
+
+def _atomic_torch_save(payload, path):
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    try:
+        with os.fdopen(fd, 'wb') as stream:
+            torch.save(payload, stream)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+class Trainer:
+    """Semi-supervised trainer of one detector on one TrainingData.
+
+    out_dir (optional): checkpoints/step_NNNNNN.pt (models.save_checkpoint), model.pt (the
+    latest weights), trainer_state.pt (everything needed to resume) and train_log.csv.
+    """
+
+    def __init__(self, config, data, out_dir=None, model=None, device=None):
+        if not isinstance(config, TrainConfig):
+            raise TypeError('config must be a TrainConfig')
+        self.config = config
+        self.spec = config.spec
+        self.data = data
+        self.device = torch.device(device) if device is not None else pick_device(config.device)
+        self.out_dir = Path(out_dir) if out_dir is not None else None
+        torch.manual_seed(config.seed)
+        self.keypoints = list(data.recording.keypoints)
+        if model is None:
+            model = build_model(config.architecture, len(self.keypoints),
+                                **config.model_options())
+        self.model = model.to(self.device)
+        self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.lr)
+        self.scheduler = torch.optim.lr_scheduler.StepLR(
+            self.optimizer, step_size=config.lr_decay_every, gamma=config.lr_decay)
+        self.rng = np.random.default_rng(config.seed)
+        self.step_count = 0
+        self.bootstrap_done = 0
+        self.heatmap_size = tuple(self.model.heatmap_size)
+        self.pseudo = data.initial_pseudo_labels(self.spec, config.tracking)
+        self._update_pools()
+        self.last_terms = {}
+        self._started = time.monotonic()
+
+    # ----------------------------------------------------------------- sampling
+    def _update_pools(self):
+        labelled = np.isfinite(self.data.labels[..., 0])                     # (T, V, C)
+        pseudo = np.isfinite(self.pseudo[..., 0]) & ~labelled
+        self.pseudo_only = np.where(pseudo[..., None], self.pseudo, np.nan)
+        self.labelled_pool = np.argwhere(labelled.any(axis=2))               # (N, 2) (t, v)
+        self.pseudo_pool = np.argwhere(pseudo.any(axis=2))
+        if self.labelled_pool.size == 0:
+            raise ValueError('no labelled view in the training split')
+
+    @property
+    def pseudo_label_count(self):
+        return int(np.isfinite(self.pseudo_only[..., 0]).sum())
+
+    def _sample(self, pool, n):
+        idx = self.rng.choice(len(pool), size=n, replace=len(pool) < n)
+        return pool[idx]
+
+    def _batch_plan(self):
+        c = self.config
+        parts = [('L', self._sample(self.labelled_pool, c.batch_labelled))]
+        if self.spec_uses_pseudo and c.batch_pseudo and len(self.pseudo_pool):
+            parts.append(('B', self._sample(self.pseudo_pool, c.batch_pseudo)))
+        if self.epipolar_active and c.batch_unlabeled and len(self.data.unlabeled_instants):
+            V = self.data.recording.num_views
+            k = min(c.views_per_instant, V)
+            inst = self.rng.choice(self.data.unlabeled_instants, size=c.batch_unlabeled,
+                                   replace=len(self.data.unlabeled_instants) < c.batch_unlabeled)
+            views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
+            pairs = np.stack([np.repeat(inst, k), views.ravel()], axis=1)
+            parts.append(('E', pairs, k))
+        return parts
+
+    @property
+    def epipolar_active(self):
+        """L_E is on: monet mode, past the warm-up (trained with L_L + L_B only)."""
+        return self.spec.epipolar and \
+            self.step_count >= int(round(self.config.epipolar_warmup * self.config.steps))
+
+    @property
+    def spec_uses_pseudo(self):
+        return self.spec.spatial or self.spec.temporal or self.spec.bootstrap_rounds > 0
+
+    # ----------------------------------------------------------------- losses
+    def _terms(self, parts, rng, augment):
+        """Loss terms of one batch plan: list of (kind, (N, 2) (instant, view) pairs[, views
+        per instant for 'E'], kind in 'L' (labels), 'B' (pseudo-labels), 'E' (epipolar)."""
+        pairs = np.concatenate([p[1] for p in parts])
+        batch = self.data.cache.views(pairs[:, 0], pairs[:, 1], rng, augment)
+        stages = self.model(batch.images.to(self.device, non_blocking=True))
+        terms = {}
+        start = 0
+        for kind, p, *rest in parts:
+            n = len(p)
+            sl = slice(start, start + n)
+            if kind in ('L', 'B'):
+                source = self.data.labels if kind == 'L' else self.pseudo_only
+                heat_pts = batch.to_heatmap(source[p[:, 0], p[:, 1]], sl)
+                terms[kind] = masked_heatmap_mse([s[sl] for s in stages], heat_pts,
+                                                 self.config.sigma)
+            else:
+                k = rest[0]
+                heat = nonnegative(stages[-1][sl])
+                B = n // k
+                f32 = dict(dtype=torch.float32, device=self.device)
+                K = torch.as_tensor(batch.K[sl], **f32).reshape(B, k, 3, 3)
+                R = torch.as_tensor(batch.R[sl], **f32).reshape(B, k, 3, 3)
+                t = torch.as_tensor(batch.t[sl], **f32).reshape(B, k, 3)
+                terms['E'] = multiview_epipolar_loss(heat.reshape(B, k, *heat.shape[1:]),
+                                                     K, R, t)
+            start += n
+        return terms
+
+    def step(self):
+        """One optimisation step; returns the loss terms as floats (and runs a bootstrapping
+        round or writes a checkpoint when the schedule says so)."""
+        c = self.config
+        self.model.train()
+        parts = self._batch_plan()
+        terms = self._terms(parts, self.rng, c.augment)
+        loss = objective(terms, c.lambda_e, c.lambda_p)
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        self.optimizer.step()
+        lr = self.optimizer.param_groups[0]['lr']
+        self.scheduler.step()
+        self.step_count += 1
+        out = {'step': self.step_count, 'loss': float(loss.detach()), 'lr': lr}
+        out.update({k: float(v.detach()) for k, v in terms.items()})
+        self.last_terms = out
+        self._log(out)
+        if self.bootstrap_due():
+            self.bootstrap()
+        if self.out_dir is not None and (self.step_count % c.checkpoint_every == 0
+                                         or self.step_count == c.steps):
+            self.save()
+        return out
+
+    @torch.no_grad()
+    def evaluate_terms(self, num=8, seed=12345):
+        """Loss terms on a fixed batch (no augmentation, no update, eval mode): comparable
+        between steps; uses `num` samples of each part."""
+        saved = self.rng
+        self.rng = np.random.default_rng(seed)
+        c = self.config
+        try:
+            parts = [('L', self._sample(self.labelled_pool, num))]
+            if len(self.pseudo_pool):
+                parts.append(('B', self._sample(self.pseudo_pool, num)))
+            if len(self.data.unlabeled_instants):
+                V = self.data.recording.num_views
+                k = min(c.views_per_instant, V)
+                inst = self.rng.choice(self.data.unlabeled_instants, size=max(1, num // k))
+                views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
+                parts.append(('E', np.stack([np.repeat(inst, k), views.ravel()], axis=1), k))
+        finally:
+            self.rng = saved
+        self.model.eval()
+        terms = self._terms(parts, None, None)
+        self.model.train()
+        return {k: float(v) for k, v in terms.items()}
+
+    @torch.no_grad()
+    def validate(self, instants=None, max_instants=16):
+        """Unsupervised validation on some instants (default: the held-out split, at most
+        max_instants evenly spread): mean epipolar divergence over all views and the
+        reprojection error (px) of the all-view triangulation of the detections. Needs no
+        ground truth (for the online learner's model selection)."""
+        if instants is None:
+            held = self.data.held_out
+            instants = held[np.linspace(0, len(held) - 1, min(max_instants, len(held)))
+                            .round().astype(int)] if len(held) else held
+        instants = np.asarray(instants, dtype=np.int64)
+        if instants.size == 0:
+            return {}
+        points, _ = self.detect(instants)
+        reproj = multiview_reprojection(points, self.data.cameras).consistency_stats
+        V = self.data.recording.num_views
+        pairs = np.stack(np.meshgrid(instants, np.arange(V), indexing='ij'), -1).reshape(-1, 2)
+        was_training = self.model.training
+        self.model.eval()
+        terms = self._terms([('E', pairs, V)], None, None)
+        self.model.train(was_training)
+        return {'epipolar_divergence': float(terms['E']), 'reprojection_px': reproj.mean,
+                'reprojection_std_px': reproj.std, 'instants': int(instants.size)}
+
+    # ----------------------------------------------------------------- bootstrapping
+    def bootstrap_steps(self):
+        r = self.spec.bootstrap_rounds
+        return [int(round(self.config.steps * (k + 1) / (r + 1))) for k in range(r)]
+
+    def bootstrap_due(self):
+        sched = self.bootstrap_steps()
+        return self.bootstrap_done < len(sched) and self.step_count >= sched[self.bootstrap_done]
+
+    @torch.no_grad()
+    def detect(self, instants, chunk=64):
+        """Detections of every view of `instants` on the cached crops (no augmentation).
+
+        Returns (points (N, V, C, 2) original image pixels, confidence (N, V, C))."""
+        instants = np.asarray(instants, dtype=np.int64)
+        V = self.data.recording.num_views
+        pairs = np.stack(np.meshgrid(instants, np.arange(V), indexing='ij'), -1).reshape(-1, 2)
+        C = len(self.keypoints)
+        points = np.empty((len(pairs), C, 2))
+        conf = np.empty((len(pairs), C))
+        was_training = self.model.training
+        self.model.eval()
+        for s in range(0, len(pairs), chunk):
+            p = pairs[s:s + chunk]
+            batch = self.data.cache.views(p[:, 0], p[:, 1])
+            heat = self.model(batch.images.to(self.device))[-1].float().cpu()
+            peaks, c = decode_heatmaps(heat)
+            A_inv = np.linalg.inv(batch.A)
+            pk = peaks.numpy().astype(np.float64)
+            points[s:s + chunk] = np.einsum('nij,ncj->nci', A_inv[:, :2, :2], pk) + \
+                A_inv[:, None, :2, 2]
+            conf[s:s + chunk] = c.numpy()
+        self.model.train(was_training)
+        return points.reshape(len(instants), V, C, 2), conf.reshape(len(instants), V, C)
+
+    def bootstrap(self):
+        """One round: detect on the unlabeled train instants, keep confident views,
+        RANSAC-triangulate, reproject -> pseudo-labels (replacing the previous round's)."""
+        c = self.config
+        inst = self.data.unlabeled_instants
+        det, conf = self.detect(inst)
+        boot = bootstrap_pseudo_labels(det, conf, self.data.cameras, c.bootstrap_confidence,
+                                       c.bootstrap_threshold_px, c.bootstrap_min_views)
+        base = self.data.initial_pseudo_labels(self.spec, c.tracking)
+        base[inst] = np.where(np.isfinite(base[inst]), base[inst], boot.points)
+        self.pseudo = base
+        self.bootstrap_done += 1
+        self._update_pools()
+        return PseudoLabels(boot.points, boot.points3d)
+
+    # ----------------------------------------------------------------- persistence
+    def metadata(self):
+        return {'keypoints': self.keypoints, 'step': self.step_count,
+                'metrics': {k: v for k, v in self.last_terms.items() if k != 'step'},
+                'mode': self.config.mode, 'train_config': self.config.to_dict(),
+                'recording': self.data.recording.name,
+                'held_out_from_stamp_ns': int(self.data.recording.stamps[self.data.held_out[0]])
+                if len(self.data.held_out) else None}
+
+    def save(self):
+        """Write checkpoints/step_N.pt, model.pt and trainer_state.pt (each atomic)."""
+        if self.out_dir is None:
+            raise ValueError('Trainer.save: no out_dir')
+        meta = self.metadata()
+        ckpt = self.out_dir / 'checkpoints' / f'step_{self.step_count:06d}.pt'
+        save_checkpoint(ckpt, self.model, meta)
+        save_checkpoint(self.out_dir / 'model.pt', self.model, meta)
+        state = {
+            'format': STATE_FORMAT,
+            'config': json.dumps(self.config.to_dict()),
+            'step': self.step_count,
+            'bootstrap_done': self.bootstrap_done,
+            'model': {k: v.detach().cpu() for k, v in self.model.state_dict().items()},
+            'optimizer': self.optimizer.state_dict(),
+            'scheduler': self.scheduler.state_dict(),
+            'numpy_rng': json.dumps(self.rng.bit_generator.state),
+            'torch_rng': torch.get_rng_state(),
+            'pseudo': torch.from_numpy(self.pseudo.astype(np.float64)),
+            'last_terms': json.dumps(self.last_terms),
+        }
+        _atomic_torch_save(state, self.out_dir / 'trainer_state.pt')
+        return ckpt
+
+    @classmethod
+    def resume(cls, out_dir, data, config=None, device=None):
+        """A trainer continuing from out_dir/trainer_state.pt (config: the saved one unless
+        given; only `steps` and `checkpoint_every` may differ)."""
+        path = Path(out_dir) / 'trainer_state.pt'
+        try:
+            state = torch.load(path, map_location='cpu', weights_only=True)
+        except FileNotFoundError:
+            raise FileNotFoundError(f'{path}: no trainer state to resume from') from None
+        except Exception as error:  # noqa: BLE001 - corrupt or truncated file
+            raise ValueError(f'{path}: unreadable trainer state: {error}') from error
+        if not isinstance(state, dict) or state.get('format') != STATE_FORMAT:
+            raise ValueError(f'{path}: field format is not {STATE_FORMAT!r}')
+        saved = TrainConfig.from_dict(json.loads(state['config']), str(path))
+        if config is None:
+            config = saved
+        else:
+            for name, value in saved.to_dict().items():
+                if name not in ('steps', 'checkpoint_every', 'device') and \
+                        getattr(config, name) != value:
+                    raise ValueError(f'{path}: config field {name} is {value!r} in the saved '
+                                     f'state but {getattr(config, name)!r} now')
+        for stale in Path(out_dir).rglob('.*.tmp'):      # temporaries of a killed write
+            stale.unlink()
+        trainer = cls(config, data, out_dir, device=device)
+        trainer.model.load_state_dict(state['model'])
+        trainer.optimizer.load_state_dict(state['optimizer'])
+        trainer.scheduler.load_state_dict(state['scheduler'])
+        trainer.step_count = int(state['step'])
+        trainer.bootstrap_done = int(state['bootstrap_done'])
+        trainer.rng.bit_generator.state = json.loads(state['numpy_rng'])
+        torch.set_rng_state(state['torch_rng'])
+        trainer.pseudo = state['pseudo'].numpy().copy()
+        trainer._update_pools()
+        trainer.last_terms = json.loads(state['last_terms'])
+        trainer._truncate_log()
+        return trainer
+
+    # ----------------------------------------------------------------- logging / loop
+    def _log_path(self):
+        return None if self.out_dir is None else self.out_dir / 'train_log.csv'
+
+    def _log(self, terms):
+        path = self._log_path()
+        if path is None:
+            return
+        path.parent.mkdir(parents=True, exist_ok=True)
+        new = not path.exists() or terms['step'] == 1        # a fresh run starts a new log
+        row = {k: terms.get(k, '') for k in LOG_FIELDS}
+        row['pseudo_labels'] = self.pseudo_label_count
+        row['seconds'] = round(time.monotonic() - self._started, 3)
+        with open(path, 'w' if new else 'a', newline='') as f:
+            writer = csv.DictWriter(f, fieldnames=LOG_FIELDS)
+            if new:
+                writer.writeheader()
+            writer.writerow(row)
+
+    def _truncate_log(self):
+        """Drop log rows past the resumed step (they were lost with the killed run)."""
+        path = self._log_path()
+        if path is None or not path.exists():
+            return
+        with open(path, newline='') as f:
+            rows = [r for r in csv.DictReader(f) if int(r['step']) <= self.step_count]
+        tmp = path.with_suffix('.tmp')
+        with open(tmp, 'w', newline='') as f:
+            writer = csv.DictWriter(f, fieldnames=LOG_FIELDS)
+            writer.writeheader()
+            writer.writerows(rows)
+        os.replace(tmp, path)
+
+    def run(self, steps=None, progress=True):
+        """Train until `steps` (default config.steps); tqdm bar on stderr; returns a summary."""
+        total = self.config.steps if steps is None else steps
+        bar = tqdm(total=total, initial=self.step_count, file=sys.stderr, disable=not progress,
+                   desc=f'train {self.config.mode}', dynamic_ncols=True)
+        start = time.monotonic()
+        first = self.step_count
+        try:
+            while self.step_count < total:
+                t = self.step()
+                bar.update(1)
+                bar.set_postfix({k: f'{t[k]:.4g}' for k in ('L', 'E', 'B') if k in t})
+        finally:
+            bar.close()
+        if self.out_dir is not None and self.step_count % self.config.checkpoint_every and \
+                self.step_count != self.config.steps:
+            self.save()
+        seconds = time.monotonic() - start
+        return {'mode': self.config.mode, 'steps': self.step_count, 'seconds': seconds,
+                'steps_per_s': (self.step_count - first) / max(seconds, 1e-9),
+                'pseudo_labels': self.pseudo_label_count, 'last': self.last_terms}
+

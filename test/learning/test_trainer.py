@@ -1,0 +1,112 @@
+"""The trainer on a tiny learnable scene: every loss term falls, checkpoints resume exactly,
+bootstrapping rounds run on schedule."""
+import shutil
+
+from helpers.blobs import blob_recording
+import numpy as np
+import pytest
+import torch
+
+from monet_ros.config import ConfigError
+from monet_ros.learning.config import TrainConfig
+from monet_ros.learning.trainer import Trainer, TrainingData
+from monet_ros.models import load_checkpoint
+
+TINY = dict(architecture='small', input_size=48, width=16, batch_labelled=4, batch_pseudo=4,
+            batch_unlabeled=1, views_per_instant=3, lr=3e-3, eval_fraction=0.25,
+            device='cpu', aug_rotate_deg=10.0, aug_photometric=0.5)
+
+
+@pytest.fixture(scope='module')
+def recording():
+    torch.set_num_threads(1)          # 2 shared cores: one thread is fastest
+    return blob_recording(num_views=4, T=24, C=3, labelled=(2, 9), label_views=(0, 1))
+
+
+def test_monet_training_reduces_every_loss_term(recording):
+    config = TrainConfig(mode='monet', steps=80, epipolar_warmup=0.3, **TINY)
+    data = TrainingData(recording, config, (48, 48), (12, 12))
+    trainer = Trainer(config, data)
+    assert trainer.pseudo_label_count == 2 * 2 * 3      # 2 labelled instants x 2 views x 3
+    before = trainer.evaluate_terms()
+    trainer.run(progress=False)
+    after = trainer.evaluate_terms()
+    assert set(trainer.last_terms) >= {'L', 'B', 'E', 'loss', 'lr'}
+    for term in ('L', 'B', 'E'):
+        assert after[term] < 0.5 * before[term], (term, before, after)
+
+
+def test_checkpoint_resume_continues_identically(recording, tmp_path):
+    config = TrainConfig(mode='monet', steps=8, checkpoint_every=4, epipolar_warmup=0.25,
+                         **TINY)
+    data = TrainingData(recording, config, (48, 48), (12, 12))
+    first = Trainer(config, data, tmp_path / 'a')
+    first.run(4, progress=False)
+    assert (tmp_path / 'a' / 'checkpoints' / 'step_000004.pt').is_file()
+    shutil.copytree(tmp_path / 'a', tmp_path / 'b')      # the state a killed run leaves
+    first.run(progress=False)
+    resumed = Trainer.resume(tmp_path / 'b', data)
+    assert resumed.step_count == 4
+    resumed.run(progress=False)
+    assert resumed.step_count == 8
+    for (name, a), b in zip(first.model.state_dict().items(),
+                            resumed.model.state_dict().values()):
+        assert torch.equal(a, b), name
+    assert first.last_terms == resumed.last_terms
+    model, meta = load_checkpoint(tmp_path / 'b' / 'model.pt')
+    assert meta['step'] == 8 and meta['mode'] == 'monet' and meta['keypoints'] == ['k0', 'k1',
+                                                                                    'k2']
+    assert meta['held_out_from_stamp_ns'] == int(recording.stamps[18])
+    log = (tmp_path / 'b' / 'train_log.csv').read_text().splitlines()
+    assert [int(r.split(',')[0]) for r in log[1:]] == list(range(1, 9))
+
+
+def test_resume_refuses_a_changed_config(recording, tmp_path):
+    config = TrainConfig(mode='spatial', steps=2, checkpoint_every=2, **TINY)
+    data = TrainingData(recording, config, (48, 48), (12, 12))
+    Trainer(config, data, tmp_path).run(progress=False)
+    other = TrainConfig(mode='spatial', steps=4, checkpoint_every=2,
+                        **{**TINY, 'lr': 1e-3})
+    with pytest.raises(ValueError, match='lr'):
+        Trainer.resume(tmp_path, data, config=other)
+    longer = TrainConfig(mode='spatial', steps=4, checkpoint_every=2, **TINY)
+    assert Trainer.resume(tmp_path, data, config=longer).step_count == 2
+
+
+def test_bootstrap_rounds_run_on_schedule_and_add_labels(recording):
+    config = TrainConfig(mode='bootstrap2', steps=60, bootstrap_confidence=0.2,
+                         bootstrap_threshold_px=6.0, **TINY)
+    data = TrainingData(recording, config, (48, 48), (12, 12))
+    trainer = Trainer(config, data)
+    assert trainer.bootstrap_steps() == [20, 40]
+    start = trainer.pseudo_label_count
+    trainer.run(progress=False)
+    assert trainer.bootstrap_done == 2
+    assert trainer.pseudo_label_count > start
+    # the bootstrapped labels lie near the truth (exact projections of the moving blobs)
+    boot = np.isfinite(trainer.pseudo_only[data.unlabeled_instants, ..., 0])
+    truth = np.stack([np.stack([c.project(recording.gt3d[t]) for c in recording.cameras])
+                      for t in data.unlabeled_instants])
+    err = np.linalg.norm(trainer.pseudo_only[data.unlabeled_instants] - truth, axis=-1)[boot]
+    assert np.median(err) < 3.0, np.median(err)
+
+
+def test_config_errors_name_the_field():
+    with pytest.raises(ConfigError, match='mode'):
+        TrainConfig(mode='magic')
+    with pytest.raises(ConfigError, match='lambda_e'):
+        TrainConfig(lambda_e=-1.0)
+    with pytest.raises(ConfigError, match='input_size'):
+        TrainConfig(input_size=50)
+
+
+def test_validate_reports_divergence_and_reprojection(recording):
+    config = TrainConfig(mode='spatial', steps=30, **TINY)
+    data = TrainingData(recording, config, (48, 48), (12, 12))
+    trainer = Trainer(config, data)
+    before = trainer.validate()
+    trainer.run(progress=False)
+    after = trainer.validate()
+    assert before['instants'] == after['instants'] == 6
+    assert after['reprojection_px'] < before['reprojection_px']
+    assert after['epipolar_divergence'] >= 0.0
