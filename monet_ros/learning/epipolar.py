@@ -254,23 +254,66 @@ class RectifiedPair:
     valid: torch.Tensor
 
 
-def _rectify(heat_i, heat_j, geom, rows, cols):
+_SAMPLE = dict(mode='bilinear', padding_mode='zeros', align_corners=False)
+
+
+def _grids(heat_i, heat_j, geom, rows, cols):
     theta_k = geom.row_angles(rows)
-    size_i, size_j = tuple(heat_i.shape[-2:]), tuple(heat_j.shape[-2:])
-    grid_i = _sampling_grid(geom.proj_i, geom.alpha_i, theta_k, geom.valid, cols, size_i,
-                            heat_i.dtype)
-    grid_j = _sampling_grid(geom.proj_j, geom.alpha_j, theta_k, geom.valid, cols, size_j,
-                            heat_j.dtype)
-    kw = dict(mode='bilinear', padding_mode='zeros', align_corners=False)
-    if size_i == size_j:        # one kernel call for both views
-        both = F.grid_sample(torch.cat([heat_i, heat_j]), torch.cat([grid_i, grid_j]), **kw)
-        return both[:heat_i.shape[0]], both[heat_i.shape[0]:], theta_k
-    return (F.grid_sample(heat_i, grid_i, **kw), F.grid_sample(heat_j, grid_j, **kw), theta_k)
+    grid_i = _sampling_grid(geom.proj_i, geom.alpha_i, theta_k, geom.valid, cols,
+                            tuple(heat_i.shape[-2:]), heat_i.dtype)
+    grid_j = _sampling_grid(geom.proj_j, geom.alpha_j, theta_k, geom.valid, cols,
+                            tuple(heat_j.shape[-2:]), heat_j.dtype)
+    return grid_i, grid_j, theta_k
 
 
-def _row_distribution(rectified):
-    """Q (N, C, rows): row max, clamped non-negative, normalised over rows (0 if empty)."""
-    q = rectified.amax(dim=-1).clamp_min(0.0)
+def _sample_pair(heat_i, heat_j, grid_i, grid_j):
+    """grid_sample of both views, one kernel call when the heatmap sizes agree."""
+    if heat_i.shape[-2:] == heat_j.shape[-2:]:
+        both = F.grid_sample(torch.cat([heat_i, heat_j]), torch.cat([grid_i, grid_j]),
+                             **_SAMPLE)
+        return both[:heat_i.shape[0]], both[heat_i.shape[0]:]
+    return F.grid_sample(heat_i, grid_i, **_SAMPLE), F.grid_sample(heat_j, grid_j, **_SAMPLE)
+
+
+def _rectify(heat_i, heat_j, geom, rows, cols):
+    """Rectified heatmaps (N, C, rows, cols) of both views and the row angles (N, rows)."""
+    grid_i, grid_j, theta_k = _grids(heat_i, heat_j, geom, rows, cols)
+    return (*_sample_pair(heat_i, heat_j, grid_i, grid_j), theta_k)
+
+
+def max_along_rows(heat, grid):
+    """(N, C, rows): max over each grid row of bilinear samples of heat (N, C, H, W) at grid
+    (N, rows, cols, 2) (grid_sample coordinates, zero padding); equals
+    grid_sample(heat, grid).amax(-1), gradient included.
+
+    The full grid is sampled without autograd; only each row's maximising sample is sampled
+    again with autograd, so the backward pass touches rows instead of rows x cols samples
+    (the max passes its gradient to that one sample anyway).
+    """
+    N, C = heat.shape[:2]
+    rows, cols = grid.shape[1:3]
+    with torch.no_grad():
+        best = F.grid_sample(heat, grid, **_SAMPLE).argmax(dim=-1)      # (N, C, rows)
+    best = best + cols * torch.arange(rows, device=best.device)       # index in rows * cols
+    index = best.reshape(N, C * rows, 1).expand(N, C * rows, 2)
+    points = grid.reshape(N, rows * cols, 2).gather(1, index)         # (N, C * rows, 2)
+    picked = F.grid_sample(heat.reshape(N * C, 1, *heat.shape[-2:]),
+                           points.reshape(N * C, rows, 1, 2), **_SAMPLE)
+    return picked.reshape(N, C, rows)
+
+
+def _row_max(heat_i, heat_j, geom, rows, cols):
+    """Row maxima (N, C, rows) of both rectified views (rectify + amax(-1))."""
+    grid_i, grid_j, _ = _grids(heat_i, heat_j, geom, rows, cols)
+    if heat_i.shape[-2:] == heat_j.shape[-2:]:        # one pass for both views
+        both = max_along_rows(torch.cat([heat_i, heat_j]), torch.cat([grid_i, grid_j]))
+        return both[:heat_i.shape[0]], both[heat_i.shape[0]:]
+    return max_along_rows(heat_i, grid_i), max_along_rows(heat_j, grid_j)
+
+
+def _row_distribution(row_max):
+    """Q (N, C, rows): row maxima clamped non-negative, normalised over rows (0 if empty)."""
+    q = row_max.clamp_min(0.0)
     return q / q.sum(dim=-1, keepdim=True).clamp_min(1e-12)
 
 
@@ -321,8 +364,8 @@ def epipolar_divergence(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, *, eps=1e-
     """
     geom, (rows, cols) = _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols,
                                   eps, min_angle_deg, max_spacing, max_grid)
-    rect_i, rect_j, _ = _rectify(heat_i, heat_j, geom, rows, cols)
-    div = _kl(_row_distribution(rect_i), _row_distribution(rect_j), eps)
+    max_i, max_j = _row_max(heat_i, heat_j, geom, rows, cols)
+    div = _kl(_row_distribution(max_i), _row_distribution(max_j), eps)
     div = torch.where(geom.valid[:, None], div, torch.zeros_like(div))
     return (div, geom.valid) if return_valid else div
 
@@ -333,17 +376,20 @@ def _multiview_pairs(K, R, t, size, valid, min_angle_deg, max_spacing):
         raise ValueError(f'K must be (B, V, 3, 3), got {tuple(K.shape)}')
     B, V = K.shape[:2]
     _check_camera_batch('cameras', K, R, t, (B, V))
-    if valid is not None and tuple(valid.shape) != (B, V):
-        raise ValueError(f'valid must be (B, V) = {(B, V)}, got {tuple(valid.shape)}')
+    if valid is not None:
+        valid = torch.as_tensor(valid, device=K.device).to(torch.bool)
+        if tuple(valid.shape) != (B, V):
+            raise ValueError(f'valid must be (B, V) = {(B, V)}, got {tuple(valid.shape)}')
     ii, jj = torch.triu_indices(V, V, 1, device=K.device)
     P = ii.numel()
-    flat = (lambda a, idx: a[:, idx].reshape(B * P, *a.shape[2:]))  # noqa: E731
+
+    def flat(a, idx):
+        return a[:, idx].reshape(B * P, *a.shape[2:])
     geom = pair_geometry(flat(K, ii), flat(R, ii), flat(t, ii), size,
                          flat(K, jj), flat(R, jj), flat(t, jj), size, min_angle_deg,
                          max_spacing)
     ok = geom.valid.reshape(B, P)
     if valid is not None:
-        valid = valid.to(device=K.device, dtype=torch.bool)
         ok = ok & valid[:, ii] & valid[:, jj]
     b, p = ok.nonzero(as_tuple=True)
     return b, ii[p], jj[p], geom.select(b * P + p)
@@ -386,7 +432,7 @@ def multiview_epipolar_loss(heat, K, R, t, valid=None, *, eps=1e-6, rows=None, c
     if b.numel() == 0:
         return heat.sum() * 0.0
     rows, cols = geom.grid_size(rows, cols, max_grid or 4 * max(size))
-    rect_i, rect_j, _ = _rectify(heat[b, i], heat[b, j], geom, rows, cols)
-    q_i, q_j = _row_distribution(rect_i), _row_distribution(rect_j)
+    max_i, max_j = _row_max(heat[b, i], heat[b, j], geom, rows, cols)
+    q_i, q_j = _row_distribution(max_i), _row_distribution(max_j)
     terms = torch.cat([_kl(q_i, q_j, eps), _kl(q_j, q_i, eps)])
     return terms.mean() if reduction == 'mean' else terms.sum()

@@ -13,6 +13,7 @@ import torch.nn.functional as F
 
 from helpers.rigs import look_at, random_camera
 from monet_ros.geometry import Camera
+from monet_ros.learning.epipolar import max_along_rows
 
 
 def crop_to_subject(camera, size=(46, 46), half_extent=0.9, centre=(0.0, 0.0, 0.0)):
@@ -112,12 +113,14 @@ def kl_rows(q_i, q_j, eps=1e-6):
     return np.maximum((p * (np.log(p + eps) - np.log(q + eps))).sum(-1), 0.0)
 
 
-def line_row_max_torch(heat, K, R, normals, spacing=1.0):
+def line_row_max_torch(heat, K, R, normals, spacing=1.0, resample_argmax=False):
     """Batched brute force: (N, C, P) max of heat (N, C, h, w) along the epipolar lines of the
     world plane normals (N, P, 3) (through the camera centre), bilinear samples every
     `spacing` pixels (at most) along each line clipped to the heatmap window.
 
     Lines are full lines: valid pairs' windows see one half-plane only (|theta| < 90 degrees).
+    resample_argmax: backward through the maximising samples only (max_along_rows), the
+    autograd strategy of the rectified loss.
     """
     N, C, h, w = heat.shape
     lines = normals.to(K.dtype) @ (R.transpose(-1, -2) @ torch.linalg.inv(K))  # K^-T R n
@@ -141,6 +144,8 @@ def line_row_max_torch(heat, K, R, normals, spacing=1.0):
     pts = p0[..., None, :] + s[..., None] * direction[..., None, :]      # (N, P, S, 2)
     grid = (pts + 0.5) * torch.stack([2.0 / hi.new_tensor(w), 2.0 / hi.new_tensor(h)]) - 1.0
     grid = torch.where(hit[..., None, None], grid, torch.full_like(grid, -3.0))
+    if resample_argmax:
+        return max_along_rows(heat, grid.to(heat.dtype)).clamp_min(0.0)
     sampled = F.grid_sample(heat, grid.to(heat.dtype), mode='bilinear', padding_mode='zeros',
                             align_corners=False)
     return sampled.amax(-1).clamp_min(0.0)

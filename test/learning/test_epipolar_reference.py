@@ -89,9 +89,11 @@ def test_batched_torch_brute_force_matches_numpy_reference(scenes):
         :, None] * z
     thetas = np.arctan2(wdirs @ v0, wdirs @ u0)
     for k, (cam, h) in enumerate(((cams[0], h_i), (cams[1], h_j))):
-        fast = line_row_max_torch(h, K[k:k + 1], R[k:k + 1], normals, spacing=0.25)[0].numpy()
         ref = plane_row_max_numpy(h[0].numpy(), cam, e1, u0, v0, thetas)
-        assert np.abs(fast - ref).max() < 0.01
+        for resample in (False, True):
+            fast = line_row_max_torch(h, K[k:k + 1], R[k:k + 1], normals, spacing=0.25,
+                                      resample_argmax=resample)[0].numpy()
+            assert np.abs(fast - ref).max() < 0.01
 
 
 def test_rectified_rows_are_corresponding_epipolar_lines_covering_the_window():
