@@ -172,7 +172,12 @@ def run(args):
         next_line = started + 1.0
         ended = None
         while rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
+            try:
+                executor.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: BLE001 - a signal shut the context down mid-call
+                if rclpy.ok():
+                    raise
+                break
             now = time.monotonic()
             if now >= next_line:
                 next_line += 1.0
