@@ -118,7 +118,7 @@ def image_transport(bag):
 
 
 def run(args):
-    from monet_ros.nodes.runner import start_error, use_large_data_profile
+    from monet_ros.nodes.runner import start_error, stopped_by_shutdown, use_large_data_profile
 
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo
@@ -195,6 +195,9 @@ def run(args):
                     break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not stopped_by_shutdown():
+            raise
     finally:
         for node in nodes:
             if isinstance(node, PlayerNode):
