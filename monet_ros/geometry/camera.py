@@ -202,7 +202,8 @@ class Camera:
 
     def undistort_normalized(self, xy, iterations=100, tol=1e-15):
         """Distorted normalised coordinates (..., 2) -> ideal ones (fixed-point inversion of
-        the distortion model, as cv2.undistortPoints but iterated to convergence)."""
+        the distortion model, as cv2.undistortPoints but iterated to convergence); NaN where
+        it does not converge (a point outside the model's invertible region)."""
         xy0 = np.asarray(xy, dtype=np.float64)
         if not self.has_distortion:
             return xy0.copy()
@@ -218,13 +219,21 @@ class Camera:
             x, y = x_new, y_new
             if change <= tol:
                 break
+        # points the model cannot invert (outside its valid region) become NaN
+        radial, dx, dy = _distortion_terms(self._d12, x, y)
+        with np.errstate(invalid='ignore'):
+            residual = np.hypot(x * radial + dx - x0, y * radial + dy - y0)
+            failed = ~(residual <= 1e-9 * np.maximum(1.0, np.hypot(x0, y0)))
+        x = np.where(failed, np.nan, x)
+        y = np.where(failed, np.nan, y)
         return np.stack([x, y], axis=-1)
 
     def undistort_points(self, uv):
         """Observed pixels uv (N, 2) -> ideal pinhole pixels (N, 2) of the same K.
 
         Inverse of `project`'s distortion, iterated to convergence; honours the skew in K.
-        NaN rows stay NaN. Without distortion the input is returned (as a copy).
+        NaN rows stay NaN; points where the inversion fails become NaN. Without distortion
+        the input is returned (as a copy).
         """
         uv = np.asarray(uv, dtype=np.float64)
         if not self.has_distortion:
@@ -256,7 +265,8 @@ def project_views(cameras, X):
     X = np.asarray(X, dtype=np.float64)
     Xh = np.concatenate([X, np.ones_like(X[..., :1])], axis=-1)[..., None, :, :]
     if not p['d12'].any():  # pinhole rig: one matmul with P
-        h = Xh @ p['P'].swapaxes(-1, -2)  # (..., V, N, 3)
+        P = p['P'] if 'P' in p else p['K'] @ np.concatenate([p['R'], p['t'][..., None]], -1)
+        h = Xh @ P.swapaxes(-1, -2)  # (..., V, N, 3)
         return h[..., :2] / h[..., 2:]
     Xc = Xh @ np.concatenate([p['R'], p['t'][:, :, None]], axis=-1).swapaxes(-1, -2)
     x = Xc[..., 0] / Xc[..., 2]

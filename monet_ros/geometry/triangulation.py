@@ -27,12 +27,14 @@ def _prepare(points2d, cameras, weights):
             raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
         if np.any(w < 0):
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
-    missing = ~np.all(np.isfinite(obs), axis=2) | ~np.isfinite(w) | (w <= 0)
-    w = np.where(missing, 0.0, w)
     ideal = obs.copy()
-    for v, cam in enumerate(cameras):
-        if cam.has_distortion:
-            ideal[v] = cam.undistort_points(obs[v])
+    with np.errstate(all='ignore'):
+        for v, cam in enumerate(cameras):
+            if cam.has_distortion:
+                ideal[v] = cam.undistort_points(obs[v])
+    # missing: NaN input, zero/NaN weight, or a point the distortion model cannot invert
+    missing = ~np.all(np.isfinite(ideal), axis=2) | ~np.isfinite(w) | (w <= 0)
+    w = np.where(missing, 0.0, w)
     ideal[missing] = 0.0
     return obs, ideal, w
 
@@ -170,22 +172,25 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     AtA = A[..., :3].swapaxes(-1, -2) @ A[..., :3]
     Atb = -(A[..., :3].swapaxes(-1, -2) @ A[..., 3:])
     AtA[~valid] = np.eye(3)
-    Xh = np.linalg.solve(AtA, Atb)[..., 0]
+    try:
+        Xh = np.linalg.solve(AtA, Atb)[..., 0]
+    except np.linalg.LinAlgError:  # a degenerate pair (e.g. coincident rays)
+        Xh = (np.linalg.pinv(AtA) @ Atb)[..., 0]
     err = _view_errors(rig, Xh, obs[:, todo])  # (H, V, n)
     inl = (err < threshold_px) & avail[None, :, todo]
     count = inl.sum(axis=1).astype(np.float64)
     mean_inl = np.where(inl, err, 0.0).sum(axis=1) / np.maximum(count, 1)
     score = np.where(valid & np.isfinite(mean_inl), count - mean_inl / (threshold_px * 2), -1)
     best_inl = inl[np.argmax(score, axis=0), :, cols].T  # (V, n)
-    for _ in range(2):  # refine on the consensus set, re-select inliers
-        Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+    Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+    for _ in range(2):  # re-select the inliers of the refined point, refine again
         err_r = _view_errors(rig, Xr, obs[:, todo])
         new_inl = (err_r < threshold_px) & avail[:, todo]
         new_inl = np.where(new_inl.sum(axis=0) >= 2, new_inl, best_inl)
         if np.array_equal(new_inl, best_inl):
             break
         best_inl = new_inl
-    Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+        Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
     ok = best_inl.sum(axis=0) >= max(2, min_views)
     X[todo[ok]] = Xr[ok]
     inliers[:, todo[ok]] = best_inl[:, ok]

@@ -35,10 +35,10 @@ def crop_images(images, boxes, out_size, antialias=True):
     """Crop and resize every image to out_size = (W_out, H_out) -> (N, H_out, W_out, 3) uint8.
 
     images: (N, H, W, 3) array or a sequence of (H_i, W_i, 3) arrays (cameras may differ);
-    boxes: (N, 4) edge coordinates. antialias: when a box is shrunk by more than 1x, blur
-    the source region first with a Gaussian of sigma = (shrink - 1) / 2 per axis (symmetric,
-    so the geometry S is unchanged). cv2.warpAffine with bilinear interpolation, constant 0
-    border.
+    boxes: (N, 4) edge coordinates. antialias: when a box is shrunk by 2x or more, the box
+    region is first block-averaged by integer factors (cv2.resize INTER_AREA) and the warp is
+    re-expressed in that region's pixels, so the geometry S is unchanged.
+    cv2.warpAffine with bilinear interpolation, constant 0 border.
     """
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     if len(images) != len(boxes):
@@ -49,32 +49,45 @@ def crop_images(images, boxes, out_size, antialias=True):
         S = crop_transform(box, (w_out, h_out))
         source = image
         if antialias:
-            source, S = _blurred_region(image, box, S)
+            source, S = _area_shrunk_region(image, box, S)
         cv2.warpAffine(source, S[:2], (w_out, h_out), dst=out[n], flags=cv2.INTER_LINEAR,
                        borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     return out
 
 
-def _blurred_region(image, box, S):
-    """The box region of `image` (with a margin) Gaussian-blurred for a shrink of 1/S, and S
-    shifted to that region's origin; unchanged when the crop does not shrink."""
-    shrink_x, shrink_y = 1.0 / S[0, 0], 1.0 / S[1, 1]
-    if shrink_x <= 1.0 and shrink_y <= 1.0:
+def _integer_span(lo, hi, factor, limit):
+    """[start, start + n * factor) covering [lo, hi) within [0, limit) where possible."""
+    start = int(np.clip(np.floor(lo) - 1, 0, limit))
+    stop = int(np.clip(np.ceil(hi) + 1, 0, limit))
+    n = max(1, -(-(stop - start) // factor))
+    start = max(0, min(start, limit - n * factor))
+    return start, n
+
+
+def _area_shrunk_region(image, box, S):
+    """The box region of `image` (1-pixel margin) box-filtered down by integer factors
+    (cv2.resize INTER_AREA with an integer ratio: each output pixel is the mean of a
+    factor x factor block, the fast path), and S re-expressed in that region's pixels; the
+    warp then shrinks by less than 2x. Unchanged when the crop shrinks by less than 2x.
+    A region that needs a few more columns/rows than the image has is padded by replication
+    (under one shrunk pixel at the image border)."""
+    fx, fy = int(1.0 / S[0, 0]), int(1.0 / S[1, 1])
+    if fx < 2 and fy < 2:
         return image, S
-    sigma_x = max((shrink_x - 1) / 2, 0.0)
-    sigma_y = max((shrink_y - 1) / 2, 0.0)
+    fx, fy = max(fx, 1), max(fy, 1)
     h, w = image.shape[:2]
-    mx, my = int(np.ceil(3 * sigma_x)) + 2, int(np.ceil(3 * sigma_y)) + 2
-    x0 = int(np.clip(np.floor(box[0]) - mx, 0, w))
-    x1 = int(np.clip(np.ceil(box[2]) + mx, 0, w))
-    y0 = int(np.clip(np.floor(box[1]) - my, 0, h))
-    y1 = int(np.clip(np.ceil(box[3]) + my, 0, h))
-    if x1 <= x0 or y1 <= y0:  # the box lies outside the image: the crop is black anyway
-        return image, S
-    region = cv2.GaussianBlur(image[y0:y1, x0:x1], (0, 0), sigmaX=max(sigma_x, 1e-3),
-                              sigmaY=max(sigma_y, 1e-3), borderType=cv2.BORDER_REPLICATE)
-    shift = np.array([[1.0, 0.0, x0], [0.0, 1.0, y0], [0.0, 0.0, 1.0]])
-    return region, S @ shift
+    if box[2] <= 0 or box[3] <= 0 or box[0] >= w or box[1] >= h:
+        return image, S  # the box lies outside the image: the crop is black anyway
+    x0, nx = _integer_span(box[0], box[2], fx, w)
+    y0, ny = _integer_span(box[1], box[3], fy, h)
+    region = image[y0:y0 + ny * fy, x0:x0 + nx * fx]
+    pad_y, pad_x = ny * fy - region.shape[0], nx * fx - region.shape[1]
+    if pad_x or pad_y:
+        region = cv2.copyMakeBorder(region, 0, pad_y, 0, pad_x, cv2.BORDER_REPLICATE)
+    region = cv2.resize(region, (nx, ny), interpolation=cv2.INTER_AREA)
+    # original pixels -> shrunk-region pixels, same edge convention as the crop itself
+    D = crop_transform((x0, y0, x0 + nx * fx, y0 + ny * fy), (nx, ny))
+    return region, S @ np.linalg.inv(D)
 
 
 def crop_to_original(points, boxes, out_size):

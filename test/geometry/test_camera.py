@@ -61,6 +61,8 @@ def test_undistort_keeps_nan_rows():
     uv = np.array([[600.0, 500.0], [np.nan, np.nan], [10.0, 20.0]])
     out = cam.undistort_points(uv)
     assert np.all(np.isnan(out[1])) and np.all(np.isfinite(out[[0, 2]]))
+    wild = cam.replace(dist=np.array([5.0, 50.0, 0.0, 0.0, 500.0]))
+    assert np.all(np.isnan(wild.undistort_points(np.array([[1e9, -1e9]]))))
 
 
 def _valid_kwargs():

@@ -192,3 +192,15 @@ def test_robust_min_views_and_nan():
         triangulate_robust(obs, cams, method='magic')
     with pytest.raises(ValueError, match='points2d'):
         triangulate(obs[:3], cams)
+
+
+def test_points_the_distortion_cannot_invert_count_as_missing():
+    rng = np.random.default_rng(12)
+    cams = random_rig(rng, 3, dist_len=5)
+    cams[0] = cams[0].replace(dist=np.array([5.0, 50.0, 0.0, 0.0, 500.0]))
+    X = random_points(rng, 5)
+    obs = _observe(cams, X)
+    obs[0] = [[1e9, -1e9]] * 5  # far outside: the inversion diverges
+    out = triangulate(obs, cams)
+    assert np.all(np.isfinite(out))
+    np.testing.assert_allclose(out, triangulate(obs[1:], cams[1:]), atol=1e-9)

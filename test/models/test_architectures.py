@@ -29,15 +29,15 @@ def test_cpm_forward_backward_step_on_cpu():
     torch.manual_seed(0)
     model = build_model('cpm', 14)
     assert model.input_size == (368, 368) and model.heatmap_size == (46, 46)
-    images = torch.rand(2, 3, 368, 368)
-    target = torch.zeros(2, 14, 46, 46)
+    images = torch.rand(1, 3, 368, 368)
+    target = torch.zeros(1, 14, 46, 46)
     target[:, :, 20:23, 10:13] = 1.0
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
     losses = []
-    for _ in range(3):
+    for _ in range(2):
         stages = model(images)
         assert len(stages) == 5, 'intermediate supervision: one output per stage'
-        assert all(s.shape == (2, 14, 46, 46) for s in stages)
+        assert all(s.shape == (1, 14, 46, 46) for s in stages)
         loss = sum(torch.mean((s - target) ** 2) for s in stages)
         optimizer.zero_grad()
         loss.backward()
