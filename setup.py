@@ -9,6 +9,7 @@ PACKAGE = 'monet_ros'
 # Executables run as `ros2 run monet_ros <name>`; setup.cfg puts them in lib/monet_ros.
 EXECUTABLES = {
     'monet': 'monet_ros.cli:main',
+    'learner': 'monet_ros.nodes.learner:main',
 }
 
 
