@@ -29,11 +29,27 @@ class BagError(ValueError):
 
 @dataclass(frozen=True)
 class TopicInfo:
-    """A topic of the bag: name, message type, message count (None when unknown)."""
+    """A topic of the bag: name, message type, message count (None when unknown) and the
+    recorded offered QoS profiles (rosbag2's YAML text, or a list in metadata v9)."""
     name: str
     msgtype: str
     count: object = None
     serialization_format: str = 'cdr'
+    offered_qos_profiles: object = ''
+
+    @property
+    def transient_local(self):
+        """True when the recorded publisher was transient-local (latched, e.g. /tf_static)."""
+        profiles = self.offered_qos_profiles
+        if isinstance(profiles, str):
+            try:
+                profiles = yaml.safe_load(profiles) if profiles.strip() else []
+            except yaml.YAMLError:
+                return False
+        if not isinstance(profiles, list):
+            return False
+        return any(isinstance(p, dict) and p.get('durability') in (1, 'transient_local')
+                   for p in profiles)
 
 
 @dataclass
@@ -185,9 +201,10 @@ def _start_bound(later_start, offset):
 class BagReader:
     """Reader of one bag (see open_bag). Re-iterable; `report` describes the last read."""
 
-    def __init__(self, path, validate_crcs=False):
+    def __init__(self, path, validate_crcs=False, max_buffer_bytes=512 * 2**20):
         self.path = Path(path)
         self.validate_crcs = validate_crcs
+        self.max_buffer_bytes = int(max_buffer_bytes)
         self.metadata = None
         self._problems = []
         self.files = self._resolve_files()
@@ -257,10 +274,11 @@ class BagReader:
                     md = entry['topic_metadata']
                     topics[md['name']] = TopicInfo(md['name'], md['type'],
                                                    int(entry.get('message_count', 0)),
-                                                   md.get('serialization_format', 'cdr'))
+                                                   md.get('serialization_format', 'cdr'),
+                                                   md.get('offered_qos_profiles', ''))
                 except (KeyError, TypeError, ValueError):
                     continue
-        counts, types, summary_ok = Counter(), {}, True
+        counts, types, qos, summary_ok = Counter(), {}, {}, True
         for f in self.files:
             scan = McapScan(f, self.report, self.validate_crcs)
             try:
@@ -274,13 +292,15 @@ class BagReader:
             for cid, ch in summary.channels.items():
                 schema = summary.schemas.get(ch.schema_id)
                 types.setdefault(ch.topic, schema.name if schema else '')
+                qos.setdefault(ch.topic, ch.metadata.get('offered_qos_profiles', ''))
                 if summary.statistics is not None:
                     counts[ch.topic] += summary.statistics.channel_message_counts.get(cid, 0)
         # the listing is complete when metadata.yaml or every file's summary gave it
         self.topics_complete = self.metadata is not None or summary_ok
         for topic, msgtype in types.items():
             if topic not in topics:
-                topics[topic] = TopicInfo(topic, msgtype, counts[topic] if summary_ok else None)
+                topics[topic] = TopicInfo(topic, msgtype, counts[topic] if summary_ok else None,
+                                          'cdr', qos.get(topic, ''))
         return topics
 
     # ------------------------------------------------------------------ reading
@@ -365,6 +385,7 @@ class BagReader:
             return ch, schema
 
         heap, seq, summary_noted = [], 0, False
+        held = [0]                # bytes of message data waiting in the heap
         later_start = []          # (offset, min start time of chunks at >= offset) from index
 
         def push(message):
@@ -380,7 +401,13 @@ class BagReader:
                 report.skip(ch.topic, f'schema {ch.schema_id} of {ch.topic} is missing')
                 return
             seq += 1
+            held[0] += len(data)
             heapq.heappush(heap, (log_time, index, seq, ch.topic, ch, schema, pub_time, data))
+
+        def pop():
+            item = heapq.heappop(heap)
+            held[0] -= len(item[-1])
+            return item
 
         for event in scan.events(skip_chunk):
             if scan.summary_problem is not None and not summary_noted:
@@ -395,7 +422,7 @@ class BagReader:
                 seen.add(event[1].topic)
             elif kind == 'message':
                 while heap and heap[0][0] <= event[1][2]:
-                    yield heapq.heappop(heap)
+                    yield pop()
                 push(event[1])
             else:
                 _, start, defs, msgs, offset, _crc_ok = event
@@ -407,12 +434,12 @@ class BagReader:
                     later_start.extend(_suffix_min_starts(scan.summary))
                 # nothing still to come starts before `bound`: release up to it
                 bound = min(start, _start_bound(later_start, offset))
-                while heap and heap[0][0] <= bound:
-                    yield heapq.heappop(heap)
+                while heap and (heap[0][0] <= bound or held[0] > self.max_buffer_bytes):
+                    yield pop()       # (over the memory bound: may come out of order)
                 for m in msgs:
                     push(m)
         while heap:
-            yield heapq.heappop(heap)
+            yield pop()
 
     def __enter__(self):
         return self
@@ -425,14 +452,16 @@ class BagReader:
                 f'topics={len(self._topics)})')
 
 
-def open_bag(path, validate_crcs=False):
+def open_bag(path, validate_crcs=False, max_buffer_bytes=512 * 2**20):
     """A BagReader for a rosbag2 folder (metadata.yaml + .mcap files) or a bare .mcap file.
 
     validate_crcs: also check every chunk's CRC (costs ~1 s per GB on these machines;
     mismatches are reported, the messages still given). The summary's CRC is always
     checked: a damaged summary is not used (the file is read sequentially instead).
     Image / CompressedImage payloads are zero-copy views of the chunk read from disk.
+    max_buffer_bytes bounds the message data held per file to restore log-time order
+    (chunks written far out of order beyond it come out of order, counted in the report).
 
     Raises BagError naming the path when it does not exist, is empty or unreadable, or
     holds no .mcap file; damage inside the files never raises (see BagReader.report)."""
-    return BagReader(path, validate_crcs=validate_crcs)
+    return BagReader(path, validate_crcs=validate_crcs, max_buffer_bytes=max_buffer_bytes)

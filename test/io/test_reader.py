@@ -67,6 +67,10 @@ def test_round_trip_every_helper(tmp_path):
     # the bare .mcap file reads the same
     bare = open_bag(tmp_path / 'b' / 'b_0.mcap')
     assert sum(1 for _ in bare.messages()) == 22 and bare.metadata is None
+    # recorded QoS: /tf_static latched, the rest volatile (from metadata.yaml and from the
+    # MCAP channel metadata alike)
+    for r in (reader, bare):
+        assert [t for t, i in r.topics.items() if i.transient_local] == ['/tf_static']
 
 
 def test_log_time_order_across_chunks_and_topic_filter(tmp_path):
@@ -85,6 +89,11 @@ def test_log_time_order_across_chunks_and_topic_filter(tmp_path):
     only_b = [int(m.msg.data) for m in reader.messages(topics='/b')]
     assert sorted(only_b) == list(range(100, 200))
     assert reader.report.ok
+    # with a tiny buffer bound the order is given up (counted), no message is lost
+    small = open_bag(tmp_path / 'b', max_buffer_bytes=100)
+    got = [m.log_time_ns for m in small.messages()]
+    assert sorted(got) == sorted(times.tolist())
+    assert small.report.out_of_order > 0 and 'out of log-time order' in small.report.summary()
 
 
 def test_path_errors_are_named(tmp_path):

@@ -83,3 +83,17 @@ def test_rig_errors_name_the_problem(tmp_path):
         bag.write_tf_static(T0, [cam])
     with pytest.raises(RigFromBagError, match='no CameraInfo topic'):
         rig_from_bag(tmp_path / 'noinfo')
+
+
+def test_rig_file_overrides_the_bag(tmp_path):
+    """With a rig file the cameras come from monet_ros.geometry.load_rig, not the bag."""
+    from monet_ros.geometry import save_rig
+    cams = [make_camera(f'cam{i}', seed=20 + i) for i in range(2)]
+    with BagWriter(tmp_path / 'b') as bag:
+        bag.write_camera_info('/cam0/camera_info', T0, make_camera('cam0', seed=99),
+                              'cam0_optical')
+    save_rig(tmp_path / 'rig.yaml', cams)
+    rig = rig_from_bag(tmp_path / 'b', rig_file=tmp_path / 'rig.yaml')
+    assert [c.name for c in rig] == ['cam0', 'cam1']
+    for got, cam in zip(rig, cams):
+        assert_same_camera(got, cam)

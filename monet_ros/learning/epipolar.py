@@ -1,0 +1,390 @@
+"""Epipolar divergence (MONET, Yao et al., ICCV 2019) and the multiview loss L_E, batched torch.
+
+For two views i, j of one keypoint, every epipolar plane contains the baseline C_i C_j and
+is named by its angle theta around the baseline. A 3D point lies on one plane, so its two
+detections must agree on theta. Following the paper, both heatmaps are stereo-rectified so
+that epipolar lines become rows, each row is max-pooled, Q(v) = max_u P(u, v) is normalised
+over the rows and the two distributions are compared with KL(Q_i || Q_j->i).
+
+Rectification (inverse warping, ``torch.nn.functional.grid_sample``, bilinear): the shared
+rectified frame R_rect (``geometry.rectifying_rotation``) has x = the baseline direction and
+z = the mean optical axis made orthogonal to it. A rectified pixel (row k, column l) is the ray
+
+    d = R_rect^T (cos a_l, sin a_l sin theta_k, sin a_l cos theta_k)
+
+(theta_k: epipolar-plane angle, a_l: angle of the ray from the baseline inside that plane),
+sampled in the original heatmap at the pixel K R d. Row k of *both* rectified heatmaps is the
+same plane theta_k, so the paper's row map v -> a v + b is the identity (a = 1, b = 0). This is
+the spherical ("polar") form of stereo rectification rather than a planar homography: rows are
+exactly the same epipolar lines, but columns stay evenly spaced along each line (a planar
+rectification stretches the side near the epipole by 1 / sin^2(a), 33x at 10 degrees) and no
+ray has to lie in front of a rectified image plane. The rectified window is the (theta, a)
+range of the warped heatmap border (corners and edge samples), theta shared by the pair and
+a per view; rows are chosen so that at each window's centre one rectified row step is at
+most ``max_spacing`` heatmap pixels, columns half that: a bilinear heatmap has cusps at pixel
+centres, so a sampled row max falls short of the supremum along the line linearly in the
+spacing (measured: <= 4% for Gaussians of sigma 1.5 px at 0.5 px columns).
+
+Degenerate pairs (coincident centres; epipole inside or within ``min_angle_deg`` of a heatmap
+window, i.e. the baseline nearly parallel to viewing rays; windows more than 90 degrees
+around the baseline from the shared frame) are flagged: their divergence is 0 with no
+gradient, never NaN. ``valid_view_pairs`` lists the non-degenerate pairs of a rig.
+"""
+from dataclasses import dataclass
+import math
+
+import torch
+import torch.nn.functional as F
+
+from monet_ros.geometry import rectifying_rotation
+
+_EDGE_SAMPLES = 16          # samples per heatmap border edge used to bound the window
+_OUTSIDE = -3.0             # grid_sample coordinate that reads the zero padding
+
+
+def _check_camera_batch(name, K, R, t, batch):
+    if K.shape[-2:] != (3, 3) or R.shape[-2:] != (3, 3) or t.shape[-1] != 3:
+        raise ValueError(f'{name}: expected K (..., 3, 3), R (..., 3, 3), t (..., 3), got '
+                         f'{tuple(K.shape)}, {tuple(R.shape)}, {tuple(t.shape)}')
+    if K.shape[:-2] != batch or R.shape[:-2] != batch or t.shape[:-1] != batch:
+        raise ValueError(f'{name}: camera batch shapes {tuple(K.shape[:-2])}, '
+                         f'{tuple(R.shape[:-2])}, {tuple(t.shape[:-1])} do not match the '
+                         f'heatmap batch {tuple(batch)}')
+
+
+def _check_options(min_angle_deg, max_spacing, eps, rows, cols, max_grid):
+    if not 0.0 < min_angle_deg < 90.0:
+        raise ValueError(f'min_angle_deg must be in (0, 90), got {min_angle_deg}')
+    if not max_spacing > 0.0:
+        raise ValueError(f'max_spacing must be > 0 heatmap pixels, got {max_spacing}')
+    if not eps > 0.0:
+        raise ValueError(f'eps must be > 0, got {eps}')
+    for name, value in (('rows', rows), ('cols', cols), ('max_grid', max_grid)):
+        if value is not None and (int(value) != value or value < 2):
+            raise ValueError(f'{name} must be an integer >= 2 or None, got {value}')
+
+
+def _border_pixels(size, dtype, device):
+    """(4 * _EDGE_SAMPLES, 2) points on the pixel-edge border of an (h, w) window."""
+    h, w = size
+    s = torch.linspace(0.0, 1.0, _EDGE_SAMPLES, dtype=dtype, device=device)
+    x0, y0, x1, y1 = -0.5, -0.5, w - 0.5, h - 0.5
+    xs, ys = x0 + s * (x1 - x0), y0 + s * (y1 - y0)
+    return torch.cat([
+        torch.stack([xs, torch.full_like(xs, y0)], -1),
+        torch.stack([xs, torch.full_like(xs, y1)], -1),
+        torch.stack([torch.full_like(ys, x0), ys], -1),
+        torch.stack([torch.full_like(ys, x1), ys], -1)])
+
+
+def _apply(M, x):
+    """M (N, 3, 3) applied to vectors x (N, ..., 3). Elementwise, not bmm: batched 3x3
+    matmuls start a thread team per call, which dominates on a loaded CPU."""
+    M = M.reshape(M.shape[0], *([1] * (x.dim() - 2)), 3, 3)
+    return (M * x[..., None, :]).sum(-1)
+
+
+def _mm(A, B):
+    """(N, 3, 3) @ (N, 3, 3), elementwise."""
+    return (A[..., :, :, None] * B[..., None, :, :]).sum(-2)
+
+
+def _rays(K_inv_Rt, uv):
+    """World unit ray directions (N, M, 3) of pixels uv (M, 2); K_inv_Rt = R^T K^-1 (N, 3, 3)."""
+    homog = torch.cat([uv, torch.ones_like(uv[:, :1])], -1)
+    d = _apply(K_inv_Rt, homog.expand(K_inv_Rt.shape[0], *homog.shape))
+    return d / d.norm(dim=-1, keepdim=True)
+
+
+@dataclass(frozen=True)
+class PairGeometry:
+    """Spherical rectification of N view pairs (float64, no gradient).
+
+    R_rect (N, 3, 3): rows = baseline x, y, z of the shared rectified frame (world -> rect).
+    proj_i, proj_j (N, 3, 3): K R R_rect^T, rectified direction -> homogeneous heatmap pixel.
+    theta_range (N, 2): epipolar-plane angles covered by both windows (shared rows).
+    alpha_i, alpha_j (N, 2): ray-to-baseline angles covered by each window (columns).
+    rows_needed, cols_needed (N,): grid size for ``max_spacing`` at the window centres.
+    valid (N,) bool: False for degenerate pairs.
+    """
+
+    R_rect: torch.Tensor
+    proj_i: torch.Tensor
+    proj_j: torch.Tensor
+    theta_range: torch.Tensor
+    alpha_i: torch.Tensor
+    alpha_j: torch.Tensor
+    rows_needed: torch.Tensor
+    cols_needed: torch.Tensor
+    valid: torch.Tensor
+
+    def select(self, index):
+        return PairGeometry(*(getattr(self, f)[index] for f in self.__dataclass_fields__))
+
+    def grid_size(self, rows=None, cols=None, max_grid=64):
+        """(rows, cols): given values, else the largest need over valid pairs, in [4, max_grid]."""
+        if rows is not None and cols is not None:
+            return int(rows), int(cols)
+        if bool(self.valid.any()):
+            need_r = math.ceil(float(self.rows_needed[self.valid].max()))
+            need_c = math.ceil(float(self.cols_needed[self.valid].max()))
+        else:
+            need_r = need_c = 4
+        rows = int(rows) if rows is not None else min(max(need_r, 4), max_grid)
+        cols = int(cols) if cols is not None else min(max(need_c, 4), max_grid)
+        return rows, cols
+
+    def row_angles(self, rows):
+        """(N, rows) epipolar-plane angle theta of each rectified row (pixel-centred bins)."""
+        k = torch.arange(rows, dtype=self.theta_range.dtype, device=self.theta_range.device)
+        lo, hi = self.theta_range[:, :1], self.theta_range[:, 1:]
+        return lo + (k + 0.5) / rows * (hi - lo)
+
+    @staticmethod
+    def column_angles(alpha, cols):
+        k = torch.arange(cols, dtype=alpha.dtype, device=alpha.device)
+        return alpha[:, :1] + (k + 0.5) / cols * (alpha[:, 1:] - alpha[:, :1])
+
+
+@torch.no_grad()
+def pair_geometry(K_i, R_i, t_i, size_i, K_j, R_j, t_j, size_j, min_angle_deg=10.0,
+                  max_spacing=1.0):
+    """Shared rectified frame, windows and degeneracy flags of N pairs; K, R, t (N, ...)."""
+    f64 = dict(dtype=torch.float64, device=K_i.device)
+    K_i, R_i, t_i, K_j, R_j, t_j = (a.detach().to(**f64) for a in (K_i, R_i, t_i, K_j, R_j, t_j))
+    n = K_i.shape[0]
+    C_i = -_apply(R_i.transpose(-1, -2), t_i)
+    C_j = -_apply(R_j.transpose(-1, -2), t_j)
+    base = C_j - C_i
+    length = base.norm(dim=-1)
+    scale = torch.maximum(torch.maximum(C_i.norm(dim=-1), C_j.norm(dim=-1)),
+                          torch.ones_like(length))
+    separated = length > 1e-9 * scale
+
+    back_i = _mm(R_i.transpose(-1, -2), torch.linalg.inv(K_i))
+    back_j = _mm(R_j.transpose(-1, -2), torch.linalg.inv(K_j))
+    border_i, border_j = _border_pixels(size_i, **f64), _border_pixels(size_j, **f64)
+    centre_i = torch.tensor([[(size_i[1] - 1) / 2, (size_i[0] - 1) / 2]], **f64)
+    centre_j = torch.tensor([[(size_j[1] - 1) / 2, (size_j[0] - 1) / 2]], **f64)
+    step = torch.tensor([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]], **f64)
+    probe_i = _rays(back_i, centre_i + step)           # (N, 3, 3): centre, +u, +v
+    probe_j = _rays(back_j, centre_j + step)
+
+    # Shared frame (geometry.rectifying_rotation): x = baseline, z = mean optical axis made
+    # orthogonal to it; NaN (-> identity, flagged) when degenerate.
+    R_rect = rectifying_rotation(R_i, t_i, R_j, t_j)
+    framed = torch.isfinite(R_rect).all(-1).all(-1)
+    R_rect = torch.where(framed[:, None, None], R_rect, torch.eye(3, **f64).expand(n, 3, 3))
+
+    cos_min = math.cos(math.radians(min_angle_deg))
+    valid = separated & framed
+    out = {}
+    for tag, back, border, probe, K, R, size in (
+            ('i', back_i, border_i, probe_i, K_i, R_i, size_i),
+            ('j', back_j, border_j, probe_j, K_j, R_j, size_j)):
+        d = _apply(R_rect, _rays(back, border))                  # (N, M, 3) rect coords
+        theta = torch.atan2(d[..., 1], d[..., 2])
+        alpha = torch.acos(d[..., 0].clamp(-1.0, 1.0))
+        # Epipole (or its antipode) inside the window: some ray is parallel to the baseline.
+        proj = _mm(_mm(K, R), R_rect.transpose(-1, -2))
+        e = _apply(proj, torch.tensor([1.0, 0.0, 0.0], **f64).expand(n, 3))
+        finite = e[:, 2].abs() > 1e-12 * e.norm(dim=-1)
+        ez = torch.where(finite, e[:, 2], torch.ones_like(e[:, 2]))
+        eu, ev = e[:, 0] / ez, e[:, 1] / ez
+        inside = finite & (eu > -0.5) & (eu < size[1] - 0.5) & (ev > -0.5) & (ev < size[0] - 0.5)
+        valid &= ~inside
+        valid &= (d[..., 0].abs() <= cos_min).all(-1)             # rays >= min angle
+        valid &= (d[..., 2] > 1e-6).all(-1)                       # |theta| < 90 degrees
+        # Angular pixel pitch at the centre; a row step moves a ray by sin(alpha) dtheta.
+        pc = _apply(R_rect, probe)
+        cos_step = (pc[:, :1] * pc[:, 1:]).sum(-1).clamp(-1.0, 1.0)
+        pitch = torch.acos(cos_step).amin(-1).clamp_min(1e-12)
+        sin_c = pc[:, 0, 1:].norm(dim=-1).clamp_min(1e-12)
+        out[tag] = dict(theta=(theta.amin(-1), theta.amax(-1)),
+                        alpha=torch.stack([alpha.amin(-1), alpha.amax(-1)], -1),
+                        d_alpha=0.5 * max_spacing * pitch, d_theta=max_spacing * pitch / sin_c,
+                        proj=proj)
+    lo = torch.minimum(out['i']['theta'][0], out['j']['theta'][0])
+    hi = torch.maximum(out['i']['theta'][1], out['j']['theta'][1])
+    theta_range = torch.stack([lo, hi], -1)
+    rows_needed = (hi - lo) / torch.minimum(out['i']['d_theta'], out['j']['d_theta'])
+    cols_needed = torch.maximum(
+        (out['i']['alpha'][:, 1] - out['i']['alpha'][:, 0]) / out['i']['d_alpha'],
+        (out['j']['alpha'][:, 1] - out['j']['alpha'][:, 0]) / out['j']['d_alpha'])
+    dummy = torch.tensor([0.0, 1.0], **f64).expand(n, 2)
+    keep = valid[:, None]
+    return PairGeometry(
+        R_rect=R_rect, proj_i=out['i']['proj'], proj_j=out['j']['proj'],
+        theta_range=torch.where(keep, theta_range, dummy),
+        alpha_i=torch.where(keep, out['i']['alpha'], dummy + 1.0),
+        alpha_j=torch.where(keep, out['j']['alpha'], dummy + 1.0),
+        rows_needed=torch.where(valid, rows_needed, torch.zeros_like(rows_needed)),
+        cols_needed=torch.where(valid, cols_needed, torch.zeros_like(cols_needed)),
+        valid=valid)
+
+
+@torch.no_grad()
+def _sampling_grid(proj, alpha, theta_k, valid, cols, size, dtype):
+    """grid_sample grid (N, rows, cols, 2) of one view's rectified heatmap."""
+    h, w = size
+    a = PairGeometry.column_angles(alpha, cols)                  # (N, cols)
+    sa, ca = torch.sin(a)[:, None, :], torch.cos(a)[:, None, :]
+    st, ct = torch.sin(theta_k)[:, :, None], torch.cos(theta_k)[:, :, None]
+    d = torch.stack(torch.broadcast_tensors(ca, sa * st, sa * ct), -1)   # (N, rows, cols, 3)
+    p = _apply(proj, d)
+    front = (p[..., 2] > 1e-9) & valid[:, None, None]
+    z = torch.where(front, p[..., 2], torch.ones_like(p[..., 2]))
+    gx = ((p[..., 0] / z + 0.5) * (2.0 / w) - 1.0).clamp(_OUTSIDE, -_OUTSIDE)
+    gy = ((p[..., 1] / z + 0.5) * (2.0 / h) - 1.0).clamp(_OUTSIDE, -_OUTSIDE)
+    grid = torch.stack([gx, gy], -1)
+    return torch.where(front[..., None], grid, torch.full_like(grid, _OUTSIDE)).to(dtype)
+
+
+@dataclass(frozen=True)
+class RectifiedPair:
+    """heat_i, heat_j (B, C, rows, cols): rectified heatmaps, row k = plane theta (B, rows)
+    in both; R_rect (B, 3, 3) world -> rectified frame; valid (B,) bool."""
+
+    heat_i: torch.Tensor
+    heat_j: torch.Tensor
+    theta: torch.Tensor
+    R_rect: torch.Tensor
+    valid: torch.Tensor
+
+
+def _rectify(heat_i, heat_j, geom, rows, cols):
+    theta_k = geom.row_angles(rows)
+    size_i, size_j = tuple(heat_i.shape[-2:]), tuple(heat_j.shape[-2:])
+    grid_i = _sampling_grid(geom.proj_i, geom.alpha_i, theta_k, geom.valid, cols, size_i,
+                            heat_i.dtype)
+    grid_j = _sampling_grid(geom.proj_j, geom.alpha_j, theta_k, geom.valid, cols, size_j,
+                            heat_j.dtype)
+    kw = dict(mode='bilinear', padding_mode='zeros', align_corners=False)
+    if size_i == size_j:        # one kernel call for both views
+        both = F.grid_sample(torch.cat([heat_i, heat_j]), torch.cat([grid_i, grid_j]), **kw)
+        return both[:heat_i.shape[0]], both[heat_i.shape[0]:], theta_k
+    return (F.grid_sample(heat_i, grid_i, **kw), F.grid_sample(heat_j, grid_j, **kw), theta_k)
+
+
+def _row_distribution(rectified):
+    """Q (N, C, rows): row max, clamped non-negative, normalised over rows (0 if empty)."""
+    q = rectified.amax(dim=-1).clamp_min(0.0)
+    return q / q.sum(dim=-1, keepdim=True).clamp_min(1e-12)
+
+
+def _kl(p, q, eps):
+    return (p * (torch.log(p + eps) - torch.log(q + eps))).sum(-1).clamp_min(0.0)
+
+
+def _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols, eps, min_angle_deg,
+             max_spacing, max_grid):
+    if heat_i.dim() != 4 or heat_j.dim() != 4:
+        raise ValueError(f'heat_i and heat_j must be (B, C, H, W), got {tuple(heat_i.shape)} '
+                         f'and {tuple(heat_j.shape)}')
+    if heat_i.shape[:2] != heat_j.shape[:2]:
+        raise ValueError(f'heat_i {tuple(heat_i.shape)} and heat_j {tuple(heat_j.shape)} '
+                         'differ in batch or keypoint count')
+    _check_camera_batch('camera i', K_i, R_i, t_i, heat_i.shape[:1])
+    _check_camera_batch('camera j', K_j, R_j, t_j, heat_j.shape[:1])
+    _check_options(min_angle_deg, max_spacing, eps, rows, cols, max_grid)
+    geom = pair_geometry(K_i, R_i, t_i, tuple(heat_i.shape[-2:]), K_j, R_j, t_j,
+                         tuple(heat_j.shape[-2:]), min_angle_deg, max_spacing)
+    max_grid = max_grid or 4 * max(*heat_i.shape[-2:], *heat_j.shape[-2:])
+    return geom, geom.grid_size(rows, cols, max_grid)
+
+
+def rectify_pair(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, *, rows=None, cols=None,
+                 min_angle_deg=10.0, max_spacing=1.0, max_grid=None):
+    """Rectify two heatmap batches (B, C, H, W) so that row k of both is epipolar plane k.
+
+    K (B, 3, 3) in heatmap pixels, R (B, 3, 3), t (B, 3) world -> camera. rows, cols: grid
+    size (default: from ``max_spacing`` heatmap pixels at the window centres, at most
+    ``max_grid``, default 4 max(H, W)). Differentiable in the heatmaps.
+    """
+    geom, (rows, cols) = _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols,
+                                  1.0, min_angle_deg, max_spacing, max_grid)
+    rect_i, rect_j, theta = _rectify(heat_i, heat_j, geom, rows, cols)
+    return RectifiedPair(rect_i, rect_j, theta, geom.R_rect, geom.valid)
+
+
+def epipolar_divergence(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, *, eps=1e-6, rows=None,
+                        cols=None, min_angle_deg=10.0, max_spacing=1.0, max_grid=None,
+                        return_valid=False):
+    """KL(Q_i || Q_j->i) per pair and keypoint: (B, C) >= 0, differentiable in both heatmaps.
+
+    heat_i, heat_j (B, C, H, W) non-negative heatmaps (negative values count as 0); K (B, 3, 3)
+    in heatmap pixels; R (B, 3, 3), t (B, 3) world -> camera. Q(v) = max over row v of the
+    rectified heatmap, normalised over rows; eps is added inside the logarithms. Degenerate
+    pairs give 0 (no gradient); with ``return_valid=True`` returns (divergence, valid (B,)).
+    """
+    geom, (rows, cols) = _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols,
+                                  eps, min_angle_deg, max_spacing, max_grid)
+    rect_i, rect_j, _ = _rectify(heat_i, heat_j, geom, rows, cols)
+    div = _kl(_row_distribution(rect_i), _row_distribution(rect_j), eps)
+    div = torch.where(geom.valid[:, None], div, torch.zeros_like(div))
+    return (div, geom.valid) if return_valid else div
+
+
+def _multiview_pairs(K, R, t, size, valid, min_angle_deg, max_spacing):
+    """Geometry of all unordered pairs i < j; returns (b, i, j, geometry of those pairs)."""
+    if K.dim() != 4 or K.shape[-2:] != (3, 3):
+        raise ValueError(f'K must be (B, V, 3, 3), got {tuple(K.shape)}')
+    B, V = K.shape[:2]
+    _check_camera_batch('cameras', K, R, t, (B, V))
+    if valid is not None and tuple(valid.shape) != (B, V):
+        raise ValueError(f'valid must be (B, V) = {(B, V)}, got {tuple(valid.shape)}')
+    ii, jj = torch.triu_indices(V, V, 1, device=K.device)
+    P = ii.numel()
+    flat = (lambda a, idx: a[:, idx].reshape(B * P, *a.shape[2:]))  # noqa: E731
+    geom = pair_geometry(flat(K, ii), flat(R, ii), flat(t, ii), size,
+                         flat(K, jj), flat(R, jj), flat(t, jj), size, min_angle_deg,
+                         max_spacing)
+    ok = geom.valid.reshape(B, P)
+    if valid is not None:
+        valid = valid.to(device=K.device, dtype=torch.bool)
+        ok = ok & valid[:, ii] & valid[:, jj]
+    b, p = ok.nonzero(as_tuple=True)
+    return b, ii[p], jj[p], geom.select(b * P + p)
+
+
+def valid_view_pairs(K, R, t, heatmap_size, valid=None, *, min_angle_deg=10.0):
+    """Non-degenerate unordered view pairs (i < j) of each instant.
+
+    K (B, V, 3, 3) heatmap pixels, R (B, V, 3, 3), t (B, V, 3); heatmap_size (h, w); valid
+    (B, V) bool views present (None = all). Skips coincident centres and pairs whose
+    baseline is within ``min_angle_deg`` of a viewing ray of either window (epipole in or
+    near the window). Returns (b, i, j) int64 tensors (N,).
+    """
+    _check_options(min_angle_deg, 1.0, 1.0, None, None, None)
+    b, i, j, _ = _multiview_pairs(K, R, t, tuple(heatmap_size), valid, min_angle_deg, 1.0)
+    return b, i, j
+
+
+def multiview_epipolar_loss(heat, K, R, t, valid=None, *, eps=1e-6, rows=None, cols=None,
+                            min_angle_deg=10.0, max_spacing=1.0, max_grid=None,
+                            reduction='mean'):
+    """L_E: epipolar divergence over all keypoints and ordered pairs of valid views.
+
+    heat (B, V, C, h, w) non-negative heatmaps; K (B, V, 3, 3) in heatmap pixels; R (B, V, 3, 3),
+    t (B, V, 3) world -> camera; valid (B, V) bool views present (None = all). Every
+    non-degenerate unordered pair is rectified once (all pairs in one grid_sample call) and
+    both directions KL(Q_i || Q_j->i), KL(Q_j || Q_i->j) are used, i.e. all ordered pairs, as
+    in the paper's sum over each view's paired views. reduction: 'mean' over (ordered pair,
+    keypoint) terms or 'sum'. Returns a scalar (0, still attached to heat, if no valid pair).
+    """
+    if heat.dim() != 5:
+        raise ValueError(f'heat must be (B, V, C, h, w), got {tuple(heat.shape)}')
+    if reduction not in ('mean', 'sum'):
+        raise ValueError(f"reduction must be 'mean' or 'sum', got {reduction!r}")
+    _check_options(min_angle_deg, max_spacing, eps, rows, cols, max_grid)
+    if tuple(K.shape[:2]) != tuple(heat.shape[:2]):
+        raise ValueError(f'K {tuple(K.shape)} does not match heat (B, V) {tuple(heat.shape[:2])}')
+    size = tuple(heat.shape[-2:])
+    b, i, j, geom = _multiview_pairs(K, R, t, size, valid, min_angle_deg, max_spacing)
+    if b.numel() == 0:
+        return heat.sum() * 0.0
+    rows, cols = geom.grid_size(rows, cols, max_grid or 4 * max(size))
+    rect_i, rect_j, _ = _rectify(heat[b, i], heat[b, j], geom, rows, cols)
+    q_i, q_j = _row_distribution(rect_i), _row_distribution(rect_j)
+    terms = torch.cat([_kl(q_i, q_j, eps), _kl(q_j, q_i, eps)])
+    return terms.mean() if reduction == 'mean' else terms.sum()
