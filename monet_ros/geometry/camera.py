@@ -248,27 +248,54 @@ class Camera:
         return replace(self, K=S @ self.K, width=int(w_out), height=int(h_out))
 
 
+_STACK_CACHE = {}  # id-tuple -> (cameras tuple, stacked dict); cameras are immutable
+
+
 def stack_cameras(cameras):
     """Stacked parameters of a rig: dict of K (V, 3, 3), R (V, 3, 3), t (V, 3), P (V, 3, 4),
-    d12 (V, 12) (distortion padded to 12 coefficients)."""
-    return {'K': np.stack([c.K for c in cameras]), 'R': np.stack([c.R for c in cameras]),
-            't': np.stack([c.t for c in cameras]), 'P': np.stack([c.P for c in cameras]),
-            'd12': np.stack([c._d12 for c in cameras])}
+    Rt (V, 3, 4) = [R | t], d12 (V, 12) (distortion padded to 12 coefficients).
+    The last few rigs are cached (Cameras are immutable): do not modify the arrays."""
+    cameras = tuple(cameras)
+    key = tuple(id(c) for c in cameras)
+    hit = _STACK_CACHE.get(key)
+    if hit is not None and all(a is b for a, b in zip(hit[0], cameras)):
+        return hit[1]
+    stacked = {'K': np.stack([c.K for c in cameras]), 'R': np.stack([c.R for c in cameras]),
+               't': np.stack([c.t for c in cameras]), 'P': np.stack([c.P for c in cameras]),
+               'd12': np.stack([c._d12 for c in cameras])}
+    stacked['Rt'] = np.concatenate([stacked['R'], stacked['t'][:, :, None]], axis=-1)
+    for array in stacked.values():
+        array.setflags(write=False)
+    if len(_STACK_CACHE) >= 16:
+        _STACK_CACHE.pop(next(iter(_STACK_CACHE)))
+    _STACK_CACHE[key] = (cameras, stacked)
+    return stacked
+
+
+def _apply_views(M, X):
+    """X (..., N, 3) through per-view (V, 3, 4) matrices -> (..., V, N, 3), one GEMM."""
+    V = M.shape[0]
+    lead, N = X.shape[:-2], X.shape[-2]
+    flat = X.reshape(-1, 3)
+    out = flat @ M[:, :, :3].reshape(V * 3, 3).T + M[:, :, 3].reshape(V * 3)  # (M, 3V)
+    out = out.reshape(*lead, N, V, 3)
+    return np.moveaxis(out, -2, -3)
 
 
 def project_views(cameras, X):
     """Project points into every camera of a rig at once (same model as Camera.project).
 
     X: (..., N, 3) world points (leading dims are batch); returns (..., V, N, 2) pixels.
+    `cameras` is a list of Camera or the dict of stack_cameras.
     """
     p = cameras if isinstance(cameras, dict) else stack_cameras(cameras)
     X = np.asarray(X, dtype=np.float64)
-    Xh = np.concatenate([X, np.ones_like(X[..., :1])], axis=-1)[..., None, :, :]
-    if not p['d12'].any():  # pinhole rig: one matmul with P
+    if not p['d12'].any():  # pinhole rig: x ~ P X
         P = p['P'] if 'P' in p else p['K'] @ np.concatenate([p['R'], p['t'][..., None]], -1)
-        h = Xh @ P.swapaxes(-1, -2)  # (..., V, N, 3)
+        h = _apply_views(P, X)  # (..., V, N, 3)
         return h[..., :2] / h[..., 2:]
-    Xc = Xh @ np.concatenate([p['R'], p['t'][:, :, None]], axis=-1).swapaxes(-1, -2)
+    Rt = p['Rt'] if 'Rt' in p else np.concatenate([p['R'], p['t'][..., None]], -1)
+    Xc = _apply_views(Rt, X)
     x = Xc[..., 0] / Xc[..., 2]
     y = Xc[..., 1] / Xc[..., 2]
     d = tuple(p['d12'].T[:, :, None])  # 12 arrays (V, 1), broadcast over (..., V, N)

@@ -65,10 +65,6 @@ def solve_dlt(B, w):
     return X
 
 
-def _projections(cameras):
-    return np.stack([cam.P for cam in cameras])
-
-
 def triangulate(points2d, cameras, weights=None):
     """Confidence-weighted DLT triangulation of N keypoints seen by V cameras.
 
@@ -77,7 +73,7 @@ def triangulate(points2d, cameras, weights=None):
     Points are undistorted first. One batched SVD over a (N, 2V, 4) stack.
     Returns X (N, 3), NaN where fewer than 2 views are present."""
     _, ideal, w = _prepare(points2d, cameras, weights)
-    return solve_dlt(dlt_rows(ideal, _projections(cameras)), w)
+    return solve_dlt(dlt_rows(ideal, stack_cameras(cameras)['P']), w)
 
 
 def _view_errors(rig, X, obs):
@@ -220,8 +216,8 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     if not threshold_px > 0:
         raise ValueError(f'threshold_px must be > 0, got {threshold_px}')
     obs, ideal, w = _prepare(points2d, cameras, weights)
-    B = dlt_rows(ideal, _projections(cameras))
     rig = stack_cameras(cameras)
+    B = dlt_rows(ideal, rig['P'])
     if method == 'exclusion':
         return _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets)
     if method == 'ransac':
