@@ -102,7 +102,7 @@ def train_and_evaluate(job):
                          'pseudo_labels_final': summary['pseudo_labels'],
                          'seed': config.seed, 'eval_seconds':
                          round(time.monotonic() - start - train_s, 1),
-                         'last_terms': summary['last']})
+                         'last_terms': summary['last'], 'config': config.to_dict()})
     print(f'[{rig} {config.mode}] {summary["steps"]} steps in {train_s:.0f} s, '
           f'reproj {result.reprojection_mean:.2f} px, PCK@0.1 {result.pck.at(0.1):.3f}',
           file=sys.stderr, flush=True)
@@ -125,6 +125,10 @@ def main(argv=None):
     parser.add_argument('--width', type=int, default=24)
     parser.add_argument('--lr', type=float, default=1e-3)
     parser.add_argument('--device', default='auto')
+    parser.add_argument('--monet-bootstrap-rounds', type=int, default=1,
+                        help='monet: bootstrapping rounds feeding L_B (0 = spatial only)')
+    parser.add_argument('--merge', action='store_true',
+                        help='keep the (mode, rig) results of OUT/results.json not rerun now')
     args = parser.parse_args(argv)
     preset = dict(FULL if args.full else REDUCED)
     if args.steps:
@@ -153,7 +157,8 @@ def main(argv=None):
               f'labelled instants {labelled_all} ({share:.2f}%)', file=sys.stderr)
     base = dict(architecture='small', input_size=args.input_size, width=args.width,
                 steps=preset['steps'], checkpoint_every=preset['steps'], lr=args.lr,
-                seed=args.seed, device=args.device)
+                seed=args.seed, device=args.device,
+                monet_bootstrap_rounds=args.monet_bootstrap_rounds)
     jobs = [(rig, TrainConfig(mode=mode, **base).to_dict(), str(out))
             for rig in args.rigs for mode in args.modes]
     context = multiprocessing.get_context('fork')
@@ -161,6 +166,12 @@ def main(argv=None):
         results = list(pool.map(train_and_evaluate, jobs))
     from monet_ros.evaluation import EvalSummary
     summaries = [EvalSummary.from_json(r) for r in results]
+    previous = out / 'results.json'
+    if args.merge and previous.exists():
+        from monet_ros.evaluation import load_summaries
+        rerun = {(s.mode, s.dataset) for s in summaries}
+        summaries = [s for s in load_summaries(previous)
+                     if (s.mode, s.dataset) not in rerun] + summaries
     wall = time.monotonic() - wall
     paths = write_report(out, summaries, name='results')
     print(markdown_table(summaries))

@@ -12,6 +12,8 @@ SUBCOMMANDS = {
     'train': 'train',
     'eval': 'eval',
     'demo': 'demo',
+    'process': 'process',
+    'pipeline': 'pipeline',
 }
 
 

@@ -40,3 +40,15 @@ def subject_boxes(cameras, X, margin=0.3, min_points=3, min_size=32.0):
     # +0.5: pixel centres are integers, the box is in edge coordinates.
     boxes[ok] = np.concatenate([centre - half + 0.5, centre + half + 0.5], axis=1)[ok]
     return boxes
+
+
+def crop_boxes(cameras, X=None, fallback_box=None, margin=0.3, min_points=3):
+    """The crop of each view (V, 4): around the projection of X (the latest 3D keypoints)
+    where at least `min_points` project into the view, else `fallback_box` (x0, y0, x1, y1),
+    else the full frame."""
+    boxes = (subject_boxes(cameras, X, margin, min_points) if X is not None
+             else np.full((len(cameras), 4), np.nan))
+    for v, camera in enumerate(cameras):
+        if np.isnan(boxes[v]).any():
+            boxes[v] = fallback_box if fallback_box else (0, 0, camera.width, camera.height)
+    return boxes

@@ -3,7 +3,7 @@
 Flat scalar/tuple fields (monet_ros.config), so the learner node can mirror them as ROS
 parameters and `monet train` as command-line options.
 """
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 
 from monet_ros.config import ConfigError, config_from_mapping, setting, validate_config
 from monet_ros.learning.dataset import AugmentConfig
@@ -80,6 +80,9 @@ class TrainConfig:
     bootstrap_threshold_px: float = setting(8.0, 'bootstrapping: RANSAC inlier threshold (px)',
                                             minimum=0.0, exclusive_minimum=True)
     bootstrap_min_views: int = setting(3, 'bootstrapping: minimum inlier views', minimum=2)
+    monet_bootstrap_rounds: int = setting(
+        1, "monet: bootstrapping rounds feeding L_B (the paper's bootstrapping prior); "
+        '0 = L_B on spatial pseudo-labels only', minimum=0, maximum=3)
     track_horizon: int = setting(10, 'spatiotemporal: frames tracked each way', minimum=0)
     track_ransac_px: float = setting(4.0, 'spatiotemporal: RANSAC threshold (px)', minimum=0.0,
                                      exclusive_minimum=True)
@@ -99,7 +102,10 @@ class TrainConfig:
 
     @property
     def spec(self):
-        return MODE_SPECS[self.mode]
+        spec = MODE_SPECS[self.mode]
+        if self.mode == 'monet':
+            spec = replace(spec, bootstrap_rounds=self.monet_bootstrap_rounds)
+        return spec
 
     @property
     def augment(self):

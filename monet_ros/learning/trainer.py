@@ -9,9 +9,11 @@
 Modes (config.mode) are the paper's rows: supervised (L_L), spatial / spatiotemporal
 (L_L + lambda_p L_B on augmented labels), bootstrap1 / bootstrap2 (the same, plus one or two
 rounds of detections -> RANSAC triangulation -> reprojection as labels, at evenly spaced
-steps), monet (L_L + lambda_p L_B on spatial pseudo-labels + lambda_e L_E on unlabeled
-instants, after a warm-up of epipolar_warmup x steps without L_E). State (weights, Adam,
-schedule, step, RNG, pseudo-labels) is checkpointed atomically and resumes exactly.
+steps), monet (L_L + lambda_e L_E on unlabeled instants, after a warm-up of
+epipolar_warmup x steps without L_E, + lambda_p L_B on spatial pseudo-labels and, with
+monet_bootstrap_rounds > 0, the bootstrapping prior: rounds of bootstrapped labels).
+State (weights, Adam, schedule, step, RNG, pseudo-labels) is checkpointed atomically and
+resumes exactly.
 """
 import csv
 import json
@@ -473,11 +475,11 @@ class Trainer:
         if path is None:
             return
         path.parent.mkdir(parents=True, exist_ok=True)
-        new = not path.exists()
+        new = not path.exists() or terms['step'] == 1        # a fresh run starts a new log
         row = {k: terms.get(k, '') for k in LOG_FIELDS}
         row['pseudo_labels'] = self.pseudo_label_count
         row['seconds'] = round(time.monotonic() - self._started, 3)
-        with open(path, 'a', newline='') as f:
+        with open(path, 'w' if new else 'a', newline='') as f:
             writer = csv.DictWriter(f, fieldnames=LOG_FIELDS)
             if new:
                 writer.writeheader()

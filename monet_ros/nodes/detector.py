@@ -39,7 +39,7 @@ from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import run_node
-from monet_ros.tracking import subject_boxes
+from monet_ros.tracking import crop_boxes
 
 
 @dataclass(frozen=True)
@@ -125,18 +125,21 @@ class DetectorNode(Node):
         self.detector = self.load_detector(config.model)
         self.model_sha256 = sha256_file(config.model)
         self.slots = []
+        compressed = config.transport == 'compressed'
         for name, rig_camera in zip(names, rig_cameras):
-            image_topic = (config.image_topic.format(camera=name) if config.image_topic
-                           else (rig_camera.topic if rig_camera is not None and rig_camera.topic
-                                 else f'/{name}/image_raw'))
+            base = (config.image_topic.format(camera=name) if config.image_topic
+                    else (rig_camera.topic if rig_camera is not None and rig_camera.topic
+                          else f'/{name}/image_raw'))
+            base = base[:-len('/compressed')] if base.endswith('/compressed') else base
+            image_topic = base + '/compressed' if compressed else base
             info_topic = (config.camera_info_topic.format(camera=name)
                           if config.camera_info_topic
-                          else image_topic.rsplit('/', 1)[0] + '/camera_info')
+                          else base.rsplit('/', 1)[0] + '/camera_info')
             self.slots.append(CameraSlot(name, rig_camera, image_topic, info_topic))
         self.pubs = {}
         for slot in self.slots:
-            if config.transport == 'compressed':
-                self.create_subscription(CompressedImage, slot.image_topic + '/compressed',
+            if compressed:
+                self.create_subscription(CompressedImage, slot.image_topic,
                                          lambda m, s=slot: self.on_image(s, m), IMAGE_IN)
             else:
                 self.create_subscription(Image, slot.image_topic,
@@ -213,8 +216,7 @@ class DetectorNode(Node):
     # ------------------------------------------------------------------ detection
     def decode(self, slot, msg):
         """(image (H, W, 3) uint8 rgb, Camera) of a message, or None (counted as bad)."""
-        topic = slot.image_topic + ('/compressed' if self.config.transport == 'compressed'
-                                    else '')
+        topic = slot.image_topic
         try:
             image = (compressed_image_to_numpy(msg) if isinstance(msg, CompressedImage)
                      else image_to_numpy(msg))
@@ -235,18 +237,15 @@ class DetectorNode(Node):
         return image, camera
 
     def crop_boxes(self, cameras):
-        """(V, 4) boxes or None per view: tracked subject, else `box`, else full frame."""
-        boxes = np.full((len(cameras), 4), np.nan)
+        """(V, 4) boxes: tracked subject (when fresh keypoints3d and rig extrinsics), else
+        `box`, else the full frame."""
         fresh = (self.keypoints is not None and time.monotonic() - self.keypoints[1]
                  <= self.config.track_timeout_s)
-        if self.config.track and fresh and all(s.rig_camera is not None for s in self.slots):
-            boxes = subject_boxes(cameras, self.keypoints[0], self.config.track_margin,
-                                  self.config.min_track_keypoints)
-        for v, camera in enumerate(cameras):
-            if np.isnan(boxes[v]).any():
-                boxes[v] = self.config.box if self.config.box else (0, 0, camera.width,
-                                                                    camera.height)
-        return boxes
+        track = (self.config.track and fresh
+                 and all(s.rig_camera is not None for s in self.slots))
+        return crop_boxes(cameras, self.keypoints[0] if track else None,
+                          self.config.box or None, self.config.track_margin,
+                          self.config.min_track_keypoints)
 
     def process(self):
         work = []

@@ -27,7 +27,7 @@ from monet_ros.io import (
     skeleton_marker_array,
 )
 from monet_ros.nodes.params import declare_config
-from monet_ros.nodes.qos import STREAM_IN, STREAM_OUT
+from monet_ros.nodes.qos import HEATMAPS_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import run_node
 from monet_ros.nodes.sync import StampSynchronizer
@@ -56,6 +56,8 @@ class FusionNodeConfig(FusionConfig):
                                     exclusive_minimum=True)
     diagnostics_period_s: float = setting(1.0, 'period of /diagnostics', minimum=0.0,
                                           exclusive_minimum=True)
+    threads: int = setting(1, 'torch CPU threads for heatmap decoding (0 = leave as is); one '
+                           'thread is fastest for these small tensors', minimum=0)
 
 
 class CameraStats:
@@ -80,6 +82,9 @@ class FusionNode(Node):
         super().__init__(node_name, **kwargs)
         self.config = config = declare_config(self, FusionNodeConfig, overrides)
         self.core_config = config_subset(config, FusionConfig)
+        if config.threads:
+            import torch
+            torch.set_num_threads(config.threads)
         if not config.rig:
             raise ConfigError(self.get_name(), 'rig', 'is required (a rig file or recording)')
         rig, rig_frame = load_node_rig(config.rig)
@@ -103,10 +108,10 @@ class FusionNode(Node):
         for name in self.names:
             self.create_subscription(
                 Image, config.heatmap_topic.format(camera=name),
-                lambda msg, n=name: self.on_message(n, 0, msg), STREAM_IN)
+                lambda msg, n=name: self.on_message(n, 0, msg), HEATMAPS_IN)
             self.create_subscription(
                 CameraInfo, config.camera_info_topic.format(camera=name),
-                lambda msg, n=name: self.on_message(n, 1, msg), STREAM_IN)
+                lambda msg, n=name: self.on_message(n, 1, msg), HEATMAPS_IN)
         self.pub_points = self.create_publisher(PointCloud2, '/monet/keypoints3d', STREAM_OUT)
         self.pub_skeleton = self.create_publisher(MarkerArray, '/monet/skeleton', STREAM_OUT)
         self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', STREAM_OUT)
@@ -217,6 +222,7 @@ class FusionNode(Node):
             values=[KeyValue(key=k, value=str(v)) for k, v in (
                 ('frames', self.frames), ('partial_frames', self.partial_frames),
                 ('dropped_frames', self.sync.stats.dropped), ('late_views', self.sync.stats.late),
+                ('time_resets', self.sync.stats.resets),
                 ('fusion_ms_median', f'{fusion_ms:.3f}'))])
         msg.status.append(summary)
         for name, stats in self.stats.items():

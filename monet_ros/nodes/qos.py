@@ -15,6 +15,11 @@ IMAGE_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
 STREAM_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                        reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)
+# Heatmaps + camera_info into fusion: reliable (a lost view is a lost observation), deep
+# enough to absorb a burst; the detector already drops stale images upstream.
+HEATMAPS_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=30,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
 # Everything we publish per frame.
 STREAM_OUT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                         reliability=ReliabilityPolicy.RELIABLE,

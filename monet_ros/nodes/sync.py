@@ -28,6 +28,7 @@ class SyncStats:
     late: int = 0           # items older than the last released group
     duplicate: int = 0      # second item of one key for one stamp
     unknown_key: int = 0
+    resets: int = 0         # time jumped back (e.g. a looped recording)
 
 
 class StampSynchronizer:
@@ -37,11 +38,13 @@ class StampSynchronizer:
     timeout_s: how long to wait for the missing keys of a group after its first item;
     min_keys: fewest keys a partial group must have to be released (default: all);
     max_pending: bound on open groups (the oldest is released/dropped beyond it);
-    clock: monotonic seconds (injectable for tests).
+    clock: monotonic seconds (injectable for tests); reset_after_ns: a stamp this much older
+    than the last released group means time jumped back (a looped recording, a restarted
+    source): the synchroniser starts afresh instead of calling everything late.
     """
 
     def __init__(self, keys, slop_ns=0, timeout_s=0.5, min_keys=None, max_pending=30,
-                 clock=time.monotonic):
+                 clock=time.monotonic, reset_after_ns=1_000_000_000):
         self.keys = tuple(keys)
         if not self.keys or len(set(self.keys)) != len(self.keys):
             raise ValueError(f'keys must be unique and non-empty, got {list(keys)}')
@@ -54,6 +57,7 @@ class StampSynchronizer:
             raise ValueError(f'min_keys must be in 1..{len(self.keys)}, got {min_keys}')
         self.max_pending = int(max_pending)
         self.clock = clock
+        self.reset_after_ns = int(reset_after_ns)
         self.expected = set(self.keys)  # keys a group needs to be complete (see set_expected)
         self.pending = []          # open groups sorted by stamp
         self.last_released = None  # stamp of the newest released group
@@ -75,8 +79,11 @@ class StampSynchronizer:
             return []
         stamp_ns = int(stamp_ns)
         if self.last_released is not None and stamp_ns <= self.last_released:
-            self.stats.late += 1
-            return []
+            if self.last_released - stamp_ns < self.reset_after_ns:
+                self.stats.late += 1
+                return []
+            self.pending, self.last_released = [], None     # time jumped back
+            self.stats.resets += 1
         group = self._find(stamp_ns)
         if group is None:
             group = Group(stamp_ns, {}, first_arrival=self.clock())

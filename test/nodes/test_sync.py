@@ -71,3 +71,13 @@ def test_expected_subset_completes_without_waiting_for_a_silent_key():
     sync.set_expected([])                   # back to all keys
     sync.add('a', 6, 'a')
     assert sync.add('b', 6, 'b') == []
+
+
+def test_time_jumping_back_restarts_instead_of_dropping_everything():
+    sync = StampSynchronizer(['a', 'b'], clock=FakeClock(), reset_after_ns=1000)
+    sync.add('a', 5000, 1)
+    assert len(sync.add('b', 5000, 1)) == 1
+    assert sync.add('a', 4500, 2) == [] and sync.stats.late == 1   # 500 ns back: late
+    sync.add('a', 100, 3)                                           # 4900 ns back: a reset
+    [group] = sync.add('b', 100, 3)
+    assert group.stamp_ns == 100 and sync.stats.resets == 1

@@ -1,0 +1,209 @@
+"""`monet pipeline`: player + detector + fusion as ROS nodes in one process.
+
+    monet pipeline                           # demo: synthetic recording + a model for it
+    monet pipeline --bag REC --model CKPT [--rig RIG] [--rate 0.5] [--loop] [--lockstep]
+
+One MultiThreadedExecutor runs the player (replaying REC), one detector node for every
+camera (batched forward) and the fusion node; other processes see the usual topics
+(/monet/keypoints3d, /monet/skeleton, /diagnostics, ...). A summary line is printed every
+second: frames fused, fps, latency (player publish -> 3D keypoints, median / p95) and the
+mean reprojection error; a final summary when the recording ends (or Ctrl-C, or --duration).
+"""
+import sys
+import threading
+import time
+
+import numpy as np
+
+HELP = 'live all-in-one: player + detector + fusion as ROS nodes in one process'
+
+
+def add_arguments(parser):
+    parser.add_argument('--bag', help='recording (rosbag2 folder or .mcap); default: a small '
+                        'synthetic recording generated (once) in --workdir')
+    parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
+                        '/tf_static, or the rig.yaml beside a synthetic recording)')
+    parser.add_argument('--model', help='detector checkpoint (default with no --bag: a small '
+                        'net trained once for the synthetic recording)')
+    parser.add_argument('--skeleton', default='human14',
+                        help='skeleton preset or YAML (keypoint order of the model, bones)')
+    parser.add_argument('--cameras', nargs='+', help='cameras to use (default: all)')
+    parser.add_argument('--rate', type=float, default=1.0,
+                        help='playback speed (0 = as fast as possible; default 1)')
+    parser.add_argument('--loop', action='store_true', help='replay the recording forever')
+    parser.add_argument('--lockstep', action='store_true',
+                        help='publish a frame only when the previous one was fused (every '
+                        'frame processed, no drops; pace = processing speed)')
+    parser.add_argument('--duration', type=float, default=0.0,
+                        help='stop after this many seconds (0 = at the end of the recording)')
+    parser.add_argument('--threshold-px', type=float, default=15.0,
+                        help='fusion inlier threshold in image pixels')
+    parser.add_argument('--device', default='', help="torch device ('' = auto)")
+    parser.add_argument('--workdir', help='where the demo recording and model are cached '
+                        '(default: ~/.cache/monet_ros/demo)')
+    parser.add_argument('--start-delay', type=float, default=0.5,
+                        help='seconds between start-up and the first frame (discovery)')
+    parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
+
+
+class Summary:
+    """Live figures from the player and fusion listeners (thread-safe)."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.published = {}       # frame stamp -> wall time of its first image
+        self.latencies = []       # (wall time, seconds)
+        self.errors = []          # (wall time, mean reprojection error px)
+        self.frames = 0
+        self.last_fused = None
+        self.stamps = []
+        self.cond = threading.Condition(self.lock)
+        self.last_stamp = -1
+
+    def on_image(self, topic, stamp_ns, wall):
+        with self.lock:
+            self.published.setdefault(stamp_ns, wall)
+            if len(self.published) > 10000:
+                self.published.pop(next(iter(self.published)))
+
+    def on_fused(self, stamp_ns, result):
+        now = time.monotonic()
+        with self.lock:
+            self.frames += 1
+            self.last_fused = now
+            self.stamps.append(stamp_ns)
+            start = self.published.get(stamp_ns)
+            if start is not None:
+                self.latencies.append((now, now - start))
+            error = result.reprojection_error
+            if np.isfinite(error).any():
+                self.errors.append((now, float(np.nanmean(error))))
+            self.last_stamp = max(self.last_stamp, stamp_ns)
+            self.cond.notify_all()
+
+    def gate(self, timeout_s=5.0):
+        """Lockstep: a player gate that waits until the previous frame was fused."""
+        def wait(previous_stamp):
+            with self.cond:
+                self.cond.wait_for(lambda: self.last_stamp >= previous_stamp, timeout_s)
+        return wait
+
+    def line(self, window=None, detector=None):
+        now = time.monotonic()
+        with self.lock:
+            lat = [s for t, s in self.latencies if window is None or now - t <= window]
+            err = [e for t, e in self.errors if window is None or now - t <= window]
+            times = [t for t, _ in self.latencies if window is None or now - t <= window]
+        parts = [f'frames {self.frames}']
+        if window is not None:
+            parts.append(f'{len(times) / window:5.1f} fps')
+        elif len(times) > 1:
+            parts.append(f'{(len(times) - 1) / (times[-1] - times[0]):5.1f} fps')
+        if lat:
+            parts.append(f'latency median {1e3 * np.median(lat):5.0f} ms '
+                         f'p95 {1e3 * np.percentile(lat, 95):5.0f} ms')
+        if err:
+            parts.append(f'reprojection error {np.mean(err):5.2f} px')
+        if detector is not None:
+            parts.append(f'dropped {sum(s.dropped for s in detector.slots)}')
+        return ' | '.join(parts)
+
+
+def image_transport(bag):
+    """'compressed' when the recording's images are CompressedImage, else 'raw'."""
+    from monet_ros.io import open_bag
+    types = {info.msgtype for info in open_bag(bag).topics.values()}
+    if 'sensor_msgs/msg/Image' in types:
+        return 'raw'
+    return 'compressed' if 'sensor_msgs/msg/CompressedImage' in types else 'raw'
+
+
+def run(args):
+    from monet_ros.nodes.runner import start_error, use_large_data_profile
+
+    if not args.bag:
+        from monet_ros.commands.demo_assets import prepare_demo
+        assets = prepare_demo(args.workdir)
+        args.bag, args.rig = args.bag or assets.bag, args.rig or assets.rig
+        args.model = args.model or assets.model
+        args.skeleton = assets.skeleton
+    if not args.model:
+        start_error('monet pipeline', '--model is required with --bag')
+        return 2
+    use_large_data_profile()
+    import rclpy
+    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+
+    from monet_ros.nodes.detector import DetectorNode
+    from monet_ros.nodes.fusion import FusionNode
+    from monet_ros.nodes.player import PlayerNode
+
+    rig = args.rig or args.bag
+    cameras = list(args.cameras or [])
+    summary = Summary()
+    rclpy.init(args=['--ros-args'])
+    nodes = []
+    detector = executor = None
+    try:
+        try:
+            transport = image_transport(args.bag)
+            fusion = FusionNode(overrides=dict(rig=str(rig), cameras=cameras,
+                                               skeleton=args.skeleton, threads=0,
+                                               threshold_px=args.threshold_px))
+            nodes.append(fusion)
+            detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
+                                                   model=str(args.model), transport=transport,
+                                                   device=args.device))
+            nodes.append(detector)
+            player = PlayerNode(overrides=dict(
+                bag=str(args.bag), rate=0.0 if args.lockstep else args.rate, loop=args.loop,
+                wait_for_subscribers=1, start_delay_s=args.start_delay,
+                topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]))
+            nodes.append(player)
+        except (ValueError, OSError) as error:
+            start_error('monet pipeline', error)
+            return 2
+        fusion.listeners.append(summary.on_fused)
+        player.listeners.append(summary.on_image)
+        if args.lockstep:
+            player.gate = summary.gate()
+        executor = MultiThreadedExecutor(num_threads=4)
+        for node in nodes:
+            executor.add_node(node)
+        started = time.monotonic()
+        next_line = started + 1.0
+        ended = None
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.05)
+            now = time.monotonic()
+            if now >= next_line:
+                next_line += 1.0
+                if not args.quiet:
+                    print(summary.line(window=1.0, detector=detector), flush=True)
+            if args.duration and now - started >= args.duration:
+                break
+            if player.done.is_set():
+                # the recording ended: let the frames in flight through, then stop
+                ended = ended or now
+                if now - max(ended, summary.last_fused or ended) > 2.0:
+                    break
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        for node in nodes:
+            if isinstance(node, PlayerNode):
+                node.stopping.set()           # no publishing into a closing context
+        if executor is not None:
+            executor.shutdown(timeout_sec=2.0)
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown()
+    print(f'monet pipeline: {args.bag}: {summary.line(detector=detector)}', flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    import argparse
+    parser = argparse.ArgumentParser(description=HELP)
+    add_arguments(parser)
+    sys.exit(run(parser.parse_args()))

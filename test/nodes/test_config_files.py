@@ -1,0 +1,38 @@
+"""config/<node>.yaml: every parameter of the node's config, a comment on each, and values
+that rcl parses and the config dataclass accepts."""
+from dataclasses import fields
+import importlib
+
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.node import Node
+import yaml
+
+from monet_ros.nodes.params import declare_config
+
+NODES = {'fusion': ('monet_ros.nodes.fusion', 'FusionNodeConfig'),
+         'player': ('monet_ros.nodes.player', 'PlayerConfig'),
+         'detector': ('monet_ros.nodes.detector', 'DetectorConfig')}
+
+
+@pytest.mark.parametrize('name', sorted(NODES))
+def test_config_file_declares_and_documents_every_parameter(name, repo_root, ros_env):
+    module, cls_name = NODES[name]
+    config_cls = getattr(importlib.import_module(module), cls_name)
+    path = repo_root / 'config' / f'{name}.yaml'
+    params = yaml.safe_load(path.read_text())[name]['ros__parameters']
+    assert set(params) == {f.name for f in fields(config_cls)}
+    lines = path.read_text().splitlines()
+    for key in params:
+        index = next(i for i, line in enumerate(lines) if line.strip().startswith(f'{key}:'))
+        assert lines[index - 1].strip().startswith('#'), f'{name}.yaml: {key} has no comment'
+    context = Context()
+    rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
+    try:
+        node = Node(name, context=context, cli_args=['--ros-args', '--params-file', str(path)])
+        config = declare_config(node, config_cls)
+        node.destroy_node()
+    finally:
+        rclpy.try_shutdown(context=context)
+    assert config == config_cls(**params)

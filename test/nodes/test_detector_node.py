@@ -1,0 +1,199 @@
+"""The detector executable in its own process: heatmap messages, virtual camera_info,
+stamps, tracked crops, bad messages and checkpoint hot reload."""
+import hashlib
+import json
+import signal
+
+from helpers.ros import NodeProcess, RosHarness
+from helpers.scenes import cv2_project, ring_rig
+import numpy as np
+import pytest
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from std_msgs.msg import String
+import torch
+
+from monet_ros.geometry import save_rig
+from monet_ros.io import (
+    camera_info_from_camera,
+    header_stamp_ns,
+    image_msg_to_heatmaps,
+    keypoints3d_to_cloud,
+    numpy_to_image_msg,
+)
+from monet_ros.models import Detector, build_model, load_checkpoint, save_checkpoint
+from monet_ros.nodes.qos import LATCHED
+from monet_ros.skeleton import load_skeleton
+
+INPUT = (96, 128)     # network input (H, W) -> heatmaps (24, 32)
+T0 = 1_650_000_000_000_000_000
+
+
+def make_checkpoint(path, seed):
+    torch.manual_seed(seed)
+    model = build_model('small', 14, input_size=INPUT)
+    save_checkpoint(path, model, {'keypoints': list(load_skeleton('human14').keypoints)})
+    return path
+
+
+def expected_box(box, aspect):
+    """A box grown about its centre to width / height = aspect (computed here by hand)."""
+    x0, y0, x1, y1 = box
+    w, h = x1 - x0, y1 - y0
+    w, h = max(w, h * aspect), max(h, w / aspect)
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    return cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2
+
+
+def expected_K(K, box, out_w, out_h):
+    x0, y0, x1, y1 = box
+    sx, sy = out_w / (x1 - x0), out_h / (y1 - y0)
+    S = np.array([[sx, 0, (0.5 - x0) * sx - 0.5], [0, sy, (0.5 - y0) * sy - 0.5], [0, 0, 1]])
+    return S @ K
+
+
+@pytest.fixture
+def setup(tmp_path):
+    rig = ring_rig(2)
+    rig_path = tmp_path / 'rig.yaml'
+    save_rig(rig_path, rig)
+    first = make_checkpoint(tmp_path / 'first.pt', 1)
+    second = make_checkpoint(tmp_path / 'second.pt', 2)
+    images = np.random.default_rng(0).integers(0, 255, (2, 480, 640, 3), dtype=np.uint8)
+    return rig, rig_path, first, second, images
+
+
+class Stream:
+    """Publishes images + camera_info of the rig and collects the detector's outputs."""
+
+    def __init__(self, ros, rig):
+        self.rig = rig
+        self.pubs = {c.name: (ros.publisher(f'/{c.name}/image_raw', Image),
+                              ros.publisher(f'/{c.name}/camera_info', CameraInfo))
+                     for c in rig}
+        self.heat = {c.name: ros.collect(f'/monet/{c.name}/heatmaps', Image, 100)
+                     for c in rig}
+        self.info = {c.name: ros.collect(f'/monet/{c.name}/camera_info', CameraInfo, 100)
+                     for c in rig}
+        self.ros = ros
+
+    def send(self, stamp, images):
+        for cam, image in zip(self.rig, images):
+            self.pubs[cam.name][1].publish(camera_info_from_camera(cam, stamp, cam.name))
+            self.pubs[cam.name][0].publish(numpy_to_image_msg(image, stamp, cam.name))
+
+    def result(self, name, stamp):
+        for heat, info in zip(self.heat[name], self.info[name]):
+            if header_stamp_ns(heat) == stamp:
+                assert header_stamp_ns(info) == stamp
+                return heat, info
+        return None
+
+    def roundtrip(self, stamp, images, node, tries=20):
+        for _ in range(tries):
+            self.send(stamp, images)
+            if self.ros.spin_until(lambda: all(self.result(c.name, stamp) for c in self.rig),
+                                   timeout=1.5, process=node):
+                return {c.name: self.result(c.name, stamp) for c in self.rig}
+        raise AssertionError(f'no heatmaps for stamp {stamp}\n{node.output()}')
+
+
+def reference(checkpoint, images, rig, boxes):
+    model, metadata = load_checkpoint(checkpoint)
+    return Detector(model, metadata, device='cpu').predict(list(images), rig, boxes,
+                                                           keep_aspect=False)[0]
+
+
+def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
+    rig, rig_path, first, second, images = setup
+    aspect = INPUT[1] / INPUT[0]
+    params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
+                  track_timeout_s=3600.0, device='cpu')
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = Stream(ros, rig)
+        for heat_pub, info_pub in stream.pubs.values():
+            ros.wait_for_subscribers(heat_pub, process=node)
+            ros.wait_for_subscribers(info_pub, process=node)
+
+        # 1. the configured box (grown to the network's aspect)
+        got = stream.roundtrip(T0, images, node)
+        box = expected_box((100, 50, 400, 450), aspect)
+        for cam in rig:
+            heat_msg, info = got[cam.name]
+            assert heat_msg.encoding == '32FC14'
+            assert (heat_msg.height, heat_msg.width) == (24, 32)
+            assert heat_msg.header.frame_id == cam.name
+            assert (info.width, info.height) == (32, 24)
+            np.testing.assert_allclose(np.reshape(info.k, (3, 3)),
+                                       expected_K(cam.K, box, 32, 24), rtol=1e-12)
+            np.testing.assert_allclose(info.d, cam.dist)
+        want = reference(first, images, rig, np.array([box, box]))
+        for v, cam in enumerate(rig):
+            np.testing.assert_allclose(image_msg_to_heatmaps(got[cam.name][0]), want[v],
+                                       atol=1e-4)
+
+        # 2. a bad image (wrong size) is counted, the node lives on
+        stream.pubs['cam0'][0].publish(numpy_to_image_msg(images[0][:240, :320], T0 + 1,
+                                                          'cam0'))
+        ros.spin_for(0.5)
+
+        # 3. crop around the projection of /monet/keypoints3d
+        X = np.random.default_rng(3).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))
+        cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
+        ros.wait_for_subscribers(cloud_pub, process=node)
+        for _ in range(5):
+            cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))
+            ros.spin_for(0.1)
+        got = stream.roundtrip(T0 + 2, images, node)
+        tracked = []
+        for cam in rig:
+            uv = cv2_project(cam, X.astype(np.float32))    # the cloud carries float32
+            lo, hi = uv.min(axis=0), uv.max(axis=0)
+            pad = 0.3 * (hi - lo)
+            tracked.append(expected_box((*(lo - pad + 0.5), *(hi + pad + 0.5)), aspect))
+            np.testing.assert_allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                                       expected_K(cam.K, tracked[-1], 32, 24), rtol=1e-9)
+        tracked = np.array(tracked)
+
+        # 4. hot reload: a verified announcement swaps the weights between frames
+        model_pub = ros.publisher('/monet/model', String, LATCHED)
+        sha = hashlib.sha256(second.read_bytes()).hexdigest()
+        model_pub.publish(String(data=json.dumps({'path': str(second), 'sha256': sha,
+                                                  'step': 7})))
+        ros.spin_for(1.0)
+        got = stream.roundtrip(T0 + 3, images, node)
+        new = reference(second, images, rig, tracked)
+        old = reference(first, images, rig, tracked)
+        for v, cam in enumerate(rig):
+            heat = image_msg_to_heatmaps(got[cam.name][0])
+            np.testing.assert_allclose(heat, new[v], atol=1e-4)
+            assert np.abs(heat - old[v]).max() > 1e-2
+
+        # 5. a corrupt file and a mismatched sha256 are refused, the new weights stay
+        corrupt = second.with_name('corrupt.pt')
+        corrupt.write_bytes(b'not a checkpoint at all')
+        for path, digest in ((corrupt, hashlib.sha256(corrupt.read_bytes()).hexdigest()),
+                             (first, '0' * 64)):
+            model_pub.publish(String(data=json.dumps({'path': str(path), 'sha256': digest})))
+            ros.spin_for(0.5)
+        got_after = stream.roundtrip(T0 + 4, images, node)
+        assert node.stop(signal.SIGINT) == 0, node.output()
+    output = node.output()
+    assert 'bad message (image is 320x240 but the camera is 640x480)' in output
+    assert 'loaded new weights' in output and str(second) in output
+    assert 'rejected, keeping the current weights' in output and 'corrupt.pt' in output
+    assert 'does not match the announced' in output
+    for v, cam in enumerate(rig):     # still the second model's weights
+        np.testing.assert_allclose(image_msg_to_heatmaps(got_after[cam.name][0]), new[v],
+                                   atol=1e-4)
+
+
+@pytest.mark.parametrize('change, message', [
+    ({'model': '/nonexistent/model.pt'}, '/nonexistent/model.pt: checkpoint file not found'),
+    ({'cameras': ['cam0', 'cam7']}, "parameter 'cameras': unknown camera 'cam7'"),
+])
+def test_bad_parameters_fail_at_start(ros_env, setup, change, message):
+    _, rig_path, first, _, _ = setup
+    params = {'rig': str(rig_path), 'model': str(first), **change}
+    with NodeProcess('detector', ros_env, params) as node:
+        assert node.wait(timeout=90) == 2, node.output()
+        assert message in node.output()
