@@ -225,6 +225,8 @@ class OnlineLearner:
         else:
             self.trainer = Trainer(train_config, data, self.out, model=model)
         self.data = data
+        if not resume:             # a fresh run: an older run's announcement is no reference
+            (self.out / PUBLISHED).unlink(missing_ok=True)
         self.published = self._load_published()
         if self.published is not None:
             self.reference_px = self.published.metrics.get('reprojection_px')
