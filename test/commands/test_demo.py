@@ -17,3 +17,13 @@ def test_demo_on_pose2sim_data(shared_data, capsys):
 def test_demo_without_data_is_a_clear_error(tmp_path, capsys):
     assert main(['demo', '--data', str(tmp_path)]) == 2
     assert 'not found' in capsys.readouterr().err
+
+
+def test_synthetic_demo(capsys):
+    assert main(['demo', '--synthetic']) == 0
+    out = capsys.readouterr().out
+    assert 'synthetic demo: 100 frames x 14 keypoints, 8 cameras' in out
+    mean_mm = float(out.split('3D error mean ')[1].split(' mm')[0])
+    assert mean_mm < 5.0  # 0.5 px noise on a 4 m ring; outliers are removed
+    flagged, total = out.split('outliers flagged ')[1].split()[0].split('/')
+    assert int(flagged) == int(total) > 0
