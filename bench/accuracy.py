@@ -14,10 +14,15 @@ For each synthetic rig (`monet synth`: a moving human, 14 keypoints, <1% labelle
 Prints the table (rows = modes, columns = rigs) and writes results.md/.csv/.json and
 pck_<rig>.png (Figure 6) under --out, with the wall time, seeds and configuration.
 
-Reduced form (default, ~15-20 min on 2 busy CPU cores):
+Reduced form (default: 240 instants, 2 labelled (0.83%), 3 labelled views each, 300 steps,
+small net 64 px -> 16x16 heatmaps, width 24, Adam 1e-3, seed 0):
     .venv/bin/python bench/accuracy.py --out /tmp/monet_accuracy
-Full form (documented; hours on CPU, minutes on a GPU):
-    .venv/bin/python bench/accuracy.py --full --out /tmp/monet_accuracy_full
+  measured 2026-11-23 on the shared 2-core development machine (load average 10-18 from
+  other jobs): 20.6 min wall for all 12 trainings + evaluations (2 jobs), 1.25 GB RSS.
+  Results in bench/results/accuracy_reduced.md.
+Full form (documented, not run here: 1500 instants, 6 labelled, 6000 steps per mode; about
+20x the reduced form's CPU time, i.e. several hours on 2 CPU cores):
+    .venv/bin/python bench/accuracy.py --full --out /tmp/monet_accuracy_full --jobs 2
 """
 import argparse
 from concurrent.futures import ProcessPoolExecutor

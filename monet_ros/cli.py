@@ -9,6 +9,7 @@ import sys
 
 # Subcommand name -> module under monet_ros.commands. Keep in the order of DESIGN.md.
 SUBCOMMANDS = {
+    'synth': 'synth',
     'train': 'train',
     'eval': 'eval',
     'demo': 'demo',

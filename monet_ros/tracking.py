@@ -31,12 +31,13 @@ def subject_boxes(cameras, X, margin=0.3, min_points=3, min_size=32.0):
     size = np.array([[cam.width, cam.height] for cam in cameras], np.float64)  # (V, 2)
     inside = ((depth > 0) & np.isfinite(uv).all(axis=-1)
               & (uv > -size[:, None]).all(axis=-1) & (uv < 2 * size[:, None]).all(axis=-1))
-    lo = np.where(inside[..., None], uv, np.inf).min(axis=1)
-    hi = np.where(inside[..., None], uv, -np.inf).max(axis=1)
+    ok = inside.sum(axis=1) >= min_points
+    uv = np.where(inside[..., None], uv, np.nan)
+    uv[~ok] = 0.0                       # views without a box: no all-NaN reductions
+    lo, hi = np.nanmin(uv, axis=1), np.nanmax(uv, axis=1)
     extent = np.maximum(hi - lo, 0.0)
     centre = (lo + hi) / 2
     half = np.maximum(extent * (0.5 + margin), min_size / 2)
-    ok = inside.sum(axis=1) >= min_points
     # +0.5: pixel centres are integers, the box is in edge coordinates.
     boxes[ok] = np.concatenate([centre - half + 0.5, centre + half + 0.5], axis=1)[ok]
     return boxes

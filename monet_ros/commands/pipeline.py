@@ -60,7 +60,6 @@ class Summary:
         self.errors = []          # (wall time, mean reprojection error px)
         self.frames = 0
         self.last_fused = None
-        self.stamps = []
         self.cond = threading.Condition(self.lock)
         self.last_stamp = -1
 
@@ -75,7 +74,6 @@ class Summary:
         with self.lock:
             self.frames += 1
             self.last_fused = now
-            self.stamps.append(stamp_ns)
             start = self.published.get(stamp_ns)
             if start is not None:
                 self.latencies.append((now, now - start))
@@ -126,7 +124,7 @@ def run(args):
     from monet_ros.nodes.runner import start_error, use_large_data_profile
 
     if not args.bag:
-        from monet_ros.commands.demo_assets import prepare_demo
+        from monet_ros.commands.pipeline_demo import prepare_demo
         assets = prepare_demo(args.workdir)
         args.bag, args.rig = args.bag or assets.bag, args.rig or assets.rig
         args.model = args.model or assets.model

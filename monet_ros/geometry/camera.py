@@ -64,9 +64,15 @@ def _distortion_terms(d, x, y):
     r2 = x * x + y * y
     r4 = r2 * r2
     r6 = r4 * r2
-    radial = (1 + k1 * r2 + k2 * r4 + k3 * r6) / (1 + k4 * r2 + k5 * r4 + k6 * r6)
-    dx = 2 * p1 * x * y + p2 * (r2 + 2 * x * x) + s1 * r2 + s2 * r4
-    dy = p1 * (r2 + 2 * y * y) + 2 * p2 * x * y + s3 * r2 + s4 * r4
+    radial = 1 + k1 * r2 + k2 * r4 + k3 * r6
+    if np.any(k4) or np.any(k5) or np.any(k6):  # rational model (skipped when all zero)
+        radial = radial / (1 + k4 * r2 + k5 * r4 + k6 * r6)
+    xy2 = 2 * x * y
+    dx = p1 * xy2 + p2 * (r2 + 2 * x * x)
+    dy = p1 * (r2 + 2 * y * y) + p2 * xy2
+    if np.any(s1) or np.any(s2) or np.any(s3) or np.any(s4):  # thin prism
+        dx = dx + s1 * r2 + s2 * r4
+        dy = dy + s3 * r2 + s4 * r4
     return radial, dx, dy
 
 

@@ -6,28 +6,31 @@ All pixels here are ideal (undistorted) pixels.
 """
 import numpy as np
 
-try:  # torch is optional for these helpers; numpy inputs never need it
-    import torch
-except ImportError:  # pragma: no cover - torch is a hard dependency of the package
-    torch = None
 
-
-def _is_torch(x):
-    return torch is not None and isinstance(x, torch.Tensor)
+def _torch(x):
+    """The torch module when x is a torch tensor, else None (torch is imported only by
+    callers that already use it: importing the geometry layer stays fast)."""
+    if type(x).__module__.split('.')[0] == 'torch':
+        import torch
+        return torch
+    return None
 
 
 def _cross(a, b):
-    return torch.linalg.cross(a, b, dim=-1) if _is_torch(a) else np.cross(a, b)
+    torch = _torch(a)
+    return torch.linalg.cross(a, b, dim=-1) if torch else np.cross(a, b)
 
 
 def _normalize(v):
-    if _is_torch(v):
+    torch = _torch(v)
+    if torch:
         return v / torch.linalg.norm(v, dim=-1, keepdim=True)
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 def _stack(items, axis):
-    return torch.stack(items, dim=axis) if _is_torch(items[0]) else np.stack(items, axis=axis)
+    torch = _torch(items[0])
+    return torch.stack(items, dim=axis) if torch else np.stack(items, axis=axis)
 
 
 def _mT(m):
@@ -35,7 +38,8 @@ def _mT(m):
 
 
 def _inv(m):
-    return torch.linalg.inv(m) if _is_torch(m) else np.linalg.inv(m)
+    torch = _torch(m)
+    return torch.linalg.inv(m) if torch else np.linalg.inv(m)
 
 
 def skew_matrix(v):
@@ -59,7 +63,8 @@ def fundamental_from_params(K_i, R_i, t_i, K_j, R_j, t_j):
     R_ij, t_ij = relative_pose(R_i, t_i, R_j, t_j)
     E = skew_matrix(t_ij) @ R_ij
     F = _mT(_inv(K_j)) @ E @ _inv(K_i)
-    if _is_torch(F):
+    torch = _torch(F)
+    if torch:
         return F / torch.linalg.norm(F, dim=(-2, -1), keepdim=True)
     return F / np.linalg.norm(F, axis=(-2, -1), keepdims=True)
 

@@ -53,7 +53,9 @@ def _header(stamp, frame_id):
 
 def _bytes_array(data):
     """uint8 numpy data -> array.array('B') (the fast way to fill an rclpy uint8[] field)."""
-    return array.array('B', np.ascontiguousarray(data, np.uint8).tobytes())
+    out = array.array('B')
+    out.frombytes(np.ascontiguousarray(data, np.uint8).reshape(-1).data)   # one copy
+    return out
 
 
 def numpy_to_image_msg(image, stamp, frame_id, encoding='rgb8'):

@@ -228,14 +228,16 @@ def _sampling_grid(proj, alpha, theta_k, valid, cols, size, dtype):
     """grid_sample grid (N, rows, cols, 2) of one view's rectified heatmap."""
     h, w = size
     a = PairGeometry.column_angles(alpha, cols)                  # (N, cols)
-    sa, ca = torch.sin(a)[:, None, :], torch.cos(a)[:, None, :]
-    st, ct = torch.sin(theta_k)[:, :, None], torch.cos(theta_k)[:, :, None]
-    d = torch.stack(torch.broadcast_tensors(ca, sa * st, sa * ct), -1)   # (N, rows, cols, 3)
-    p = _apply(proj, d)
-    front = (p[..., 2] > 1e-9) & valid[:, None, None]
-    z = torch.where(front, p[..., 2], torch.ones_like(p[..., 2]))
-    gx = ((p[..., 0] / z + 0.5) * (2.0 / w) - 1.0).clamp(_OUTSIDE, -_OUTSIDE)
-    gy = ((p[..., 1] / z + 0.5) * (2.0 / h) - 1.0).clamp(_OUTSIDE, -_OUTSIDE)
+    # p = proj d, d = (cos a, sin a sin theta, sin a cos theta): (N, 3, rows, cols) in two
+    # rank-1 terms, without materialising d.
+    across = (proj[:, :, 1, None] * torch.sin(theta_k)[:, None]
+              + proj[:, :, 2, None] * torch.cos(theta_k)[:, None])          # (N, 3, rows)
+    p = (proj[:, :, 0, None, None] * torch.cos(a)[:, None, None]
+         + across[..., None] * torch.sin(a)[:, None, None])                   # (N, 3, rows, cols)
+    front = (p[:, 2] > 1e-9) & valid[:, None, None]
+    z = torch.where(front, p[:, 2], torch.ones_like(p[:, 2]))
+    gx = ((p[:, 0] / z + 0.5) * (2.0 / w) - 1.0).clamp(_OUTSIDE, -_OUTSIDE)
+    gy = ((p[:, 1] / z + 0.5) * (2.0 / h) - 1.0).clamp(_OUTSIDE, -_OUTSIDE)
     grid = torch.stack([gx, gy], -1)
     return torch.where(front[..., None], grid, torch.full_like(grid, _OUTSIDE)).to(dtype)
 

@@ -8,7 +8,7 @@ late detector still receives the latest checkpoint announcement.
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 # Camera images in: newest frame only (a slow detector drops, never queues).
-IMAGE_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=2,
+IMAGE_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                       reliability=ReliabilityPolicy.BEST_EFFORT,
                       durability=DurabilityPolicy.VOLATILE)
 # Small per-frame messages in (heatmaps, camera_info, keypoints3d): a few frames of slack.

@@ -186,6 +186,11 @@ class Subject:
         return (1.75 if self.body == 'human' else 0.7) * self.config.scale
 
     @property
+    def root_joint(self):
+        """Name of the body point above the ground contact centre (pelvis / spine_mid)."""
+        return 'pelvis' if self.body == 'human' else 'spine_mid'
+
+    @property
     def default_path_radius(self):
         return (1.0 if self.body == 'human' else 0.6) * self.config.scale
 

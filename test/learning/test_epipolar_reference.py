@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 import torch
 
+from monet_ros.geometry import fundamental_matrix
 from monet_ros.learning import epipolar_divergence, rectify_pair
 from monet_ros.models import render_heatmaps
 
@@ -91,3 +92,46 @@ def test_batched_torch_brute_force_matches_numpy_reference(scenes):
         fast = line_row_max_torch(h, K[k:k + 1], R[k:k + 1], normals, spacing=0.25)[0].numpy()
         ref = plane_row_max_numpy(h[0].numpy(), cam, e1, u0, v0, thetas)
         assert np.abs(fast - ref).max() < 0.01
+
+
+def test_rectified_rows_are_corresponding_epipolar_lines_covering_the_window():
+    """Rectify coordinate maps: each rectified sample reads back its source pixel. Rows of
+    i and j must satisfy x_j^T F x_i = 0 (geometry.fundamental_matrix), cover every pixel of
+    both windows, and sample them about as densely as the input grid."""
+    cams = random_heatmap_pair(np.random.default_rng(8))
+    h, w = SIZE
+    v, u = torch.meshgrid(torch.arange(h, dtype=torch.float64),
+                          torch.arange(w, dtype=torch.float64), indexing='ij')
+    maps = torch.stack([u, v, torch.ones_like(u)])[None]           # (1, 3, h, w)
+    K, R, t = stack(cams)
+    rect = rectify_pair(maps, maps, K[:1], R[:1], t[:1], K[1:], R[1:], t[1:])
+    F = fundamental_matrix(*cams)
+    src = []
+    for r in (rect.heat_i[0], rect.heat_j[0]):
+        inside = (r[2] > 1 - 1e-9).numpy()                          # all 4 neighbours inside
+        src.append((r[0].numpy(), r[1].numpy(), inside))
+    (ui, vi, ini), (uj, vj, inj) = src
+    rows = rect.theta.shape[1]
+    checked = 0
+    for k in range(rows):
+        if ini[k].sum() < 2 or inj[k].sum() < 2:
+            continue
+        xi = np.c_[ui[k][ini[k]], vi[k][ini[k]], np.ones(ini[k].sum())]
+        xj = np.c_[uj[k][inj[k]], vj[k][inj[k]], np.ones(inj[k].sum())]
+        lines = xi @ F.T                                             # lines in view j
+        lines /= np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+        assert np.abs(xj @ lines.T).max() < 1e-6
+        checked += 1
+    assert checked > 0.5 * rows
+    for uu, vv, ok in src:
+        pts = np.c_[uu[ok], vv[ok]]
+        centres = np.c_[u.numpy().ravel(), v.numpy().ravel()]
+        nearest = np.min(np.linalg.norm(centres[:, None] - pts[None], axis=-1), axis=1)
+        # Covers the window: a sample near every pixel centre (the border pixels' samples
+        # that read the zero padding are not counted as "inside").
+        border = (centres == 0).any(1) | (centres[:, 0] == w - 1) | (centres[:, 1] == h - 1)
+        assert nearest[~border].max() < 0.75 and nearest[border].max() < 1.5
+        col_step = np.hypot(np.diff(uu, axis=1), np.diff(vv, axis=1))[ok[:, 1:] & ok[:, :-1]]
+        row_step = np.hypot(np.diff(uu, axis=0), np.diff(vv, axis=0))[ok[1:] & ok[:-1]]
+        assert 0.3 < np.median(col_step) < 0.7 and col_step.max() < 1.0
+        assert 0.6 < np.median(row_step) < 1.2 and row_step.max() < 2.0

@@ -1,0 +1,86 @@
+"""`monet synth`: render a synthetic calibrated rig + moving subject to a recording folder."""
+import sys
+
+HELP = ('render a synthetic calibrated rig and a moving articulated subject to a rosbag2 '
+        'MCAP, with rig file, sparse 2D labels and 3D ground truth')
+
+
+def _floats(text):
+    try:
+        return tuple(float(v) for v in text.split(',') if v.strip())
+    except ValueError:
+        raise ValueError(f'expected comma-separated numbers, got {text!r}') from None
+
+
+def add_arguments(parser):
+    from monet_ros.synth.recording import SynthConfig
+
+    d = SynthConfig.__dataclass_fields__
+    parser.add_argument('--out', required=True,
+                        help='output folder (must not exist or be empty)')
+    parser.add_argument('--cameras', type=int, default=d['cameras'].default,
+                        help='number of cameras (default %(default)s)')
+    parser.add_argument('--frames', type=int, default=d['frames'].default,
+                        help='number of instants (default %(default)s)')
+    parser.add_argument('--fps', type=float, default=d['fps'].default,
+                        help='frame rate (default %(default)s)')
+    parser.add_argument('--width', type=int, default=d['width'].default,
+                        help='image width in pixels (default %(default)s)')
+    parser.add_argument('--height', type=int, default=d['height'].default,
+                        help='image height in pixels (default %(default)s)')
+    parser.add_argument('--skeleton', default=d['skeleton'].default,
+                        help='human14 | quadruped13 | path to a skeleton YAML whose keypoints '
+                             'are joints of one of those bodies (default %(default)s)')
+    parser.add_argument('--layout', choices=('ring', 'dome'), default=d['layout'].default,
+                        help='camera layout (default %(default)s)')
+    parser.add_argument('--label-fraction', type=float, default=d['label_fraction'].default,
+                        help='fraction of instants labelled in every view, at least one '
+                             '(default %(default)s)')
+    parser.add_argument('--seed', type=int, default=d['seed'].default,
+                        help='random seed: same seed, same bytes (default %(default)s)')
+    parser.add_argument('--distortion', default=','.join(
+        str(v) for v in d['distortion'].default),
+        help='OpenCV distortion k1[,k2,p1,p2,k3] of every camera, e.g. '
+             '--distortion=-0.1,0.02 (seeded +-10%% per camera; default %(default)s; '
+             '0 = none)')
+    parser.add_argument('--radius', type=float, default=None,
+                        help='camera distance from the centre in metres (default 4 for a '
+                             'human, 2.5 for a quadruped)')
+    parser.add_argument('--hfov', type=float, default=d['hfov_deg'].default,
+                        help='horizontal field of view in degrees (default %(default)s)')
+    parser.add_argument('--noise', type=float, default=d['noise'].default,
+                        help='sensor noise standard deviation in grey levels '
+                             '(default %(default)s)')
+    parser.add_argument('--visible-labels-only', action='store_true',
+                        help='label only keypoints not hidden by another limb (default: '
+                             'every keypoint inside the image)')
+    parser.add_argument('--quiet', action='store_true', help='no progress bar')
+
+
+def config_from_args(args):
+    """SynthConfig from parsed arguments (SynthError / ValueError naming the option)."""
+    from monet_ros.synth.recording import SynthConfig, SynthError
+
+    try:
+        distortion = _floats(args.distortion)
+    except ValueError as error:
+        raise SynthError(f'--distortion: {error}') from None
+    return SynthConfig(
+        cameras=args.cameras, frames=args.frames, fps=args.fps, width=args.width,
+        height=args.height, skeleton=args.skeleton, layout=args.layout,
+        label_fraction=args.label_fraction, seed=args.seed, distortion=distortion,
+        radius=args.radius, hfov_deg=args.hfov, noise=args.noise,
+        label_occluded=not args.visible_labels_only)
+
+
+def run(args):
+    from monet_ros.synth.recording import SynthError, synthesize
+
+    try:
+        config = config_from_args(args)
+        result = synthesize(config, args.out, progress=not args.quiet)
+    except SynthError as error:
+        print(f'monet synth: error: {error}', file=sys.stderr)
+        return 2
+    print(result.summary())
+    return 0

@@ -1,0 +1,344 @@
+"""Synthesise a recording: rig + moving subject -> rosbag2 MCAP, rig file, labels, ground
+truth and a README (the `monet synth` command; no rclpy: monet_ros.io writes CDR itself).
+
+Output folder DIR (must not exist or be empty):
+  DIR/recording/        rosbag2 MCAP: /camK/image_raw (Image rgb8), /camK/camera_info,
+                        /tf_static (world -> camK_optical), /ground_truth/keypoints3d
+                        (PointCloud2, one point per keypoint; num_views = views in which it
+                        projects inside the image)
+  DIR/rig.yaml          geometry.save_rig (frame 'world')
+  DIR/labels.csv        monet_ros.labels format for the labelled instants
+  DIR/ground_truth.npz  stamps (T,), keypoints3d (T, C, 3), keypoints2d (T, V, C, 2),
+                        in_image / occluded (T, V, C), labelled (T,) bool, camera_names,
+                        keypoint_names
+  DIR/README.md         what, seed, cameras, frames, labels, how to train / evaluate
+"""
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+import sys
+import time
+
+import numpy as np
+
+from monet_ros.geometry import save_rig
+from monet_ros.labels import label_rows, write_labels
+from monet_ros.skeleton import SkeletonError, load_skeleton
+from monet_ros.synth.render import (
+    RenderConfig,
+    Scene,
+    capsule_outlines,
+    in_image,
+    occlusion,
+)
+from monet_ros.synth.rig import LAYOUTS, RigConfig, RigConfigError, make_rig
+from monet_ros.synth.subject import Subject, SubjectError
+
+DEFAULT_START_NS = 1_767_225_600_000_000_000          # 2026-01-01T00:00:00Z
+GROUND_TRUTH_TOPIC = '/ground_truth/keypoints3d'
+FRAME_ID = 'world'
+
+# SynthConfig field -> RigConfig field (to name the user's field in errors)
+_RIG_FIELDS = {'cameras': 'num_cameras', 'layout': 'layout', 'width': 'image_width',
+               'height': 'image_height', 'distortion': 'distortion', 'radius': 'radius',
+               'hfov_deg': 'hfov_deg', 'jitter': 'jitter'}
+
+
+class SynthError(ValueError):
+    """Bad synth configuration or output path; the message names the field or path."""
+
+
+@dataclass(frozen=True)
+class SynthConfig:
+    """A synthetic recording (all fields validated on construction; errors name the field).
+
+    cameras: number of cameras; frames: instants; fps: frame rate; width, height: image
+    size; skeleton: preset name (human14, quadruped13) or YAML path; layout: ring | dome;
+    label_fraction: fraction of instants with 2D labels in every view (at least one
+    instant is labelled); seed: everything random derives from it; distortion: OpenCV
+    (k1[, k2, p1, p2, k3]); radius: camera distance (m; None = 4.0 for a human, 2.5 for a
+    quadruped); hfov_deg: horizontal field of view; jitter: rig perturbation scale;
+    label_occluded: label keypoints hidden by other limbs too (True) or only visible ones;
+    noise: sensor noise std (DN); start_ns: stamp of the first instant.
+    """
+
+    cameras: int = 8
+    frames: int = 100
+    fps: float = 30.0
+    width: int = 640
+    height: int = 480
+    skeleton: str = 'human14'
+    layout: str = 'ring'
+    label_fraction: float = 0.005
+    seed: int = 0
+    distortion: tuple = (-0.08, 0.02)
+    radius: float | None = None
+    hfov_deg: float = 60.0
+    jitter: float = 1.0
+    label_occluded: bool = True
+    noise: float = 3.0
+    start_ns: int = DEFAULT_START_NS
+    rig: RigConfig = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self):
+        def bad(name, message):
+            raise SynthError(f'synth config: field {name!r}: {message}')
+
+        for name in ('cameras', 'frames', 'width', 'height', 'seed', 'start_ns'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                bad(name, f'must be an integer, got {value!r}')
+        if not 1 <= self.frames <= 1_000_000:
+            bad('frames', f'must be in 1..1000000, got {self.frames}')
+        if not (np.isfinite(self.fps) and 0 < self.fps <= 1000):
+            bad('fps', f'must be in (0, 1000], got {self.fps!r}')
+        if not (np.isfinite(self.label_fraction) and 0 <= self.label_fraction <= 1):
+            bad('label_fraction', f'must be in [0, 1], got {self.label_fraction!r}')
+        if self.seed < 0:
+            bad('seed', f'must be >= 0, got {self.seed}')
+        if self.start_ns < 0:
+            bad('start_ns', f'must be >= 0, got {self.start_ns}')
+        if self.layout not in LAYOUTS:
+            bad('layout', f'must be one of {LAYOUTS}, got {self.layout!r}')
+        if not (np.isfinite(self.noise) and 0 <= self.noise <= 50):
+            bad('noise', f'must be in 0..50, got {self.noise!r}')
+        if not isinstance(self.label_occluded, bool):
+            bad('label_occluded', f'must be a bool, got {self.label_occluded!r}')
+        try:
+            skeleton = load_skeleton(self.skeleton)
+            subject = Subject(skeleton)
+        except (SkeletonError, SubjectError) as error:
+            bad('skeleton', str(error))
+        radius = self.radius
+        if radius is None:
+            radius = 4.0 if subject.body == 'human' else 2.5
+        height = subject.nominal_height
+        try:
+            rig = RigConfig(num_cameras=self.cameras, layout=self.layout, radius=radius,
+                            camera_height=0.9 * height, target=(0.0, 0.0, 0.5 * height),
+                            image_width=self.width, image_height=self.height,
+                            hfov_deg=self.hfov_deg, distortion=tuple(self.distortion),
+                            jitter=self.jitter)
+        except RigConfigError as error:
+            message = str(error)
+            for ours, theirs in _RIG_FIELDS.items():
+                if f"'{theirs}'" in message:
+                    bad(ours, message.split(': ', 2)[-1])
+            raise SynthError(message) from None
+        object.__setattr__(self, 'distortion', rig.distortion)
+        object.__setattr__(self, 'rig', rig)
+
+    @property
+    def labelled_count(self):
+        """Number of labelled instants: round(fraction * frames), at least 1."""
+        return max(1, min(self.frames, int(round(self.label_fraction * self.frames))))
+
+    def stamps(self):
+        """(T,) int64 stamps in ns: start_ns + round(k * 1e9 / fps)."""
+        k = np.arange(self.frames, dtype=np.float64)
+        return self.start_ns + np.round(k * 1e9 / self.fps).astype(np.int64)
+
+    def to_dict(self):
+        data = asdict(self)
+        data.pop('rig', None)
+        data['distortion'] = list(self.distortion)
+        return data
+
+
+@dataclass(frozen=True)
+class SynthResult:
+    out: Path
+    frames: int
+    cameras: int
+    keypoints: int
+    labelled_instants: int
+    label_rows: int
+    wall_s: float
+    bag_bytes: int
+
+    def summary(self):
+        return (f'monet synth: wrote {self.frames} instants x {self.cameras} cameras '
+                f'({self.keypoints} keypoints, {self.labelled_instants} labelled instants, '
+                f'{self.label_rows} labels) to {self.out} in {self.wall_s:.1f} s '
+                f'({self.bag_bytes / 1e6:.1f} MB bag)')
+
+
+def labelled_indices(config):
+    """Indices of the labelled instants: evenly spread with a seeded offset."""
+    n = config.labelled_count
+    offset = np.random.default_rng([config.seed, 0x4c41]).uniform()      # 'LA'
+    idx = np.floor((np.arange(n) + offset) * config.frames / n).astype(int)
+    return np.unique(np.clip(idx, 0, config.frames - 1))
+
+
+def plan(config):
+    """Everything but the images: cameras, skeleton, subject, stamps, ground truth.
+
+    Returns a dict: cameras, skeleton, subject, stamps (T,), times (T,), keypoints3d
+    (T, C, 3), A, B (T, P, 3) capsule axes, keypoints2d (T, V, C, 2), in_image, occluded
+    (T, V, C), labelled (T,) bool, label_mask (T, V, C) bool, root (T, 3) on the ground.
+    """
+    skeleton = load_skeleton(config.skeleton)
+    subject = Subject(skeleton, seed=config.seed)
+    cameras = make_rig(config.rig, seed=config.seed)
+    stamps = config.stamps()
+    times = (stamps - stamps[0]) / 1e9
+    joints = subject.joints(times)
+    X = np.stack([joints[k] for k in skeleton.keypoints], axis=1)
+    A, B = subject.capsule_arrays(times, joints)
+    uv, inside = in_image(cameras, X)
+    hidden = occlusion(cameras, X, A, B, subject.radii, subject.attached)
+    labelled = np.zeros(config.frames, bool)
+    labelled[labelled_indices(config)] = True
+    mask = inside & labelled[:, None, None]
+    if not config.label_occluded:
+        mask &= ~hidden
+    root = joints[subject.root_joint] * [1.0, 1.0, 0.0]             # shadow centre
+    return dict(cameras=cameras, skeleton=skeleton, subject=subject, stamps=stamps,
+                times=times, keypoints3d=X, A=A, B=B, keypoints2d=uv, in_image=inside,
+                occluded=hidden, labelled=labelled, label_mask=mask, root=root)
+
+
+def _check_output(out):
+    out = Path(out)
+    if out.exists() and (not out.is_dir() or any(out.iterdir())):
+        raise SynthError(f'output {out} exists and is not an empty folder; not overwriting '
+                         '(choose another --out)')
+    out.mkdir(parents=True, exist_ok=True)
+    return out
+
+
+def write_frame(bag, cameras, stamp, images, X, num_views):
+    """Write one instant: every camera's image + camera_info, then the ground truth."""
+    for cam, image in zip(cameras, images):
+        frame_id = f'{cam.name}_optical'
+        bag.write_image(f'/{cam.name}/image_raw', stamp, image, frame_id, encoding='rgb8')
+        bag.write_camera_info(f'/{cam.name}/camera_info', stamp, cam, frame_id)
+    bag.write_keypoints3d(GROUND_TRUTH_TOPIC, stamp, FRAME_ID, X,
+                          confidence=np.ones(len(X)), reprojection_error=np.zeros(len(X)),
+                          num_views=num_views)
+
+
+def render_views(scene, cameras, backgrounds, outlines, t, root):
+    """The V images (H, W, 3) uint8 of instant t."""
+    return [scene.render(v, t, cam, backgrounds[v], outlines[v][0][t], outlines[v][1][t],
+                         outlines[v][2][t], root=root[t])
+            for v, cam in enumerate(cameras)]
+
+
+def synthesize(config, out, progress=True):
+    """Write the recording described by `config` into folder `out`; returns SynthResult."""
+    from tqdm import tqdm
+
+    from monet_ros.io import BagWriter
+
+    start = time.perf_counter()
+    out = _check_output(out)
+    p = plan(config)
+    cameras, subject = p['cameras'], p['subject']
+    render_config = RenderConfig(noise=config.noise)
+    scene = Scene(cameras, subject.parts, seed=config.seed, config=render_config)
+    backgrounds = [scene.background(cam) for cam in cameras]
+    outlines = [capsule_outlines(cam, p['A'], p['B'], subject.radii, scene.light,
+                                 render_config.levels, render_config.samples,
+                                 render_config.axis_points) for cam in cameras]
+    num_views = p['in_image'].sum(axis=1)                              # (T, C)
+    stamps = p['stamps']
+    bag_path = out / 'recording'
+    with BagWriter(bag_path) as bag:
+        bag.write_tf_static(int(stamps[0]), cameras, parent=FRAME_ID)
+        frames = tqdm(range(config.frames), desc='monet synth', unit='frame',
+                      file=sys.stderr, disable=not progress, dynamic_ncols=True)
+        for t in frames:
+            images = render_views(scene, cameras, backgrounds, outlines, t, p['root'])
+            write_frame(bag, cameras, int(stamps[t]), images, p['keypoints3d'][t],
+                        num_views[t])
+    save_rig(out / 'rig.yaml', cameras, frame_id=FRAME_ID)
+    labelled = np.flatnonzero(p['labelled'])
+    points = np.where(p['label_mask'][labelled][..., None], p['keypoints2d'][labelled], np.nan)
+    rows = write_labels(out / 'labels.csv', label_rows(
+        stamps[labelled], [c.name for c in cameras], p['skeleton'].keypoints, points))
+    np.savez_compressed(
+        out / 'ground_truth.npz', stamps=stamps, keypoints3d=p['keypoints3d'],
+        keypoints2d=p['keypoints2d'], in_image=p['in_image'], occluded=p['occluded'],
+        labelled=p['labelled'], camera_names=np.array([c.name for c in cameras]),
+        keypoint_names=np.array(p['skeleton'].keypoints))
+    bag_bytes = sum(f.stat().st_size for f in bag_path.iterdir())
+    result = SynthResult(out=out, frames=config.frames, cameras=len(cameras),
+                         keypoints=p['skeleton'].num_keypoints,
+                         labelled_instants=len(labelled), label_rows=rows,
+                         wall_s=time.perf_counter() - start, bag_bytes=bag_bytes)
+    (out / 'README.md').write_text(readme_text(config, p, result))
+    return result
+
+
+def readme_text(config, p, result):
+    """The DIR/README.md summary."""
+    cams = p['cameras']
+    inside = p['in_image']
+    hidden = p['occluded'] & inside
+    labelled = np.flatnonzero(p['labelled'])
+    stamps = p['stamps']
+    visible_pct = 100 * inside.mean(axis=(0, 2))
+    hidden_pct = 100 * hidden.sum(axis=(0, 2)) / np.maximum(1, inside.sum(axis=(0, 2)))
+    rows = '\n'.join(
+        f'| {c.name} | {c.width}x{c.height} | {c.K[0, 0]:.1f} | '
+        f'{", ".join(f"{d:.4f}" for d in c.dist)} | '
+        f'{", ".join(f"{x:.2f}" for x in c.center)} | '
+        f'{visible_pct[i]:.1f}% | {hidden_pct[i]:.1f}% |'
+        for i, c in enumerate(cams))
+    shown = ', '.join(str(stamps[i]) for i in labelled[:20])
+    if len(labelled) > 20:
+        shown += ' ...'
+    occluded_note = ('every keypoint that projects inside the image, including keypoints '
+                     'hidden by other limbs' if config.label_occluded else
+                     'only keypoints that project inside the image and are not hidden by '
+                     'another limb')
+    settings = '\n'.join(f'- {k}: {v}' for k, v in config.to_dict().items())
+    return f"""# Synthetic MONET recording
+
+Rendered by `monet synth` (monet_ros): a calibrated {config.layout} rig of {len(cams)} cameras
+around a {p['subject'].body} ({p['skeleton'].name}, {p['skeleton'].num_keypoints} keypoints)
+walking on a curved path. Seed {config.seed}; the same settings give byte-identical
+message data.
+
+- Frames: {config.frames} instants at {config.fps:g} fps, stamps {stamps[0]} ..
+  {stamps[-1]} ns; images {config.width}x{config.height} rgb8.
+- Labelled instants: {len(labelled)} of {config.frames}
+  ({100 * len(labelled) / config.frames:.2f}%), {result.label_rows} 2D labels in
+  `labels.csv`: {occluded_note}, in every view of a labelled instant.
+- Labelled stamps: {shown}
+- Bag: {result.bag_bytes / 1e6:.1f} MB; rendered in {result.wall_s:.1f} s.
+
+## Files
+
+- `recording/`: rosbag2 (MCAP) with `/camK/image_raw` (sensor_msgs/Image rgb8),
+  `/camK/camera_info`, `/tf_static` (world -> camK_optical) and
+  `{GROUND_TRUTH_TOPIC}` (sensor_msgs/PointCloud2, fields x y z confidence
+  reprojection_error num_views keypoint; num_views = views where it is in the image).
+- `rig.yaml`: the cameras (x ~ K (R X + t), OpenCV distortion), frame `world`.
+- `labels.csv`: `stamp_ns,camera,keypoint,u,v` in original image pixels
+  (`monet_ros.labels.read_labels`).
+- `ground_truth.npz`: stamps (T,), keypoints3d (T, C, 3) m, keypoints2d (T, V, C, 2) px,
+  in_image and occluded (T, V, C), labelled (T,), camera_names, keypoint_names.
+
+## Cameras
+
+| camera | size | fx | distortion | centre (m) | keypoints in image | of those occluded |
+|---|---|---|---|---|---|---|
+{rows}
+
+## Use
+
+```bash
+monet train {result.out} --out {result.out}/train_monet --skeleton {config.skeleton} --mode monet
+monet eval {result.out}/train_monet/model.pt --data {result.out} --out {result.out}/eval \\
+    --skeleton {config.skeleton}
+```
+
+(`monet train --help` / `monet eval --help` list the options; the folder's rig.yaml,
+labels.csv and ground_truth.npz are found automatically.)
+
+## Settings
+
+{settings}
+"""
