@@ -213,9 +213,9 @@ def run(args):
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
-    print(f'monet pipeline: {args.bag}: {summary.line()}', flush=True)
     if len(nodes) > 1 and nodes[0].last_result is not None:
         print(keypoint_table(nodes[0]), flush=True)
+    print(f'monet pipeline: {args.bag}: {summary.line()}', flush=True)   # the last line
     return 0
 
 
