@@ -23,13 +23,12 @@ from dataclasses import dataclass, fields
 import hashlib
 import json
 import math
-import os
 from pathlib import Path
-import tempfile
 import time
 
 import numpy as np
 
+from monet_ros.atomic import atomic_write
 from monet_ros.config import ConfigError, setting
 from monet_ros.learning.config import TrainConfig
 
@@ -135,18 +134,8 @@ def _finite(metrics):
 
 
 def _write_json_atomic(path, payload):
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
-    try:
-        with os.fdopen(fd, 'w') as stream:
-            json.dump(payload, stream, indent=1)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path, 'w') as stream:
+        json.dump(payload, stream, indent=1)
 
 
 def concatenate_recordings(recordings):

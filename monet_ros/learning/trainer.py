@@ -20,13 +20,13 @@ import json
 import os
 from pathlib import Path
 import sys
-import tempfile
 import time
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
+from monet_ros.atomic import atomic_write
 from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.learning.config import TrainConfig
 from monet_ros.learning.dataset import CropCache, boxes_from_points, fill_boxes
@@ -148,19 +148,8 @@ class _Frames:
 
 
 def _atomic_torch_save(payload, path):
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
-    try:
-        with os.fdopen(fd, 'wb') as stream:
-            torch.save(payload, stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path) as stream:
+        torch.save(payload, stream)
 
 
 class Trainer:

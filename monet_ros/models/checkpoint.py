@@ -12,12 +12,11 @@ plus any further JSON-able keys the caller adds. Loaded with torch.load(weights_
 so a checkpoint can never run code.
 """
 import json
-import os
 from pathlib import Path
-import tempfile
 
 import torch
 
+from monet_ros.atomic import atomic_write
 from monet_ros.models.registry import build_model
 
 FORMAT = 'monet_ros.checkpoint/1'
@@ -82,27 +81,8 @@ def save_checkpoint(path, model, metadata):
     state = {k: v.detach().cpu() if isinstance(v, torch.Tensor) else v
              for k, v in model.state_dict().items()}
     payload = {'format': FORMAT, 'metadata': meta, 'state_dict': state}
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
-    try:
-        with os.fdopen(fd, 'wb') as stream:
-            torch.save(payload, stream)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    try:  # make the rename durable (best effort; not every platform can fsync a folder)
-        dir_fd = os.open(path.parent, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)
-        finally:
-            os.close(dir_fd)
-    except OSError:
-        pass
+    with atomic_write(path) as stream:
+        torch.save(payload, stream)
     return meta
 
 
