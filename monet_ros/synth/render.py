@@ -371,17 +371,20 @@ class Scene:
         if np.any(camera.to_camera(ring)[:, 2] <= 0.05):
             return
         uv = camera.project(ring)
-        x0, y0 = np.floor(uv.min(0)).astype(int) - 2
-        x1, y1 = np.ceil(uv.max(0)).astype(int) + 2
-        x0, y0 = max(x0, 0), max(y0, 0)
-        x1, y1 = min(x1, camera.width), min(y1, camera.height)
-        if x1 <= x0 or y1 <= y0:
+        sigma = max(1.0, np.ptp(uv[:, 0]) / 12)
+        pad = int(np.ceil(3 * sigma)) + 2                 # the blur fades out inside the box
+        x0, y0 = np.floor(uv.min(0)).astype(int) - pad
+        x1, y1 = np.ceil(uv.max(0)).astype(int) + pad
+        if x1 <= 0 or y1 <= 0 or x0 >= camera.width or y0 >= camera.height:
             return
         mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
         pts = np.round((uv - [x0, y0]) * _SCALE).astype(np.int32)
         cv2.fillConvexPoly(mask, pts, 90, cv2.LINE_AA, SHIFT)
-        mask = cv2.GaussianBlur(mask, (0, 0), max(1.0, (x1 - x0) / 12))
-        roi = image[y0:y1, x0:x1]
+        mask = cv2.GaussianBlur(mask, (0, 0), sigma, borderType=cv2.BORDER_CONSTANT)
+        cx0, cy0 = max(x0, 0), max(y0, 0)
+        cx1, cy1 = min(x1, camera.width), min(y1, camera.height)
+        mask = mask[cy0 - y0:cy1 - y0, cx0 - x0:cx1 - x0]
+        roi = image[cy0:cy1, cx0:cx1]
         roi[:] = (roi * (1 - mask[..., None] / 255.0)).astype(np.uint8)
 
     def render(self, view, frame, camera, background, outlines, depth, facing, root=None,

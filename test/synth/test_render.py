@@ -129,3 +129,18 @@ def test_render_config_validation():
         RenderConfig(levels=0)
     with pytest.raises(ValueError, match="'noise'"):
         RenderConfig(noise=-1.0)
+
+
+def test_shadow_is_a_soft_blob_without_box_edges():
+    cam = _camera(center=(0.0, -4.0, 2.0))
+    scene = Scene([cam], ('torso',), seed=0)
+    image = np.full((150, 200, 3), 200, np.uint8)
+    scene.shadow(image, cam, np.zeros(3), 0.35)
+    centre = np.round(cam.project(np.zeros((1, 3)))[0]).astype(int)
+    assert image[centre[1], centre[0], 0] < 200 * 0.75          # dark under the subject
+    edge = np.round(cam.project(np.array([[1.2, 0.0, 0.0], [0.0, 1.2, 0.0]]))).astype(int)
+    assert np.all(image[edge[:, 1], edge[:, 0]] == 200)         # untouched farther out
+    darkened = np.argwhere(image[..., 0] < 200)
+    # the darkened region is round: its bounding box corners stay untouched
+    (y0, x0), (y1, x1) = darkened.min(0), darkened.max(0)
+    assert np.all(image[[y0, y0, y1, y1], [x0, x1, x0, x1], 0] > 195)

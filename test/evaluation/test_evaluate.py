@@ -1,0 +1,61 @@
+"""evaluate_detector against an independent recomputation (OpenCV projection, per-point DLT)
+from the same detector outputs."""
+import cv2
+from helpers.blobs import blob_recording
+import numpy as np
+import torch
+
+from monet_ros.evaluation.evaluate import evaluate_detector
+from monet_ros.learning.trainer import crop_boxes
+from monet_ros.models import build_model, decode_heatmaps
+from monet_ros.models.detector import Detector
+
+
+def dlt(points, cameras):
+    """Plain per-point DLT with numpy SVD (independent of geometry.triangulate)."""
+    rows = []
+    for (u, v), cam in zip(points, cameras):
+        P = cam.K @ np.hstack([cam.R, cam.t[:, None]])
+        rows += [u * P[2] - P[0], v * P[2] - P[1]]
+    X = np.linalg.svd(np.array(rows))[2][-1]
+    return X[:3] / X[3]
+
+
+def test_evaluate_detector_matches_independent_computation():
+    torch.manual_seed(0)
+    rec = blob_recording(num_views=4, T=6, C=3, labelled=(0,))
+    model = build_model('small', 3, input_size=[48, 48], width=8)
+    detector = Detector(model, {'keypoints': list(rec.keypoints)}, device='cpu')
+    boxes = crop_boxes(rec, 'ground_truth', 1.0, 0.25)
+    instants = np.array([3, 4, 5])
+    summary = evaluate_detector(detector, rec, instants, boxes, 'supervised', 'blobs')
+
+    distances, errors, gt_errors = [], [], []
+    for t in instants:
+        heat, heat_cams = detector.predict(rec.images(t), rec.cameras, boxes[t])
+        peaks, _ = decode_heatmaps(heat)
+        image_pts = []
+        for v, hc in enumerate(heat_cams):
+            gt_heat, _ = cv2.projectPoints(rec.gt3d[t], cv2.Rodrigues(hc.R)[0], hc.t, hc.K,
+                                           hc.dist)
+            distances.append(np.linalg.norm(peaks[v] - gt_heat[:, 0], axis=1) / 12.0)
+            x0, y0, x1, y1 = boxes[t, v]
+            image_pts.append(np.stack([(peaks[v, :, 0] + 0.5) * (x1 - x0) / 12 + x0 - 0.5,
+                                       (peaks[v, :, 1] + 0.5) * (y1 - y0) / 12 + y0 - 0.5], 1))
+        image_pts = np.stack(image_pts)                                        # (V, C, 2)
+        for c in range(3):
+            X = dlt(image_pts[:, c], rec.cameras)
+            for v, cam in enumerate(rec.cameras):
+                proj, _ = cv2.projectPoints(X[None], cv2.Rodrigues(cam.R)[0], cam.t, cam.K,
+                                            cam.dist)
+                gt, _ = cv2.projectPoints(rec.gt3d[t, c][None], cv2.Rodrigues(cam.R)[0], cam.t,
+                                          cam.K, cam.dist)
+                errors.append(np.linalg.norm(proj[0, 0] - image_pts[v, c]))
+                gt_errors.append(np.linalg.norm(proj[0, 0] - gt[0, 0]))
+    d = np.concatenate(distances)
+    for alpha in (0.05, 0.1, 0.2):
+        assert summary.pck.at(alpha) == np.mean(d <= alpha)
+    assert abs(summary.reprojection_mean - np.mean(errors)) < 1e-6
+    assert abs(summary.reprojection_std - np.std(errors)) < 1e-6
+    assert abs(summary.gt_reprojection_mean - np.mean(gt_errors)) < 1e-6
+    assert summary.instants == 3 and summary.pck.counts.tolist() == [12, 12, 12]
