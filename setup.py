@@ -12,6 +12,7 @@ EXECUTABLES = {
     'detector': 'monet_ros.nodes.detector:main',
     'fusion': 'monet_ros.nodes.fusion:main',
     'player': 'monet_ros.nodes.player:main',
+    'learner': 'monet_ros.nodes.learner:main',
 }
 
 

@@ -2,6 +2,7 @@
 
     monet pipeline                           # demo: synthetic recording + a model for it
     monet pipeline --bag REC --model CKPT [--rig RIG] [--rate 0.5] [--loop] [--lockstep]
+    monet pipeline --bag REC --model CKPT --loop --learn    # + online learner (hot reload)
 
 One MultiThreadedExecutor runs the player (replaying REC), one detector node for every
 camera (batched forward) and the fusion node; other processes see the usual topics
@@ -14,6 +15,8 @@ import threading
 import time
 
 import numpy as np
+
+from monet_ros.commands.pipeline_learn import add_learn_arguments, learner_node
 
 HELP = 'live all-in-one: player + detector + fusion as ROS nodes in one process'
 
@@ -44,6 +47,7 @@ def add_arguments(parser):
     parser.add_argument('--start-delay', type=float, default=0.5,
                         help='seconds between start-up and the first frame (discovery)')
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
+    add_learn_arguments(parser)
 
 
 class Summary:
@@ -158,6 +162,8 @@ def run(args):
                 wait_for_subscribers=1, start_delay_s=args.start_delay,
                 topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]))
             nodes.append(player)
+            if args.learn:
+                nodes.append(learner_node(args, rig, summary))
         except (ValueError, OSError) as error:
             start_error('monet pipeline', error)
             return 2

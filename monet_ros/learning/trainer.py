@@ -194,6 +194,7 @@ class Trainer:
         self.pseudo = data.initial_pseudo_labels(self.spec, config.tracking)
         self._update_pools()
         self.last_terms = {}
+        self.last_checkpoint = None      # path of the latest checkpoints/step_N.pt written
         self._started = time.monotonic()
 
     # ----------------------------------------------------------------- sampling
@@ -423,12 +424,14 @@ class Trainer:
             'last_terms': json.dumps(self.last_terms),
         }
         _atomic_torch_save(state, self.out_dir / 'trainer_state.pt')
+        self.last_checkpoint = ckpt
         return ckpt
 
     @classmethod
-    def resume(cls, out_dir, data, config=None, device=None):
+    def resume(cls, out_dir, data, config=None, device=None, model=None):
         """A trainer continuing from out_dir/trainer_state.pt (config: the saved one unless
-        given; only `steps` and `checkpoint_every` may differ)."""
+        given; only `steps` and `checkpoint_every` may differ; model: the network to load the
+        saved weights into, default one built from the config)."""
         path = Path(out_dir) / 'trainer_state.pt'
         try:
             state = torch.load(path, map_location='cpu', weights_only=True)
@@ -449,7 +452,7 @@ class Trainer:
                                      f'state but {getattr(config, name)!r} now')
         for stale in Path(out_dir).rglob('.*.tmp'):      # temporaries of a killed write
             stale.unlink()
-        trainer = cls(config, data, out_dir, device=device)
+        trainer = cls(config, data, out_dir, model=model, device=device)
         trainer.model.load_state_dict(state['model'])
         trainer.optimizer.load_state_dict(state['optimizer'])
         trainer.scheduler.load_state_dict(state['scheduler'])

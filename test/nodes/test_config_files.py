@@ -13,7 +13,8 @@ from monet_ros.nodes.params import declare_config
 
 NODES = {'fusion': ('monet_ros.nodes.fusion', 'FusionNodeConfig'),
          'player': ('monet_ros.nodes.player', 'PlayerConfig'),
-         'detector': ('monet_ros.nodes.detector', 'DetectorConfig')}
+         'detector': ('monet_ros.nodes.detector', 'DetectorConfig'),
+         'learner': ('monet_ros.learning.online', 'LearnerConfig')}
 
 
 @pytest.mark.parametrize('name', sorted(NODES))

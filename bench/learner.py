@@ -1,0 +1,243 @@
+"""Online learner: training steps/s, and the reprojection error before / after online learning.
+
+1. Steps/s of OnlineLearner.step (small net, all 8 views of an instant in L_E, CPU; CUDA
+   too when present), mode monet (L_L + lambda_e L_E + lambda_p L_B) side by side with
+   supervised (L_L only, the baseline), median of --repeats runs of --steps steps.
+2. Before / after: a starting model trained with labels only (mode supervised, Trainer,
+   --start-steps) on a synthetic 8-camera rig; then --minutes of online learning
+   (OnlineLearner, mode monet, checkpoints every --every steps, announced when the held-out
+   reprojection error is not worse). Each announcement prints a live line. The announced
+   models (what the detectors would load) are evaluated on the held-out tail with the
+   detector + fusion core the live pipeline runs (models.Detector -> fusion.fuse_heatmaps,
+   robust triangulation): mean reprojection error of the fused keypoints (px) and their 3D
+   error against the ground truth (mm); plus evaluation.evaluate_detector (all-view
+   triangulation without RANSAC, PCK@0.1). The baseline beside it: the same minutes of
+   supervised training continued from the same start.
+
+    .venv/bin/python bench/learner.py --out /tmp/monet_learner_bench [--minutes 2]
+
+Data: `monet synth` (ring, 8 cameras, 14 keypoints, <1% labelled) when the command exists,
+else --data DIR (a `monet synth` folder), else the test suite's 8-camera blob scene.
+"""
+import argparse
+import json
+from pathlib import Path
+import sys
+import time
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / 'test'))
+
+import torch  # noqa: E402
+
+from monet_ros.cli import SUBCOMMANDS  # noqa: E402
+from monet_ros.cli import main as monet_main  # noqa: E402
+from monet_ros.evaluation.evaluate import evaluate_detector  # noqa: E402
+from monet_ros.fusion import FusionConfig, fuse_heatmaps  # noqa: E402
+from monet_ros.learning.config import TrainConfig  # noqa: E402
+from monet_ros.learning.online import LearnerConfig, OnlineLearner  # noqa: E402
+from monet_ros.learning.trainer import Trainer, TrainingData  # noqa: E402
+from monet_ros.models import Detector, build_model, load_checkpoint  # noqa: E402
+
+SMALL = dict(architecture='small', input_size=96, width=24)
+BATCH = dict(batch_labelled=8, batch_pseudo=8, batch_unlabeled=1, lr=1e-3, eval_fraction=0.2,
+             sigma=1.5)
+
+
+def make_data(args):
+    """A `monet synth` folder (8 cameras) or the blob scene written as one."""
+    if args.data:
+        return Path(args.data), 'human14'
+    folder = Path(args.out) / 'data'
+    if 'synth' in SUBCOMMANDS:
+        if not (folder / 'ground_truth.npz').exists():
+            code = monet_main(['synth', '--out', str(folder), '--frames', str(args.frames),
+                               '--cameras', '8', '--layout', 'ring', '--width', '320',
+                               '--height', '240', '--label-fraction', '0.008', '--seed', '0',
+                               '--quiet'])
+            if code:
+                raise SystemExit('monet synth failed')
+        return folder, 'human14'
+    from helpers.blob_bag import write_blob_folder
+    from helpers.blobs import blob_recording
+    if not (folder / 'ground_truth.npz').exists():
+        T = args.frames
+        rec = blob_recording(num_views=8, T=T, C=6, labelled=(T // 10, T // 2), seed=0,
+                             label_views=(0, 1, 2), width=160, height=120, focal=180.0)
+        write_blob_folder(rec, folder)
+    skeleton = Path(args.out) / 'blobs.yaml'
+    skeleton.write_text('name: blobs\nkeypoints: [k0, k1, k2, k3, k4, k5]\n')
+    return folder, str(skeleton)
+
+
+def steps_per_s(folder, skeleton, mode, device, steps, repeats, out):
+    """Median steps/s of OnlineLearner.step over `repeats` runs (after 3 warm-up steps)."""
+    config = LearnerConfig(bags=(str(folder),), out=str(out), skeleton=skeleton, mode=mode,
+                           views_per_instant=8, device=device, resume=False,
+                           checkpoint_every=10 ** 6, **SMALL, **BATCH)
+    learner = OnlineLearner(config, log=lambda *a: None)
+    for _ in range(3):
+        learner.step()
+    rates = []
+    for _ in range(repeats):
+        start = time.perf_counter()
+        for _ in range(steps):
+            learner.step()
+        if device.startswith('cuda'):
+            torch.cuda.synchronize()
+        rates.append(steps / (time.perf_counter() - start))
+    return float(np.median(rates)), learner.recording
+
+
+def fused_errors(checkpoint, data, instants, fusion=None):
+    """The live core over held-out instants: Detector -> fuse_heatmaps.
+
+    Returns (mean reprojection error of the fused keypoints px, mean 3D error mm vs ground
+    truth, fraction of keypoints triangulated)."""
+    fusion = fusion or FusionConfig()
+    detector = Detector(*load_checkpoint(checkpoint), device='cpu')
+    rec, cams = data.recording, data.recording.cameras
+    reproj, err3d, ok = [], [], []
+    for t in instants:
+        boxes = detector.boxes_for(cams, data.boxes[t])
+        heat, heat_cams = detector.predict(rec.images(int(t)), cams, boxes,
+                                           keep_aspect=False)
+        result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cams]), cams, fusion)
+        reproj.append(result.reprojection_error)
+        ok.append(np.isfinite(result.X[:, 0]))
+        if rec.gt3d is not None:
+            err3d.append(np.linalg.norm(result.X - rec.gt3d[t], axis=1) * 1e3)
+    reproj, ok = np.concatenate(reproj), np.concatenate(ok)
+    e3 = np.concatenate(err3d) if err3d else np.array([np.nan])
+    return float(np.nanmean(reproj)), float(np.nanmean(e3)), float(ok.mean())
+
+
+def evaluate(checkpoint, data, label):
+    model, meta = load_checkpoint(checkpoint)
+    held = data.held_out
+    fused_px, fused_mm, fraction = fused_errors(checkpoint, data, held)
+    row = {'model': label, 'step': meta['step'], 'fused_reproj_px': fused_px,
+           'fused_3d_mm': fused_mm, 'triangulated': fraction}
+    if data.recording.gt3d is not None:
+        summary = evaluate_detector(Detector(model, meta, device='cpu'), data.recording, held,
+                                    data.boxes, mode=label)
+        row.update({'allview_reproj_px': summary.reprojection_mean,
+                    'gt_reproj_px': summary.gt_reprojection_mean,
+                    'pck@0.1': summary.pck.at(0.1)})
+    return row
+
+
+def online(folder, skeleton, start, out, mode, minutes, every, data, device):
+    """Run OnlineLearner for `minutes` from `start`; print each announcement live."""
+    config = LearnerConfig(bags=(str(folder),), out=str(out), skeleton=skeleton, model=str(start),
+                           mode=mode, views_per_instant=8, checkpoint_every=every,
+                           device=device, resume=False, validate_instants=16, **SMALL, **BATCH)
+    learner = OnlineLearner(config, log=lambda *a: None)
+    t0 = time.monotonic()
+    print(f'  [{mode}] start: held-out reprojection (Trainer.validate) '
+          f'{learner.reference_px:.2f} px', flush=True)
+    while time.monotonic() - t0 < 60 * minutes:
+        learner.step()
+        result = learner.checkpoint_due()
+        if result is not None and result.published:
+            fused_px, _, _ = fused_errors(result.path, data, data.held_out[::2])
+            print(f'  [{mode}] {time.monotonic() - t0:6.0f} s  step {result.step:5d}  '
+                  f'announced: held-out reprojection {result.metrics["reprojection_px"]:.2f} px'
+                  f', live core (fused) {fused_px:.2f} px', flush=True)
+    final = learner.published.path if learner.published else str(start)
+    return final, learner.step_count, learner.steps_per_s
+
+
+def table(rows, columns):
+    widths = {c: max(len(c), *(len(fmt(r.get(c))) for r in rows)) for c in columns}
+    lines = ['  '.join(c.ljust(widths[c]) for c in columns)]
+    for r in rows:
+        lines.append('  '.join(fmt(r.get(c)).ljust(widths[c]) for c in columns))
+    return '\n'.join(lines)
+
+
+def fmt(value):
+    if isinstance(value, float):
+        return f'{value:.3f}'
+    return '' if value is None else str(value)
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--out', default='/tmp/monet_learner_bench')
+    parser.add_argument('--data', help='a `monet synth` folder with 8 cameras')
+    parser.add_argument('--frames', type=int, default=150)
+    parser.add_argument('--steps', type=int, default=10, help='steps per speed run')
+    parser.add_argument('--repeats', type=int, default=3)
+    parser.add_argument('--start-steps', type=int, default=400,
+                        help='supervised steps of the starting model')
+    parser.add_argument('--minutes', type=float, default=3.0, help='online learning time')
+    parser.add_argument('--every', type=int, default=25, help='steps between checkpoints')
+    parser.add_argument('--threads', type=int, default=1)
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    wall = time.monotonic()
+    folder, skeleton = make_data(args)
+    print(f'data: {folder} (skeleton {skeleton}); torch threads {args.threads}; machine shared '
+          f'with other jobs (2 cores): figures are indicative', flush=True)
+
+    devices = ['cpu'] + (['cuda'] if torch.cuda.is_available() else [])
+    speed = []
+    for device in devices:
+        for mode in ('supervised', 'monet'):
+            rate, rec = steps_per_s(folder, skeleton, mode, device, args.steps, args.repeats,
+                                    out / f'speed_{mode}_{device}')
+            speed.append({'device': device, 'mode': mode, 'views': rec.num_views,
+                          'image': f'{rec.cameras[0].width}x{rec.cameras[0].height}',
+                          'steps_per_s': rate})
+    print('\n1. training steps/s (median of %d x %d steps; small net %dpx, batch 8 '
+          'labelled + 8 pseudo + 1 instant x 8 views)' % (args.repeats, args.steps,
+                                                           SMALL['input_size']))
+    print(table(speed, ['device', 'mode', 'views', 'image', 'steps_per_s']), flush=True)
+
+    # 2. labels-only start, then online learning vs continued supervised training
+    from monet_ros.learning.recording import load_recording
+    from monet_ros.skeleton import load_skeleton
+    keypoints = load_skeleton(skeleton).keypoints
+    recording = load_recording(folder, skeleton=list(keypoints))
+    cfg = TrainConfig(mode='supervised', steps=args.start_steps, checkpoint_every=10 ** 6,
+                      device='cpu', **{**SMALL, **BATCH})
+    probe_data = None
+    start_dir = out / 'start'
+    start = start_dir / 'model.pt'
+    if not start.exists():
+        t = time.monotonic()
+        probe = build_model('small', len(keypoints), **cfg.model_options())
+        probe_data = TrainingData(recording, cfg, probe.input_size, probe.heatmap_size)
+        trainer = Trainer(cfg, probe_data, start_dir)
+        trainer.run(progress=False)
+        print(f'\nstarting model: {args.start_steps} supervised steps (labels only) in '
+              f'{time.monotonic() - t:.0f} s', flush=True)
+    meta = load_checkpoint(start)[1]
+    data = probe_data or TrainingData(recording, cfg, meta['input_size'], meta['heatmap_size'])
+    rows = [evaluate(start, data, 'start (labels only)')]
+    results = {}
+    for mode in ('monet', 'supervised'):
+        print(f'\n{args.minutes:g} min of online learning, mode {mode}:', flush=True)
+        final, steps, rate = online(folder, skeleton, start, out / f'online_{mode}', mode,
+                                    args.minutes, args.every, data, 'cpu')
+        results[mode] = (steps, rate)
+        row = evaluate(final, data, f'after {args.minutes:g} min {mode}')
+        row['online_steps'] = steps
+        rows.append(row)
+    print(f'\n2. held-out tail ({len(data.held_out)} instants x {recording.num_views} views): '
+          'the announced model of each run')
+    print(table(rows, ['model', 'step', 'online_steps', 'fused_reproj_px', 'fused_3d_mm',
+                       'triangulated', 'allview_reproj_px', 'gt_reproj_px', 'pck@0.1']))
+    (out / 'results.json').write_text(json.dumps({'speed': speed, 'before_after': rows},
+                                                 indent=1))
+    print(f'\nwall time {time.monotonic() - wall:.0f} s; results in {out / "results.json"}')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,334 @@
+"""Online learning: fine-tune a detector from recorded bags while the pipeline runs (no ROS).
+
+    learner = OnlineLearner(LearnerConfig(bags=('rec/',), model='start.pt', out='run/'))
+    while True:
+        terms = learner.step()              # one Trainer step: L_L + lambda_e L_E + lambda_p L_B
+        result = learner.checkpoint_due()   # every checkpoint_every steps: CheckpointResult
+        if result is not None and result.published:
+            announce(result.announcement())     # JSON of /monet/model
+
+The bags are decoded once into memory (learning.recording) and replayed as a shuffled,
+looping stream of multiview instants: every step the Trainer samples labelled views (L_L),
+unlabeled instants (L_E) and pseudo-labelled views (L_B) at random, forever. The held-out
+slice (the tail of the recordings, `eval_fraction`) is never trained on; every checkpoint is
+validated on it without ground truth (Trainer.validate: mean epipolar divergence and the
+reprojection error of the all-view triangulation of the detections).
+
+Publication criterion: a checkpoint is announced only when its held-out reprojection error
+is finite and not worse than that of the last announced model (initially: the starting
+model, validated at start) by more than `publish_tolerance_px`. The last announcement is
+kept in out/published.json, so a restarted learner resumes with the same reference.
+"""
+from dataclasses import dataclass, fields
+import hashlib
+import json
+import math
+import os
+from pathlib import Path
+import tempfile
+import time
+
+import numpy as np
+
+from monet_ros.config import ConfigError, setting
+from monet_ros.learning.config import TrainConfig
+
+PUBLISHED = 'published.json'
+FOREVER = 10 ** 12          # TrainConfig.steps of a learner that runs until stopped
+
+
+@dataclass(frozen=True)
+class LearnerConfig(TrainConfig):
+    """TrainConfig + where the data comes from and when models are announced."""
+    bags: tuple[str, ...] = setting((), 'recordings to learn from: rosbag2 folders, .mcap files '
+                                    'or `monet synth` output folders', min_length=1)
+    out: str = setting('', 'output folder: checkpoints/, model.pt, trainer_state.pt, '
+                       'train_log.csv, published.json')
+    model: str = setting('', "initial checkpoint ('' = a new network of `architecture`); "
+                         'its architecture and keypoints define the network')
+    rig: str = setting('', "rig file for all bags ('' = each folder's rig.yaml, else the "
+                       "bag's CameraInfo + /tf_static)")
+    labels: str = setting('', "labels CSV (stamp_ns,camera,keypoint,u,v) for all bags "
+                          "('' = each folder's labels.csv, else none)")
+    skeleton: str = setting('human14', 'keypoint names (preset or YAML) when no initial model '
+                            'is given')
+    max_instants: int = setting(0, 'read at most this many instants per bag (0 = all)',
+                                minimum=0)
+    resume: bool = setting(True, 'continue from out/trainer_state.pt when it exists')
+    publish_tolerance_px: float = setting(0.0, 'announce a checkpoint when its held-out '
+                                          'reprojection error is at most the last announced '
+                                          "one's + this (px)", minimum=0.0)
+    validate_instants: int = setting(16, 'held-out instants used to validate a checkpoint',
+                                     minimum=1)
+    keep_checkpoints: int = setting(5, 'unannounced checkpoints kept besides the announced one '
+                                    '(older ones are deleted; 0 = keep all)', minimum=0)
+    threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0)
+    # Redefined with the learner's meaning and defaults:
+    steps: int = setting(0, 'stop after this many training steps (0 = run until stopped)',
+                         minimum=0)
+    checkpoint_every: int = setting(200, 'steps between checkpoints (each is validated and '
+                                    'maybe announced)', minimum=1)
+    epipolar_warmup: float = setting(0.0, 'fraction of `steps` trained without L_E (needs '
+                                     'steps > 0; 0 when starting from a trained model)',
+                                     minimum=0.0, maximum=0.95)
+
+    def __post_init__(self):
+        super().__post_init__()
+        if not self.out:
+            raise ConfigError('LearnerConfig', 'out', 'is required (an output folder)')
+        if self.epipolar_warmup and not self.steps:
+            raise ConfigError('LearnerConfig', 'epipolar_warmup', 'needs steps > 0 (a '
+                              'fraction of the steps); use 0 for a learner that runs until '
+                              'stopped')
+
+    def train_config(self):
+        """The TrainConfig of the trainer (steps = FOREVER when 0)."""
+        names = {f.name for f in fields(TrainConfig)}
+        values = {k: v for k, v in self.to_dict().items() if k in names}
+        values['steps'] = self.steps or FOREVER
+        return TrainConfig(**values)
+
+
+def sha256_file(path):
+    digest = hashlib.sha256()
+    with open(path, 'rb') as stream:
+        for block in iter(lambda: stream.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def should_publish(metrics, reference_px, tolerance_px=0.0):
+    """(publish, reason): publish when the held-out reprojection error is finite and at most
+    reference_px + tolerance_px (reference None or inf = nothing announced yet)."""
+    err = metrics.get('reprojection_px', math.nan) if metrics else math.nan
+    if err is None or not math.isfinite(err):
+        return False, 'no finite held-out reprojection error (nothing triangulated)'
+    if reference_px is None or not math.isfinite(reference_px):
+        return True, f'reprojection {err:.3f} px (no reference yet)'
+    if err <= reference_px + tolerance_px:
+        return True, f'reprojection {err:.3f} px <= {reference_px:.3f} px + {tolerance_px:g}'
+    return False, f'reprojection {err:.3f} px worse than the announced {reference_px:.3f} px'
+
+
+@dataclass(frozen=True)
+class CheckpointResult:
+    """One validated checkpoint: path, step, sha256, held-out metrics (+ loss terms) and
+    whether it was announced (and why)."""
+    path: str
+    step: int
+    sha256: str
+    metrics: dict
+    published: bool
+    reason: str
+
+    def announcement(self):
+        """The /monet/model JSON text."""
+        return json.dumps({'path': self.path, 'step': self.step, 'sha256': self.sha256,
+                           'metrics': self.metrics}, allow_nan=False,
+                          default=lambda x: None)
+
+
+def _finite(metrics):
+    """JSON-safe metrics (NaN/inf -> None)."""
+    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
+            for k, v in metrics.items()}
+
+
+def _write_json_atomic(path, payload):
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    try:
+        with os.fdopen(fd, 'w') as stream:
+            json.dump(payload, stream, indent=1)
+            stream.flush()
+            os.fsync(stream.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+
+
+def concatenate_recordings(recordings):
+    """One Recording of several with the same cameras (by name) and keypoints."""
+    from monet_ros.learning.recording import Recording, RecordingError
+    first = recordings[0]
+    if len(recordings) == 1:
+        return first
+    names = [c.name for c in first.cameras]
+    for rec in recordings[1:]:
+        if [c.name for c in rec.cameras] != names:
+            raise RecordingError(f'{rec.name}: cameras {[c.name for c in rec.cameras]} differ '
+                                 f'from {first.name}: {names}')
+    gt = None
+    if all(r.gt3d is not None for r in recordings):
+        gt = np.concatenate([r.gt3d for r in recordings])
+    return Recording('+'.join(r.name for r in recordings), first.cameras,
+                     np.concatenate([r.stamps for r in recordings]),
+                     [np.concatenate([r.frames[v] for r in recordings])
+                      for v in range(len(names))],
+                     first.keypoints, np.concatenate([r.labels for r in recordings]), gt)
+
+
+def load_bags(config, keypoints):
+    """The concatenated Recording of config.bags (keypoints: names, heatmap channel order)."""
+    from monet_ros.learning.recording import load_recording
+    return concatenate_recordings([
+        load_recording(bag, rig=config.rig or None, labels=config.labels or None,
+                       skeleton=list(keypoints), max_instants=config.max_instants or None)
+        for bag in config.bags])
+
+
+class OnlineLearner:
+    """A Trainer over the bags plus validation, announcement bookkeeping and pruning.
+
+    Not thread-safe: call from one thread (the node serialises with a lock)."""
+
+    def __init__(self, config, log=print):
+        import torch
+
+        from monet_ros.learning.trainer import Trainer, TrainingData
+        from monet_ros.models import build_model, load_checkpoint
+        from monet_ros.skeleton import load_skeleton
+
+        if not isinstance(config, LearnerConfig):
+            raise TypeError('config must be a LearnerConfig')
+        self.config = config
+        self.log = log
+        if config.threads:
+            torch.set_num_threads(config.threads)
+        self.out = Path(config.out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        for stale in self.out.rglob('.*.tmp'):          # temporaries of a killed write
+            stale.unlink()
+        train_config = config.train_config()
+        resume = config.resume and (self.out / 'trainer_state.pt').is_file()
+        model = None
+        if resume:           # the network of the last run (its weights come from the state)
+            model, meta = load_checkpoint(self.out / 'model.pt')
+            keypoints = meta['keypoints']
+        elif config.model:
+            model, meta = load_checkpoint(config.model)
+            keypoints = meta['keypoints']
+        else:
+            keypoints = list(load_skeleton(config.skeleton).keypoints)
+        probe = model or build_model(config.architecture, len(keypoints),
+                                     **config.model_options())
+        self.recording = load_bags(config, keypoints)
+        data = TrainingData(self.recording, train_config, probe.input_size, probe.heatmap_size)
+        if len(data.held_out) == 0:
+            raise ConfigError('LearnerConfig', 'eval_fraction', 'leaves no held-out instant '
+                              'to validate checkpoints on')
+        if resume:
+            self.trainer = Trainer.resume(self.out, data, config=train_config, model=model)
+            log(f'resumed at step {self.trainer.step_count} from {self.out}')
+        else:
+            self.trainer = Trainer(train_config, data, self.out, model=model)
+        self.data = data
+        if not resume:             # a fresh run: an older run's announcement is no reference
+            (self.out / PUBLISHED).unlink(missing_ok=True)
+        self.published = self._load_published()
+        if self.published is not None:
+            self.reference_px = self.published.metrics.get('reprojection_px')
+            log(f'last announced model: {self.published.path} (step {self.published.step})')
+        else:
+            start = self.trainer.validate(max_instants=config.validate_instants)
+            self.start_metrics = start
+            self.reference_px = start.get('reprojection_px')
+            log(f'starting model: held-out reprojection {self.reference_px} px, epipolar '
+                f'divergence {start.get("epipolar_divergence")}')
+        if self.reference_px is None:
+            self.reference_px = math.inf
+        self.checkpoints = 0
+        self.last_result = None
+        self.step_times = []
+        log(f'{self.recording.name}: {self.recording.num_instants} instants x '
+            f'{self.recording.num_views} views, {len(data.labelled_instants)} labelled, '
+            f'{len(data.unlabeled_instants)} unlabeled, {len(data.held_out)} held out; '
+            f'mode {config.mode}, device {self.trainer.device}')
+
+    def _load_published(self):
+        path = self.out / PUBLISHED
+        if not path.is_file():
+            return None
+        try:
+            info = json.loads(path.read_text())
+            result = CheckpointResult(info['path'], int(info['step']), info['sha256'],
+                                      info['metrics'], True, 'announced before')
+        except (ValueError, KeyError, TypeError) as error:
+            self.log(f'{path}: ignored ({error})')
+            return None
+        if not Path(result.path).is_file() or sha256_file(result.path) != result.sha256:
+            self.log(f'{path}: the announced checkpoint {result.path} is gone or changed; '
+                     'ignored')
+            return None
+        return result
+
+    @property
+    def step_count(self):
+        return self.trainer.step_count
+
+    @property
+    def finished(self):
+        return bool(self.config.steps) and self.trainer.step_count >= self.config.steps
+
+    def step(self):
+        """One training step; returns the loss terms ({'loss', 'L', 'E', 'B', 'lr', 'step'})."""
+        start = time.perf_counter()
+        terms = self.trainer.step()
+        self.step_times = (self.step_times + [time.perf_counter() - start])[-50:]
+        return terms
+
+    @property
+    def steps_per_s(self):
+        return len(self.step_times) / sum(self.step_times) if self.step_times else 0.0
+
+    def checkpoint_due(self):
+        """After step(): the CheckpointResult when the trainer just wrote a scheduled
+        checkpoint (every checkpoint_every steps), else None."""
+        c = self.trainer.config
+        n = self.trainer.step_count
+        if n and (n % c.checkpoint_every == 0 or n == c.steps):
+            return self.evaluate(self.trainer.last_checkpoint)
+        return None
+
+    def save(self):
+        """Write a checkpoint now (e.g. on request) and evaluate it."""
+        if self.trainer.last_checkpoint is not None and \
+                self.trainer.last_checkpoint.name == f'step_{self.step_count:06d}.pt' and \
+                self.last_result is not None and self.last_result.step == self.step_count:
+            return self.last_result                       # nothing trained since
+        return self.evaluate(self.trainer.save())
+
+    def evaluate(self, path):
+        """Validate the checkpoint at `path` (the trainer's current weights) on the held-out
+        slice, decide whether to announce it, prune old checkpoints."""
+        metrics = self.trainer.validate(max_instants=self.config.validate_instants)
+        metrics.update({f'loss_{k}': v for k, v in self.trainer.last_terms.items()
+                        if k in ('loss', 'L', 'E', 'B')})
+        metrics = _finite(metrics)
+        publish, reason = should_publish(metrics, self.reference_px,
+                                         self.config.publish_tolerance_px)
+        result = CheckpointResult(str(Path(path).resolve()), self.step_count,
+                                  sha256_file(path), metrics, publish, reason)
+        self.checkpoints += 1
+        self.last_result = result
+        if publish:
+            self.published = result
+            self.reference_px = metrics['reprojection_px']
+            _write_json_atomic(self.out / PUBLISHED, {
+                'path': result.path, 'step': result.step, 'sha256': result.sha256,
+                'metrics': result.metrics})
+        self.prune()
+        return result
+
+    def prune(self):
+        """Delete unannounced checkpoints beyond the newest keep_checkpoints."""
+        keep = self.config.keep_checkpoints
+        if not keep:
+            return
+        announced = Path(self.published.path).name if self.published else None
+        files = sorted((self.out / 'checkpoints').glob('step_*.pt'))
+        candidates = [p for p in files if p.name != announced]
+        for path in candidates[:-keep]:
+            path.unlink(missing_ok=True)
