@@ -18,7 +18,7 @@ $(STAMP): requirements.txt setup.py
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m monet_ros.cli demo
+	$(PY) -m monet_ros.cli pipeline
 
 test: $(STAMP)
 	$(PY) -m pytest

@@ -59,12 +59,15 @@ class Summary:
         self.latencies = []       # (wall time, seconds)
         self.errors = []          # (wall time, mean reprojection error px)
         self.frames = 0
+        self.frames_published = 0
         self.last_fused = None
         self.cond = threading.Condition(self.lock)
         self.last_stamp = -1
 
     def on_image(self, topic, stamp_ns, wall):
         with self.lock:
+            if stamp_ns not in self.published:
+                self.frames_published += 1
             self.published.setdefault(stamp_ns, wall)
             if len(self.published) > 10000:
                 self.published.pop(next(iter(self.published)))
@@ -90,13 +93,13 @@ class Summary:
                 self.cond.wait_for(lambda: self.last_stamp >= previous_stamp, timeout_s)
         return wait
 
-    def line(self, window=None, detector=None):
+    def line(self, window=None):
         now = time.monotonic()
         with self.lock:
             lat = [s for t, s in self.latencies if window is None or now - t <= window]
             err = [e for t, e in self.errors if window is None or now - t <= window]
             times = [t for t, _ in self.latencies if window is None or now - t <= window]
-        parts = [f'frames {self.frames}']
+        parts = [f'frames {self.frames} fused of {self.frames_published} played']
         if window is not None:
             parts.append(f'{len(times) / window:5.1f} fps')
         elif len(times) > 1:
@@ -106,8 +109,6 @@ class Summary:
                          f'p95 {1e3 * np.percentile(lat, 95):5.0f} ms')
         if err:
             parts.append(f'reprojection error {np.mean(err):5.2f} px')
-        if detector is not None:
-            parts.append(f'dropped {sum(s.dropped for s in detector.slots)}')
         return ' | '.join(parts)
 
 
@@ -121,7 +122,7 @@ def image_transport(bag):
 
 
 def run(args):
-    from monet_ros.nodes.runner import start_error, use_large_data_profile
+    from monet_ros.nodes.runner import start_error, stopped_by_shutdown, use_large_data_profile
 
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo
@@ -129,6 +130,8 @@ def run(args):
         args.bag, args.rig = args.bag or assets.bag, args.rig or assets.rig
         args.model = args.model or assets.model
         args.skeleton = assets.skeleton
+        args.loop = True                             # a 3 s recording: show it for a while
+        args.duration = args.duration or 20.0
     if not args.model:
         start_error('monet pipeline', '--model is required with --bag')
         return 2
@@ -178,12 +181,17 @@ def run(args):
         next_line = started + 1.0
         ended = None
         while rclpy.ok():
-            executor.spin_once(timeout_sec=0.05)
+            try:
+                executor.spin_once(timeout_sec=0.05)
+            except Exception:  # noqa: BLE001 - a signal shut the context down mid-call
+                if rclpy.ok():
+                    raise
+                break
             now = time.monotonic()
             if now >= next_line:
                 next_line += 1.0
                 if not args.quiet:
-                    print(summary.line(window=1.0, detector=detector), flush=True)
+                    print(summary.line(window=1.0), flush=True)
             if args.duration and now - started >= args.duration:
                 break
             if player.done.is_set():
@@ -193,6 +201,9 @@ def run(args):
                     break
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not stopped_by_shutdown():
+            raise
     finally:
         for node in nodes:
             if isinstance(node, PlayerNode):
@@ -202,8 +213,22 @@ def run(args):
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
-    print(f'monet pipeline: {args.bag}: {summary.line(detector=detector)}', flush=True)
+    if len(nodes) > 1 and nodes[0].last_result is not None:
+        print(keypoint_table(nodes[0]), flush=True)
+    print(f'monet pipeline: {args.bag}: {summary.line()}', flush=True)   # the last line
     return 0
+
+
+def keypoint_table(fusion):
+    """The last fused frame as text: keypoint, x y z (m), views, reprojection error (px)."""
+    result = fusion.last_result
+    lines = [f'last frame (stamp {fusion.last_stamp_ns}), frame {fusion.frame_id!r}:',
+             f'  {"keypoint":<16}{"x":>8}{"y":>8}{"z":>8}{"views":>7}{"error px":>10}']
+    for name, X, views, error in zip(fusion.skeleton.keypoints, result.X, result.num_views,
+                                     result.reprojection_error):
+        lines.append(f'  {name:<16}{X[0]:8.3f}{X[1]:8.3f}{X[2]:8.3f}{int(views):7d}'
+                     f'{error:10.2f}')
+    return '\n'.join(lines)
 
 
 if __name__ == '__main__':

@@ -15,10 +15,11 @@ DEFAULT_WORKDIR = Path.home() / '.cache' / 'monet_ros' / 'demo'
 # Small enough to make and learn in about a minute on two CPU cores.
 SYNTH_ARGS = ['--cameras', '4', '--frames', '90', '--fps', '30', '--width', '320',
               '--height', '240', '--label-fraction', '1.0', '--seed', '0', '--quiet']
+# One torch thread: on a busy 2-core machine two threads made each step 10x slower.
 TRAIN_ARGS = ['--mode', 'supervised', '--architecture', 'small', '--input-size', '128',
-              '--steps', '300', '--lr', '0.002', '--lr-decay-every', '100',
-              '--batch-labelled', '12', '--eval-fraction', '0.0', '--checkpoint-every', '300',
-              '--no-progress']
+              '--steps', '150', '--lr', '0.003', '--lr-decay-every', '50',
+              '--batch-labelled', '8', '--eval-fraction', '0.0', '--checkpoint-every', '150',
+              '--threads', '1', '--no-progress']
 
 
 @dataclass(frozen=True)

@@ -43,6 +43,13 @@ def start_error(name, error):
     print(f'{name}: error: {error}', file=sys.stderr, flush=True)
 
 
+def stopped_by_shutdown(context=None):
+    """True once SIGINT / SIGTERM (rclpy's signal handler) or rclpy.shutdown() has closed the
+    context. An executor caught inside spin at that moment raises RCLError ('context is not
+    valid') instead of ExternalShutdownException: that is a clean stop, not a failure."""
+    return not rclpy.ok(context=context)
+
+
 def run_node(factory, name, args=None, large_data=False):
     """Run the node built by `factory()` until shutdown; return the process exit code.
 
@@ -64,6 +71,9 @@ def run_node(factory, name, args=None, large_data=False):
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        if not stopped_by_shutdown():
+            raise
     finally:
         if node is not None:
             node.destroy_node()

@@ -28,7 +28,8 @@ def test_lockstep_publishes_keypoints3d_for_every_frame(ros_env, tmp_path):
     for cloud in clouds:
         assert cloud.header.frame_id == 'world'
         assert cloud_to_keypoints3d(cloud)['X'].shape == (14, 3)
-    assert f'frames {len(stamps)}' in proc.output()   # the final summary line
+    # the final summary line
+    assert f'frames {len(stamps)} fused of {len(stamps)} played' in proc.output()
 
 
 def test_sigterm_and_sigint_exit_zero(ros_env, tmp_path):

@@ -107,9 +107,10 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
     rig, rig_path, first, second, images = setup
     aspect = INPUT[1] / INPUT[0]
     params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
-                  track_timeout_s=3600.0, device='cpu')
+                  track_timeout_s=3600.0, device='cpu', overlay=True)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = Stream(ros, rig)
+        overlays = ros.collect('/monet/cam1/overlay', Image, 100)
         for heat_pub, info_pub in stream.pubs.values():
             ros.wait_for_subscribers(heat_pub, process=node)
             ros.wait_for_subscribers(info_pub, process=node)
@@ -126,6 +127,9 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
             np.testing.assert_allclose(np.reshape(info.k, (3, 3)),
                                        expected_K(cam.K, box, 32, 24), rtol=1e-12)
             np.testing.assert_allclose(info.d, cam.dist)
+        ros.spin_until(lambda: any(header_stamp_ns(m) == T0 for m in overlays), timeout=10)
+        overlay = next(m for m in overlays if header_stamp_ns(m) == T0)
+        assert (overlay.encoding, overlay.width, overlay.height) == ('rgb8', 128, 96)
         want = reference(first, images, rig, np.array([box, box]))
         for v, cam in enumerate(rig):
             np.testing.assert_allclose(image_msg_to_heatmaps(got[cam.name][0]), want[v],

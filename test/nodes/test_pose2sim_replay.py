@@ -125,6 +125,10 @@ def test_replay_matches_pose2sim_triangulation(ros_env, shared_data, tmp_path):
     assert detector.answered >= 380
     for status in diagnostics[-1].status:
         print(status.name, status.message, [(kv.key, kv.value) for kv in status.values])
+    # Only this replay's frames (a parallel test run on the same random domain id is
+    # possible on a shared machine: ignore clouds that are not ours).
+    clouds = [c for c in clouds if c.width == len(MARKERS)
+              and 0 <= round((header_stamp_ns(c) - T0_NS) * 60 / 1e9) < 100]
     errors = []
     for cloud in clouds:
         frame = round((header_stamp_ns(cloud) - T0_NS) * 60 / 1e9)
