@@ -122,7 +122,12 @@ def image_transport(bag):
 
 
 def run(args):
-    from monet_ros.nodes.runner import start_error, stopped_by_shutdown, use_large_data_profile
+    from monet_ros.nodes.runner import (
+        start_error,
+        stop_executor,
+        stopped_by_shutdown,
+        use_large_data_profile,
+    )
 
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo
@@ -209,7 +214,7 @@ def run(args):
             if isinstance(node, PlayerNode):
                 node.stopping.set()           # no publishing into a closing context
         if executor is not None:
-            executor.shutdown(timeout_sec=2.0)
+            stop_executor(executor)
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()

@@ -81,8 +81,8 @@ class TrainConfig:
                                             minimum=0.0, exclusive_minimum=True)
     bootstrap_min_views: int = setting(3, 'bootstrapping: minimum inlier views', minimum=2)
     monet_bootstrap_rounds: int = setting(
-        1, "monet: bootstrapping rounds feeding L_B (the paper's bootstrapping prior); "
-        '0 = L_B on spatial pseudo-labels only', minimum=0, maximum=3)
+        2, "monet: bootstrapping rounds feeding L_B (the paper's bootstrapping prior; 2 = "
+        "Bootstrapping II's); 0 = L_B on spatial pseudo-labels only", minimum=0, maximum=3)
     track_horizon: int = setting(10, 'spatiotemporal: frames tracked each way', minimum=0)
     track_ransac_px: float = setting(4.0, 'spatiotemporal: RANSAC threshold (px)', minimum=0.0,
                                      exclusive_minimum=True)

@@ -7,6 +7,7 @@ destroys it and shuts rclpy down, exiting 0.
 import os
 from pathlib import Path
 import sys
+import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
@@ -48,6 +49,22 @@ def stopped_by_shutdown(context=None):
     context. An executor caught inside spin at that moment raises RCLError ('context is not
     valid') instead of ExternalShutdownException: that is a clean stop, not a failure."""
     return not rclpy.ok(context=context)
+
+
+def stop_executor(executor, timeout_sec=2.0):
+    """Shut `executor` down and wait for the callbacks still running in its threads.
+
+    rclpy 7's Executor.shutdown does not wait for a MultiThreadedExecutor's in-flight
+    callbacks; destroying the nodes under them makes them fail ("cannot use Destroyable"),
+    and the failed tasks print "exception was never retrieved" when collected. Waiting for
+    them (and collecting what they raised while the context closed) keeps the exit quiet."""
+    executor.shutdown(timeout_sec=timeout_sec)
+    deadline = time.monotonic() + timeout_sec
+    for task in list(getattr(executor, '_futures', ())):     # MultiThreadedExecutor only
+        while not task.done() and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if task.done():
+            task.exception()          # marks it retrieved: a stop-time failure, not a bug
 
 
 def run_node(factory, name, args=None, large_data=False):
