@@ -14,15 +14,17 @@ For each synthetic rig (`monet synth`: a moving human, 14 keypoints, <1% labelle
 Prints the table (rows = modes, columns = rigs) and writes results.md/.csv/.json and
 pck_<rig>.png (Figure 6) under --out, with the wall time, seeds and configuration.
 
-Reduced form (default: 240 instants, 2 labelled (0.83%), 3 labelled views each, 300 steps,
-small net 64 px -> 16x16 heatmaps, width 24, Adam 1e-3, seed 0):
-    .venv/bin/python bench/accuracy.py --out /tmp/monet_accuracy
-  measured 2026-11-23 on the shared 2-core development machine (load average 10-18 from
-  other jobs): 20.6 min wall for all 12 trainings + evaluations (2 jobs), 1.25 GB RSS.
-  Results in bench/results/accuracy_reduced.md.
-Full form (documented, not run here: 1500 instants, 6 labelled, 6000 steps per mode; about
-20x the reduced form's CPU time, i.e. several hours on 2 CPU cores):
-    .venv/bin/python bench/accuracy.py --full --out /tmp/monet_accuracy_full --jobs 2
+Forms (small net 64 px -> 16x16 heatmaps, width 24, Adam 1e-3, 3 labelled views per
+labelled instant; rigs ring8 and dome6; wall times measured 2026-11-23 on the 2-core
+development machine, quiet, 2 jobs, no GPU; figures in bench/results/accuracy.md):
+  reduced (default): 240 instants, 2 labelled (0.83%), 300 steps per mode, seed 0
+      .venv/bin/python bench/accuracy.py --out /tmp/monet_accuracy          # 1.8 min
+  medium, several seeds and a third rig with only 4 cameras:
+      .venv/bin/python bench/accuracy.py --out /tmp/acc_seeds --frames 600 --steps 1500 \
+          --rigs ring8 dome6 ring4 --seeds 0 1 2                           # ~35 min
+  full: 1500 instants, 6 labelled (0.40%), 6000 steps per mode, seed 0
+      .venv/bin/python bench/accuracy.py --full --out /tmp/monet_accuracy_full   # 29.8 min
+Variants side by side: --set KEY=VALUE (any TrainConfig field) with --tag NAME --merge.
 """
 import argparse
 from concurrent.futures import ProcessPoolExecutor
@@ -174,7 +176,7 @@ def across_seeds(summaries, rigs, seeds):
             lines.append(
                 f'| {MODE_TITLES.get(m, m)} | {stat([r.reprojection_mean for r in rows])} '
                 f'| {stat([r.gt_reprojection_mean for r in rows])} '
-                f'| {stat([1000 * r.extra["error3d_mean"] for r in rows], ".0f")} '
+                f'| {stat([1000 * r.extra["error3d_mean"] for r in rows], ".0f")} | '
                 + ' | '.join(stat([r.pck.at(a) for r in rows], '.3f') for a in (0.05, 0.1, 0.2))
                 + f' | {sum(best_reproj[n] == m for n in complete)}/{len(complete)} '
                 f'| {sum(best_pck[n] == m for n in complete)}/{len(complete)} '

@@ -32,10 +32,19 @@ def add_arguments(parser):
     group = parser.add_argument_group('training configuration (TrainConfig)')
     for f in fields(TrainConfig):
         flag = '--' + f.name.replace('_', '-')
-        kind = {'int': int, 'float': float, 'str': str}[f.type if isinstance(f.type, str)
-                                                        else f.type.__name__]
+        kind = {'int': int, 'float': float, 'str': str, 'bool': parse_bool}[
+            f.type if isinstance(f.type, str) else f.type.__name__]
         group.add_argument(flag, dest=f.name, type=kind, default=None,
                            help=f'{f.metadata["description"]} (default {f.default!r})')
+
+
+def parse_bool(text):
+    """'true'/'false' (also 1/0, yes/no, on/off) for boolean TrainConfig flags."""
+    value = {'true': True, '1': True, 'yes': True, 'on': True,
+             'false': False, '0': False, 'no': False, 'off': False}.get(text.lower())
+    if value is None:
+        raise argparse.ArgumentTypeError(f'expected true or false, got {text!r}')
+    return value
 
 
 def config_from_args(args):

@@ -83,6 +83,9 @@ class TrainConfig:
     monet_bootstrap_rounds: int = setting(
         2, "monet: bootstrapping rounds feeding L_B (the paper's bootstrapping prior; 2 = "
         "Bootstrapping II's); 0 = L_B on spatial pseudo-labels only", minimum=0, maximum=3)
+    monet_temporal: bool = setting(
+        False, 'monet: add spatiotemporal pseudo-labels (tracked, verified) to L_B; they take '
+        'precedence over bootstrapped ones')
     track_horizon: int = setting(10, 'spatiotemporal: frames tracked each way', minimum=0)
     track_ransac_px: float = setting(4.0, 'spatiotemporal: RANSAC threshold (px)', minimum=0.0,
                                      exclusive_minimum=True)
@@ -104,7 +107,8 @@ class TrainConfig:
     def spec(self):
         spec = MODE_SPECS[self.mode]
         if self.mode == 'monet':
-            spec = replace(spec, bootstrap_rounds=self.monet_bootstrap_rounds)
+            spec = replace(spec, bootstrap_rounds=self.monet_bootstrap_rounds,
+                           temporal=self.monet_temporal)
         return spec
 
     @property

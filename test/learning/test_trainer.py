@@ -91,6 +91,19 @@ def test_bootstrap_rounds_run_on_schedule_and_add_labels(recording):
     assert np.median(err) < 3.0, np.median(err)
 
 
+def test_monet_temporal_uses_the_spatiotemporal_pseudo_labels(recording):
+    def pseudo(mode, **options):
+        config = TrainConfig(mode=mode, steps=10, **options, **TINY)
+        return Trainer(config, TrainingData(recording, config, (48, 48), (12, 12))).pseudo
+
+    spatial = pseudo('spatial')
+    tracked = pseudo('spatiotemporal')
+    monet = pseudo('monet', monet_temporal=True)
+    assert np.isfinite(tracked).sum() > np.isfinite(spatial).sum()   # tracking added labels
+    np.testing.assert_array_equal(monet, tracked)
+    np.testing.assert_array_equal(pseudo('monet'), spatial)           # default: spatial only
+
+
 def test_config_errors_name_the_field():
     with pytest.raises(ConfigError, match='mode'):
         TrainConfig(mode='magic')
