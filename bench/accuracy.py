@@ -18,10 +18,10 @@ Forms (small net 64 px -> 16x16 heatmaps, width 24, Adam 1e-3, 3 labelled views 
 labelled instant; rigs ring8 and dome6; wall times measured 2026-11-23 on the 2-core
 development machine, quiet, 2 jobs, no GPU; figures in bench/results/accuracy.md):
   reduced (default): 240 instants, 2 labelled (0.83%), 300 steps per mode, seed 0
-      .venv/bin/python bench/accuracy.py --out /tmp/monet_accuracy          # 1.8 min
+      .venv/bin/python bench/accuracy.py --out /tmp/monet_accuracy          # 2.0 min
   medium, several seeds and a third rig with only 4 cameras:
       .venv/bin/python bench/accuracy.py --out /tmp/acc_seeds --frames 600 --steps 1500 \
-          --rigs ring8 dome6 ring4 --seeds 0 1 2                           # ~35 min
+          --rigs ring8 dome6 ring4 --seeds 1 2                             # 23.6 min
   full: 1500 instants, 6 labelled (0.40%), 6000 steps per mode, seed 0
       .venv/bin/python bench/accuracy.py --full --out /tmp/monet_accuracy_full   # 29.8 min
 Variants side by side: --set KEY=VALUE (any TrainConfig field) with --tag NAME --merge.
