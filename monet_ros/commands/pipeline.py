@@ -125,7 +125,7 @@ def run(args):
     from monet_ros.nodes.runner import (
         start_error,
         stop_executor,
-        stopped_by_shutdown,
+        until_shutdown,
         use_large_data_profile,
     )
 
@@ -142,7 +142,7 @@ def run(args):
         return 2
     use_large_data_profile()
     import rclpy
-    from rclpy.executors import ExternalShutdownException, MultiThreadedExecutor
+    from rclpy.executors import MultiThreadedExecutor
 
     from monet_ros.nodes.detector import DetectorNode
     from monet_ros.nodes.fusion import FusionNode
@@ -155,60 +155,56 @@ def run(args):
     nodes = []
     detector = executor = None
     try:
-        try:
-            transport = image_transport(args.bag)
-            fusion = FusionNode(overrides=dict(rig=str(rig), cameras=cameras,
-                                               skeleton=args.skeleton, threads=0,
-                                               threshold_px=args.threshold_px))
-            nodes.append(fusion)
-            detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
-                                                   model=str(args.model), transport=transport,
-                                                   device=args.device))
-            nodes.append(detector)
-            player = PlayerNode(overrides=dict(
-                bag=str(args.bag), rate=0.0 if args.lockstep else args.rate, loop=args.loop,
-                wait_for_subscribers=1, start_delay_s=args.start_delay,
-                topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]))
-            nodes.append(player)
-            if args.learn:
-                nodes.append(learner_node(args, rig, summary))
-        except (ValueError, OSError) as error:
-            start_error('monet pipeline', error)
-            return 2
-        fusion.listeners.append(summary.on_fused)
-        player.listeners.append(summary.on_image)
-        if args.lockstep:
-            player.gate = summary.gate()
-        executor = MultiThreadedExecutor(num_threads=4)
-        for node in nodes:
-            executor.add_node(node)
-        started = time.monotonic()
-        next_line = started + 1.0
-        ended = None
-        while rclpy.ok():
+        with until_shutdown():
             try:
-                executor.spin_once(timeout_sec=0.05)
-            except Exception:  # noqa: BLE001 - a signal shut the context down mid-call
-                if rclpy.ok():
-                    raise
-                break
-            now = time.monotonic()
-            if now >= next_line:
-                next_line += 1.0
-                if not args.quiet:
-                    print(summary.line(window=1.0), flush=True)
-            if args.duration and now - started >= args.duration:
-                break
-            if player.done.is_set():
-                # the recording ended: let the frames in flight through, then stop
-                ended = ended or now
-                if now - max(ended, summary.last_fused or ended) > 2.0:
+                transport = image_transport(args.bag)
+                fusion = FusionNode(overrides=dict(rig=str(rig), cameras=cameras,
+                                                   skeleton=args.skeleton, threads=0,
+                                                   threshold_px=args.threshold_px))
+                nodes.append(fusion)
+                detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
+                                                       model=str(args.model), transport=transport,
+                                                       device=args.device))
+                nodes.append(detector)
+                player = PlayerNode(overrides=dict(
+                    bag=str(args.bag), rate=0.0 if args.lockstep else args.rate, loop=args.loop,
+                    wait_for_subscribers=1, start_delay_s=args.start_delay,
+                    topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]))
+                nodes.append(player)
+                if args.learn:
+                    nodes.append(learner_node(args, rig, summary))
+            except (ValueError, OSError) as error:
+                start_error('monet pipeline', error)
+                return 2
+            fusion.listeners.append(summary.on_fused)
+            player.listeners.append(summary.on_image)
+            if args.lockstep:
+                player.gate = summary.gate()
+            executor = MultiThreadedExecutor(num_threads=4)
+            for node in nodes:
+                executor.add_node(node)
+            started = time.monotonic()
+            next_line = started + 1.0
+            ended = None
+            while rclpy.ok():
+                try:
+                    executor.spin_once(timeout_sec=0.05)
+                except Exception:  # noqa: BLE001 - a signal shut the context down mid-call
+                    if rclpy.ok():
+                        raise
                     break
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if not stopped_by_shutdown():
-            raise
+                now = time.monotonic()
+                if now >= next_line:
+                    next_line += 1.0
+                    if not args.quiet:
+                        print(summary.line(window=1.0), flush=True)
+                if args.duration and now - started >= args.duration:
+                    break
+                if player.done.is_set():
+                    # the recording ended: let the frames in flight through, then stop
+                    ended = ended or now
+                    if now - max(ended, summary.last_fused or ended) > 2.0:
+                        break
     finally:
         for node in nodes:
             if isinstance(node, PlayerNode):

@@ -4,6 +4,7 @@
 a clear one-line error and exit code 2), spins it, and on SIGINT / SIGTERM / Ctrl-C
 destroys it and shuts rclpy down, exiting 0.
 """
+from contextlib import contextmanager
 import os
 from pathlib import Path
 import sys
@@ -51,6 +52,20 @@ def stopped_by_shutdown(context=None):
     return not rclpy.ok(context=context)
 
 
+@contextmanager
+def until_shutdown():
+    """Treat the ways a spin ends on SIGINT / SIGTERM as a clean stop: KeyboardInterrupt,
+    ExternalShutdownException, and any error raised once the context is shut down (see
+    stopped_by_shutdown). Anything else propagates."""
+    try:
+        yield
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        if not stopped_by_shutdown():
+            raise
+
+
 def stop_executor(executor, timeout_sec=2.0):
     """Shut `executor` down and wait for the callbacks still running in its threads.
 
@@ -78,19 +93,15 @@ def run_node(factory, name, args=None, large_data=False):
     rclpy.init(args=args)
     node = None
     try:
-        try:
-            node = factory()
-        except (ValueError, OSError) as error:
-            start_error(name, error)
-            return EXIT_BAD_START
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if not stopped_by_shutdown():
-            raise
+        with until_shutdown():
+            try:
+                node = factory()
+            except (ValueError, OSError) as error:
+                start_error(name, error)
+                return EXIT_BAD_START
+            executor = SingleThreadedExecutor()
+            executor.add_node(node)
+            executor.spin()
     finally:
         if node is not None:
             node.destroy_node()
