@@ -4,6 +4,12 @@
 Shapes: points2d (V, N, 2) observed (distorted) pixels, NaN = missing; weights (V, N) >= 0
 (0 or NaN = missing); cameras: list of V Camera; X (N, 3) world points, NaN = not
 triangulated.
+
+Cheirality, in every path: a triangulated point must lie in front of (camera-frame z > 0)
+every view used for it. A view that puts the point behind its camera is an outlier (its
+reprojection error counts as infinite); a point with fewer than 2 (min_views) views left is
+NaN with no inlier views. (Rays that meet behind the cameras reproject with 0 px error, so
+the reprojection error alone cannot catch them.)
 """
 from itertools import combinations
 from math import comb
@@ -65,15 +71,40 @@ def solve_dlt(B, w):
     return X
 
 
+def depths(rig, X):
+    """Camera-frame depths (..., V, N) of X (..., N, 3) in every view of `rig` (the dict of
+    stack_cameras); > 0 in front of the camera, NaN where X is NaN."""
+    X = np.asarray(X, dtype=np.float64)
+    return np.einsum('...nk,vk->...vn', X, rig['R'][:, 2]) + rig['t'][:, 2, None]
+
+
+def _behind(rig, X, used):
+    """Used views (..., V, N) that see X (..., N, 3) behind (or on) their camera plane."""
+    with np.errstate(invalid='ignore'):
+        return used & ~(depths(rig, X) > 0) & np.isfinite(X).all(axis=-1)[..., None, :]
+
+
 def triangulate(points2d, cameras, weights=None):
     """Confidence-weighted DLT triangulation of N keypoints seen by V cameras.
 
     points2d: (V, N, 2) observed pixels (NaN = missing); weights: (V, N) >= 0 or None
     (rows of view v are scaled by weights[v], as Pose2Sim's weighted triangulation).
     Points are undistorted first. One batched SVD over a (N, 2V, 4) stack.
-    Returns X (N, 3), NaN where fewer than 2 views are present."""
+    Cheirality: views that put the point behind their camera are left out and the point is
+    solved again from the rest; NaN if it is still behind a used view.
+    Returns X (N, 3), NaN where fewer than 2 views (in front) are present."""
     _, ideal, w = _prepare(points2d, cameras, weights)
-    return solve_dlt(dlt_rows(ideal, stack_cameras(cameras)['P']), w)
+    rig = stack_cameras(cameras)
+    B = dlt_rows(ideal, rig['P'])
+    X = solve_dlt(B, w)
+    behind = _behind(rig, X, w > 0)
+    if behind.any():
+        cols = np.flatnonzero(behind.any(axis=0))
+        w_cols = np.where(behind[:, cols], 0.0, w[:, cols])
+        X_cols = solve_dlt(B[:, cols], w_cols)
+        X_cols[_behind(rig, X_cols, w_cols > 0).any(axis=0)] = np.nan
+        X[cols] = X_cols
+    return X
 
 
 def _view_errors(rig, X, obs):
@@ -128,6 +159,7 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
             used = used[None]
         Xs = solve_dlt(B[:, todo], w[None, :, todo] * used)  # (S, n, 3)
         err = _view_errors(rig, Xs, obs[:, todo])  # (S, V, n)
+        err[_behind(rig, Xs, used)] = np.inf  # cheirality: a view behind is an outlier
         mean = _mean_used_error(err, used)
         best = np.argmin(mean, axis=0)
         cols = np.arange(todo.size)
@@ -173,6 +205,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     except np.linalg.LinAlgError:  # a degenerate pair (e.g. coincident rays)
         Xh = (np.linalg.pinv(AtA) @ Atb)[..., 0]
     err = _view_errors(rig, Xh, obs[:, todo])  # (H, V, n)
+    err[_behind(rig, Xh, np.ones(err.shape, bool))] = np.inf  # cheirality
     inl = (err < threshold_px) & avail[None, :, todo]
     count = inl.sum(axis=1).astype(np.float64)
     mean_inl = np.where(inl, err, 0.0).sum(axis=1) / np.maximum(count, 1)
@@ -181,13 +214,15 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
     for _ in range(2):  # re-select the inliers of the refined point, refine again
         err_r = _view_errors(rig, Xr, obs[:, todo])
+        err_r[_behind(rig, Xr, np.ones(err_r.shape, bool))] = np.inf
         new_inl = (err_r < threshold_px) & avail[:, todo]
         new_inl = np.where(new_inl.sum(axis=0) >= 2, new_inl, best_inl)
         if np.array_equal(new_inl, best_inl):
             break
         best_inl = new_inl
         Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
-    ok = best_inl.sum(axis=0) >= max(2, min_views)
+    ok = (best_inl.sum(axis=0) >= max(2, min_views)) & np.isfinite(Xr).all(axis=-1)
+    ok &= ~_behind(rig, Xr, best_inl).any(axis=0)
     X[todo[ok]] = Xr[ok]
     inliers[:, todo[ok]] = best_inl[:, ok]
     return X, inliers
