@@ -5,7 +5,8 @@ virtual camera (K_heat = S K, S the crop/scale of the source image), so a sub-pi
 in heatmap pixels maps back to source-image pixels through S^-1; triangulation, its
 inlier threshold and the reported reprojection errors are all in source-image pixels.
 """
-from dataclasses import dataclass
+from collections import Counter
+from dataclasses import dataclass, field
 import time
 
 import numpy as np
@@ -42,7 +43,10 @@ class FusionResult:
     the inlier views; reprojection_error (C,) mean over the inlier views (source px);
     num_views (C,) inlier count; inliers (V, C) bool; view_errors (V, C) source px of the
     inlier views (NaN elsewhere); points2d (V, C, 2) decoded peaks in source px (NaN where
-    below the confidence threshold); peak_confidence (V, C); seconds: wall time.
+    below the confidence threshold); peak_confidence (V, C); seconds: wall time;
+    skipped_views {view index: reason} of the views fuse_heatmaps could not use (too small
+    a grid, wrong channel count, non-finite values, K not a crop of the rig camera); they
+    count as missing, the other views are fused.
     """
     X: np.ndarray
     confidence: np.ndarray
@@ -53,6 +57,7 @@ class FusionResult:
     points2d: np.ndarray
     peak_confidence: np.ndarray
     seconds: float = 0.0
+    skipped_views: dict = field(default_factory=dict)  # view index -> why it was left out
 
     def view_mean_errors(self):
         """(V,) mean reprojection error of each view over its inlier keypoints (NaN: none)."""
@@ -62,16 +67,25 @@ class FusionResult:
             return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
 
 
+def crop_scales(K_heat, K_source):
+    """(S (V, 3, 3) with K_heat = S K_source, bad (V,) bool): bad where S is not a crop/scale
+    (rotation/shear, non-positive or non-finite scales). K_* (V, 3, 3)."""
+    K_heat = np.asarray(K_heat, np.float64).reshape(-1, 3, 3)
+    K_source = np.asarray(K_source, np.float64).reshape(-1, 3, 3)
+    with np.errstate(all='ignore'):
+        S = K_heat @ np.linalg.inv(K_source)
+        off = np.abs(np.stack([S[:, 0, 1], S[:, 1, 0], S[:, 2, 0], S[:, 2, 1],
+                               S[:, 2, 2] - 1], axis=1))
+        scale = np.maximum(np.abs(S[:, 0, 0]), 1.0)
+        good = (off.max(axis=1) <= _CROP_TOL * scale) & (S[:, 0, 0] > 0) & (S[:, 1, 1] > 0)
+    good &= np.isfinite(S).all(axis=(1, 2))
+    return S, ~good
+
+
 def heat_to_source(K_heat, K_source):
     """S (V, 3, 3) with K_heat = S K_source, checked to be a crop/scale (positive scales,
     no rotation/shear). K_* (V, 3, 3). Raises ValueError naming the view index."""
-    K_heat = np.asarray(K_heat, np.float64).reshape(-1, 3, 3)
-    K_source = np.asarray(K_source, np.float64).reshape(-1, 3, 3)
-    S = K_heat @ np.linalg.inv(K_source)
-    off = np.abs(np.stack([S[:, 0, 1], S[:, 1, 0], S[:, 2, 0], S[:, 2, 1], S[:, 2, 2] - 1],
-                          axis=1))
-    scale = np.maximum(np.abs(S[:, 0, 0]), 1.0)
-    bad = (off.max(axis=1) > _CROP_TOL * scale) | (S[:, 0, 0] <= 0) | (S[:, 1, 1] <= 0)
+    S, bad = crop_scales(K_heat, K_source)
     if np.any(bad):
         view = int(np.flatnonzero(bad)[0])
         raise ValueError(f'view {view}: heatmap K is not a crop/scale of the source K '
@@ -125,26 +139,60 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig()):
                         seconds=time.perf_counter() - start)
 
 
+def _usable_views(heatmaps, S, bad_K):
+    """{view: reason} for the heatmaps that cannot be decoded: not (C, h, w) with h, w >= 3,
+    a channel count other than the majority's, non-finite values, K not a crop."""
+    skipped = {}
+    shapes = [np.shape(h) for h in heatmaps]
+    counts = Counter(shape[0] for shape in shapes if len(shape) == 3)
+    channels = counts.most_common(1)[0][0] if counts else None
+    for v, (heat, shape) in enumerate(zip(heatmaps, shapes)):
+        if len(shape) != 3:
+            skipped[v] = f'view {v}: heatmaps must be (C, h, w), got {shape}'
+        elif shape[1] < 3 or shape[2] < 3:
+            skipped[v] = f'view {v}: heatmap grid {shape[2]}x{shape[1]} is smaller than 3x3'
+        elif shape[0] != channels:
+            skipped[v] = f'view {v}: {shape[0]} heatmap channels, the other views have ' \
+                f'{channels}'
+        elif not np.isfinite(heat).all():
+            skipped[v] = f'view {v}: heatmaps hold non-finite values'
+        elif bad_K[v]:
+            skipped[v] = (f'view {v}: heatmap K is not a crop/scale of the source K '
+                          f'(S = K_heat K^-1 = {np.round(S[v], 6).tolist()})')
+    return skipped, channels
+
+
 def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig()):
     """Heatmaps of V views -> FusionResult.
 
     heatmaps: (V, C, h, w) array, or a list of V (C, h_v, w_v) arrays when grids differ;
     K_heat (V, 3, 3): intrinsics of each heatmap's virtual camera (its camera_info);
     cameras: V source cameras (rig: K, dist, R, t of the full image).
+    A view that cannot be used (grid smaller than 3x3, other channel count, non-finite
+    values, K not a crop/scale of its camera's K) is left out as missing and named in
+    result.skipped_views; the other views are fused. ValueError (naming view 0's
+    problem) only when no view is usable.
     """
     start = time.perf_counter()
-    S = heat_to_source(K_heat, np.stack([cam.K for cam in cameras]))
-    if isinstance(heatmaps, np.ndarray) and heatmaps.ndim == 4:
-        peaks, conf = decode_heatmaps(heatmaps)
-    else:
-        shapes = {np.shape(h) for h in heatmaps}
-        if len(shapes) == 1:
-            peaks, conf = decode_heatmaps(np.stack(heatmaps))
-        else:  # views with different grids: decode each view (V is small)
-            decoded = [decode_heatmaps(np.asarray(h)[None]) for h in heatmaps]
-            peaks = np.concatenate([np.asarray(p) for p, _ in decoded])
-            conf = np.concatenate([np.asarray(c) for _, c in decoded])
-    points = heat_to_source_points(np.asarray(peaks, np.float64), S)
-    result = fuse_points(points, np.asarray(conf, np.float64), cameras, config)
+    if len(heatmaps) != len(cameras):
+        raise ValueError(f'{len(heatmaps)} heatmaps for {len(cameras)} cameras')
+    S, bad_K = crop_scales(K_heat, np.stack([cam.K for cam in cameras]))
+    heatmaps = [np.asarray(h) for h in heatmaps]
+    skipped, channels = _usable_views(heatmaps, S, bad_K)
+    good = [v for v in range(len(cameras)) if v not in skipped]
+    if not good:
+        raise ValueError(skipped[0])
+    peaks = np.full((len(cameras), channels, 2), np.nan)
+    conf = np.zeros((len(cameras), channels))
+    if len({heatmaps[v].shape for v in good}) == 1:
+        p, c = decode_heatmaps(np.stack([heatmaps[v] for v in good]))
+        peaks[good], conf[good] = p, c
+    else:  # views with different grids: decode each view (V is small)
+        for v in good:
+            p, c = decode_heatmaps(heatmaps[v][None])
+            peaks[v], conf[v] = p[0], c[0]
+    points = heat_to_source_points(peaks, S)
+    result = fuse_points(points, conf, cameras, config)
+    result.skipped_views = skipped
     result.seconds = time.perf_counter() - start
     return result

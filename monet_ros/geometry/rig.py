@@ -2,8 +2,11 @@
 calibration.toml, ROS camera_info YAML, OpenCV FileStorage YAML/XML and DANNCE
 label3d .mat files; write the project rig YAML (exact round trip).
 
-Every problem raises RigError naming the file and the field.
+Every problem raises RigError naming the file and the field. Files are bounded before they
+are parsed (MAX_RIG_BYTES), YAML aliases/anchors are refused (a 600-byte alias bomb would
+expand to gigabytes), sizes must be finite positive integers (not booleans).
 """
+import math
 from pathlib import Path
 import re
 import tomllib
@@ -16,6 +19,63 @@ import yaml
 from monet_ros.geometry.camera import Camera, CameraError
 
 DEFAULT_FRAME_ID = 'world'
+MAX_RIG_BYTES = 8 << 20       # text rig files (a 1000-camera rig is ~1 MB)
+MAX_MAT_BYTES = 512 << 20     # DANNCE .mat files (may hold labels too)
+# Distortion coefficient counts accepted per ROS distortion_model (OpenCV order k1 k2 p1 p2
+# k3 k4 k5 k6 s1..s4 tx ty): the SAME rule for rig files, camera_info YAML and recordings.
+DISTORTION_MODELS = {'plumb_bob': (0, 4, 5), 'rational_polynomial': (0, 4, 5, 8, 12, 14),
+                     '': (0,), 'none': (0,)}
+
+
+def opencv_distortion(model, coefficients, where):
+    """Coefficients of a ROS CameraInfo distortion_model as a Camera.dist array.
+
+    plumb_bob: 0, 4 or 5 coefficients; rational_polynomial: 0, 4, 5, 8, 12 or 14 (fewer
+    than 8 = the higher terms are 0; 14 = tilt terms, accepted only when 0); '' / 'none':
+    no coefficients (or all 0). Anything else (equidistant, fisheye...) is refused.
+    Raises ValueError starting with `where` (the file/field or topic)."""
+    model = str(model)
+    d = np.asarray(coefficients, np.float64).reshape(-1)
+    if model not in DISTORTION_MODELS:
+        raise ValueError(f'{where}: unsupported distortion_model {model!r} (OpenCV '
+                         'plumb_bob / rational_polynomial only)')
+    if model in ('', 'none'):
+        if np.any(d != 0):
+            raise ValueError(f'{where}: distortion_model {model!r} with non-zero '
+                             'coefficients')
+        return np.zeros(0)
+    if d.size not in DISTORTION_MODELS[model]:
+        raise ValueError(f'{where}: distortion_model {model!r} with {d.size} coefficients '
+                         f'(expected {" or ".join(map(str, DISTORTION_MODELS[model]))})')
+    if not np.all(np.isfinite(d)):
+        raise ValueError(f'{where}: distortion coefficients contain NaN or infinity')
+    if d.size == 14:
+        if np.any(d[12:] != 0):
+            raise ValueError(f'{where}: tilted-sensor terms (coefficients 13-14) are not '
+                             'supported')
+        d = d[:12]
+    return d
+
+
+class _NoAliasLoader(yaml.SafeLoader):
+    """SafeLoader that refuses aliases: rig files never need them, and nested aliases
+    (a "billion laughs" file) expand exponentially."""
+
+    def compose_node(self, parent, index):
+        if self.check_event(yaml.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None, f'YAML alias *{event.anchor} is not allowed in a rig file',
+                event.start_mark)
+        return super().compose_node(parent, index)
+
+
+def load_yaml_text(path, text):
+    """YAML -> Python data without aliases; RigError naming the file otherwise."""
+    try:
+        return yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 - a SafeLoader subclass
+    except yaml.YAMLError as exc:
+        raise RigError(path, None, f'not valid YAML ({exc})') from None
 
 
 class RigError(ValueError):
@@ -24,6 +84,7 @@ class RigError(ValueError):
     def __init__(self, path, field, message):
         self.path = str(path)
         self.field = field
+        self.message = message
         where = f'{self.path}: field {field!r}: ' if field else f'{self.path}: '
         super().__init__(where + message)
 
@@ -41,7 +102,7 @@ def _array(path, field, value, shapes):
     try:
         array = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise RigError(path, field, f'not a numeric array: {value!r}') from None
+        raise RigError(path, field, f'not a numeric array: {str(value)[:60]!r}') from None
     for shape in shapes:
         if array.shape == shape:
             return array
@@ -60,12 +121,17 @@ def _require(path, mapping, key, prefix=''):
 
 
 def _size(path, field, value):
+    """A positive integer size (an int, or a float/string with an integer value); booleans,
+    NaN, infinity and sizes above 1e6 pixels are refused."""
+    if isinstance(value, (bool, np.bool_)):
+        raise RigError(path, field, f'must be a positive integer, got the boolean {value!r}')
     try:
         number = float(value)
-    except (TypeError, ValueError):
-        raise RigError(path, field, f'not a number: {value!r}') from None
-    if number != int(number) or number <= 0:
-        raise RigError(path, field, f'must be a positive integer, got {value!r}')
+    except (TypeError, ValueError, OverflowError):
+        raise RigError(path, field, f'not a number: {str(value)[:40]!r}') from None
+    if not math.isfinite(number) or number != int(number) or not 0 < number <= 1e6:
+        raise RigError(path, field, f'must be a positive integer (<= 1000000), got '
+                       f'{str(value)[:40]!r}')
     return int(number)
 
 
@@ -115,18 +181,25 @@ def _load_project_yaml(path, data):
         if unknown:
             raise RigError(path, prefix + sorted(unknown)[0], 'unknown key (expected name, '
                            'width, height, K, D, R, t, topic)')
-        cameras.append(_camera(
-            path, prefix, {'dist': 'D'},
-            name=str(_require(path, entry, 'name', prefix)),
-            K=_array(path, prefix + 'K', _require(path, entry, 'K', prefix), [(3, 3)]),
-            dist=_array(path, prefix + 'D', entry.get('D', []) or [],
-                        [(n,) for n in (0, 4, 5, 8, 12)]),
-            R=_rotation(path, prefix + 'R', _require(path, entry, 'R', prefix)),
-            t=_array(path, prefix + 't', _require(path, entry, 't', prefix), [(3,)]),
-            width=_size(path, prefix + 'width', _require(path, entry, 'width', prefix)),
-            height=_size(path, prefix + 'height', _require(path, entry, 'height', prefix)),
-            topic=entry.get('topic')))
+        name = str(_require(path, entry, 'name', prefix))
+        try:
+            cameras.append(_project_camera(path, prefix, name, entry))
+        except RigError as exc:     # name the camera too, not only its index
+            raise RigError(path, exc.field, f'camera {name!r}: {exc.message}') from None
     return _check_unique(path, cameras), frame_id
+
+
+def _project_camera(path, prefix, name, entry):
+    return _camera(
+        path, prefix, {'dist': 'D'}, name=name,
+        K=_array(path, prefix + 'K', _require(path, entry, 'K', prefix), [(3, 3)]),
+        dist=_array(path, prefix + 'D', entry.get('D', []) or [],
+                    [(n,) for n in (0, 4, 5, 8, 12)]),
+        R=_rotation(path, prefix + 'R', _require(path, entry, 'R', prefix)),
+        t=_array(path, prefix + 't', _require(path, entry, 't', prefix), [(3,)]),
+        width=_size(path, prefix + 'width', _require(path, entry, 'width', prefix)),
+        height=_size(path, prefix + 'height', _require(path, entry, 'height', prefix)),
+        topic=entry.get('topic'))
 
 
 def _load_camera_info_yaml(path, data):
@@ -136,11 +209,11 @@ def _load_camera_info_yaml(path, data):
         return _array(path, key + '.data', _require(path, node, 'data', key + '.'), shapes)
 
     model = data.get('distortion_model', 'plumb_bob')
-    dist = matrix('distortion_coefficients', [(n,) for n in (0, 4, 5, 8, 12)])
-    if model not in ('plumb_bob', 'rational_polynomial', ''):
-        if model == 'equidistant' or np.any(dist != 0):
-            raise RigError(path, 'distortion_model', f'unsupported model {model!r} '
-                           '(plumb_bob or rational_polynomial)')
+    dist = matrix('distortion_coefficients', [(n,) for n in (0, 4, 5, 8, 12, 14)])
+    try:
+        dist = opencv_distortion(model, dist, 'distortion_model')
+    except ValueError as exc:
+        raise RigError(path, 'distortion_model', str(exc).split(': ', 1)[1]) from None
     name = data.get('camera_name') or Path(path).stem
     camera = _camera(
         path, '', {'K': 'camera_matrix.data', 'dist': 'distortion_coefficients.data',
@@ -187,6 +260,8 @@ def _load_toml(path):
     return _check_unique(path, cameras), DEFAULT_FRAME_ID
 
 
+# Field names accepted in OpenCV FileStorage files, matched without regard to case (OpenCV's
+# camera_calibration sample writes Camera_Matrix, Distortion_Coefficients, image_Width).
 _OPENCV_KEYS = {
     'K': ('camera_matrix', 'cameraMatrix', 'K', 'M', 'intrinsic_matrix', 'intrinsics'),
     'D': ('distortion_coefficients', 'dist_coeffs', 'distCoeffs', 'D', 'distortion'),
@@ -197,36 +272,63 @@ _OPENCV_KEYS = {
     'size': ('image_size', 'imageSize'),
     'name': ('camera_name', 'name'),
 }
+_STEREO_EXTRINSICS = ('extrinsics.yml', 'extrinsics.yaml', 'extrinsics.xml')
 
 
-def _load_opencv(path):
-    """OpenCV FileStorage (YAML/XML) with one camera (camera_matrix, distortion_coefficients,
-    image_width, image_height[, R, T]) or a stereo pair (M1, D1, M2, D2, R, T, image size)."""
+def _accepted(field):
+    return '/'.join(_OPENCV_KEYS[field])
+
+
+def _open_storage(path):
+    """(cv2.FileStorage opened for reading, {lower-case key: key}); RigError otherwise."""
     try:
         fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except cv2.error as exc:
-        raise RigError(path, None, f'not a readable OpenCV FileStorage file ({exc})') from None
+    except (cv2.error, SystemError) as exc:
+        raise RigError(path, None, f'not a readable OpenCV FileStorage file '
+                       f'({str(exc).strip()[:200]})') from None
+    if not fs.isOpened():
+        raise RigError(path, None, 'not a readable OpenCV FileStorage file')
     try:
-        if not fs.isOpened():
-            raise RigError(path, None, 'not a readable OpenCV FileStorage file')
-        root = fs.root()
-        keys = list(root.keys())
+        keys = {key.lower(): key for key in fs.root().keys()}
+    except (cv2.error, SystemError) as exc:
+        fs.release()
+        raise RigError(path, None, f'not a readable OpenCV FileStorage file '
+                       f'({str(exc).strip()[:200]})') from None
+    return fs, keys
 
-        def read(key):
-            node = fs.getNode(key)
-            if node.isMap() or node.isSeq() or node.type() == cv2.FILE_NODE_NONE:
-                mat = node.mat()
-                if mat is None and node.isSeq():
-                    mat = np.array([node.at(i).real() for i in range(node.size())])
-                return mat
-            if node.isString():
-                return node.string()
-            return node.real()
 
-        def first(field):
+def _read_node(path, fs, key):
+    """A FileStorage entry as an array / str / float; RigError naming the key when its
+    rows/cols do not match its data, or it is truncated."""
+    try:
+        node = fs.getNode(key)
+        if node.isMap() or node.isSeq() or node.type() == cv2.FILE_NODE_NONE:
+            mat = node.mat()
+            if mat is None and node.isSeq():
+                mat = np.array([node.at(i).real() for i in range(node.size())])
+            return mat
+        if node.isString():
+            return node.string()
+        return node.real()
+    except (cv2.error, SystemError) as exc:
+        raise RigError(path, key, 'unreadable matrix (rows/cols do not match the data, or '
+                       f'the file is truncated): {str(exc).strip()[:200]}') from None
+
+
+def _load_opencv(path, image_size=None):
+    """OpenCV FileStorage (YAML/XML) with one camera (camera_matrix, distortion_coefficients,
+    image_width, image_height[, R, T]; OpenCV's camera_calibration sample names too:
+    Camera_Matrix, Distortion_Coefficients, image_Width, image_Height) or a stereo pair
+    (stereo_calib: M1, D1, M2, D2 in intrinsics.yml, R, T in extrinsics.yml, read from
+    beside it when the file itself has no R/T). Files without an image size need
+    image_size=(w, h)."""
+    fs, keys = _open_storage(path)
+    try:
+        def first(field, keys=keys, fs=fs):
             for key in _OPENCV_KEYS[field]:
-                if key in keys:
-                    return key, read(key)
+                if key.lower() in keys:
+                    real = keys[key.lower()]
+                    return real, _read_node(path, fs, real)
             return _OPENCV_KEYS[field][0], None
 
         def size():
@@ -235,29 +337,35 @@ def _load_opencv(path):
             if w is not None and h is not None:
                 return _size(path, wkey, w), _size(path, hkey, h)
             skey, s = first('size')
-            if s is None:
-                raise RigError(path, 'image_width', 'missing (also no image_size)')
-            s = _array(path, skey, s, [(2,)])
-            return _size(path, skey + '[0]', s[0]), _size(path, skey + '[1]', s[1])
+            if s is not None:
+                s = _array(path, skey, s, [(2,)])
+                return _size(path, skey + '[0]', s[0]), _size(path, skey + '[1]', s[1])
+            if image_size is not None:
+                return (_size(path, 'image_size[0]', image_size[0]),
+                        _size(path, 'image_size[1]', image_size[1]))
+            raise RigError(path, 'image_width', f'missing: the file stores no image size '
+                           f'(accepted: {_accepted("width")} with {_accepted("height")}, or '
+                           f'{_accepted("size")}); give the size (image_size=(w, h))')
 
         dist_shapes = [(n,) for n in (0, 4, 5, 8, 12)]
-        if 'M1' in keys and 'M2' in keys:  # stereo calibration output
+        if 'm1' in keys and 'm2' in keys:  # stereo calibration output
             width, height = size()
+            R, t = _stereo_extrinsics(path, fs, keys)
             cams = []
-            for k, (R, t) in enumerate([(np.eye(3), np.zeros(3)),
-                                        (read('R') if 'R' in keys else None,
-                                         read('T') if 'T' in keys else None)], start=1):
+            for k, (R_k, t_k) in enumerate([(np.eye(3), np.zeros(3)), (R, t)], start=1):
+                M, D = keys[f'm{k}'], keys.get(f'd{k}')
                 cams.append(_camera(
-                    path, '', {'K': f'M{k}', 'dist': f'D{k}', 't': 'T'}, name=f'cam{k}',
-                    K=_array(path, f'M{k}', read(f'M{k}'), [(3, 3)]),
-                    dist=_array(path, f'D{k}', read(f'D{k}') if f'D{k}' in keys else [],
+                    path, '', {'K': M, 'dist': D or f'D{k}', 't': 'T'}, name=f'cam{k}',
+                    K=_array(path, M, _read_node(path, fs, M), [(3, 3)]),
+                    dist=_array(path, D or f'D{k}', _read_node(path, fs, D) if D else [],
                                 dist_shapes),
-                    R=_rotation(path, 'R', R), t=_array(path, 'T', t, [(3,)]),
+                    R=_rotation(path, 'R', R_k), t=_array(path, 'T', t_k, [(3,)]),
                     width=width, height=height))
             return cams, DEFAULT_FRAME_ID
         kkey, K = first('K')
         if K is None:
-            raise RigError(path, 'camera_matrix', 'missing')
+            raise RigError(path, 'camera_matrix', f'missing (accepted names: {_accepted("K")},'
+                           ' or M1/M2 for a stereo pair)')
         dkey, D = first('D')
         rkey, R = first('R')
         tkey, t = first('t')
@@ -274,6 +382,37 @@ def _load_opencv(path):
         return [camera], DEFAULT_FRAME_ID
     finally:
         fs.release()
+
+
+def _stereo_extrinsics(path, fs, keys):
+    """(R, T) of a stereo pair: from the file, else from stereo_calib's extrinsics.yml
+    beside it; RigError naming both when neither has them."""
+    if 'r' in keys and 't' in keys:
+        return _read_node(path, fs, keys['r']), _read_node(path, fs, keys['t'])
+    for name in _STEREO_EXTRINSICS:
+        other = Path(path).with_name(name)
+        if other.is_file() and other != Path(path):
+            _check_file_size(other, MAX_RIG_BYTES)
+            ofs, okeys = _open_storage(other)
+            try:
+                if 'r' in okeys and 't' in okeys:
+                    return (_read_node(other, ofs, okeys['r']),
+                            _read_node(other, ofs, okeys['t']))
+            finally:
+                ofs.release()
+    raise RigError(path, 'R', 'missing: a stereo pair (M1, M2) needs R and T, in the file or '
+                   f'in {" / ".join(_STEREO_EXTRINSICS)} beside it (as stereo_calib writes '
+                   'them)')
+
+
+def _check_file_size(path, limit):
+    try:
+        size = Path(path).stat().st_size
+    except OSError as exc:
+        raise RigError(path, None, f'cannot read the file ({exc})') from None
+    if size > limit:
+        raise RigError(path, None, f'file is {size} bytes, more than the {limit} a rig file '
+                       'may have')
 
 
 def _load_dannce_mat(path, image_size=None):
@@ -330,11 +469,14 @@ def read_rig(path, image_size=None):
 
     Formats: project rig YAML (frame_id + cameras), anipose / Pose2Sim calibration.toml,
     ROS camera_info YAML (one camera, identity extrinsics unless R/t are given), OpenCV
-    FileStorage YAML/XML, DANNCE label3d .mat (image_size=(w, h) as it is not stored)."""
+    FileStorage YAML/XML (OpenCV's sample names too), DANNCE label3d .mat. image_size=(w, h):
+    the size for files that store none (DANNCE, stereo_calib's intrinsics.yml).
+    Files larger than MAX_RIG_BYTES (MAX_MAT_BYTES for .mat) are refused unread."""
     path = Path(path)
     if not path.is_file():
         raise RigError(path, None, 'no such file' if not path.exists() else 'not a file')
     suffix = path.suffix.lower()
+    _check_file_size(path, MAX_MAT_BYTES if suffix == '.mat' else MAX_RIG_BYTES)
     if suffix == '.mat':
         return _load_dannce_mat(path, image_size)
     try:
@@ -346,12 +488,9 @@ def read_rig(path, image_size=None):
         return _load_toml(path)
     if head.lstrip().startswith((b'%YAML:', b'<?xml', b'<opencv_storage')) \
             or b'!!opencv-matrix' in head or suffix == '.xml':
-        return _load_opencv(path)
+        return _load_opencv(path, image_size)
     if suffix in ('.yaml', '.yml', ''):
-        try:
-            data = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise RigError(path, None, f'not valid YAML ({exc})') from None
+        data = load_yaml_text(path, text)
         if isinstance(data, dict) and 'cameras' in data:
             return _load_project_yaml(path, data)
         if isinstance(data, dict) and 'camera_matrix' in data:

@@ -118,6 +118,34 @@ def compressed_image_to_numpy(msg):
     return img
 
 
+def to_rgb8(image):
+    """Any decoded image -> (H, W, 3) uint8 RGB, the detector's input.
+
+    (H, W, 3) uint8 as is; grey (H, W) or (H, W, 1) repeated to 3 channels; 16-bit and
+    other integer or float images (mono16, 16UC1, rgb16, 32FC1 ...) are stretched linearly
+    from their own finite minimum..maximum to 0..255 (a 12-bit sensor in a 16-bit container
+    stays visible; NaN becomes 0). Raises ImageDecodeError for other channel counts or
+    empty images."""
+    image = np.asarray(image)
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[..., 0]
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3) \
+            or image.size == 0:
+        raise ImageDecodeError(f'need a colour (H, W, 3) or grey (H, W) image, got '
+                               f'{image.shape} {image.dtype}')
+    if image.dtype != np.uint8:
+        values = image.astype(np.float32)
+        finite = np.isfinite(values)
+        low = float(values[finite].min()) if finite.any() else 0.0
+        high = float(values[finite].max()) if finite.any() else 0.0
+        scale = 255.0 / (high - low) if high > low else 0.0
+        values = np.where(finite, (values - low) * scale, 0.0)
+        image = np.clip(values + 0.5, 0, 255).astype(np.uint8)
+    if image.ndim == 2:
+        image = np.repeat(image[..., None], 3, axis=2)
+    return image
+
+
 def any_image_to_numpy(msg):
     """Image or CompressedImage (told apart by the `format` attribute) -> numpy."""
     if hasattr(msg, 'format') and not hasattr(msg, 'encoding'):

@@ -17,13 +17,18 @@ import zlib
 
 from mcap.data_stream import ReadDataStream
 from mcap.reader import SeekingReader
-from mcap.records import Channel, Schema
+from mcap.records import Attachment, Channel, Metadata, Schema
 
 MAGIC = b'\x89MCAP0\r\n'
 OP_HEADER, OP_FOOTER, OP_SCHEMA, OP_CHANNEL, OP_MESSAGE, OP_CHUNK = 0x01, 0x02, 0x03, 0x04, \
     0x05, 0x06
+OP_MESSAGE_INDEX, OP_ATTACHMENT, OP_METADATA = 0x07, 0x09, 0x0C
 OP_DATA_END = 0x0F
 _KNOWN_OPS = set(range(0x01, 0x10))
+# records that belong in the summary section (or the footer): in the data section, before
+# the summary starts, they are damage (e.g. a record whose opcode lost a bit)
+_SUMMARY_OPS = {OP_FOOTER, 0x08, 0x0A, 0x0B, 0x0D, 0x0E, OP_DATA_END}
+_IN_CHUNK_OPS = (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE)  # the only records a chunk may hold
 _CHUNK_FIXED = struct.Struct('<QQQI')          # start, end, uncompressed size, crc
 _MSG_HEAD = struct.Struct('<HIQQ')             # channel, sequence, log_time, publish_time
 _REC_HEAD = struct.Struct('<BQ')
@@ -60,6 +65,18 @@ def read_summary(f, size):
     if summary is None:
         return None, 'the file has no summary section'
     return summary, None
+
+
+def footer_summary_start(f, size):
+    """The footer's summary_start (0 when there is no footer or no summary)."""
+    if size < 8 + 29 + 8:
+        return 0
+    f.seek(size - 8 - 29)
+    footer = f.read(29)
+    if len(footer) != 29 or footer[0] != OP_FOOTER:
+        return 0
+    start = struct.unpack_from('<Q', footer, 9)[0]
+    return start if 8 <= start < size else 0
 
 
 def _decompress(compression, data, uncompressed_size):
@@ -166,10 +183,12 @@ class McapScan:
         self.size = os.path.getsize(self.path)
         self.summary = None
         self.summary_problem = None
+        self.summary_start = 0                 # the footer's summary start (0 = unknown)
         self._chunk_offsets = []
 
     def open_summary(self, f):
         self.summary, self.summary_problem = read_summary(f, self.size)
+        self.summary_start = footer_summary_start(f, self.size)
         if self.summary is not None:
             self._chunk_offsets = sorted(
                 ci.chunk_start_offset for ci in self.summary.chunk_indexes
@@ -243,11 +262,11 @@ class McapScan:
                     problem = 'runs past the end of the file (truncated?)'
                 elif op not in _KNOWN_OPS and op < 0x80:
                     problem = 'has an unknown opcode'
-                elif op in (OP_FOOTER, OP_DATA_END):
-                    if length == (20 if op == OP_FOOTER else 4) and \
-                            self._indexed_chunk_between(pos, self.size) is None:
+                elif op in _SUMMARY_OPS:
+                    if self._summary_starts_at(f, op, length, pos):
                         break                          # the summary section follows
-                    problem = 'is a misplaced end-of-data record'
+                    problem = ('is a summary-section record before the end of the data '
+                               '(damaged opcode?)')
                 else:
                     skipped = self._indexed_chunk_between(pos, end)
                     if skipped is not None:
@@ -285,7 +304,24 @@ class McapScan:
                     item = self._record(op, body, pos)
                     if item is not None:
                         yield item
+                else:
+                    trouble = self._check_other(op, memoryview(f.read(length)), pos)
+                    if trouble is not None:
+                        self._error(f'record at byte {pos} (opcode 0x{op:02x}, length '
+                                    f'{length}) {trouble}; skipped')
                 prev, pos = pos, end
+
+    def _summary_starts_at(self, f, op, length, pos):
+        """True when the record at `pos` (a summary-section opcode) is where the data ends:
+        at or after the footer's summary start (or the data end record just before it)
+        when the footer gives one, else when no chunk follows it."""
+        if op == OP_DATA_END and length != 4 or op == OP_FOOTER and length != 20:
+            return False
+        if self.summary_start:
+            return pos >= self.summary_start or (op == OP_DATA_END
+                                                 and pos + 9 + 4 == self.summary_start)
+        return (self._indexed_chunk_between(pos, self.size) is None
+                and self._scan_for_chunk(f, pos + 1) is None)
 
     def _indexed_chunk_between(self, lo, hi):
         """An indexed chunk offset strictly inside (lo, hi) that really holds a chunk."""
@@ -297,6 +333,27 @@ class McapScan:
                     return off
             k += 1
         return None
+
+    def _check_other(self, op, body, pos):
+        """Problem text for a data-section record that is not a schema/channel/message/chunk
+        (message index, attachment, metadata, header, private), or None when it is valid."""
+        if op == OP_HEADER:
+            return None if pos == 8 else 'is a second file header (damaged)'
+        if op == OP_MESSAGE_INDEX:
+            if len(body) < 6:
+                return 'is a message index too short to parse (damaged)'
+            (n,) = struct.unpack_from('<I', body, 2)
+            if n % 16 or 6 + n != len(body):
+                return 'is a message index whose entries do not fill it (damaged)'
+            return None
+        if op in (OP_ATTACHMENT, OP_METADATA):
+            try:
+                stream = ReadDataStream(io.BytesIO(bytes(body)))
+                (Attachment if op == OP_ATTACHMENT else Metadata).read(stream)
+            except Exception as exc:    # noqa: BLE001 - any parse failure is damage
+                return f'does not parse: {type(exc).__name__}: {exc}'
+            return None
+        return 'has a private opcode (not written by rosbag2; damaged?)'
 
     def _record(self, op, body, pos):
         try:
@@ -323,9 +380,13 @@ class McapScan:
             self._error(f'chunk at byte {pos}: CRC mismatch (data damaged; messages kept, '
                         'each may fail to decode)')
         messages, defs = [], []
-        for op, rec in parse_records(data, lambda t: self._error(f'chunk at byte {pos}: {t}')):
-            item = self._record(op, rec, pos) if op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE) \
-                else None
+        records = parse_records(data, lambda t: self._error(f'chunk at byte {pos}: {t}'))
+        for k, (op, rec) in enumerate(records):
+            if op not in _IN_CHUNK_OPS:
+                self._error(f'chunk at byte {pos}: record {k} has opcode 0x{op:02x}, which a '
+                            'chunk cannot hold (damaged); skipped')
+                continue
+            item = self._record(op, rec, pos)
             if item is None:
                 continue
             if item[0] == 'message':

@@ -198,6 +198,30 @@ def _start_bound(later_start, offset):
     return later_start[k][1] if k < len(later_start) else float('inf')
 
 
+def _compare_with_summary(summary, read_per_channel, want, path, report):
+    """Count, per topic, the messages the summary's statistics list but the scan did not
+    read (records lost to damage: a flipped opcode, a cut chunk); reported as skipped."""
+    stats = summary.statistics
+    if stats is None:
+        return
+    per_channel = dict(stats.channel_message_counts or {})
+    if not per_channel:
+        if want is None and stats.message_count > sum(read_per_channel.values()):
+            lost = stats.message_count - sum(read_per_channel.values())
+            report.error(path, f'{lost} of the {stats.message_count} messages the summary '
+                               'lists could not be read (damaged records)')
+        return
+    for cid, expected in sorted(per_channel.items()):
+        channel = summary.channels.get(cid)
+        topic = channel.topic if channel is not None else f'<channel {cid}>'
+        if want is not None and topic not in want:
+            continue
+        lost = expected - read_per_channel.get(cid, 0)
+        if lost > 0:
+            report.skip(topic, f'{lost} of the {expected} messages that the summary of {path} '
+                               'lists could not be read (damaged records; see the errors)', lost)
+
+
 class BagReader:
     """Reader of one bag (see open_bag). Re-iterable; `report` describes the last read."""
 
@@ -385,12 +409,14 @@ class BagReader:
             return ch, schema
 
         heap, seq, summary_noted = [], 0, False
+        read_per_channel = Counter()  # channel id -> message records read from this file
         held = [0]                # bytes of message data waiting in the heap
         later_start = []          # (offset, min start time of chunks at >= offset) from index
 
         def push(message):
             nonlocal seq
             cid, _, log_time, pub_time, data = message
+            read_per_channel[cid] += 1
             ch, schema = resolve(cid)
             if ch is None:
                 report.skip(f'<channel {cid}>', f'message of unknown channel id {cid} in {path}')
@@ -438,6 +464,11 @@ class BagReader:
                     yield pop()       # (over the memory bound: may come out of order)
                 for m in msgs:
                     push(m)
+        if scan.summary_problem is not None and not summary_noted:
+            report.error(path, f'no usable summary/index ({scan.summary_problem}); '
+                               'read sequentially')
+        if scan.summary is not None:
+            _compare_with_summary(scan.summary, read_per_channel, want, path, report)
         while heap:
             yield pop()
 

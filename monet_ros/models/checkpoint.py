@@ -10,14 +10,23 @@ File = torch.save of {'format': FORMAT, 'metadata': dict, 'state_dict': dict}. M
     metrics       dict       anything JSON-able (losses, PCK, ...)
 plus any further JSON-able keys the caller adds. Loaded with torch.load(weights_only=True),
 so a checkpoint can never run code.
+
+Nothing in a checkpoint is trusted before it is checked (read_checkpoint): the zip
+archive's CRCs are verified (torch.load does not: a flipped bit in the weights loads
+silently), every metadata field is checked for type and range, sizes are bounded (width,
+blocks, stages, input size, keypoint count: a hostile file cannot make the network
+exhaust memory) BEFORE any network is built, and every weight must be finite. Every
+problem is one CheckpointError naming the file and the field, for the API, the detector's
+`model` parameter and its hot reload alike.
 """
 import json
 from pathlib import Path
+import zipfile
 
 import torch
 
 from monet_ros.atomic import atomic_write
-from monet_ros.models.registry import build_model
+from monet_ros.models.registry import MODELS, build_model
 
 FORMAT = 'monet_ros.checkpoint/1'
 REQUIRED = ('architecture', 'keypoints', 'input_size', 'heatmap_size')
@@ -25,6 +34,120 @@ REQUIRED = ('architecture', 'keypoints', 'input_size', 'heatmap_size')
 
 class CheckpointError(ValueError):
     """A checkpoint is missing, unreadable or does not match; names the file and field."""
+
+
+MAX_FILE_BYTES = 4 << 30          # larger files are refused before reading
+MAX_KEYPOINTS = 1000
+MAX_INPUT_SIDE = 4096             # network input height/width in pixels
+# model_options each architecture takes: name -> (smallest, largest) int; input_size is
+# checked separately (a [H, W] pair equal to metadata.input_size).
+OPTION_RANGES = {
+    'cpm': {'num_stages': (1, 12), 'width': (1, 1024)},
+    'hourglass': {'num_stacks': (1, 8), 'features': (1, 1024), 'depth': (1, 6)},
+    'small': {'width': (1, 1024), 'context_blocks': (0, 64)},
+}
+
+
+def _is_int(value):
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _check_pair(path, field, value):
+    """[H, W] of positive ints <= MAX_INPUT_SIDE (a tuple/list of two), else CheckpointError."""
+    if not isinstance(value, (list, tuple)) or len(value) != 2 \
+            or not all(_is_int(v) and 1 <= v <= MAX_INPUT_SIDE for v in value):
+        raise CheckpointError(f'{path}: field metadata.{field} must be a pair [H, W] of ints '
+                              f'in 1..{MAX_INPUT_SIDE}, got {value!r}')
+    return list(value)
+
+
+def validate_metadata(path, meta):
+    """Check every metadata field's type and range (bounded sizes) before a network is
+    built; returns the metadata with defaults filled in. Raises CheckpointError naming the
+    file and field."""
+    for field in REQUIRED:
+        if field not in meta:
+            raise CheckpointError(f'{path}: field metadata.{field} is missing')
+    architecture = meta['architecture']
+    if not isinstance(architecture, str) or architecture not in OPTION_RANGES \
+            or architecture not in MODELS:
+        raise CheckpointError(f'{path}: field metadata.architecture must be one of '
+                              f'{sorted(OPTION_RANGES)}, got {architecture!r}')
+    keypoints = meta['keypoints']
+    if not isinstance(keypoints, list) or not all(isinstance(k, str) for k in keypoints) \
+            or not keypoints or len(keypoints) > MAX_KEYPOINTS:
+        raise CheckpointError(f'{path}: field metadata.keypoints must be a non-empty list of '
+                              f'at most {MAX_KEYPOINTS} names, got {_short(keypoints)}')
+    for field in ('input_size', 'heatmap_size'):
+        meta[field] = _check_pair(path, field, meta[field])
+    options = meta.setdefault('model_options', {})
+    if not isinstance(options, dict):
+        raise CheckpointError(f'{path}: field metadata.model_options must be a dict, got '
+                              f'{_short(options)}')
+    ranges = OPTION_RANGES[architecture]
+    for key, value in options.items():
+        if key == 'input_size':
+            if _check_pair(path, 'model_options.input_size', value) != meta['input_size']:
+                raise CheckpointError(f'{path}: field metadata.model_options.input_size '
+                                      f'{value!r} differs from metadata.input_size '
+                                      f'{meta["input_size"]!r}')
+            continue
+        if key not in ranges:
+            raise CheckpointError(f'{path}: field metadata.model_options.{key} is not an '
+                                  f'option of {architecture!r} (expected '
+                                  f'{sorted(ranges) + ["input_size"]})')
+        low, high = ranges[key]
+        if not _is_int(value) or not low <= value <= high:
+            raise CheckpointError(f'{path}: field metadata.model_options.{key} must be an int '
+                                  f'in {low}..{high}, got {_short(value)}')
+    step = meta.setdefault('step', 0)
+    if not _is_int(step) or step < 0:
+        raise CheckpointError(f'{path}: field metadata.step must be an int >= 0, got '
+                              f'{_short(step)}')
+    if not isinstance(meta.setdefault('metrics', {}), dict):
+        raise CheckpointError(f'{path}: field metadata.metrics must be a dict')
+    return meta
+
+
+def _short(value, limit=60):
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + '...'
+
+
+def verify_archive(path):
+    """Check the CRC-32 of every member of a checkpoint's zip archive (torch.save's
+    format; torch.load does not check them). Raises CheckpointError naming the member."""
+    try:
+        size = path.stat().st_size
+    except OSError as error:
+        raise CheckpointError(f'{path}: cannot read the checkpoint: {error}') from error
+    if size > MAX_FILE_BYTES:
+        raise CheckpointError(f'{path}: checkpoint is {size} bytes, more than the '
+                              f'{MAX_FILE_BYTES} a detector checkpoint can need')
+    if not zipfile.is_zipfile(path):
+        raise CheckpointError(f'{path}: not a readable checkpoint (not a torch.save zip '
+                              'archive; corrupt or truncated)')
+    try:
+        with zipfile.ZipFile(path) as archive:
+            bad = archive.testzip()
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError, NotImplementedError) as error:
+        raise CheckpointError(f'{path}: not a readable checkpoint (corrupt or truncated zip '
+                              f'archive: {error})') from error
+    if bad is not None:
+        raise CheckpointError(f'{path}: archive member {bad!r} fails its CRC check (the file '
+                              'is corrupted)')
+
+
+def check_weights(path, state):
+    """Every state_dict entry must be a tensor with finite values (CheckpointError naming
+    the first that is not)."""
+    for key, value in state.items():
+        if not isinstance(key, str) or not isinstance(value, torch.Tensor):
+            raise CheckpointError(f'{path}: field state_dict.{key} is not a tensor')
+        if value.is_floating_point() and not bool(torch.isfinite(value).all()):
+            bad = int((~torch.isfinite(value)).sum())
+            raise CheckpointError(f'{path}: field state_dict.{key} holds {bad} non-finite '
+                                  'value(s) (NaN/inf; corrupted or diverged weights)')
 
 
 def _model_metadata(model, metadata):
@@ -87,10 +210,12 @@ def save_checkpoint(path, model, metadata):
 
 
 def read_checkpoint(path):
-    """(metadata, state_dict) of a checkpoint file, validated; CheckpointError otherwise."""
+    """(metadata, state_dict) of a checkpoint file, validated (archive CRCs, metadata types,
+    ranges and bounded sizes, finite weights); CheckpointError otherwise."""
     path = Path(path)
     if not path.is_file():
         raise CheckpointError(f'{path}: checkpoint file not found')
+    verify_archive(path)
     try:
         payload = torch.load(path, map_location='cpu', weights_only=True)
     except Exception as error:  # noqa: BLE001 - zip, pickle and EOF errors all mean "corrupt"
@@ -100,25 +225,13 @@ def read_checkpoint(path):
         raise CheckpointError(f'{path}: not a monet_ros checkpoint (top level is '
                               f'{type(payload).__name__}, not a dict)')
     if payload.get('format') != FORMAT:
-        raise CheckpointError(f'{path}: field format is {payload.get("format")!r}, '
+        raise CheckpointError(f'{path}: field format is {_short(payload.get("format"))}, '
                               f'expected {FORMAT!r}')
     for field in ('metadata', 'state_dict'):
         if not isinstance(payload.get(field), dict):
             raise CheckpointError(f'{path}: field {field} is missing or not a dict')
-    meta = payload['metadata']
-    for field in REQUIRED:
-        if field not in meta:
-            raise CheckpointError(f'{path}: field metadata.{field} is missing')
-    keypoints = meta['keypoints']
-    if not isinstance(keypoints, list) or not all(isinstance(k, str) for k in keypoints) \
-            or not keypoints:
-        raise CheckpointError(f'{path}: field metadata.keypoints must be a non-empty list of '
-                              f'names, got {keypoints!r}')
-    if not isinstance(meta.get('model_options', {}), dict):
-        raise CheckpointError(f'{path}: field metadata.model_options must be a dict')
-    meta.setdefault('model_options', {})
-    meta.setdefault('step', 0)
-    meta.setdefault('metrics', {})
+    meta = validate_metadata(path, payload['metadata'])
+    check_weights(path, payload['state_dict'])
     return meta, payload['state_dict']
 
 
@@ -126,9 +239,10 @@ def load_checkpoint(path, architecture=None, num_keypoints=None, device='cpu'):
     """Rebuild the model of a checkpoint and load its weights -> (model in eval mode, metadata).
 
     architecture / num_keypoints: when given, the checkpoint must match them. Every problem
-    (missing file, corrupt or truncated file, missing metadata, architecture or keypoint-count
-    mismatch, state_dict that does not fit the architecture) raises CheckpointError naming
-    the file and the field.
+    (missing file, corrupt or truncated file or archive CRC, metadata of the wrong type or
+    range, non-finite weights, architecture or keypoint-count mismatch, state_dict that does
+    not fit the architecture) raises CheckpointError naming the file and the field; the
+    metadata is validated before any network is built.
     """
     path = Path(path)
     meta, state = read_checkpoint(path)
@@ -141,7 +255,7 @@ def load_checkpoint(path, architecture=None, num_keypoints=None, device='cpu'):
                               f'expected {num_keypoints}')
     try:
         model = build_model(meta['architecture'], count, **meta['model_options'])
-    except (TypeError, ValueError) as error:
+    except (TypeError, ValueError, RuntimeError) as error:
         raise CheckpointError(f'{path}: field metadata.architecture/model_options cannot build '
                               f'a model: {error}') from error
     for field in ('input_size', 'heatmap_size'):
@@ -150,7 +264,7 @@ def load_checkpoint(path, architecture=None, num_keypoints=None, device='cpu'):
                                   f'{meta["architecture"]!r} has {list(getattr(model, field))}')
     try:
         model.load_state_dict(state, strict=True)
-    except RuntimeError as error:
+    except (RuntimeError, TypeError, ValueError) as error:
         raise CheckpointError(f'{path}: field state_dict does not fit architecture '
                               f'{meta["architecture"]!r} with {count} keypoints: {error}') \
             from error

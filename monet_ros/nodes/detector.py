@@ -33,6 +33,7 @@ from monet_ros.io import (
     image_to_numpy,
     numpy_to_image_msg,
 )
+from monet_ros.io.images import to_rgb8
 from monet_ros.models import CheckpointError, Detector, decode_heatmaps
 from monet_ros.models.crop import crop_images
 from monet_ros.nodes.params import declare_config
@@ -220,11 +221,7 @@ class DetectorNode(Node):
         try:
             image = (compressed_image_to_numpy(msg) if isinstance(msg, CompressedImage)
                      else image_to_numpy(msg))
-            if image.ndim == 2:
-                image = np.repeat(image[..., None], 3, axis=2)
-            if image.dtype != np.uint8 or image.shape[2] != 3:
-                raise ValueError(f'need an 8-bit colour or mono image, got {image.dtype} '
-                                 f'{image.shape}')
+            image = to_rgb8(image)        # grey / 16-bit / float -> the network's rgb8
             camera = slot.camera or slot.rig_camera
             if camera is None:
                 raise ValueError(f'no camera_info on {slot.info_topic} yet')

@@ -193,6 +193,8 @@ class FusionNode(Node):
             else:
                 self.get_logger().error(f'fusion failed at stamp {group.stamp_ns}: {error}')
             return
+        for index, reason in result.skipped_views.items():  # e.g. a 2x2 heatmap grid
+            self.bad_message(cameras[index].name, reason)
         self.frames += 1
         self.partial_frames += bool(group.missing)
         self.fusion_seconds = (self.fusion_seconds + [result.seconds])[-100:]

@@ -2,11 +2,18 @@
 
 `run_node(factory)` initialises rclpy, builds the node (a bad parameter, file or model is
 a clear one-line error and exit code 2), spins it, and on SIGINT / SIGTERM / Ctrl-C
-destroys it and shuts rclpy down, exiting 0.
+destroys it and shuts rclpy down, exiting 0 - at any moment, start-up included (the
+package installs exit-0 handlers before the heavy imports, monet_ros.nodes).
+
+Nothing that arrives on a topic stops a node: every subscription and timer callback runs
+under a CallbackGuard, which counts an exception per topic and kind, logs each kind once,
+and reports the counts in /diagnostics ('monet <node>: callback errors').
 """
+from collections import Counter
 from contextlib import contextmanager
 import os
 from pathlib import Path
+import signal
 import sys
 import time
 
@@ -82,16 +89,96 @@ def stop_executor(executor, timeout_sec=2.0):
             task.exception()          # marks it retrieved: a stop-time failure, not a bug
 
 
+class CallbackGuard:
+    """Runs a node's subscription and timer callbacks so that an exception costs only that
+    call: counted per topic (timer callbacks: per callback name) and exception type, logged
+    once per kind (with the message), published on /diagnostics every second while any
+    were counted. `errors`: Counter {(source, exception type name): count}."""
+
+    def __init__(self, node):
+        self.node = node
+        self.errors = Counter()
+        self.last = {}
+        for sub in list(node.subscriptions):
+            sub.callback = self.wrap(sub.topic_name, sub.callback)
+        for timer in list(node.timers):
+            label = getattr(timer.callback, '__name__', 'timer')
+            timer.callback = self.wrap(f'timer {label}', timer.callback)
+        from diagnostic_msgs.msg import DiagnosticArray
+        self._array = DiagnosticArray
+        self.pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        node.create_timer(1.0, self.publish)
+
+    def wrap(self, source, callback):
+        def guarded(*args):
+            try:
+                return callback(*args)
+            except Exception as error:  # noqa: BLE001 - nothing on a topic may stop the node
+                if stopped_by_shutdown(self.node.context):
+                    raise
+                self.record(source, error)
+                return None
+        guarded.__name__ = getattr(callback, '__name__', 'callback')
+        return guarded
+
+    def record(self, source, error):
+        kind = (source, type(error).__name__)
+        self.errors[kind] += 1
+        self.last[source] = f'{type(error).__name__}: {error}'
+        if self.errors[kind] == 1:
+            self.node.get_logger().error(
+                f'{source}: message not handled ({type(error).__name__}: {error}); the node '
+                'goes on, further errors of this kind are counted in /diagnostics')
+
+    def publish(self):
+        if not self.errors:
+            return
+        from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+        msg = self._array()
+        msg.header.stamp = self.node.get_clock().now().to_msg()
+        by_source = Counter()
+        for (source, _), count in self.errors.items():
+            by_source[source] += count
+        for source, count in sorted(by_source.items()):
+            msg.status.append(DiagnosticStatus(
+                level=DiagnosticStatus.WARN, name=f'monet {self.node.get_name()}: callback '
+                f'errors: {source}', hardware_id=source,
+                message=f'{count} message(s) not handled on {source}',
+                values=[KeyValue(key='errors', value=str(count)),
+                        KeyValue(key='last_error', value=self.last[source])]))
+        self.pub.publish(msg)
+
+
+def _raise_interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def clean_stop_handlers():
+    """SIGINT and SIGTERM raise KeyboardInterrupt (a clean stop in until_shutdown) until
+    rclpy's own handlers take over (they chain to these)."""
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, _raise_interrupt)
+
+
 def run_node(factory, name, args=None, large_data=False):
     """Run the node built by `factory()` until shutdown; return the process exit code.
 
     Errors while building the node (ValueError subclasses such as ConfigError, RigError,
-    CheckpointError, and OSError for missing files) print one line and return 2.
+    CheckpointError, and OSError for missing files) print one line and return 2. SIGINT /
+    SIGTERM at any moment return 0. The node's callbacks run under a CallbackGuard.
     """
     if large_data:
         use_large_data_profile()
-    rclpy.init(args=args)
     node = None
+    try:
+        clean_stop_handlers()
+        rclpy.init(args=args)
+    except KeyboardInterrupt:
+        rclpy.try_shutdown()
+        return EXIT_OK
+    except Exception as error:  # noqa: BLE001 - e.g. malformed --ros-args: one line, exit 2
+        start_error(name, f'cannot start ROS: {error}')
+        return EXIT_BAD_START
     try:
         with until_shutdown():
             try:
@@ -99,11 +186,15 @@ def run_node(factory, name, args=None, large_data=False):
             except (ValueError, OSError) as error:
                 start_error(name, error)
                 return EXIT_BAD_START
+            node.callback_guard = CallbackGuard(node)
             executor = SingleThreadedExecutor()
             executor.add_node(node)
             executor.spin()
     finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+        try:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
+        except KeyboardInterrupt:
+            pass
     return EXIT_OK
