@@ -299,6 +299,12 @@ class McapScan:
                         prev, pos = pos, nxt
                         continue
                     yield item
+                elif op == OP_MESSAGE and self._chunk_offsets:
+                    # the summary indexes chunks: its messages are all in chunks, so this is
+                    # another record whose opcode was damaged (e.g. a message index)
+                    self._error(f'record at byte {pos} (opcode 0x05, length {length}) is a '
+                                'message outside the chunks of a chunked file (damaged); '
+                                'skipped')
                 elif op in (OP_SCHEMA, OP_CHANNEL, OP_MESSAGE):
                     body = memoryview(f.read(length))
                     item = self._record(op, body, pos)
@@ -368,7 +374,7 @@ class McapScan:
 
     def _chunk(self, body, pos):
         try:
-            start, _end, usize, crc, compression, data = parse_chunk_header(body)
+            start, end, usize, crc, compression, data = parse_chunk_header(body)
             data = _decompress(compression, data, usize)
         except (ChunkError, struct.error) as exc:
             self._error(f'chunk at byte {pos} skipped: {exc}')
@@ -380,6 +386,7 @@ class McapScan:
             self._error(f'chunk at byte {pos}: CRC mismatch (data damaged; messages kept, '
                         'each may fail to decode)')
         messages, defs = [], []
+        ranged = 0 < end and start <= end          # the header's message time range
         records = parse_records(data, lambda t: self._error(f'chunk at byte {pos}: {t}'))
         for k, (op, rec) in enumerate(records):
             if op not in _IN_CHUNK_OPS:
@@ -390,6 +397,12 @@ class McapScan:
             if item is None:
                 continue
             if item[0] == 'message':
+                if ranged and not start <= item[1][2] <= end:
+                    # e.g. a Channel record whose opcode became 0x05 parses as a "message"
+                    self._error(f'chunk at byte {pos}: record {k} is a message with log time '
+                                f"{item[1][2]} outside the chunk's range {start}..{end} "
+                                '(damaged); skipped')
+                    continue
                 messages.append(item[1])
             else:
                 defs.append(item)

@@ -217,6 +217,9 @@ def _compare_with_summary(summary, read_per_channel, want, path, report):
         if want is not None and topic not in want:
             continue
         lost = expected - read_per_channel.get(cid, 0)
+        if lost < 0:
+            report.error(path, f'{-lost} more messages on {topic} than the summary lists '
+                               '(damaged records read as messages?)')
         if lost > 0:
             report.skip(topic, f'{lost} of the {expected} messages that the summary of {path} '
                                'lists could not be read (damaged records; see the errors)', lost)
