@@ -1,0 +1,121 @@
+"""Checkpoints are not trusted: metadata types, ranges and bounded sizes are checked before
+any network is built, the zip archive's CRCs are verified (torch.load does not) and
+non-finite weights are refused - one CheckpointError for load_checkpoint and
+Detector.from_checkpoint alike (the detector node's `model` parameter and hot reload use
+the same path; see test/nodes/test_bad_input_nodes.py).
+
+Built from issue 14's examples: `input_size: 64` (an int), `model_options.width` -16 or
+200000, a million context blocks, and one bit flipped inside the weights of the zip
+(a weight becomes ~1e37, the member's CRC no longer matches)."""
+import re
+import time
+import zipfile
+
+import numpy as np
+import pytest
+import torch
+
+from monet_ros.models import (
+    CheckpointError,
+    Detector,
+    build_model,
+    load_checkpoint,
+    save_checkpoint,
+)
+
+NAMES = ['a', 'b', 'c']
+
+
+@pytest.fixture
+def saved(tmp_path):
+    torch.manual_seed(0)
+    path = tmp_path / 'model.pt'
+    save_checkpoint(path, build_model('small', 3, width=16, input_size=(64, 64)),
+                    {'keypoints': NAMES})
+    return path
+
+
+def rewrite(path, edit):
+    payload = torch.load(path, weights_only=True)
+    edit(payload)
+    torch.save(payload, path)
+
+
+def refused(path, field):
+    """Both API entry points raise CheckpointError naming the file and the field, fast
+    (no network of the asked-for size is ever built)."""
+    pattern = re.escape(str(path)) + '.*' + re.escape(field)
+    for load in (load_checkpoint, lambda p: Detector.from_checkpoint(p, device='cpu')):
+        start = time.perf_counter()
+        with pytest.raises(CheckpointError, match=pattern):
+            load(path)
+        assert time.perf_counter() - start < 5.0
+
+
+@pytest.mark.parametrize('field, value, named', [
+    ('input_size', 64, 'metadata.input_size'),                 # the issue's example
+    ('input_size', [64, 64, 3], 'metadata.input_size'),
+    ('input_size', [64.0, 64.0], 'metadata.input_size'),
+    ('input_size', [True, 64], 'metadata.input_size'),
+    ('input_size', [64, 10 ** 9], 'metadata.input_size'),
+    ('heatmap_size', 'big', 'metadata.heatmap_size'),
+    ('architecture', ['small'], 'metadata.architecture'),
+    ('architecture', 'resnet', 'metadata.architecture'),
+    ('keypoints', ['x'] * 100_000, 'metadata.keypoints'),
+    ('step', -3, 'metadata.step'),
+    ('model_options', [], 'metadata.model_options'),
+])
+def test_metadata_types_and_ranges(saved, field, value, named):
+    rewrite(saved, lambda p: p['metadata'].update({field: value}))
+    refused(saved, named)
+
+
+@pytest.mark.parametrize('option, value', [
+    ('width', -16), ('width', 200_000), ('width', 16.0), ('width', True),
+    ('context_blocks', 1_000_000), ('depth', 3), ('input_size', [32, 32]),
+])
+def test_model_options_are_bounded_before_building(saved, option, value):
+    rewrite(saved, lambda p: p['metadata']['model_options'].update({option: value}))
+    refused(saved, f'metadata.model_options.{option}')
+
+
+def _float_member(path):
+    """(name, offset in the file, dtype) of the largest float tensor member of the zip."""
+    with zipfile.ZipFile(path) as archive:
+        infos = [i for i in archive.infolist() if '/data/' in i.filename]
+        info = max(infos, key=lambda i: i.file_size)
+        assert info.compress_type == zipfile.ZIP_STORED
+    with open(path, 'rb') as stream:      # data starts after the local header + name + extra
+        stream.seek(info.header_offset + 26)
+        name_len, extra_len = np.frombuffer(stream.read(4), '<u2')
+    return info, info.header_offset + 30 + int(name_len) + int(extra_len)
+
+
+def test_bit_flip_in_weights_is_refused(saved):
+    """One exponent bit of one float32 weight flipped in the file: torch.load alone gives
+    a ~1e37 weight (checked here); the archive check refuses the file."""
+    info, start = _float_member(saved)
+    data = bytearray(saved.read_bytes())
+    data[start + 3] ^= 0x40                  # exponent MSB of the first float32 (little end)
+    saved.write_bytes(bytes(data))
+    payload = torch.load(saved, weights_only=True)        # torch does not notice
+    assert max(float(t.abs().max()) for t in payload['state_dict'].values()
+               if t.is_floating_point()) > 1e30
+    refused(saved, 'CRC')
+
+
+@pytest.mark.parametrize('bad', [float('nan'), float('inf')])
+def test_non_finite_weights_are_refused(saved, bad):
+    """A valid archive (CRCs right) whose weights hold NaN / inf (e.g. a diverged run)."""
+    def poison(payload):
+        payload['state_dict']['head.weight'][0, 0, 0, 0] = bad
+    rewrite(saved, poison)
+    with zipfile.ZipFile(saved) as archive:
+        assert archive.testzip() is None
+    refused(saved, 'state_dict.head.weight')
+
+
+def test_valid_checkpoint_still_loads(saved):
+    model, meta = load_checkpoint(saved)
+    assert meta['input_size'] == [64, 64] and meta['keypoints'] == NAMES
+    assert Detector.from_checkpoint(saved, device='cpu').input_size == (64, 64)
