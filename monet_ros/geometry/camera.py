@@ -13,6 +13,9 @@ DIST_LENGTHS = (0, 4, 5, 8, 12)
 _ROTATION_TOL = 1e-6
 
 
+MAX_K = 1e7   # largest |K| entry in pixels (focal lengths of real lenses are < 1e5 px)
+
+
 class CameraError(ValueError):
     """A camera parameter is invalid; `.field` names the offending field."""
 
@@ -105,6 +108,9 @@ class Camera:
         if K[0, 0] <= 0 or K[1, 1] <= 0:
             raise CameraError(name, 'K', f'focal lengths must be positive, got fx={K[0, 0]}, '
                               f'fy={K[1, 1]}')
+        if np.abs(K).max() > MAX_K:
+            raise CameraError(name, 'K', f'values beyond {MAX_K:g} pixels (largest '
+                              f'{np.abs(K).max():.3g}): not a real camera')
         if K[1, 0] != 0 or not np.array_equal(K[2], [0.0, 0.0, 1.0]):
             raise CameraError(name, 'K', 'must be upper triangular with last row [0, 0, 1]')
         dist = np.array(self.dist if self.dist is not None else [], dtype=np.float64).ravel()

@@ -18,9 +18,6 @@ KEYPOINT_CLOUD_FIELDS = (
 )
 KEYPOINT_POINT_STEP = 28
 
-# OpenCV distortion vector lengths -> ROS distortion_model
-_DIST_MODELS = {'plumb_bob': (4, 5), 'rational_polynomial': (8, 12, 14)}
-
 
 def split_stamp(stamp_ns):
     """Nanoseconds -> (sec, nanosec) of a builtin_interfaces/Time."""
@@ -62,30 +59,35 @@ def camera_from_camera_info(msg, name, R=None, t=None, topic=None):
     """sensor_msgs/CameraInfo -> monet_ros.geometry.Camera (intrinsics from K and D,
     extrinsics world -> camera R, t given; identity / zero when None).
 
-    Only OpenCV models are accepted (plumb_bob, rational_polynomial, or an empty model
-    with no coefficients); anything else is a ValueError naming the model."""
+    The camera is that of the images the driver publishes: a region of interest (roi,
+    full-resolution pixels) and binning_x / binning_y (0 = 1) are applied to K and the size
+    (REP 104: the image is (roi or width x height) / binning). Distortion models follow the
+    one rule of monet_ros.geometry.rig.opencv_distortion (plumb_bob, rational_polynomial
+    with any OpenCV count, or none); anything else is a ValueError naming the camera."""
     from monet_ros.geometry import Camera
+    from monet_ros.geometry.rig import opencv_distortion
 
-    model = str(msg.distortion_model)
-    d = np.asarray(msg.d, np.float64).reshape(-1)
-    if model in _DIST_MODELS:
-        if d.size not in _DIST_MODELS[model] and d.size != 0:
-            raise ValueError(f'camera {name}: distortion_model {model!r} with {d.size} '
-                             'coefficients')
-    elif model in ('', 'none') and not np.any(d):
-        d = np.zeros(5)
-    else:
-        raise ValueError(f'camera {name}: unsupported distortion_model {model!r} '
-                         '(OpenCV plumb_bob / rational_polynomial only)')
+    d = opencv_distortion(msg.distortion_model, msg.d, f'camera {name}')
     if d.size == 0:
         d = np.zeros(5)
     K = np.asarray(msg.k, np.float64).reshape(3, 3)
-    if K[2, 2] == 0 or K[0, 0] <= 0 or K[1, 1] <= 0:
+    if not np.all(np.isfinite(K)) or K[2, 2] == 0 or K[0, 0] <= 0 or K[1, 1] <= 0:
         raise ValueError(f'camera {name}: CameraInfo has no valid intrinsics (K = {K.tolist()})')
+    width, height = int(msg.width), int(msg.height)
+    roi = getattr(msg, 'roi', None)
+    if roi is not None and int(roi.width) > 0 and int(roi.height) > 0:
+        K = K.copy()
+        K[0, 2] -= int(roi.x_offset)
+        K[1, 2] -= int(roi.y_offset)
+        width, height = int(roi.width), int(roi.height)
+    bx = max(int(getattr(msg, 'binning_x', 0)), 1)
+    by = max(int(getattr(msg, 'binning_y', 0)), 1)
+    if bx > 1 or by > 1:      # as ROS image_geometry: fx / b, (cx - roi offset) / b
+        K = np.diag([1 / bx, 1 / by, 1.0]) @ K
+        width, height = width // bx, height // by
     R = np.eye(3) if R is None else np.asarray(R, np.float64)
     t = np.zeros(3) if t is None else np.asarray(t, np.float64)
-    return Camera(name=name, K=K, dist=d, R=R, t=t, width=int(msg.width),
-                  height=int(msg.height), topic=topic)
+    return Camera(name=name, K=K, dist=d, R=R, t=t, width=width, height=height, topic=topic)
 
 
 # ---------------------------------------------------------------- heatmaps <-> Image
