@@ -1,0 +1,179 @@
+"""Rig files as users have them, and broken ones: every problem is a RigError naming the
+file and the field - never a raw ValueError/OverflowError/cv2.error/MemoryError, never a
+value silently taken (issue 14: `width: true`, NaN/inf sizes, a YAML alias bomb, 50 MB rig
+files, OpenCV XML whose rows/cols lie or that is cut; OpenCV's own sample calibration
+files are read)."""
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+from monet_ros.geometry import RigError, load_rig, read_rig, save_rig
+from monet_ros.geometry.rig import MAX_RIG_BYTES
+
+K = np.array([[658.2, 0.0, 319.4], [0.0, 657.9, 241.1], [0.0, 0.0, 1.0]])
+D = np.array([-0.25, 0.11, 0.0004, -0.0007, -0.02])
+
+PROJECT = """frame_id: world
+cameras:
+  - name: cam0
+    width: {width}
+    height: 120
+    K: [[137.7, 0.0, 80.8], [0.0, 139.5, 58.8], [0.0, 0.0, 1.0]]
+    D: [-0.08, 0.02, 0.0, 0.0, 0.0]
+    R: [[1, 0, 0], [0, 1, 0], [0, 0, 1]]
+    t: [0.0, 0.8, 4.1]
+"""
+
+
+@pytest.mark.parametrize('width', ['true', 'false', '.nan', '.inf', '-.inf', '1e400',
+                                   '160.5', '"wide"', '[160]'])
+def test_bad_width_names_file_camera_and_field(tmp_path, width):
+    path = tmp_path / 'rig.yaml'
+    path.write_text(PROJECT.format(width=width))
+    with pytest.raises(RigError) as info:
+        load_rig(path)
+    text = str(info.value)
+    assert str(path) in text and "'cam0'" in text and 'cameras[0].width' in text
+    assert info.value.field == 'cameras[0].width'
+
+
+def test_good_width_still_loads(tmp_path):
+    path = tmp_path / 'rig.yaml'
+    path.write_text(PROJECT.format(width=160))
+    assert load_rig(path)[0].width == 160
+
+
+def test_toml_nan_and_inf_sizes(tmp_path):
+    path = tmp_path / 'calibration.toml'
+    for size in ('[nan, 480]', '[inf, 480]', '[640, 1e400]'):
+        path.write_text(f'[cam_1]\nname = "a"\nsize = {size}\n'
+                        'matrix = [[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]]\n'
+                        'distortions = [0.0, 0.0, 0.0, 0.0]\nrotation = [0.0, 0.0, 0.0]\n'
+                        'translation = [0.0, 0.0, 0.0]\n')
+        with pytest.raises(RigError, match=r'calibration\.toml.*cam_1\.size'):
+            load_rig(path)
+
+
+def test_yaml_alias_bomb_is_refused_fast(tmp_path):
+    """A ~600-byte "billion laughs": nine levels of nine aliases."""
+    lines = ['a0: &a0 [0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]']
+    for i in range(1, 10):
+        lines.append(f'a{i}: &a{i} [' + ', '.join([f'*a{i - 1}'] * 9) + ']')
+    lines.append('cameras: [*a9]')
+    path = tmp_path / 'bomb.yaml'
+    path.write_text('\n'.join(lines) + '\n')
+    assert path.stat().st_size < 700
+    start = time.perf_counter()
+    with pytest.raises(RigError, match=r'bomb\.yaml.*alias'):
+        load_rig(path)
+    assert time.perf_counter() - start < 2.0
+
+
+def test_huge_rig_file_is_refused_unread(tmp_path):
+    path = tmp_path / 'big.yaml'
+    with open(path, 'w') as stream:
+        stream.write(PROJECT.format(width=160))
+        stream.write(('#' * 1023 + '\n') * (MAX_RIG_BYTES // 1024 + 1))
+    start = time.perf_counter()
+    with pytest.raises(RigError, match=r'big\.yaml.*bytes'):
+        load_rig(path)
+    assert time.perf_counter() - start < 1.0
+
+
+def _write_opencv(path, entries):
+    fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_WRITE)
+    for key, value in entries.items():
+        fs.write(key, value)
+    fs.release()
+
+
+def test_opencv_camera_calibration_sample_names(tmp_path):
+    """out_camera_data.xml as OpenCV's camera_calibration sample writes it."""
+    path = tmp_path / 'out_camera_data.xml'
+    _write_opencv(path, {'calibration_Time': 'Mon Nov  3 10:00:00 2025', 'nrOfFrames': 25,
+                         'image_Width': 640, 'image_Height': 480, 'board_Width': 9,
+                         'board_Height': 6, 'Camera_Matrix': K,
+                         'Distortion_Coefficients': D.reshape(5, 1),
+                         'Avg_Reprojection_Error': 0.31})
+    cam = load_rig(path)[0]
+    np.testing.assert_array_equal(cam.K, K)
+    np.testing.assert_array_equal(cam.dist, D)
+    assert (cam.width, cam.height) == (640, 480)
+    np.testing.assert_array_equal(cam.R, np.eye(3))
+
+
+def test_opencv_stereo_calib_intrinsics_without_size(tmp_path):
+    """stereo_calib's intrinsics.yml (M1 D1 M2 D2, no size) + extrinsics.yml (R T ...)."""
+    folder = tmp_path / 'calib'
+    folder.mkdir()
+    intrinsics = folder / 'intrinsics.yml'
+    _write_opencv(intrinsics, {'M1': K, 'D1': D.reshape(1, 5), 'M2': K * [[1.01], [1.0],
+                                                                          [1.0]],
+                               'D2': D.reshape(1, 5)})
+    with pytest.raises(RigError) as info:                    # no size, no extrinsics
+        load_rig(intrinsics)
+    assert 'image_width' in str(info.value) and 'image_size' in str(info.value)
+    with pytest.raises(RigError, match=r'intrinsics\.yml.*extrinsics\.yml'):
+        load_rig(intrinsics, image_size=(640, 480))
+    R = cv2.Rodrigues(np.array([0.0, 0.1, 0.0]))[0]
+    T = np.array([[-0.12], [0.0], [0.001]])
+    _write_opencv(folder / 'extrinsics.yml', {'R': R, 'T': T, 'R1': np.eye(3)})
+    left, right = load_rig(intrinsics, image_size=(640, 480))
+    assert (left.width, left.height) == (right.width, right.height) == (640, 480)
+    np.testing.assert_array_equal(left.R, np.eye(3))
+    np.testing.assert_allclose(right.R, R)
+    np.testing.assert_allclose(right.t, T.ravel())
+    np.testing.assert_allclose(right.K, K * [[1.01], [1.0], [1.0]])
+
+
+def test_unknown_opencv_names_list_the_accepted_ones(tmp_path):
+    path = tmp_path / 'cam.xml'
+    _write_opencv(path, {'intrinsic': K, 'image_Width': 640, 'image_Height': 480})
+    with pytest.raises(RigError) as info:
+        load_rig(path)
+    assert 'camera_matrix' in str(info.value) and 'cameraMatrix' in str(info.value)
+
+
+XML_MATRIX = """<?xml version="1.0"?>
+<opencv_storage>
+<image_width>640</image_width>
+<image_height>480</image_height>
+<camera_matrix type_id="opencv-matrix">
+  <rows>{rows}</rows>
+  <cols>{cols}</cols>
+  <dt>d</dt>
+  <data>
+    658.2 0. 319.4 0. 657.9 241.1 0. 0. 1.</data></camera_matrix>
+</opencv_storage>
+"""
+
+
+@pytest.mark.parametrize('rows, cols', [(4, 4), (3, 2), (100000, 100000), (-1, 3)])
+def test_opencv_xml_whose_rows_cols_lie(tmp_path, rows, cols):
+    path = tmp_path / 'cam.xml'
+    path.write_text(XML_MATRIX.format(rows=rows, cols=cols))
+    with pytest.raises(RigError, match=r'cam\.xml'):
+        load_rig(path)
+
+
+@pytest.mark.parametrize('fraction', [0.3, 0.6, 0.9])
+def test_truncated_opencv_xml(tmp_path, fraction):
+    text = XML_MATRIX.format(rows=3, cols=3)
+    path = tmp_path / 'cam.xml'
+    path.write_text(text[:int(len(text) * fraction)])
+    with pytest.raises(RigError, match=r'cam\.xml'):
+        load_rig(path)
+
+
+def test_round_trip_unchanged(tmp_path):
+    cams = load_rig(_sample(tmp_path))
+    save_rig(tmp_path / 'again.yaml', cams)
+    assert read_rig(tmp_path / 'again.yaml')[0] == cams
+
+
+def _sample(tmp_path):
+    path = tmp_path / 'sample.yaml'
+    path.write_text(PROJECT.format(width=160))
+    return path
