@@ -5,15 +5,39 @@ goes to a temporary file in the same folder, is fsynced, then renamed over the t
 (os.replace is atomic on POSIX); the folder is fsynced so the rename survives a crash.
 """
 from contextlib import contextmanager
+import errno
 import os
 from pathlib import Path
+import shutil
 import tempfile
+
+# Free bytes below which a failed write is reported as a full disk (torch's zip writer
+# raises RuntimeError "enforce fail at inline_container.cc", without errno or path).
+_NEARLY_FULL = 1 << 20
+
+
+class DiskFullError(OSError):
+    """A write failed because the file system is full; names the file."""
+
+
+def _disk_full(error, folder):
+    """True when `error` (raised while writing into `folder`) means: no space left."""
+    if isinstance(error, OSError) and error.errno in (errno.ENOSPC, errno.EDQUOT):
+        return True
+    if not isinstance(error, (OSError, RuntimeError)):
+        return False
+    try:
+        return shutil.disk_usage(folder).free < _NEARLY_FULL
+    except OSError:
+        return False
 
 
 @contextmanager
 def atomic_write(path, mode='wb'):
     """Context manager yielding a stream; on success the file appears at `path` whole, on any
-    exception (or KeyboardInterrupt) the temporary file is removed and `path` is untouched."""
+    exception (or KeyboardInterrupt) the temporary file is removed and `path` is untouched.
+    A write that fails because the disk is full raises DiskFullError (an OSError, ENOSPC)
+    naming `path` and saying so, whatever the writer raised."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
@@ -23,11 +47,15 @@ def atomic_write(path, mode='wb'):
             stream.flush()
             os.fsync(stream.fileno())
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as error:
+        full = _disk_full(error, path.parent)
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
+        if full:
+            raise DiskFullError(errno.ENOSPC, f'{path}: cannot write: no space left on the '
+                                f'device (disk full; nothing was written)') from error
         raise
     try:  # make the rename durable (best effort; not every platform can fsync a folder)
         dir_fd = os.open(path.parent, os.O_RDONLY)
