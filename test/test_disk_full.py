@@ -12,7 +12,7 @@ import textwrap
 
 import pytest
 
-SCRIPT = textwrap.dedent('''
+SCRIPT = textwrap.dedent("""
     import os, sys, torch
     from monet_ros.models import build_model, save_checkpoint
     folder = sys.argv[1]
@@ -23,7 +23,7 @@ SCRIPT = textwrap.dedent('''
     except OSError as error:
         print('ERROR', type(error).__name__, error)
     print('LEFT', sorted(os.listdir(os.path.join(folder, 'ckpt'))))
-''')
+""")
 
 
 def _in_small_tmpfs(tmp_path, script):
