@@ -163,4 +163,5 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     recording = Recording(name or Path(path).name, cameras, stamps,
                           [np.stack(frames[n]) for n in names], keypoints, label_array, gt)
     recording.skipped = skipped
+    recording.read_report = reader.report      # what the bag read skipped (ok False: print)
     return recording

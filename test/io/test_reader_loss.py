@@ -7,9 +7,9 @@ opcode of a small real bag (top-level records and the records inside its chunks)
 The layout of the original file comes from the `mcap` library (independent of our scanner).
 """
 import io
-import struct
 
 from helpers.io_bags import make_camera, smooth_images
+from helpers.mcap_layout import opcode_offsets
 from mcap.reader import make_reader
 import numpy as np
 import pytest
@@ -28,27 +28,6 @@ def build_bag(folder):
                 bag.write_image(f'/{cam.name}/image_raw', s, smooth_images(rng, 1, 12, 16)[0],
                                 f'{cam.name}_optical')
     return folder / f'{folder.name}_0.mcap'
-
-
-def opcode_offsets(data):
-    """Byte offsets of every record opcode in the data section: top-level records (walked
-    from the header to the summary start the footer gives) and the records inside each
-    uncompressed chunk."""
-    summary_start = struct.unpack_from('<Q', data, len(data) - 8 - 29 + 9)[0]
-    offsets, pos = [], 8
-    while pos < summary_start:
-        op, length = struct.unpack_from('<BQ', data, pos)
-        offsets.append(pos)
-        if op == 0x06:
-            body = pos + 9
-            (clen,) = struct.unpack_from('<I', data, body + 28)
-            records = body + 32 + clen + 8
-            inner, end = records, pos + 9 + length
-            while inner < end:
-                offsets.append(inner)
-                inner += 9 + struct.unpack_from('<Q', data, inner + 1)[0]
-        pos += 9 + length
-    return offsets
 
 
 @pytest.fixture(scope='module')
