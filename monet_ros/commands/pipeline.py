@@ -123,6 +123,7 @@ def image_transport(bag):
 
 def run(args):
     from monet_ros.nodes.runner import (
+        CallbackGuard,
         start_error,
         stop_executor,
         until_shutdown,
@@ -182,6 +183,7 @@ def run(args):
                 player.gate = summary.gate()
             executor = MultiThreadedExecutor(num_threads=4)
             for node in nodes:
+                node.callback_guard = CallbackGuard(node)  # a bad message costs only itself
                 executor.add_node(node)
             started = time.monotonic()
             next_line = started + 1.0

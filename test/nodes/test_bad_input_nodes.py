@@ -232,3 +232,16 @@ def test_signal_during_start_exits_0_without_traceback(ros_env, tmp_path, module
     output = node.output()
     assert 'Traceback' not in output, output
     assert code == 0, output
+
+
+def test_bad_checkpoint_as_model_parameter_is_one_line_exit_2(ros_env, detector_setup):
+    """The same CheckpointError path as hot reload: a clear start error, not a traceback."""
+    rig, rig_path, good, bad = detector_setup
+    with NodeProcess('detector', ros_env, dict(rig=str(rig_path), model=str(bad),
+                                               device='cpu')) as node:
+        code = node.wait(timeout=120)
+    output = node.output()
+    assert code == 2, output
+    assert 'Traceback' not in output
+    lines = [line for line in output.splitlines() if 'error' in line]
+    assert len(lines) == 1 and str(bad) in lines[0] and 'metadata.input_size' in lines[0]
