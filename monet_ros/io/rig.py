@@ -38,10 +38,50 @@ def _image_topic(reader, name):
     return candidates[0] if candidates else None
 
 
+def recording_image_size(path):
+    """(width, height) shared by the first image of every image topic of a recording, or
+    None when the recording has no image or its cameras differ in size."""
+    from .images import any_image_to_numpy
+    reader = path if isinstance(path, BagReader) else open_bag(path)
+    topics = reader.topics_of_type(*IMAGE_TYPES)
+    sizes = {}
+    for m in reader.messages(topics=topics):
+        if m.topic not in sizes:
+            try:
+                if hasattr(m.msg, 'width') and hasattr(m.msg, 'height'):
+                    sizes[m.topic] = (int(m.msg.width), int(m.msg.height))
+                else:
+                    shape = any_image_to_numpy(m.msg).shape
+                    sizes[m.topic] = (int(shape[1]), int(shape[0]))
+            except (AttributeError, TypeError, ValueError):
+                continue
+        if len(sizes) == len(topics):
+            break
+    return next(iter(sizes.values())) if len(set(sizes.values())) == 1 else None
+
+
+def _rig_file_sized_by(path, rig_file):
+    """load_rig(rig_file); a calibration file that stores no image size (OpenCV's
+    stereo_calib intrinsics.yml) takes the size of the recording's images."""
+    from monet_ros.geometry import RigError, load_rig
+    try:
+        return load_rig(rig_file)
+    except RigError as error:
+        if error.field != 'image_width' or 'stores no image size' not in error.message:
+            raise
+        size = recording_image_size(path) if path is not None else None
+        if size is None:
+            raise RigError(error.path, error.field, error.message + '; the recording does '
+                           'not give one either (no images, or cameras of different sizes)') \
+                from None
+        return load_rig(rig_file, image_size=size)
+
+
 def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None):
     """list[Camera] of a bag, sorted by name.
 
-    With rig_file: monet_ros.geometry.load_rig(rig_file). Otherwise intrinsics from the
+    With rig_file: monet_ros.geometry.load_rig(rig_file) (the recording's image size when
+    the file stores none, as stereo_calib's intrinsics.yml). Otherwise intrinsics from the
     first message of each CameraInfo topic (camera name = the topic's first name, e.g.
     /cam01/camera_info -> cam01) and extrinsics from the /tf_static transforms that chain
     the CameraInfo's header.frame_id to world_frame (default: the common root frame). A
@@ -50,8 +90,7 @@ def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None)
     path: a bag path or a BagReader. Raises RigFromBagError naming what is missing.
     """
     if rig_file is not None:
-        from monet_ros.geometry import load_rig
-        return load_rig(rig_file)
+        return _rig_file_sized_by(path, rig_file)
     reader = path if isinstance(path, BagReader) else open_bag(path)
     info_topics = sorted(camera_info_topics or reader.topics_of_type(CAMERA_INFO))
     if not info_topics:

@@ -115,3 +115,32 @@ def test_16bit_images_to_network_rgb8():
 
 def test_binned_camera_info_message_type_is_real():
     assert hasattr(CameraInfo(), 'binning_x') and hasattr(CameraInfo(), 'roi')
+
+
+def test_stereo_calib_file_takes_the_size_of_the_recording(tmp_path):
+    """OpenCV stereo_calib's intrinsics.yml (M1 D1 M2 D2, no image size) used as the rig of
+    a recording: the size comes from the recording's images."""
+    from monet_ros.geometry import RigError
+    from monet_ros.io import BagWriter, rig_from_bag
+
+    folder = tmp_path / 'calib'
+    folder.mkdir()
+    K = np.array([[80.0, 0, 32], [0, 80.0, 24], [0, 0, 1]])
+    for name, entries in (('intrinsics.yml', {'M1': K, 'D1': np.zeros((1, 5)), 'M2': K,
+                                              'D2': np.zeros((1, 5))}),
+                          ('extrinsics.yml', {'R': np.eye(3), 'T': np.array([-0.1, 0, 0])})):
+        fs = cv2.FileStorage(str(folder / name), cv2.FILE_STORAGE_WRITE)
+        for key, value in entries.items():
+            fs.write(key, value)
+        fs.release()
+    image = np.zeros((48, 64, 3), np.uint8)
+    with BagWriter(tmp_path / 'rec') as bag:
+        for cam in ('cam1', 'cam2'):
+            bag.write_image(f'/{cam}/image_raw', 1000, image, cam)
+    cams = rig_from_bag(tmp_path / 'rec', rig_file=folder / 'intrinsics.yml')
+    assert [(c.name, c.width, c.height) for c in cams] == [('cam1', 64, 48), ('cam2', 64, 48)]
+    with BagWriter(tmp_path / 'mixed') as bag:       # sizes differ: no size to take
+        bag.write_image('/cam1/image_raw', 1000, image, 'cam1')
+        bag.write_image('/cam2/image_raw', 1000, image[:24], 'cam2')
+    with pytest.raises(RigError, match='intrinsics.yml.*image_width.*recording'):
+        rig_from_bag(tmp_path / 'mixed', rig_file=folder / 'intrinsics.yml')
