@@ -185,7 +185,12 @@ def _model_metadata(model, metadata):
             raise ValueError(f'save_checkpoint: metadata.{key} is not JSON-able: {error}') \
                 from error
     # Round trip through JSON: plain dicts/lists/str/numbers only (what weights_only loads).
-    return json.loads(json.dumps(meta))
+    meta = json.loads(json.dumps(meta))
+    try:   # never write a checkpoint that read_checkpoint would refuse
+        validate_metadata('save_checkpoint', dict(meta))
+    except CheckpointError as error:
+        raise ValueError(str(error)) from None
+    return meta
 
 
 def save_checkpoint(path, model, metadata):
