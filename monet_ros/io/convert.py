@@ -17,6 +17,7 @@ from .fields import (
     heatmap_image_fields,
     image_msg_to_heatmaps,
     keypoint_cloud_fields,
+    split_stamp,
 )
 from .images import (
     any_image_to_numpy,
@@ -42,22 +43,12 @@ def _stamp_ns(stamp):
     return int(stamp)
 
 
-def header_time_fields(stamp_ns):
-    """(sec, nanosec) of a builtin_interfaces/Time for any stamp a message can carry:
-    sec is a signed int32 (stamps before 1970, e.g. sec = -1, are valid), nanosec in
-    [0, 1e9). ValueError outside the int32 seconds range."""
-    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
-    if not -2**31 <= sec < 2**31:
-        raise ValueError(f'stamp {stamp_ns} ns is outside the int32 seconds of a ROS time')
-    return sec, nanosec
-
-
 def _header(stamp, frame_id):
     """std_msgs/Header with `stamp` (int ns or a Time-like, kept as is, before 1970 too)."""
     from builtin_interfaces.msg import Time
     from std_msgs.msg import Header
 
-    sec, nanosec = header_time_fields(_stamp_ns(stamp))
+    sec, nanosec = split_stamp(_stamp_ns(stamp))
     return Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=str(frame_id))
 
 

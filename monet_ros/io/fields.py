@@ -20,11 +20,13 @@ KEYPOINT_POINT_STEP = 28
 
 
 def split_stamp(stamp_ns):
-    """Nanoseconds -> (sec, nanosec) of a builtin_interfaces/Time."""
-    stamp_ns = int(stamp_ns)
-    if stamp_ns < 0:
-        raise ValueError(f'stamp must be >= 0 ns, got {stamp_ns}')
-    return stamp_ns // 1_000_000_000, stamp_ns % 1_000_000_000
+    """Nanoseconds -> (sec, nanosec) of a builtin_interfaces/Time: sec is a signed int32
+    (a stamp before 1970, e.g. sec = -1, is a valid header stamp), nanosec in [0, 1e9).
+    ValueError outside the int32 seconds range."""
+    sec, nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    if not -2**31 <= sec < 2**31:
+        raise ValueError(f'stamp {stamp_ns} ns is outside the int32 seconds of a ROS time')
+    return sec, nanosec
 
 
 def stamp_to_ns(stamp):
