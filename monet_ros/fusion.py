@@ -79,6 +79,9 @@ def crop_scales(K_heat, K_source):
         scale = np.maximum(np.abs(S[:, 0, 0]), 1.0)
         good = (off.max(axis=1) <= _CROP_TOL * scale) & (S[:, 0, 0] > 0) & (S[:, 1, 1] > 0)
     good &= np.isfinite(S).all(axis=(1, 2))
+    with np.errstate(invalid='ignore'):   # absurd scales (e.g. K = 1e300): not a crop
+        good &= (np.minimum(S[:, 0, 0], S[:, 1, 1]) > 1e-6) \
+            & (np.maximum(S[:, 0, 0], S[:, 1, 1]) < 1e6)
     return S, ~good
 
 

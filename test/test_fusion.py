@@ -93,3 +93,33 @@ def test_heat_camera_must_be_a_crop_of_the_source():
     rotated[1] /= rotated[1][2, 2]
     with pytest.raises(ValueError, match='view 1: heatmap K is not a crop/scale'):
         heat_to_source(rotated, np.stack([c.K for c in rig]))
+
+
+def test_a_2x2_or_absurd_view_is_skipped_the_others_fused():
+    """fuse_heatmaps: a view whose grid is smaller than 3x3, or whose camera_info K is
+    absurd (1e300), is left out and named in skipped_views; the good views are fused to
+    the same answer as without the bad view."""
+    from monet_ros.fusion import fuse_heatmaps as fuse
+    rig, X, heat, K_heat = _scene_for_skips()
+    full = fuse(heat, K_heat, rig, FusionConfig())
+    tiny = [h for h in heat]
+    tiny[1] = np.full((heat.shape[1], 2, 2), 0.5, np.float32)
+    got = fuse(tiny, K_heat, rig, FusionConfig())
+    assert list(got.skipped_views) == [1] and '3x3' in got.skipped_views[1]
+    keep = [0, 2, 3]
+    ref = fuse(heat[keep], K_heat[keep], [rig[i] for i in keep], FusionConfig())
+    np.testing.assert_allclose(got.X, ref.X, atol=1e-9)
+    assert not got.inliers[1].any()
+    absurd = K_heat.copy()
+    absurd[2, 0, 0] = 1e300
+    got = fuse(heat, absurd, rig, FusionConfig())
+    assert list(got.skipped_views) == [2]
+    assert np.isfinite(got.X).all() and np.isfinite(full.X).all()
+    with pytest.raises(ValueError, match='view 0'):
+        fuse([np.zeros((heat.shape[1], 2, 2))] * 4, K_heat, rig, FusionConfig())
+
+
+def _scene_for_skips():
+    rig, X = scene(np.random.default_rng(5))
+    heat, K_heat, _ = render(rig, X, noise=0.2, rng=np.random.default_rng(6))
+    return rig, X, heat.astype(np.float32), K_heat

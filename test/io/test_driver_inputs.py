@@ -144,3 +144,12 @@ def test_stereo_calib_file_takes_the_size_of_the_recording(tmp_path):
         bag.write_image('/cam2/image_raw', 1000, image[:24], 'cam2')
     with pytest.raises(RigError, match='intrinsics.yml.*image_width.*recording'):
         rig_from_bag(tmp_path / 'mixed', rig_file=folder / 'intrinsics.yml')
+
+
+def test_split_stamp_signed_seconds():
+    from monet_ros.io.fields import split_stamp
+    assert split_stamp(-1_000_000_000) == (-1, 0)
+    assert split_stamp(-1) == (-1, 999_999_999)
+    assert split_stamp(1_700_000_000_123_456_789) == (1_700_000_000, 123_456_789)
+    with pytest.raises(ValueError, match='int32'):
+        split_stamp(2**31 * 1_000_000_000)
