@@ -164,7 +164,8 @@ def run_node(factory, name, args=None, large_data=False):
     """Run the node built by `factory()` until shutdown; return the process exit code.
 
     Errors while building the node (ValueError subclasses such as ConfigError, RigError,
-    CheckpointError, and OSError for missing files) print one line and return 2. SIGINT /
+    CheckpointError, OSError for missing files, and any other exception, with its type)
+    print one line and return 2. SIGINT /
     SIGTERM at any moment return 0. The node's callbacks run under a CallbackGuard.
     """
     if large_data:
@@ -185,6 +186,11 @@ def run_node(factory, name, args=None, large_data=False):
                 node = factory()
             except (ValueError, OSError) as error:
                 start_error(name, error)
+                return EXIT_BAD_START
+            except Exception as error:  # noqa: BLE001 - never a traceback: one line, exit 2
+                if stopped_by_shutdown():
+                    raise
+                start_error(name, f'{type(error).__name__}: {error}')
                 return EXIT_BAD_START
             node.callback_guard = CallbackGuard(node)
             executor = SingleThreadedExecutor()
