@@ -32,6 +32,19 @@ def _disk_full(error, folder):
         return False
 
 
+def write_error(path, error):
+    """The error to raise for a failed write of `path`: DiskFullError naming it when the
+    disk is full, else an OSError that names it (errno kept)."""
+    path = Path(path)
+    if _disk_full(error, path.parent):
+        return DiskFullError(errno.ENOSPC, f'{path}: cannot write: no space left on the '
+                             'device (disk full)')
+    if isinstance(error, OSError) and str(path) in str(error):
+        return error
+    return OSError(getattr(error, 'errno', None) or errno.EIO,
+                   f'{path}: cannot write: {getattr(error, "strerror", None) or error}')
+
+
 @contextmanager
 def atomic_write(path, mode='wb'):
     """Context manager yielding a stream; on success the file appears at `path` whole, on any
@@ -48,14 +61,13 @@ def atomic_write(path, mode='wb'):
             os.fsync(stream.fileno())
         os.replace(tmp, path)
     except BaseException as error:
-        full = _disk_full(error, path.parent)
+        full = _disk_full(error, path.parent)   # measured before the temporary file goes
         try:
             os.unlink(tmp)
         except FileNotFoundError:
             pass
         if full:
-            raise DiskFullError(errno.ENOSPC, f'{path}: cannot write: no space left on the '
-                                f'device (disk full; nothing was written)') from error
+            raise write_error(path, error) from error
         raise
     try:  # make the rename durable (best effort; not every platform can fsync a folder)
         dir_fd = os.open(path.parent, os.O_RDONLY)

@@ -50,3 +50,25 @@ def test_checkpoint_on_full_disk_names_path_and_leaves_nothing(tmp_path):
     assert str(mount / 'ckpt' / 'model.pt') in error
     assert 'inline_container' not in error
     assert lines[-1] == 'LEFT []'          # no partial file, no temporary file
+
+
+LOG_SCRIPT = textwrap.dedent("""
+    import os, sys
+    from monet_ros.atomic import write_error
+    path = os.path.join(sys.argv[1], 'train_log.csv')
+    try:
+        with open(path, 'w') as stream:
+            stream.write('x' * (1 << 20))
+    except OSError as error:
+        error = write_error(path, error)
+        print('ERROR', type(error).__name__, error)
+""")
+
+
+def test_plain_file_write_on_full_disk_names_the_file(tmp_path):
+    """The trainer's CSV log (a plain append, not atomic) on a full disk."""
+    done, mount = _in_small_tmpfs(tmp_path, LOG_SCRIPT)
+    assert done.returncode == 0, done.stderr
+    error = next(line for line in done.stdout.splitlines() if line.startswith('ERROR'))
+    assert 'DiskFullError' in error and 'disk full' in error
+    assert str(mount / 'train_log.csv') in error

@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from monet_ros.atomic import atomic_write
+from monet_ros.atomic import atomic_write, write_error
 from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.learning.config import TrainConfig
 from monet_ros.learning.dataset import CropCache, boxes_from_points, fill_boxes
@@ -468,11 +468,14 @@ class Trainer:
         row = {k: terms.get(k, '') for k in LOG_FIELDS}
         row['pseudo_labels'] = self.pseudo_label_count
         row['seconds'] = round(time.monotonic() - self._started, 3)
-        with open(path, 'w' if new else 'a', newline='') as f:
-            writer = csv.DictWriter(f, fieldnames=LOG_FIELDS)
-            if new:
-                writer.writeheader()
-            writer.writerow(row)
+        try:
+            with open(path, 'w' if new else 'a', newline='') as f:
+                writer = csv.DictWriter(f, fieldnames=LOG_FIELDS)
+                if new:
+                    writer.writeheader()
+                writer.writerow(row)
+        except OSError as error:      # e.g. a full disk: say which file and why
+            raise write_error(path, error) from error
 
     def _truncate_log(self):
         """Drop log rows past the resumed step (they were lost with the killed run)."""
