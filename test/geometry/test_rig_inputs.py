@@ -177,3 +177,55 @@ def _sample(tmp_path):
     path = tmp_path / 'sample.yaml'
     path.write_text(PROJECT.format(width=160))
     return path
+
+
+TOKENS = ['true', 'null', '.nan', '.inf', '-1', '0', '1e400', '"x"', '[]', '{}', '[1, 2]',
+          '[[1, 0, 0], [0, 1, 0]]', '&a 3', '*a', '160', '1e-300', "'", '[', '-', '~']
+
+
+def test_seeded_project_yaml_mutations_are_rig_errors_or_rigs(tmp_path):
+    """300 seeded edits of a rig file (a value replaced by an odd token, or the text cut):
+    load_rig gives cameras or RigError naming the file - nothing else, never slow."""
+    text = PROJECT.format(width=160)
+    lines = text.splitlines()
+    rng = np.random.default_rng(14)
+    path = tmp_path / 'rig.yaml'
+    refused = 0
+    for _ in range(300):
+        if rng.random() < 0.2:
+            mutated = text[:int(rng.integers(len(text)))]
+        else:
+            i = int(rng.integers(1, len(lines)))
+            key = lines[i].split(':')[0]
+            mutated = '\n'.join(lines[:i] + [f'{key}: {TOKENS[int(rng.integers(len(TOKENS)))]}']
+                                + lines[i + 1:])
+        path.write_text(mutated)
+        start = time.perf_counter()
+        try:
+            cams = load_rig(path)
+        except RigError as error:
+            assert str(path) in str(error), error
+            refused += 1
+        else:
+            assert all(c.width > 0 and np.isfinite(c.K).all() for c in cams)
+        assert time.perf_counter() - start < 2.0
+    assert refused > 150
+
+
+def test_seeded_opencv_xml_damage_is_rig_error_or_rig(tmp_path):
+    text = XML_MATRIX.format(rows=3, cols=3)
+    rng = np.random.default_rng(15)
+    path = tmp_path / 'cam.xml'
+    for _ in range(200):
+        data = bytearray(text.encode())
+        for _ in range(int(rng.integers(1, 4))):
+            data[int(rng.integers(len(data)))] = int(rng.integers(32, 127))
+        if rng.random() < 0.3:
+            del data[int(rng.integers(len(data))):]
+        path.write_bytes(bytes(data))
+        try:
+            cams = load_rig(path)
+        except RigError as error:
+            assert str(path) in str(error)
+        else:
+            assert cams[0].K.shape == (3, 3)

@@ -7,6 +7,7 @@ the same path; see test/nodes/test_bad_input_nodes.py).
 Built from issue 14's examples: `input_size: 64` (an int), `model_options.width` -16 or
 200000, a million context blocks, and one bit flipped inside the weights of the zip
 (a weight becomes ~1e37, the member's CRC no longer matches)."""
+import json
 import re
 import time
 import zipfile
@@ -119,3 +120,48 @@ def test_valid_checkpoint_still_loads(saved):
     model, meta = load_checkpoint(saved)
     assert meta['input_size'] == [64, 64] and meta['keypoints'] == NAMES
     assert Detector.from_checkpoint(saved, device='cpu').input_size == (64, 64)
+
+
+VALUES = [0, 1, -1, 3, 64, 2 ** 31, 10 ** 12, 0.5, float('nan'), float('inf'), True, None,
+          '', 'x', [], [64], [64, 64], [64, 64, 3], ['a'], {}, {'width': 8}, [[64, 64]]]
+FIELDS = ['architecture', 'keypoints', 'input_size', 'heatmap_size', 'model_options',
+          'step', 'metrics', 'model_options.width', 'model_options.context_blocks',
+          'model_options.input_size', 'model_options.num_stages']
+
+
+def test_seeded_metadata_mutations_only_ever_give_checkpoint_error(saved):
+    """200 seeded mutations (1-3 fields set to odd values): each load either succeeds with
+    a working detector or raises CheckpointError - never another exception, never slow."""
+    original = torch.load(saved, weights_only=True)
+    rng = np.random.default_rng(14)
+    outcomes = {'loaded': 0, 'refused': 0}
+    for case in range(200):
+        payload = {k: v for k, v in original.items()}
+        meta = json_copy(original['metadata'])
+        for _ in range(int(rng.integers(1, 4))):
+            field = FIELDS[int(rng.integers(len(FIELDS)))]
+            value = VALUES[int(rng.integers(len(VALUES)))]
+            if field.startswith('model_options.'):
+                if isinstance(meta.get('model_options'), dict):
+                    meta['model_options'][field.split('.', 1)[1]] = value
+            else:
+                meta[field] = value
+        payload['metadata'] = meta
+        torch.save(payload, saved)
+        start = time.perf_counter()
+        try:
+            model, _ = load_checkpoint(saved)
+        except CheckpointError as error:
+            assert str(saved) in str(error), error
+            outcomes['refused'] += 1
+        else:
+            with torch.inference_mode():
+                out = model(torch.zeros(1, 3, *model.input_size))[-1]
+            assert out.shape[-2:] == tuple(model.heatmap_size), case
+            outcomes['loaded'] += 1
+        assert time.perf_counter() - start < 5.0, f'case {case}: {meta}'
+    assert outcomes['refused'] > 100
+
+
+def json_copy(value):
+    return json.loads(json.dumps(value))
