@@ -83,8 +83,9 @@ def _ring_with_backward_camera():
     return cams
 
 
-@pytest.mark.parametrize('method', ['exclusion', 'ransac'])
-def test_view_behind_is_an_outlier_the_rest_triangulate(method):
+@pytest.mark.parametrize('method, limit', [('exclusion', 20), ('exclusion', 1),
+                                           ('ransac', 20), ('ransac', 2)])
+def test_view_behind_is_an_outlier_the_rest_triangulate(method, limit):
     """The backward camera's P maps the point to a pixel that fits the DLT exactly (0 px),
     yet the point is behind it: it must be left out, the other 3 views kept."""
     cams = _ring_with_backward_camera()
@@ -93,7 +94,9 @@ def test_view_behind_is_an_outlier_the_rest_triangulate(method):
     obs = h[..., :2] / h[..., 2:]  # pinhole projections, the backward one included
     assert (cams[3].to_camera(X_true)[:, 2] < 0).all()
     assert np.all((obs[3] > 0) & (obs[3] < [640, 480]))  # a plausible pixel
-    X, inliers = triangulate_robust(obs, cams, method=method, min_views=2)
+    # limit: the exhaustive subset / pair search, or the worst-view / random-pair fallback
+    X, inliers = triangulate_robust(obs, cams, method=method, min_views=2, max_subsets=limit,
+                                    max_hypotheses=limit)
     assert np.allclose(X, X_true, atol=1e-6)
     assert inliers.tolist() == [[True, True], [True, True], [True, True], [False, False]]
     # plain DLT: the backward view is left out and the point solved again from the rest
