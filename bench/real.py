@@ -339,7 +339,13 @@ def main(argv=None):
         key, sep, value = pair.partition('=')
         if not sep or key not in TrainConfig.__dataclass_fields__:
             parser.error(f'--set {pair!r}: expected KEY=VALUE with KEY a TrainConfig field')
-        overrides[key] = yaml.safe_load(value)
+        value = yaml.safe_load(value)
+        if isinstance(value, str):                     # YAML 1.1 reads 1e-3 as a string
+            try:
+                value = float(value)
+            except ValueError:
+                pass
+        overrides[key] = value
     root = args.data or default_data_root()
     if not (root / BAG).exists():
         print(f'real.py: {root / BAG} not found (use --data)', file=sys.stderr)
