@@ -212,6 +212,7 @@ def run_job(job):
     result = score(X, points, reference, reference2d, unlabelled)
     result.update({'labels': count, 'mode': mode, 'steps': steps, 'train_s': round(train_s, 1),
                    'instants': instants.tolist(), 'fit_px': summary['fit']['median_px'],
+                   'fit_heat': summary['fit']['median_heat'],
                    'pseudo_labels': summary['pseudo_labels'], 'warnings': said,
                    'bootstrap': summary['bootstrap']})
     print(f'[{count} labels {mode}] {steps} steps in {train_s:.0f} s: 3D median '

@@ -88,9 +88,9 @@ def run(args):
     summary = trainer.run(progress=not args.no_progress)
     summary['checkpoint'] = str(out / 'model.pt')
     fit = summary['fit']
-    print(f'fit to the labelled views: median {fit["median_px"]:.2f} px, mean '
-          f'{fit["mean_px"]:.2f} px, p90 {fit["p90_px"]:.2f} px ({fit["count"]} keypoints)',
-          file=sys.stderr)
+    print(f'fit to the labelled views: median {fit["median_px"]:.2f} px '
+          f'({fit["median_heat"]:.2f} heatmap px), mean {fit["mean_px"]:.2f} px, p90 '
+          f'{fit["p90_px"]:.2f} px ({fit["count"]} keypoints)', file=sys.stderr)
     for stats in summary['bootstrap']:
         print(f'bootstrapping round {stats["round"]} at step {stats["step"]}: '
               f'{stats["pseudo_labels"]} pseudo-labels (peak cut-off {stats["cutoff"]:.3g})',

@@ -110,10 +110,11 @@ class TrainConfig:
     track_min_views: int = setting(3, 'spatiotemporal: minimum verified views', minimum=2)
     track_min_ncc: float = setting(0.7, 'spatiotemporal: minimum patch NCC', minimum=-1.0,
                                    maximum=1.0)
-    fit_warning_px: float = setting(
-        4.0, 'warn when the median error of the final detector on its own labelled views '
-        '(original image pixels) is above this: it does not fit its labels (raise lr or steps)',
-        minimum=0.0, exclusive_minimum=True)
+    fit_warning_heat_px: float = setting(
+        1.0, 'warn when the median error of the final detector on its own labelled views is '
+        'above this many heatmap pixels (the output grid: 1/64 of the crop side for the small '
+        'net): it does not fit its labels (raise lr or steps)', minimum=0.0,
+        exclusive_minimum=True)
 
     def __post_init__(self):
         validate_config(self)

@@ -18,7 +18,8 @@ resumes exactly.
 Problems that make a run quietly useless are warned about loudly (stderr by default, and in
 `warnings` of the run summary): a semi-supervised term with no data (no pseudo-labels, a
 bootstrapping round that keeps nothing, no unlabeled instant for L_E) and a detector that
-does not fit its own labelled views at the end (median error > fit_warning_px).
+does not fit its own labelled views at the end (median error >
+fit_warning_heat_px heatmap pixels).
 """
 import csv
 import json
@@ -555,26 +556,39 @@ class Trainer:
 
     def fit_error(self):
         """How well the detector fits its own labelled views (no augmentation): dict of the
-        median, mean and 90th percentile of the distance (original image pixels) between
-        detections and labels, over every labelled keypoint of every labelled view."""
+        median, mean and 90th percentile of the distance between detections and labels, over
+        every labelled keypoint of every labelled view, in original image pixels (`*_px`) and
+        in heatmap pixels (`*_heat`: the network's output grid, independent of the image
+        resolution; a lost keypoint counts as infinitely far)."""
         inst = self.data.labelled_instants
         points, _ = self.detect(inst)
         labels = self.data.labels[inst]
-        ok = np.isfinite(labels[..., 0])
-        err = np.linalg.norm(points[ok] - labels[ok], axis=-1)
-        err = np.where(np.isfinite(err), err, np.inf)           # a lost keypoint counts
-        return {'median_px': float(np.median(err)), 'mean_px': float(np.mean(err)),
-                'p90_px': float(np.percentile(err, 90)), 'count': int(err.size)}
+        ok = np.isfinite(labels[..., 0])                                     # (N, V, C)
+        V = self.data.recording.num_views
+        pairs = np.stack(np.meshgrid(inst, np.arange(V), indexing='ij'), -1).reshape(-1, 2)
+        A = self.data.cache.views(pairs[:, 0], pairs[:, 1]).A[:, :2, :2]
+        scale = np.sqrt(np.abs(np.linalg.det(A))).reshape(len(inst), V)      # heat px / px
+        err = np.linalg.norm(points - labels, axis=-1)
+        err = np.where(np.isfinite(err), err, np.inf)[ok]
+        heat = err * np.broadcast_to(scale[..., None], ok.shape)[ok]
+        out = {'count': int(err.size)}
+        for suffix, e in (('px', err), ('heat', heat)):
+            out.update({f'median_{suffix}': float(np.median(e)),
+                        f'mean_{suffix}': float(np.mean(e)),
+                        f'p90_{suffix}': float(np.percentile(e, 90))})
+        return out
 
     def check_fit(self):
-        """fit_error(), with a warning when its median exceeds config.fit_warning_px."""
+        """fit_error(), with a warning when its median in heatmap pixels exceeds
+        config.fit_warning_heat_px."""
         fit = self.fit_error()
-        if not fit['median_px'] <= self.config.fit_warning_px:
+        if not fit['median_heat'] <= self.config.fit_warning_heat_px:
             self.warn(f'the detector does not fit its own labels: median error '
-                      f'{fit["median_px"]:.1f} px (mean {fit["mean_px"]:.1f}, p90 '
-                      f'{fit["p90_px"]:.1f}) on {fit["count"]} labelled keypoints after '
-                      f'{self.step_count} steps (> fit_warning_px {self.config.fit_warning_px}):'
-                      ' train longer or with a higher learning rate (--steps, --lr)')
+                      f'{fit["median_heat"]:.2f} heatmap px = {fit["median_px"]:.1f} image px '
+                      f'(p90 {fit["p90_px"]:.1f} px) on {fit["count"]} labelled keypoints after '
+                      f'{self.step_count} steps (> fit_warning_heat_px '
+                      f'{self.config.fit_warning_heat_px}): train longer or with a higher '
+                      'learning rate (--steps, --lr)')
         return fit
 
     def run(self, steps=None, progress=True):
