@@ -248,7 +248,7 @@ def main(argv=None):
                   f'labelled instants {labelled_all} ({share:.2f}%)', file=sys.stderr)
     base = dict(architecture='small', input_size=args.input_size, width=args.width,
                 steps=preset['steps'], checkpoint_every=preset['steps'], lr=args.lr,
-                device=args.device, monet_bootstrap_rounds=rounds)
+                device=args.device, monet_bootstrap_rounds=rounds, eval_fraction=0.2)
     base.update(parse_overrides(args.overrides))
     jobs = [(name, TrainConfig(mode=mode, **dict(base, seed=setup[name]['seed'])).to_dict(),
              str(out), args.tag) for name in setup for mode in args.modes]

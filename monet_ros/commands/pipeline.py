@@ -130,9 +130,11 @@ def run(args):
         use_large_data_profile,
     )
 
+    score = None
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo
         assets = prepare_demo(args.workdir)
+        score = assets.scorer()                      # accuracy against the ground truth
         args.bag, args.rig = args.bag or assets.bag, args.rig or assets.rig
         args.model = args.model or assets.model
         args.skeleton = assets.skeleton
@@ -178,6 +180,8 @@ def run(args):
                 start_error('monet pipeline', error)
                 return 2
             fusion.listeners.append(summary.on_fused)
+            if score is not None:
+                fusion.listeners.append(score.on_fused)
             player.listeners.append(summary.on_image)
             if args.lockstep:
                 player.gate = summary.gate()
@@ -200,6 +204,8 @@ def run(args):
                     next_line += 1.0
                     if not args.quiet:
                         print(summary.line(window=1.0), flush=True)
+                        if score is not None:
+                            print(f'  {score.line()}', flush=True)
                 if args.duration and now - started >= args.duration:
                     break
                 if player.done.is_set():
@@ -218,6 +224,8 @@ def run(args):
         rclpy.try_shutdown()
     if len(nodes) > 1 and nodes[0].last_result is not None:
         print(keypoint_table(nodes[0]), flush=True)
+    if score is not None:
+        print(score.table(), flush=True)
     print(f'monet pipeline: {args.bag}: {summary.line()}', flush=True)   # the last line
     return 0
 

@@ -54,6 +54,9 @@ def add_arguments(parser):
     parser.add_argument('--visible-labels-only', action='store_true',
                         help='label only keypoints not hidden by another limb (default: '
                              'every keypoint inside the image)')
+    parser.add_argument('--distinct-sides', action='store_true',
+                        help="render the subject's left limbs in their own colour (default: "
+                        'left and right look alike)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
@@ -70,7 +73,7 @@ def config_from_args(args):
         height=args.height, skeleton=args.skeleton, layout=args.layout,
         label_fraction=args.label_fraction, seed=args.seed, distortion=distortion,
         radius=args.radius, hfov_deg=args.hfov, noise=args.noise,
-        label_occluded=not args.visible_labels_only)
+        label_occluded=not args.visible_labels_only, distinct_sides=args.distinct_sides)
 
 
 def run(args):

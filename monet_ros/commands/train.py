@@ -90,6 +90,19 @@ def run(args):
           f'pseudo-labels, device {trainer.device}', file=sys.stderr)
     summary = trainer.run(progress=not args.no_progress)
     summary['checkpoint'] = str(out / 'model.pt')
+    fit = summary['fit']
+    print(f'fit to the labelled views: median {fit["median_px"]:.2f} px '
+          f'({fit["median_heat"]:.2f} heatmap px), mean {fit["mean_px"]:.2f} px, p90 '
+          f'{fit["p90_px"]:.2f} px ({fit["count"]} keypoints)', file=sys.stderr)
+    for stats in summary['bootstrap']:
+        print(f'bootstrapping round {stats["round"]} at step {stats["step"]}: '
+              f'{stats["pseudo_labels"]} pseudo-labels (peak cut-off {stats["cutoff"]:.3g})',
+              file=sys.stderr)
+    if summary['warnings']:
+        print(f'monet train: {len(summary["warnings"])} WARNING(S), this model may be '
+              'unusable:', file=sys.stderr)
+        for message in summary['warnings']:
+            print(f'  WARNING: {message}', file=sys.stderr)
     print(json.dumps(summary, indent=1))
     return 0
 

@@ -4,6 +4,7 @@ Flat scalar/tuple fields (monet_ros.config), so the learner node can mirror them
 parameters and `monet train` as command-line options.
 """
 from dataclasses import asdict, dataclass, fields, replace
+import math
 
 from monet_ros.config import ConfigError, config_from_mapping, setting, validate_config
 from monet_ros.learning.dataset import AugmentConfig
@@ -53,17 +54,29 @@ class TrainConfig:
     epipolar_warmup: float = setting(0.3, 'monet: fraction of the steps trained without L_E '
                                      '(L_L + L_B only) before the epipolar divergence starts',
                                      minimum=0.0, maximum=0.95)
-    lr: float = setting(1e-4, 'Adam learning rate', minimum=0.0, exclusive_minimum=True)
-    lr_decay: float = setting(0.9, 'learning-rate factor every lr_decay_every steps',
-                              minimum=0.0, maximum=1.0, exclusive_minimum=True)
-    lr_decay_every: int = setting(500, 'steps between learning-rate decays', minimum=1)
+    lr: float = setting(1e-3, 'Adam learning rate (peak, after the warm-up)', minimum=0.0,
+                        exclusive_minimum=True)
+    lr_schedule: str = setting('cosine', 'learning-rate schedule after the warm-up: cosine '
+                               '(down to lr_final x lr at `steps`), step (x lr_decay every '
+                               'lr_decay_every steps) or constant',
+                               choices=('cosine', 'step', 'constant'))
+    lr_warmup_steps: int = setting(100, 'steps of linear learning-rate warm-up from lr / '
+                                   '(lr_warmup_steps + 1) to lr', minimum=0)
+    lr_final: float = setting(0.02, 'cosine schedule: learning rate at the last step, as a '
+                              'fraction of lr', minimum=0.0, maximum=1.0)
+    lr_decay: float = setting(0.9, 'step schedule: learning-rate factor every lr_decay_every '
+                              'steps', minimum=0.0, maximum=1.0, exclusive_minimum=True)
+    lr_decay_every: int = setting(500, 'step schedule: steps between learning-rate decays',
+                                  minimum=1)
     sigma: float = setting(2.0, 'Gaussian target sigma (heatmap px)', minimum=0.0,
                            exclusive_minimum=True)
     checkpoint_every: int = setting(500, 'steps between checkpoints', minimum=1)
     seed: int = setting(0, 'random seed (sampling, augmentation, initialisation)', minimum=0)
     device: str = setting('auto', 'torch device: auto (CUDA when present), cpu, cuda, cuda:N')
-    eval_fraction: float = setting(0.2, 'held-out tail of the recording (not trained on)',
-                                   minimum=0.0, maximum=0.9)
+    eval_fraction: float = setting(0.0, 'held-out tail of the recording, never trained on '
+                                   '(0 = train on everything, for real use; e.g. 0.2 to keep '
+                                   'a tail to measure generalisation on)', minimum=0.0,
+                                   maximum=0.9)
     box_source: str = setting('auto', 'crop boxes: ground_truth, labels, full or auto',
                               choices=('auto', 'ground_truth', 'labels', 'full'))
     box_margin: float = setting(0.25, 'crop margin around the keypoints (fraction)',
@@ -75,8 +88,13 @@ class TrainConfig:
     aug_rotate_deg: float = setting(15.0, 'in-plane rotation jitter (deg)', minimum=0.0,
                                     maximum=90.0)
     aug_photometric: float = setting(1.0, 'photometric jitter strength (0 = off)', minimum=0.0)
-    bootstrap_confidence: float = setting(0.4, 'bootstrapping: minimum heatmap peak',
+    bootstrap_confidence: float = setting(0.0, 'bootstrapping: minimum heatmap peak '
+                                          '(absolute floor; see bootstrap_relative_confidence)',
                                           minimum=0.0)
+    bootstrap_relative_confidence: float = setting(
+        0.5, "bootstrapping: minimum heatmap peak as a fraction of the median peak of the "
+        "detector's own labelled views (its scale on data it fits); the cut-off is the larger "
+        'of this and bootstrap_confidence', minimum=0.0, maximum=1.0)
     bootstrap_threshold_px: float = setting(8.0, 'bootstrapping: RANSAC inlier threshold (px)',
                                             minimum=0.0, exclusive_minimum=True)
     bootstrap_min_views: int = setting(3, 'bootstrapping: minimum inlier views', minimum=2)
@@ -92,6 +110,11 @@ class TrainConfig:
     track_min_views: int = setting(3, 'spatiotemporal: minimum verified views', minimum=2)
     track_min_ncc: float = setting(0.7, 'spatiotemporal: minimum patch NCC', minimum=-1.0,
                                    maximum=1.0)
+    fit_warning_heat_px: float = setting(
+        1.0, 'warn when the median error of the final detector on its own labelled views is '
+        'above this many heatmap pixels (the output grid: 1/64 of the crop side for the small '
+        'net): it does not fit its labels (raise lr or steps)', minimum=0.0,
+        exclusive_minimum=True)
 
     def __post_init__(self):
         validate_config(self)
@@ -102,6 +125,20 @@ class TrainConfig:
                                           self.device.startswith('cuda')):
             raise ConfigError('TrainConfig', 'device',
                               f'expected auto, cpu, cuda or cuda:N, got {self.device!r}')
+
+    def lr_factor(self, step):
+        """Learning-rate multiplier of optimisation step `step` (0-based): linear warm-up over
+        lr_warmup_steps, then the lr_schedule (cosine from 1 at the end of the warm-up to
+        lr_final at `steps`, step decay, or constant)."""
+        warm = self.lr_warmup_steps
+        if step < warm:
+            return (step + 1) / (warm + 1)
+        if self.lr_schedule == 'constant':
+            return 1.0
+        if self.lr_schedule == 'step':
+            return self.lr_decay ** ((step - warm) // self.lr_decay_every)
+        progress = min(1.0, (step - warm) / max(1, self.steps - 1 - warm))
+        return self.lr_final + (1.0 - self.lr_final) * 0.5 * (1.0 + math.cos(math.pi * progress))
 
     @property
     def spec(self):

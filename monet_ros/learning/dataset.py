@@ -6,10 +6,16 @@ sample is then one warp of a cached crop: random scale, shift and in-plane rotat
 Nothing is approximated: the rotation is a rotation of the camera about its optical axis
 (R' = Rz R, t' = Rz t) and the crop/scale a virtual camera (K' = S K), so
 
-    heatmap pixel = A @ original pixel     and     heatmap pixel ~ K_heat (R' X + t')
+    heatmap pixel = A @ original pixel     and     heatmap pixel = K_heat d'(R' X + t')
 
-hold together (exactly for radial distortion; rotation is skipped for views whose cached
-camera has fx != fy, skew or tangential/prism distortion, where it would not be exact).
+hold together exactly for every calibration the Camera class takes (fx != fy, skew, radial,
+tangential and thin-prism distortion). The image warp of a rotation by theta is
+K_c Rz K_c^-1 (K_c the cached crop's intrinsics): an affine map, since Rz only mixes the
+normalised x, y. OpenCV's distortion d commutes with that rotation once its non-radial
+coefficients are rotated with it: the tangential offset 2 (p.x) x + |x|^2 p, p = (p2, p1),
+and the prism offsets (s1, s3) r^2 + (s2, s4) r^4 are vectors that turn with x, the radial
+factor does not change. So d' (ViewBatch.dist) is d with (p2, p1), (s1, s3) and (s2, s4)
+rotated by theta.
 """
 from dataclasses import dataclass
 import warnings
@@ -90,11 +96,22 @@ def fill_boxes(boxes, cameras):
     return out
 
 
-def _rotation_ok(camera_K, dist):
+def rotate_distortion(dist, theta):
+    """OpenCV distortion coefficients of a camera rotated by theta about its optical axis.
+
+    dist (D,) with D in (0, 4, 5, 8, 12) (k1 k2 p1 p2 k3 k4 k5 k6 s1 s2 s3 s4); theta (N,)
+    radians (x' = Rz(theta) x in normalised coordinates). Returns (N, 12): radial terms
+    unchanged, the vectors (p2, p1), (s1, s3), (s2, s4) rotated by theta, so that
+    d'(Rz x) = Rz d(x) for every normalised point x."""
+    theta = np.asarray(theta, dtype=np.float64).ravel()
     d = np.zeros(12)
-    d[:len(dist)] = dist
-    return bool(np.isclose(camera_K[0, 0], camera_K[1, 1], rtol=1e-9) and camera_K[0, 1] == 0
-                and not np.any(d[2:4]) and not np.any(d[8:]))
+    d[:len(dist)] = np.asarray(dist, dtype=np.float64).ravel()
+    out = np.repeat(d[None], len(theta), axis=0)
+    c, s = np.cos(theta), np.sin(theta)
+    for a, b in ((3, 2), (8, 10), (9, 11)):            # (x, y) components of each vector
+        out[:, a] = c * d[a] - s * d[b]
+        out[:, b] = s * d[a] + c * d[b]
+    return out
 
 
 def _rz(theta):
@@ -112,7 +129,9 @@ class ViewBatch:
 
     images (N, 3, H, W) float32 in [0, 1]; A (N, 3, 3) original pixels -> heatmap pixels;
     K (N, 3, 3) heatmap camera intrinsics; R (N, 3, 3), t (N, 3) its world -> camera pose;
-    instants (N,), views (N,) indices."""
+    instants (N,), views (N,) indices; dist (N, 12) its OpenCV distortion coefficients
+    (the view's, with the non-radial terms turned by the sample's rotation): heatmap pixel =
+    cv2.projectPoints(X, R, t, K, dist) exactly."""
     images: torch.Tensor
     A: np.ndarray
     K: np.ndarray
@@ -120,6 +139,7 @@ class ViewBatch:
     t: np.ndarray
     instants: np.ndarray
     views: np.ndarray
+    dist: np.ndarray = None
 
     def to_heatmap(self, points, index=slice(None)):
         """(N, C, 2) original pixels -> heatmap pixels (NaN kept) of the samples
@@ -165,9 +185,6 @@ class CropCache:
         self.K_cache = self.S_cache @ Ks[None]
         self.R = np.stack([c.R for c in recording.cameras])
         self.t = np.stack([c.t for c in recording.cameras])
-        self.rotation_ok = np.array([[_rotation_ok(self.K_cache[t, v], cam.dist)
-                                      for v, cam in enumerate(recording.cameras)]
-                                     for t in range(T)])
         self.S_heat = crop_transform((0, 0, W, H), (self.heatmap_size[1], self.heatmap_size[0]))
 
     def views(self, instants, views, rng=None, augment=NO_AUGMENT):
@@ -186,7 +203,6 @@ class CropCache:
         scale = 1.0 + augment.scale * u[:, 0]
         shift = augment.translate * u[:, 1:3]
         theta = np.deg2rad(augment.rotate_deg) * u[:, 3]
-        theta = np.where(self.rotation_ok[instants, views], theta, 0.0)
         Kc = self.K_cache[instants, views]                                 # (N, 3, 3)
         Rz = _rz(theta)
         rot_px = Kc @ Rz @ np.linalg.inv(Kc)                               # cache px -> rotated
@@ -208,9 +224,13 @@ class CropCache:
         K = self.S_heat[None] @ S_crop @ Kc
         R = Rz @ self.R[views]
         t = np.einsum('nij,nj->ni', Rz, self.t[views])
+        dist = np.empty((N, 12))
+        for v in np.unique(views):
+            pick = views == v
+            dist[pick] = rotate_distortion(self.recording.cameras[v].dist, theta[pick])
         tensor = images_to_tensor(images)              # the detector's own conversion
         tensor = photometric(tensor, augment, rng)
-        return ViewBatch(tensor, A, K, R, t, instants, views)
+        return ViewBatch(tensor, A, K, R, t, instants, views, dist)
 
 
 def photometric(images, augment, rng):

@@ -14,6 +14,12 @@ epipolar_warmup x steps without L_E, + lambda_p L_B on spatial pseudo-labels and
 monet_bootstrap_rounds > 0, the bootstrapping prior: rounds of bootstrapped labels).
 State (weights, Adam, schedule, step, RNG, pseudo-labels) is checkpointed atomically and
 resumes exactly.
+
+Problems that make a run quietly useless are warned about loudly (stderr by default, and in
+`warnings` of the run summary): a semi-supervised term with no data (no pseudo-labels, a
+bootstrapping round that keeps nothing, no unlabeled instant for L_E) and a detector that
+does not fit its own labelled views at the end (median error >
+fit_warning_heat_px heatmap pixels).
 """
 import csv
 import json
@@ -147,6 +153,14 @@ class _Frames:
         return self.recording.images(int(self.instants[i]))
 
 
+def _fmt(value):
+    return 'n/a' if value is None else f'{value:.3g}'
+
+
+def _stderr_warning(message):
+    tqdm.write(f'WARNING: {message}', file=sys.stderr)       # above a running progress bar
+
+
 def _atomic_torch_save(payload, path):
     with atomic_write(path) as stream:
         torch.save(payload, stream)
@@ -159,7 +173,7 @@ class Trainer:
     latest weights), trainer_state.pt (everything needed to resume) and train_log.csv.
     """
 
-    def __init__(self, config, data, out_dir=None, model=None, device=None):
+    def __init__(self, config, data, out_dir=None, model=None, device=None, warn=None):
         if not isinstance(config, TrainConfig):
             raise TypeError('config must be a TrainConfig')
         self.config = config
@@ -174,8 +188,8 @@ class Trainer:
                                 **config.model_options())
         self.model = model.to(self.device)
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.lr)
-        self.scheduler = torch.optim.lr_scheduler.StepLR(
-            self.optimizer, step_size=config.lr_decay_every, gamma=config.lr_decay)
+        self.scheduler = torch.optim.lr_scheduler.LambdaLR(
+            self.optimizer, lambda step: config.lr_factor(step))
         self.rng = np.random.default_rng(config.seed)
         self.step_count = 0
         self.bootstrap_done = 0
@@ -185,6 +199,27 @@ class Trainer:
         self.last_terms = {}
         self.last_checkpoint = None      # path of the latest checkpoints/step_N.pt written
         self._started = time.monotonic()
+        self.warnings = []
+        self._warn_sink = warn if warn is not None else _stderr_warning
+        self.bootstrap_stats = []
+        self._warn_missing_data()
+
+    # ----------------------------------------------------------------- warnings
+    def warn(self, message):
+        """Record a warning (run summary `warnings`) and say it (stderr by default)."""
+        self.warnings.append(message)
+        self._warn_sink(message)
+
+    def _warn_missing_data(self):
+        spec, c = self.spec, self.config
+        if (spec.spatial or spec.temporal) and spec.bootstrap_rounds == 0 and \
+                c.lambda_p > 0 and len(self.pseudo_pool) == 0:
+            self.warn(f'mode {c.mode}: no pseudo-labels (no keypoint is labelled in 2 views '
+                      'of an instant to triangulate): L_B gets no data, this run is '
+                      'supervised only')
+        if spec.epipolar and c.lambda_e > 0 and len(self.data.unlabeled_instants) == 0:
+            self.warn(f'mode {c.mode}: no unlabeled instant in the training split: the '
+                      'epipolar divergence L_E gets no data, this run is supervised only')
 
     # ----------------------------------------------------------------- sampling
     def _update_pools(self):
@@ -367,14 +402,45 @@ class Trainer:
         self.model.train(was_training)
         return points.reshape(len(instants), V, C, 2), conf.reshape(len(instants), V, C)
 
+    def labelled_peaks(self):
+        """(N,) heatmap peak values of the detector at the labelled keypoints of the labelled
+        views (no augmentation): its confidence scale on data it was trained on."""
+        inst = self.data.labelled_instants
+        _, conf = self.detect(inst)
+        return conf[np.isfinite(self.data.labels[inst][..., 0])]
+
+    def bootstrap_cutoff(self):
+        """(cut-off, median labelled peak): the minimum heatmap peak of a bootstrapped
+        detection, the larger of bootstrap_confidence and bootstrap_relative_confidence x the
+        median peak on the labelled views."""
+        peaks = self.labelled_peaks()
+        median = float(np.median(peaks)) if peaks.size else float('nan')
+        relative = self.config.bootstrap_relative_confidence * median if peaks.size else 0.0
+        return max(self.config.bootstrap_confidence, relative), median
+
     def bootstrap(self):
-        """One round: detect on the unlabeled train instants, keep confident views,
-        RANSAC-triangulate, reproject -> pseudo-labels (replacing the previous round's)."""
+        """One round: detect on the unlabeled train instants, keep confident views (peak at
+        least bootstrap_cutoff()), RANSAC-triangulate, reproject -> pseudo-labels (replacing
+        the previous round's); warns when the round keeps nothing."""
         c = self.config
         inst = self.data.unlabeled_instants
         det, conf = self.detect(inst)
-        boot = bootstrap_pseudo_labels(det, conf, self.data.cameras, c.bootstrap_confidence,
+        cutoff, median = self.bootstrap_cutoff()
+        boot = bootstrap_pseudo_labels(det, conf, self.data.cameras, cutoff,
                                        c.bootstrap_threshold_px, c.bootstrap_min_views)
+        stats = {'round': self.bootstrap_done + 1, 'step': self.step_count,
+                 'cutoff': cutoff, 'median_labelled_peak': median,
+                 'median_unlabeled_peak': float(np.median(conf)) if conf.size else None,
+                 'confident_views': int((conf >= cutoff).sum()), 'pseudo_labels': boot.count}
+        self.bootstrap_stats.append(stats)
+        if boot.count == 0 and c.lambda_p > 0:
+            self.warn(f'bootstrapping round {stats["round"]} (step {self.step_count}) kept no '
+                      f'pseudo-label: {stats["confident_views"]} detections reached the cut-off '
+                      f'{cutoff:.3g} (median peak {median:.3g} on labelled views, '
+                      f'{_fmt(stats["median_unlabeled_peak"])} on unlabeled ones) and none '
+                      f'agreed in '
+                      f'{c.bootstrap_min_views} views within {c.bootstrap_threshold_px} px: L_B '
+                      'gets no bootstrapped data this round')
         base = self.data.initial_pseudo_labels(self.spec, c.tracking)
         base[inst] = np.where(np.isfinite(base[inst]), base[inst], boot.points)
         self.pseudo = base
@@ -491,8 +557,46 @@ class Trainer:
             writer.writerows(rows)
         os.replace(tmp, path)
 
+    def fit_error(self):
+        """How well the detector fits its own labelled views (no augmentation): dict of the
+        median, mean and 90th percentile of the distance between detections and labels, over
+        every labelled keypoint of every labelled view, in original image pixels (`*_px`) and
+        in heatmap pixels (`*_heat`: the network's output grid, independent of the image
+        resolution; a lost keypoint counts as infinitely far)."""
+        inst = self.data.labelled_instants
+        points, _ = self.detect(inst)
+        labels = self.data.labels[inst]
+        ok = np.isfinite(labels[..., 0])                                     # (N, V, C)
+        V = self.data.recording.num_views
+        pairs = np.stack(np.meshgrid(inst, np.arange(V), indexing='ij'), -1).reshape(-1, 2)
+        A = self.data.cache.views(pairs[:, 0], pairs[:, 1]).A[:, :2, :2]
+        scale = np.sqrt(np.abs(np.linalg.det(A))).reshape(len(inst), V)      # heat px / px
+        err = np.linalg.norm(points - labels, axis=-1)
+        err = np.where(np.isfinite(err), err, np.inf)[ok]
+        heat = err * np.broadcast_to(scale[..., None], ok.shape)[ok]
+        out = {'count': int(err.size)}
+        for suffix, e in (('px', err), ('heat', heat)):
+            out.update({f'median_{suffix}': float(np.median(e)),
+                        f'mean_{suffix}': float(np.mean(e)),
+                        f'p90_{suffix}': float(np.percentile(e, 90))})
+        return out
+
+    def check_fit(self):
+        """fit_error(), with a warning when its median in heatmap pixels exceeds
+        config.fit_warning_heat_px."""
+        fit = self.fit_error()
+        if not fit['median_heat'] <= self.config.fit_warning_heat_px:
+            self.warn(f'the detector does not fit its own labels: median error '
+                      f'{fit["median_heat"]:.2f} heatmap px = {fit["median_px"]:.1f} image px '
+                      f'(p90 {fit["p90_px"]:.1f} px) on {fit["count"]} labelled keypoints after '
+                      f'{self.step_count} steps (> fit_warning_heat_px '
+                      f'{self.config.fit_warning_heat_px}): train longer or with a higher '
+                      'learning rate (--steps, --lr)')
+        return fit
+
     def run(self, steps=None, progress=True):
-        """Train until `steps` (default config.steps); tqdm bar on stderr; returns a summary."""
+        """Train until `steps` (default config.steps); tqdm bar on stderr; returns a summary
+        (with `fit`, the fit to the labelled views, and `warnings`)."""
         total = self.config.steps if steps is None else steps
         bar = tqdm(total=total, initial=self.step_count, file=sys.stderr, disable=not progress,
                    desc=f'train {self.config.mode}', dynamic_ncols=True)
@@ -509,7 +613,9 @@ class Trainer:
                 self.step_count != self.config.steps:
             self.save()
         seconds = time.monotonic() - start
+        fit = self.check_fit()
         return {'mode': self.config.mode, 'steps': self.step_count, 'seconds': seconds,
                 'steps_per_s': (self.step_count - first) / max(seconds, 1e-9),
-                'pseudo_labels': self.pseudo_label_count, 'last': self.last_terms}
+                'pseudo_labels': self.pseudo_label_count, 'last': self.last_terms,
+                'fit': fit, 'bootstrap': self.bootstrap_stats, 'warnings': list(self.warnings)}
 

@@ -29,6 +29,7 @@ from monet_ros.synth.render import (
     capsule_outlines,
     in_image,
     occlusion,
+    sided_parts,
 )
 from monet_ros.synth.rig import LAYOUTS, RigConfig, RigConfigError, make_rig
 from monet_ros.synth.subject import Subject, SubjectError
@@ -58,7 +59,9 @@ class SynthConfig:
     (k1[, k2, p1, p2, k3]); radius: camera distance (m; None = 4.0 for a human, 2.5 for a
     quadruped); hfov_deg: horizontal field of view; jitter: rig perturbation scale;
     label_occluded: label keypoints hidden by other limbs too (True) or only visible ones;
-    noise: sensor noise std (DN); start_ns: stamp of the first instant.
+    noise: sensor noise std (DN); start_ns: stamp of the first instant; distinct_sides:
+    the subject's left limbs in their own colour (left and right limbs look alike otherwise,
+    the symmetric ambiguity of real subjects).
     """
 
     cameras: int = 8
@@ -77,6 +80,7 @@ class SynthConfig:
     label_occluded: bool = True
     noise: float = 3.0
     start_ns: int = DEFAULT_START_NS
+    distinct_sides: bool = False
     rig: RigConfig = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -101,8 +105,9 @@ class SynthConfig:
             bad('layout', f'must be one of {LAYOUTS}, got {self.layout!r}')
         if not (np.isfinite(self.noise) and 0 <= self.noise <= 50):
             bad('noise', f'must be in 0..50, got {self.noise!r}')
-        if not isinstance(self.label_occluded, bool):
-            bad('label_occluded', f'must be a bool, got {self.label_occluded!r}')
+        for name in ('label_occluded', 'distinct_sides'):
+            if not isinstance(getattr(self, name), bool):
+                bad(name, f'must be a bool, got {getattr(self, name)!r}')
         try:
             skeleton = load_skeleton(self.skeleton)
             subject = Subject(skeleton)
@@ -236,7 +241,8 @@ def synthesize(config, out, progress=True):
     p = plan(config)
     cameras, subject = p['cameras'], p['subject']
     render_config = RenderConfig(noise=config.noise)
-    scene = Scene(cameras, subject.parts, seed=config.seed, config=render_config)
+    parts = sided_parts(subject.capsules) if config.distinct_sides else subject.parts
+    scene = Scene(cameras, parts, seed=config.seed, config=render_config)
     backgrounds = [scene.background(cam) for cam in cameras]
     outlines = [capsule_outlines(cam, p['A'], p['B'], subject.radii, scene.light,
                                  render_config.levels, render_config.samples,

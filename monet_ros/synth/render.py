@@ -67,8 +67,21 @@ class RenderConfig:
                                  f'{getattr(self, name)!r}')
 
 
+# Colour mixed into the parts of the subject's left side (`left_<part>`, --distinct-sides).
+LEFT_TINT = np.array([240.0, 200.0, 20.0])
+SIDED = 'left_'
+
+
+def sided_parts(capsules):
+    """Part names with the subject's left limbs renamed `left_<part>` (own material)."""
+    return tuple(SIDED + c.part if c.a.startswith(('l_', 'lf_', 'lh_')) else c.part
+                 for c in capsules)
+
+
 def part_colors(parts, rng):
-    """dict part -> (3,) float RGB for the parts present; linked parts share a colour."""
+    """dict part -> (3,) float RGB for the parts present; linked parts share a colour;
+    `left_<part>` is <part>'s colour mixed 60% with LEFT_TINT (left and right limbs told
+    apart)."""
     base = {name: np.array(pal[rng.integers(len(pal))], float)
             for name, pal in PALETTES.items() if pal is not None}
     base['arm'] = base['torso'] * 0.85
@@ -79,6 +92,9 @@ def part_colors(parts, rng):
         fur = np.array(PALETTES['torso'][rng.integers(5)], float) * 0.8 + 40
         for name in ('torso', 'head', 'leg', 'tail'):
             base[name] = fur
+    for part in parts:
+        if part.startswith(SIDED):
+            base[part] = 0.4 * base[part[len(SIDED):]] + 0.6 * LEFT_TINT
     return {p: np.clip(base[p], 0, 255) for p in set(parts)}
 
 

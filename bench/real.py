@@ -1,0 +1,404 @@
+"""Label efficiency on real video: the 4-camera Pose2Sim recording, a few labelled instants.
+
+The recording is ../shared/data/derived_pose2sim_4cam_mcap (100 instants, 4 cameras, JPEG at
+half resolution; cameras from its own CameraInfo + /tf_static). The reference is Pose2Sim's
+.trc of the same trial (pose2sim_demo_balancing, itself a triangulation of OpenPose: it
+reprojects 4-10 px from OpenPose's 2D at half resolution, the floor of every figure here),
+trc (X, Y, Z) = world (Y, Z, X), its 14 human14 joints (head = Pose2Sim's Head marker).
+
+For each count N in --labels (2, 3, 5, 10) the labelled instants are N instants spread over the
+recording (one drawn with --seed in each of N equal strata); their labels are the reference
+projected into all 4 views (project_to_views: none outside an image). Each mode (supervised,
+bootstrap2, monet) then trains the same network from the same initialisation with the same
+wall-time budget (--budget-s per run: the step count of each mode is set from a short timing
+probe of its step cost; the table gives the wall times actually spent), with the default
+TrainConfig recipe (no held-out tail: every instant is in the training split, and the scores
+below are on the instants without labels, which L_E and bootstrapping see unlabelled). Each
+model detects every view of every instant on the training crops (boxes from the labels of the
+nearest labelled instant: what a lab has, no reference used), the detections are fused by
+`fusion.fuse_points` (the fusion node's and `monet process`'s triangulation), and scored on
+the unlabelled instants against the reference:
+
+  3D error (mm): median / mean / p90 over the triangulated joints; `tri` = share triangulated;
+  PCK@5/10/20 px: share of the detections (every view, every joint the reference projects
+    into) within 5/10/20 px (half-resolution image pixels) of the reference's projection.
+
+Rows without training: OpenPose (pretrained BODY_25B, Pose2Sim's pose-associated 2D) fused by
+`fuse_points` with Pose2Sim's rule (likelihood >= 0.3, exclusion at 15 px full resolution =
+7.5 px here): this is the reference's own input, so its 3D error is ~0 by construction and its
+2D PCK is the floor of the reference; image-blind baselines: the pose of the nearest labelled
+instant, and the mean labelled pose (projected for 2D).
+
+Writes OUT.md (tables + the command), OUT.json and OUT.png (curves: 3D median error and
+PCK@10 px against the number of labelled instants). --quick: 3 labelled instants, all modes,
+45 s per run (a smoke run of the whole path, a few minutes; not the figures).
+    .venv/bin/python bench/real.py --quick
+    .venv/bin/python bench/real.py --budget-s 300 --jobs 2      # the figures, about 40 min
+"""
+import argparse
+from concurrent.futures import ProcessPoolExecutor
+import json
+import multiprocessing
+import os
+from pathlib import Path
+import sys
+import time
+
+import numpy as np
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from monet_ros.commands.demo import default_data_root  # noqa: E402
+from monet_ros.learning.config import TrainConfig  # noqa: E402
+
+BAG = Path('derived_pose2sim_4cam_mcap/pose2sim_balancing_4cam')
+TRIAL = Path('pose2sim_demo_balancing/S00_P00_SingleParticipant/S00_P00_T01_BalancingTrial')
+# human14 joint -> Pose2Sim marker (BODY_25B keypoint) of the .trc
+MARKERS = {'head': 'Head', 'neck': 'Neck', 'r_shoulder': 'RShoulder', 'r_elbow': 'RElbow',
+           'r_wrist': 'RWrist', 'l_shoulder': 'LShoulder', 'l_elbow': 'LElbow',
+           'l_wrist': 'LWrist', 'r_hip': 'RHip', 'r_knee': 'RKnee', 'r_ankle': 'RAnkle',
+           'l_hip': 'LHip', 'l_knee': 'LKnee', 'l_ankle': 'LAnkle'}
+MODES = ('supervised', 'bootstrap2', 'monet')
+PCK_PX = (5, 10, 20)
+_STATE = {}             # recording and reference, loaded before forking workers
+
+
+def load_reference(root, keypoints):
+    """(T, C, 3) world metres of the .trc, in the order of `keypoints`."""
+    from monet_ros.geometry.pose2sim import read_trc, trc_to_world
+
+    names, _, trc = read_trc(next((root / TRIAL / 'pose-3d').glob('*.trc')))
+    index = [names.index(MARKERS[k]) for k in keypoints]
+    return trc_to_world(trc[:, index])
+
+
+def load_openpose(root, keypoints, num_views):
+    """(T, V, C, 2) OpenPose 2D in half-resolution pixels and (T, V, C) likelihoods."""
+    from monet_ros.geometry.pose2sim import BODY_25B_IDS, read_openpose_folder
+
+    folders = sorted((root / TRIAL / 'pose-associated').glob('cam*_json'))
+    if len(folders) != num_views:
+        raise SystemExit(f'{len(folders)} OpenPose folders for {num_views} cameras')
+    ids = [BODY_25B_IDS[MARKERS[k]] for k in keypoints]
+    det = np.stack([read_openpose_folder(f)[:, ids] for f in folders], axis=1)
+    uv = (det[..., :2] + 0.5) * 0.5 - 0.5        # full -> half resolution (the bag's K)
+    return uv, np.nan_to_num(det[..., 2])
+
+
+def choose_instants(num_instants, count, seed):
+    """`count` instants, one drawn (seeded) in each of `count` equal strata of the recording."""
+    rng = np.random.default_rng(seed)
+    edges = np.linspace(0, num_instants, count + 1).round().astype(int)
+    return np.array([rng.integers(a, b) for a, b in zip(edges[:-1], edges[1:])])
+
+
+def project_reference(reference, cameras):
+    """(T, C, 3) -> (T, V, C, 2) pixels (NaN outside an image or behind a camera)."""
+    from monet_ros.learning.pseudo_labels import project_to_views
+
+    T, C, _ = reference.shape
+    return project_to_views(reference.reshape(-1, 3), cameras).reshape(
+        len(cameras), T, C, 2).transpose(1, 0, 2, 3)
+
+
+def fuse(points, confidence, cameras, config=None):
+    """(T, V, C, 2) + (T, V, C) -> (T, C, 3) with fusion.fuse_points (all instants at once)."""
+    from monet_ros.fusion import FusionConfig, fuse_points
+
+    T, V, C, _ = points.shape
+    result = fuse_points(points.transpose(1, 0, 2, 3).reshape(V, T * C, 2),
+                         confidence.transpose(1, 0, 2).reshape(V, T * C), cameras,
+                         config or FusionConfig())
+    return result.X.reshape(T, C, 3)
+
+
+def score(X, points, reference, reference2d, instants):
+    """3D error (mm) and 2D PCK of predictions X (T, C, 3), points (T, V, C, 2) or None."""
+    err = np.linalg.norm(X[instants] - reference[instants], axis=-1) * 1000.0
+    have = np.isfinite(reference[instants, :, 0])
+    ok = np.isfinite(err)
+    e = err[ok]
+    out = {'median_mm': float(np.median(e)) if e.size else None,
+           'mean_mm': float(np.mean(e)) if e.size else None,
+           'p90_mm': float(np.percentile(e, 90)) if e.size else None,
+           'triangulated': float(ok.sum() / max(have.sum(), 1))}
+    if points is not None:
+        ref = reference2d[instants]
+        inside = np.isfinite(ref[..., 0])
+        d = np.linalg.norm(points[instants] - ref, axis=-1)[inside]
+        d = np.where(np.isfinite(d), d, np.inf)                  # missing = a miss
+        for px in PCK_PX:
+            out[f'pck{px}'] = float((d <= px).mean())
+    return out
+
+
+def labelled_recording(recording, reference2d, instants):
+    """The recording (frames shared, not copied) labelled at `instants` only."""
+    import dataclasses
+
+    labels = np.full_like(recording.labels, np.nan)
+    labels[instants] = reference2d[instants]
+    return dataclasses.replace(recording, labels=labels)
+
+
+def probe_seconds_per_step(config, data, steps=6):
+    """Seconds per step of this mode (its most expensive phase), from a short timing run."""
+    import dataclasses
+
+    from monet_ros.learning.trainer import Trainer
+
+    options = {'steps': 10 ** 6}
+    if config.mode == 'monet':
+        options['epipolar_warmup'] = 0.0            # time the L_E phase ...
+    trainer = Trainer(dataclasses.replace(config, **options), data, warn=lambda m: None)
+    trainer.step()                                   # first step: allocations
+    start = time.monotonic()
+    for _ in range(steps):
+        trainer.step()
+    full = (time.monotonic() - start) / steps
+    if config.mode != 'monet':
+        return full
+    trainer = Trainer(dataclasses.replace(config, steps=10 ** 6, epipolar_warmup=0.95), data,
+                      warn=lambda m: None)            # ... and the warm-up phase
+    trainer.step()
+    start = time.monotonic()
+    for _ in range(steps):
+        trainer.step()
+    warm = (time.monotonic() - start) / steps
+    w = config.epipolar_warmup
+    return w * warm + (1 - w) * full
+
+
+def run_job(job):
+    """Worker: train one mode on one label set within the budget, detect, fuse, score."""
+    import dataclasses
+
+    import torch
+
+    from monet_ros.learning.trainer import Trainer, TrainingData
+    from monet_ros.models import build_model
+
+    torch.set_num_threads(1)
+    count, mode, budget_s, fixed_steps, overrides, seed = job
+    recording, reference, reference2d = _STATE['recording'], _STATE['reference'], \
+        _STATE['reference2d']
+    instants = choose_instants(recording.num_instants, count, seed)
+    rec = labelled_recording(recording, reference2d, instants)
+    config = TrainConfig(mode=mode, seed=seed, **overrides)
+    probe = build_model(config.architecture, rec.num_keypoints, **config.model_options())
+    data = TrainingData(rec, config, probe.input_size, probe.heatmap_size)
+    if fixed_steps:
+        steps = fixed_steps
+    else:
+        per_step = probe_seconds_per_step(config, data)
+        extra = 0.0
+        if mode == 'bootstrap2' or (mode == 'monet' and config.monet_bootstrap_rounds):
+            trainer = Trainer(config, data, warn=lambda m: None)
+            start = time.monotonic()
+            trainer.detect(data.unlabeled_instants)
+            rounds = 2 if mode == 'bootstrap2' else config.monet_bootstrap_rounds
+            extra = rounds * (time.monotonic() - start)
+        steps = max(20, int((budget_s - extra) / per_step))
+    config = dataclasses.replace(config, steps=steps, checkpoint_every=10 ** 6)
+    said = []
+    start = time.monotonic()
+    trainer = Trainer(config, data, warn=said.append)
+    summary = trainer.run(progress=False)
+    train_s = time.monotonic() - start
+    points, conf = trainer.detect(np.arange(rec.num_instants))
+    X = fuse(points, conf, rec.cameras)
+    unlabelled = np.setdiff1d(np.arange(rec.num_instants), instants)
+    result = score(X, points, reference, reference2d, unlabelled)
+    result.update({'labels': count, 'mode': mode, 'steps': steps, 'train_s': round(train_s, 1),
+                   'instants': instants.tolist(), 'fit_px': summary['fit']['median_px'],
+                   'fit_heat': summary['fit']['median_heat'],
+                   'pseudo_labels': summary['pseudo_labels'], 'warnings': said,
+                   'bootstrap': summary['bootstrap']})
+    print(f'[{count} labels {mode}] {steps} steps in {train_s:.0f} s: 3D median '
+          f'{result["median_mm"]:.0f} mm, PCK@10 {result["pck10"]:.3f}, fit '
+          f'{result["fit_px"]:.1f} px, {len(said)} warnings', file=sys.stderr, flush=True)
+    return result
+
+
+def baselines(count, seed):
+    """Image-blind rows: nearest labelled instant's pose, mean labelled pose."""
+    from monet_ros.learning.pseudo_labels import spatial_pseudo_labels
+
+    recording, reference, reference2d = _STATE['recording'], _STATE['reference'], \
+        _STATE['reference2d']
+    T = recording.num_instants
+    instants = choose_instants(T, count, seed)
+    labels = np.full_like(recording.labels, np.nan)
+    labels[instants] = reference2d[instants]
+    X_lab = spatial_pseudo_labels(labels, recording.cameras).points3d       # from the labels
+    unlabelled = np.setdiff1d(np.arange(T), instants)
+    nearest = instants[np.abs(np.arange(T)[:, None] - instants[None]).argmin(axis=1)]
+    rows = []
+    for name, X in (('nearest labelled pose', X_lab[nearest]),
+                    ('mean labelled pose', np.repeat(np.nanmean(X_lab[instants], axis=0)[None],
+                                                     T, axis=0))):
+        r = score(X, project_reference(X, recording.cameras), reference, reference2d,
+                  unlabelled)
+        r.update({'labels': count, 'mode': name, 'steps': 0, 'train_s': 0.0})
+        rows.append(r)
+    return rows
+
+
+def openpose_row(root):
+    from monet_ros.fusion import FusionConfig
+
+    recording, reference, reference2d = _STATE['recording'], _STATE['reference'], \
+        _STATE['reference2d']
+    uv, likelihood = load_openpose(root, recording.keypoints, recording.num_views)
+    X = fuse(uv, likelihood, recording.cameras, FusionConfig(confidence_threshold=0.3,
+                                                             threshold_px=7.5, min_views=2))
+    uv = np.where((likelihood >= 0.3)[..., None], uv, np.nan)
+    r = score(X, uv, reference, reference2d, np.arange(recording.num_instants))
+    r.update({'labels': 0, 'mode': 'OpenPose (pretrained) + fuse_points', 'steps': 0,
+              'train_s': 0.0})
+    return r
+
+
+def fmt(value, spec):
+    return '–' if value is None else format(value, spec)
+
+
+def table(rows):
+    lines = ['| labelled instants | model | steps | train wall (s) | 3D median / mean / p90 (mm) '
+             '| triangulated | PCK@5 / 10 / 20 px | fit on labels (px) | warnings |',
+             '|---|---|---|---|---|---|---|---|---|']
+    for r in rows:
+        lines.append(
+            f'| {r["labels"] or "–"} | {r["mode"]} | {r["steps"] or "–"} | '
+            f'{fmt(r["train_s"] or None, ".0f")} | {fmt(r["median_mm"], ".0f")} / '
+            f'{fmt(r["mean_mm"], ".0f")} / {fmt(r["p90_mm"], ".0f")} | '
+            f'{r["triangulated"]:.0%} | {fmt(r.get("pck5"), ".1%")} / '
+            f'{fmt(r.get("pck10"), ".1%")} / {fmt(r.get("pck20"), ".1%")} | '
+            f'{fmt(r.get("fit_px"), ".1f")} | {len(r.get("warnings", []))} |')
+    return '\n'.join(lines)
+
+
+def plot(rows, path, counts):
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for mode in (*MODES, 'nearest labelled pose'):
+        pts = sorted((r['labels'], r['median_mm'], r.get('pck10')) for r in rows
+                     if r['mode'] == mode and r['median_mm'] is not None)
+        if not pts:
+            continue
+        style = '--' if mode not in MODES else '-o'
+        axes[0].plot([p[0] for p in pts], [p[1] for p in pts], style, label=mode)
+        axes[1].plot([p[0] for p in pts], [100 * p[2] for p in pts], style, label=mode)
+    for r in rows:
+        if r['mode'].startswith('OpenPose'):
+            axes[1].axhline(100 * r['pck10'], color='grey', ls=':', label='OpenPose')
+    axes[0].set(xlabel='labelled instants', ylabel='3D median error (mm)', xticks=counts,
+                title='3D error on unlabelled instants')
+    axes[1].set(xlabel='labelled instants', ylabel='PCK@10 px (%)', xticks=counts,
+                title='2D PCK@10 px on unlabelled instants')
+    axes[0].legend()
+    axes[1].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--data', type=Path, default=None,
+                        help='shared data folder (default: ../shared/data)')
+    parser.add_argument('--out', default=None, help='output path stem (default '
+                        'bench/results/real, or bench/results/real_quick with --quick)')
+    parser.add_argument('--labels', nargs='+', type=int, default=[2, 3, 5, 10],
+                        help='numbers of labelled instants')
+    parser.add_argument('--modes', nargs='+', default=list(MODES), choices=MODES)
+    parser.add_argument('--budget-s', type=float, default=300.0,
+                        help='training wall time per run (s), the same for every mode')
+    parser.add_argument('--steps', type=int, default=0,
+                        help='equal step counts instead of equal wall time')
+    parser.add_argument('--seed', type=int, default=0, help='labelled instants and training')
+    parser.add_argument('--jobs', type=int, default=1, help='runs in parallel (processes)')
+    parser.add_argument('--set', nargs='*', default=[], metavar='KEY=VALUE',
+                        help='TrainConfig overrides for every run (e.g. lr=3e-4)')
+    parser.add_argument('--quick', action='store_true',
+                        help='smoke run: 3 labelled instants, 45 s per run')
+    args = parser.parse_args(argv)
+    import yaml
+
+    from monet_ros.learning.recording import load_recording
+
+    if args.quick:
+        args.labels, args.budget_s = [3], 45.0
+    stem = Path(args.out or REPO / 'bench' / 'results' / ('real_quick' if args.quick
+                                                           else 'real'))
+    overrides = {}
+    for pair in args.set:
+        key, sep, value = pair.partition('=')
+        if not sep or key not in TrainConfig.__dataclass_fields__:
+            parser.error(f'--set {pair!r}: expected KEY=VALUE with KEY a TrainConfig field')
+        value = yaml.safe_load(value)
+        if isinstance(value, str):                     # YAML 1.1 reads 1e-3 as a string
+            try:
+                value = float(value)
+            except ValueError:
+                pass
+        overrides[key] = value
+    root = args.data or default_data_root()
+    if not (root / BAG).exists():
+        print(f'real.py: {root / BAG} not found (use --data){"" if args.data else ": skipped"}',
+              file=sys.stderr)
+        return 2 if args.data else 0
+    start = time.monotonic()
+    recording = load_recording(root / BAG, skeleton='human14')
+    reference = load_reference(root, recording.keypoints)
+    if len(reference) != recording.num_instants:
+        raise SystemExit(f'{len(reference)} reference frames for {recording.num_instants} '
+                         'instants')
+    _STATE.update(recording=recording, reference=reference,
+                  reference2d=project_reference(reference, recording.cameras))
+    print(f'loaded {recording.num_instants} instants x {recording.num_views} views in '
+          f'{time.monotonic() - start:.0f} s', file=sys.stderr)
+    jobs = [(n, m, args.budget_s, args.steps, overrides, args.seed)
+            for n in args.labels for m in args.modes]
+    if args.jobs > 1:
+        with ProcessPoolExecutor(args.jobs,
+                                 mp_context=multiprocessing.get_context('fork')) as pool:
+            trained = list(pool.map(run_job, jobs))
+    else:
+        trained = [run_job(j) for j in jobs]
+    rows = [openpose_row(root)]
+    for n in args.labels:
+        rows += [r for r in trained if r['labels'] == n] + baselines(n, args.seed)
+    command = 'python bench/real.py ' + ' '.join(argv if argv is not None else sys.argv[1:])
+    title = '# Label efficiency on real video (Pose2Sim 4-camera recording)'
+    if args.quick:
+        title += ' - QUICK smoke run (45 s per run), not the figures'
+    text = '\n'.join([
+        title,
+        '', f'Command: `{command.strip()}` (wall {time.monotonic() - start:.0f} s, load average '
+        f'{os.getloadavg()[0]:.1f} at the end, torch 1 thread per run, {args.jobs} job(s)).',
+        f'Budget: {"%d steps" % args.steps if args.steps else "%.0f s" % args.budget_s} per '
+        f'run; seed {args.seed}; overrides {overrides or "none"}; scores on the unlabelled '
+        'instants (OpenPose row: all instants). How the figures are made: bench/real.py.', '',
+        table(rows), '',
+        'Labelled instants per count: ' + '; '.join(
+            f'{n}: {choose_instants(recording.num_instants, n, args.seed).tolist()}'
+            for n in args.labels), ''])
+    warnings = [(r['labels'], r['mode'], w) for r in trained for w in r['warnings']]
+    if warnings:
+        text += '\nWarnings of the runs:\n\n' + '\n'.join(
+            f'- {n} labels, {m}: {w}' for n, m, w in warnings) + '\n'
+    stem.parent.mkdir(parents=True, exist_ok=True)
+    stem.with_suffix('.md').write_text(text)
+    stem.with_suffix('.json').write_text(json.dumps(rows, indent=1))
+    plot(rows, stem.with_suffix('.png'), args.labels)
+    print(text)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
