@@ -2,10 +2,24 @@
 
 Each subcommand lives in its own module under monet_ros/commands with
 `HELP` (one line), `add_arguments(parser)` and `run(args) -> int`.
+
+Exit codes, the same for every subcommand: 0 on success and on SIGINT / SIGTERM (a clean
+stop at any moment); 2 with ONE line on stderr naming the file, field or option and the
+reason for bad input (an argument, a file, a model, an output folder that cannot be
+written); 1 with one line for an internal error (a bug: MONET_TRACEBACK=1 shows its
+traceback).
 """
 import argparse
+from contextlib import contextmanager
 import importlib
+import os
+import signal
 import sys
+import threading
+
+EXIT_OK = 0
+EXIT_INTERNAL = 1
+EXIT_BAD_INPUT = 2
 
 # Subcommand name -> module under monet_ros.commands. Keep in the order of DESIGN.md.
 SUBCOMMANDS = {
@@ -18,10 +32,18 @@ SUBCOMMANDS = {
 }
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with one-line errors (`monet train: error: argument --steps: ...`), exit 2."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f'{self.prog}: error: {message}\n')
+
+
 def build_parser():
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog='monet', description='MONET multiview keypoint tracking: offline jobs and pipeline.')
-    sub = parser.add_subparsers(dest='command', metavar='COMMAND')
+    sub = parser.add_subparsers(dest='command', metavar='COMMAND',
+                                parser_class=OneLineParser)
     sub.required = True
     for name, module_name in SUBCOMMANDS.items():
         module = importlib.import_module(f'monet_ros.commands.{module_name}')
@@ -31,12 +53,71 @@ def build_parser():
     return parser
 
 
-def main(argv=None):
-    args = build_parser().parse_args(argv)
+def _stop_on_sigterm(signum, frame):
+    raise KeyboardInterrupt
+
+
+@contextmanager
+def sigterm_as_interrupt():
+    """SIGTERM raises KeyboardInterrupt (a clean stop, exit 0) while the command runs."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGTERM, _stop_on_sigterm)
     try:
-        return int(args.handler(args) or 0)
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def error_line(error):
+    """The one line printed for a bad-input error (the message names file/field/option)."""
+    from monet_ros.commands.common import os_error_text
+
+    if isinstance(error, OSError):
+        return os_error_text(error)
+    if isinstance(error, MemoryError):
+        return 'out of memory (the input or an option asks for too much; see its size)'
+    text = str(error).strip() or type(error).__name__
+    return ' '.join(text.split())                     # one line, whatever the message
+
+
+def bad_input_errors():
+    """Exception types that mean bad input (their messages name the thing)."""
+    errors = [ValueError, OSError, MemoryError]
+    try:
+        from monet_ros.models import CheckpointError
+        errors.append(CheckpointError)
+    except ImportError:                                # pragma: no cover
+        pass
+    return tuple(errors)
+
+
+def main(argv=None):
+    """Run `monet ARGV`; returns the exit code (see the module docstring)."""
+    name = 'monet'
+    try:
+        with sigterm_as_interrupt():
+            args = build_parser().parse_args(argv)
+            name = f'monet {args.command}'
+            try:
+                return int(args.handler(args) or 0)
+            except bad_input_errors() as error:
+                if os.environ.get('MONET_TRACEBACK'):
+                    raise
+                print(f'{name}: error: {error_line(error)}', file=sys.stderr, flush=True)
+                return EXIT_BAD_INPUT
     except KeyboardInterrupt:
-        return 130
+        print(f'{name}: stopped', file=sys.stderr, flush=True)
+        return EXIT_OK
+    except SystemExit as exit_:
+        return exit_.code if isinstance(exit_.code, int) else EXIT_BAD_INPUT
+    except Exception as error:  # noqa: BLE001 - one line, never a traceback, for users
+        if os.environ.get('MONET_TRACEBACK'):
+            raise
+        print(f'{name}: internal error: {type(error).__name__}: {error_line(error)} '
+              '(MONET_TRACEBACK=1 shows where)', file=sys.stderr, flush=True)
+        return EXIT_INTERNAL
 
 
 if __name__ == '__main__':

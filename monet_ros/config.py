@@ -16,6 +16,7 @@ Supported field types: str, int, float, bool and tuple[str | int | float, ...].
 """
 from dataclasses import field, fields
 import math
+import string
 import typing
 
 SCALAR_TYPES = (str, int, float, bool)
@@ -32,18 +33,20 @@ class ConfigError(ValueError):
 
 
 def setting(default, description, *, choices=None, minimum=None, maximum=None,
-            exclusive_minimum=False, min_length=None, length=None):
+            exclusive_minimum=False, min_length=None, length=None, template_fields=None):
     """A dataclass field with a default and the metadata `validate_config` checks.
 
     choices: allowed values (for tuples: allowed elements); minimum/maximum: numeric bounds
     (inclusive unless exclusive_minimum; for tuples: per element); min_length / length: tuple
-    length constraints (length may be a tuple of allowed lengths).
+    length constraints (length may be a tuple of allowed lengths); template_fields: the
+    str.format fields a template string may use (e.g. ('camera',) for '/{camera}/image').
     """
     if isinstance(default, list):
         default = tuple(default)
     meta = {'description': description, 'choices': tuple(choices) if choices else None,
             'minimum': minimum, 'maximum': maximum, 'exclusive_minimum': exclusive_minimum,
-            'min_length': min_length, 'length': length}
+            'min_length': min_length, 'length': length,
+            'template_fields': tuple(template_fields) if template_fields else None}
     return field(default=default, metadata=meta)
 
 
@@ -115,6 +118,8 @@ def validate_config(config):
                 raise ConfigError(owner, f.name, f'expected at least {meta["min_length"]} '
                                   f'values, got {len(value)}: {list(value)}')
         for item in items:
+            if meta.get('template_fields') is not None and isinstance(item, str):
+                check_template(owner, f.name, item, meta['template_fields'])
             if meta.get('choices') and item not in meta['choices']:
                 raise ConfigError(owner, f.name, f'{item!r} is not one of '
                                   f'{list(meta["choices"])}')
@@ -130,6 +135,22 @@ def validate_config(config):
                 if high is not None and item > high:
                     raise ConfigError(owner, f.name, f'must be <= {high}, got {item!r}')
     return config
+
+
+def check_template(owner, name, text, allowed):
+    """ConfigError unless `text` is a str.format template using only the `allowed` fields
+    (plain names, no conversions or format specs)."""
+    try:
+        parsed = list(string.Formatter().parse(text))
+    except ValueError as error:
+        raise ConfigError(owner, name, f'{text!r}: not a valid template ({error})') from None
+    for _, field_name, spec, conversion in parsed:
+        if field_name is None:
+            continue
+        if field_name not in allowed or spec or conversion:
+            raise ConfigError(owner, name, f'{text!r}: unknown template field '
+                              f'{{{field_name}}}; allowed: '
+                              f'{", ".join("{" + a + "}" for a in allowed)}')
 
 
 def config_subset(config, target_cls):
@@ -149,5 +170,5 @@ def config_from_mapping(config_cls, values, source='<mapping>'):
     return config_cls(**values)
 
 
-__all__ = ['ConfigError', 'coerce_value', 'config_from_mapping', 'config_subset', 'field_kind',
-           'setting', 'validate_config']
+__all__ = ['check_template', 'ConfigError', 'coerce_value', 'config_from_mapping',
+           'config_subset', 'field_kind', 'setting', 'validate_config']

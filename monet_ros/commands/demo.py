@@ -7,12 +7,15 @@ as weights, worst-camera exclusion at 15 px, >= 2 cameras) and reports the agree
 Pose2Sim's own .trc and the reprojection error per camera. Without the data (or with
 --synthetic) it triangulates a synthetic subject seen by a generated 8-camera rig instead.
 """
+from dataclasses import dataclass
 import os
 from pathlib import Path
 import sys
 import time
 
 import numpy as np
+
+from monet_ros.config import setting, validate_config
 
 HELP = 'triangulate the Pose2Sim demo (../shared/data) and compare with its .trc'
 TRIAL = Path('pose2sim_demo_balancing/S00_P00_SingleParticipant/S00_P00_T01_BalancingTrial')
@@ -28,6 +31,17 @@ def default_data_root():
         if (root / 'shared' / 'data').is_dir():
             return root / 'shared' / 'data'
     return repo.parent / 'shared' / 'data'
+
+
+@dataclass(frozen=True)
+class DemoOptions:
+    """The numeric options of `monet demo` (validated; errors name the option)."""
+    threshold_px: float = setting(15.0, 'exclusion threshold (px)', minimum=0.0,
+                                  exclusive_minimum=True)
+    likelihood: float = setting(0.3, 'minimum OpenPose likelihood', minimum=0.0, maximum=1.0)
+
+    def __post_init__(self):
+        validate_config(self)
 
 
 def add_arguments(parser):
@@ -87,6 +101,7 @@ def run(args):
         trc_to_world,
     )
 
+    DemoOptions(threshold_px=args.threshold_px, likelihood=args.likelihood)
     if args.synthetic:
         return run_synthetic()
     root = args.data or default_data_root()
@@ -108,11 +123,23 @@ def run(args):
     for folder in folders:
         detections.append(read_openpose_folder(folder))
         _log(f'  read {folder.name}: {len(detections[-1])} frames')
+    counts = {folder.name: len(d) for folder, d in zip(folders, detections)}
+    if len(set(counts.values())) != 1:
+        raise ValueError(f'{trial / "pose-associated"}: the cameras have different numbers '
+                         f'of frames {counts}')
     detections = np.stack(detections)  # (V, F, 25, 3)
-    trc_path = next((trial / 'pose-3d').glob('*.trc'))
+    trc_path = next(iter(sorted((trial / 'pose-3d').glob('*.trc'))), None)
+    if trc_path is None:
+        raise FileNotFoundError(2, "no Pose2Sim .trc file (Pose2Sim's 3D result)",
+                                str(trial / 'pose-3d'))
     names, _, trc = read_trc(trc_path)
+    unknown = [name for name in names if name not in BODY_25B_IDS]
+    if unknown:
+        raise ValueError(f'{trc_path}: marker {unknown[0]!r} is not a BODY_25B keypoint')
     ids = [BODY_25B_IDS[name] for name in names]
     V, F = detections.shape[:2]
+    if len(trc) != F:
+        raise ValueError(f'{trc_path}: {len(trc)} rows, the detections have {F} frames')
     points = detections[:, :, ids, :2].reshape(V, F * len(ids), 2)
     likelihood = detections[:, :, ids, 2].reshape(V, F * len(ids))
     weights = np.where(likelihood >= args.likelihood, likelihood, 0.0)

@@ -20,50 +20,67 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0, help='torch CPU threads (0 = default)')
 
 
+def load_results_json(path):
+    """EvalSummary list from a results.json (ValueError naming the file and what is wrong)."""
+    import json
+
+    from monet_ros.evaluation import load_summaries
+
+    try:
+        summaries = load_summaries(path)
+    except json.JSONDecodeError as error:
+        raise ValueError(f'{path}: not JSON (line {error.lineno}: {error.msg})') from None
+    except (KeyError, TypeError, AttributeError, ValueError) as error:
+        raise ValueError(f'{path}: not a monet eval results.json ({type(error).__name__}: '
+                         f'{error})') from None
+    if not summaries:
+        raise ValueError(f'{path}: holds no results')
+    return summaries
+
+
 def run(args):
     import numpy as np
 
-    from monet_ros.evaluation import load_summaries, markdown_table, write_report
+    from monet_ros.commands.common import check_device, check_threads
+    from monet_ros.evaluation import markdown_table, write_report
     from monet_ros.evaluation.evaluate import evaluate_detector
-    from monet_ros.learning.recording import RecordingError, load_recording
+    from monet_ros.learning.recording import load_recording
     from monet_ros.learning.trainer import crop_boxes
-    from monet_ros.models import CheckpointError
     from monet_ros.models.detector import Detector
 
-    if args.threads:
-        import torch
-        torch.set_num_threads(args.threads)
+    check_threads('monet eval', args.threads)
+    device = check_device('monet eval', args.device)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
     if args.from_json:
-        summaries = load_summaries(args.from_json)
+        summaries = load_results_json(args.from_json)
     else:
         if not args.checkpoints or not args.data:
-            print('monet eval: give checkpoints and --data (or --from-json)', file=sys.stderr)
-            return 2
-        try:
-            recordings = [load_recording(d, skeleton=args.skeleton) for d in args.data]
-        except (RecordingError, ValueError, OSError) as error:
-            print(f'monet eval: {error}', file=sys.stderr)
-            return 1
+            raise ValueError('give checkpoints and --data (or --from-json)')
+        recordings = [load_recording(d, skeleton=args.skeleton) for d in args.data]
+        for data, rec in zip(args.data, recordings):
+            if rec.gt3d is None:
+                raise ValueError(f'--data {data}: no ground truth (ground_truth.npz beside '
+                                 'the recording); monet eval needs 3D ground truth')
         summaries = []
         for path in args.checkpoints:
-            try:
-                detector = Detector.from_checkpoint(path, device=args.device)
-            except CheckpointError as error:
-                print(f'monet eval: {error}', file=sys.stderr)
-                return 1
+            detector = Detector.from_checkpoint(path, device=device)
             meta = detector.metadata
             named = [r for r in recordings if r.name == meta.get('recording')]
             cfg = meta.get('train_config', {})
             for rec in named or recordings:
                 if list(rec.keypoints) != list(meta['keypoints']):
-                    print(f'monet eval: {path}: keypoints {meta["keypoints"]} differ from '
-                          f"{rec.name}'s skeleton", file=sys.stderr)
-                    return 1
+                    raise ValueError(f'{path}: keypoints {meta["keypoints"]} differ from '
+                                     f"{rec.name}'s skeleton {list(rec.keypoints)}")
                 start = meta.get('held_out_from_stamp_ns')
                 if args.instants == 'all' or start is None:
                     instants = np.arange(rec.num_instants)
                 else:
                     instants = np.flatnonzero(rec.stamps >= int(start))
+                if len(instants) == 0:
+                    raise ValueError(f'{path}: no held-out instant of {rec.name} (held out '
+                                     f'from stamp {start}); use --instants all')
                 h, w = detector.input_size
                 boxes = crop_boxes(rec, cfg.get('box_source', 'auto'), w / h,
                                    cfg.get('box_margin', 0.25))
@@ -72,7 +89,7 @@ def run(args):
                 summary.extra['checkpoint'] = str(path)
                 summary.extra['step'] = meta.get('step')
                 summaries.append(summary)
-    paths = write_report(args.out, summaries)
+    paths = write_report(out, summaries)
     print(markdown_table(summaries), end='')
     print('written: ' + ', '.join(str(p) for p in paths.values()), file=sys.stderr)
     return 0

@@ -10,6 +10,9 @@ camera (batched forward) and the fusion node; other processes see the usual topi
 second: frames fused, fps, latency (player publish -> 3D keypoints, median / p95) and the
 mean reprojection error; a final summary when the recording ends (or Ctrl-C, or --duration).
 """
+from collections import deque
+from dataclasses import dataclass
+import math
 import sys
 import threading
 import time
@@ -17,6 +20,7 @@ import time
 import numpy as np
 
 from monet_ros.commands.pipeline_learn import add_learn_arguments, learner_node
+from monet_ros.config import ConfigError, setting, validate_config
 
 HELP = 'live all-in-one: player + detector + fusion as ROS nodes in one process'
 
@@ -50,14 +54,37 @@ def add_arguments(parser):
     add_learn_arguments(parser)
 
 
-class Summary:
-    """Live figures from the player and fusion listeners (thread-safe)."""
+@dataclass(frozen=True)
+class PipelineOptions:
+    """The numeric options of `monet pipeline` (validated; errors name the option)."""
+    rate: float = setting(1.0, 'playback speed (0 = as fast as possible)', minimum=0.0,
+                          maximum=1000.0)
+    duration: float = setting(0.0, 'stop after this many seconds (0 = at the end)',
+                              minimum=0.0)
+    start_delay: float = setting(0.5, 'seconds between start-up and the first frame',
+                                 minimum=0.0, maximum=3600.0)
 
-    def __init__(self):
+    def __post_init__(self):
+        validate_config(self)
+
+
+# Samples kept for the latency / error statistics (the last ones: bounded whatever the run
+# length; at 30 frames/s, about two minutes).
+SUMMARY_SAMPLES = 4096
+
+
+class Summary:
+    """Live figures from the player and fusion listeners (thread-safe, bounded state: the
+    per-frame samples are the last `samples` ones, the totals running counts)."""
+
+    def __init__(self, samples=SUMMARY_SAMPLES):
         self.lock = threading.Lock()
         self.published = {}       # frame stamp -> wall time of its first image
-        self.latencies = []       # (wall time, seconds)
-        self.errors = []          # (wall time, mean reprojection error px)
+        self.latencies = deque(maxlen=samples)   # (wall time, seconds)
+        self.errors = deque(maxlen=samples)      # (wall time, mean reprojection error px)
+        self.first_fused = None   # wall time of the first / last frame with a latency
+        self.timed_frames = 0     # frames with a latency (running count)
+        self.error_sum, self.error_count = 0.0, 0
         self.frames = 0
         self.frames_published = 0
         self.last_fused = None
@@ -80,9 +107,14 @@ class Summary:
             start = self.published.get(stamp_ns)
             if start is not None:
                 self.latencies.append((now, now - start))
+                self.first_fused = self.first_fused or now
+                self.timed_frames += 1
             error = result.reprojection_error
             if np.isfinite(error).any():
-                self.errors.append((now, float(np.nanmean(error))))
+                mean = float(np.nanmean(error))
+                self.errors.append((now, mean))
+                self.error_sum += mean
+                self.error_count += 1
             self.last_stamp = max(self.last_stamp, stamp_ns)
             self.cond.notify_all()
 
@@ -94,31 +126,50 @@ class Summary:
         return wait
 
     def line(self, window=None):
+        """The status line: the last `window` seconds, or the whole run (latency percentiles
+        over the last samples kept)."""
         now = time.monotonic()
         with self.lock:
-            lat = [s for t, s in self.latencies if window is None or now - t <= window]
+            recent = [(t, s) for t, s in self.latencies if window is None or now - t <= window]
             err = [e for t, e in self.errors if window is None or now - t <= window]
-            times = [t for t, _ in self.latencies if window is None or now - t <= window]
+            timed, first = self.timed_frames, self.first_fused
+            last = self.latencies[-1][0] if self.latencies else None
+            error_mean = self.error_sum / self.error_count if self.error_count else math.nan
+        lat = [s for _, s in recent]
         parts = [f'frames {self.frames} fused of {self.frames_published} played']
         if window is not None:
-            parts.append(f'{len(times) / window:5.1f} fps')
-        elif len(times) > 1:
-            parts.append(f'{(len(times) - 1) / (times[-1] - times[0]):5.1f} fps')
+            parts.append(f'{len(recent) / window:5.1f} fps')
+        elif timed > 1 and last > first:
+            parts.append(f'{(timed - 1) / (last - first):5.1f} fps')
         if lat:
             parts.append(f'latency median {1e3 * np.median(lat):5.0f} ms '
                          f'p95 {1e3 * np.percentile(lat, 95):5.0f} ms')
-        if err:
+        if window is not None and err:
             parts.append(f'reprojection error {np.mean(err):5.2f} px')
+        elif window is None and self.error_count:
+            parts.append(f'reprojection error {error_mean:5.2f} px')
         return ' | '.join(parts)
 
 
-def image_transport(bag):
-    """'compressed' when the recording's images are CompressedImage, else 'raw'."""
+def image_transport(bag, cameras):
+    """'compressed' when the recording holds only CompressedImage topics for the cameras
+    (the one image-topic rule of `monet process` and `monet train`:
+    io.multiview.image_topics), else 'raw'."""
     from monet_ros.io import open_bag
-    types = {info.msgtype for info in open_bag(bag).topics.values()}
-    if 'sensor_msgs/msg/Image' in types:
-        return 'raw'
-    return 'compressed' if 'sensor_msgs/msg/CompressedImage' in types else 'raw'
+    from monet_ros.io.multiview import image_topics
+    from monet_ros.io.multiview import image_transport as transport_of
+
+    return transport_of(image_topics(open_bag(bag), cameras, bag))
+
+
+def check_skeleton(fusion, detector, skeleton, model):
+    """ConfigError naming both when the skeleton's keypoints are not the model's."""
+    names = list(fusion.skeleton.keypoints)
+    model_names = list(detector.detector.keypoints)
+    if names != model_names:
+        raise ConfigError('monet pipeline', 'skeleton',
+                          f'{skeleton} has keypoints {names}, the model {model} has '
+                          f'{model_names}; give --skeleton matching the model')
 
 
 def run(args):
@@ -141,8 +192,11 @@ def run(args):
         args.loop = True                             # a 3 s recording: show it for a while
         args.duration = args.duration or 20.0
     if not args.model:
-        start_error('monet pipeline', '--model is required with --bag')
-        return 2
+        raise ConfigError('monet pipeline', 'model', '--model is required with --bag')
+    from monet_ros.commands.common import check_device
+    options = PipelineOptions(rate=args.rate, duration=args.duration,
+                              start_delay=args.start_delay)
+    check_device('monet pipeline', args.device)
     use_large_data_profile()
     import rclpy
     from rclpy.executors import MultiThreadedExecutor
@@ -160,18 +214,19 @@ def run(args):
     try:
         with until_shutdown():
             try:
-                transport = image_transport(args.bag)
                 fusion = FusionNode(overrides=dict(rig=str(rig), cameras=cameras,
                                                    skeleton=args.skeleton, threads=0,
                                                    threshold_px=args.threshold_px))
                 nodes.append(fusion)
+                transport = image_transport(args.bag, fusion.cameras)
                 detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
                                                        model=str(args.model), transport=transport,
                                                        device=args.device))
                 nodes.append(detector)
+                check_skeleton(fusion, detector, args.skeleton, args.model)
                 player = PlayerNode(overrides=dict(
-                    bag=str(args.bag), rate=0.0 if args.lockstep else args.rate, loop=args.loop,
-                    wait_for_subscribers=1, start_delay_s=args.start_delay,
+                    bag=str(args.bag), rate=0.0 if args.lockstep else options.rate,
+                    loop=args.loop, wait_for_subscribers=1, start_delay_s=options.start_delay,
                     topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]))
                 nodes.append(player)
                 if args.learn:
@@ -206,7 +261,7 @@ def run(args):
                         print(summary.line(window=1.0), flush=True)
                         if score is not None:
                             print(f'  {score.line()}', flush=True)
-                if args.duration and now - started >= args.duration:
+                if options.duration and now - started >= options.duration:
                     break
                 if player.done.is_set():
                     # the recording ended: let the frames in flight through, then stop

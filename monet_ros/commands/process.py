@@ -6,11 +6,16 @@ possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 
 The same functions as the live nodes: Detector.predict (one batched forward per instant),
 tracking.crop_boxes (crop around the previous instant's 3D keypoints), fusion.fuse_heatmaps.
 """
-from pathlib import Path
+from collections import Counter
+from dataclasses import dataclass
+import math
 import sys
 import time
 
 import numpy as np
+
+from monet_ros.config import ConfigError, config_subset, setting
+from monet_ros.fusion import FusionConfig
 
 HELP = 'run detector + fusion over a recording offline, write keypoints3d to an MCAP'
 
@@ -18,7 +23,8 @@ HELP = 'run detector + fusion over a recording offline, write keypoints3d to an 
 def add_arguments(parser):
     parser.add_argument('bag', help='recording: rosbag2 folder or .mcap')
     parser.add_argument('--model', required=True, help='detector checkpoint')
-    parser.add_argument('--out', required=True, help='output rosbag2 folder (must not exist)')
+    parser.add_argument('--out', required=True, help='output rosbag2 folder (must not exist; '
+                        'written atomically: a failed run leaves nothing behind)')
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
                         '/tf_static)')
     parser.add_argument('--cameras', nargs='+', help='cameras to use (default: all)')
@@ -40,54 +46,108 @@ def add_arguments(parser):
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
-def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None, slop_ns=0,
-                      track=True, heatmaps=False, skeleton=None, device=None, progress=True):
-    """Detect + fuse every instant of `bag`; write `out`. Returns a dict of figures."""
+@dataclass(frozen=True)
+class ProcessConfig(FusionConfig):
+    """Settings of `monet process` (validated on construction; errors name the option)."""
+    slop_ms: float = setting(0.0, 'stamp tolerance between cameras (0 = exact)', minimum=0.0,
+                             maximum=10_000.0)
+    track: bool = setting(True, "crop around the previous instant's 3D keypoints")
+    heatmaps: bool = setting(False, 'also write /monet/<cam>/heatmaps')
+
+
+class RunningMean:
+    """Count and mean of the finite values added (bounded state for any run length)."""
+
+    def __init__(self):
+        self.count, self.total = 0, 0.0
+
+    def add(self, value):
+        if math.isfinite(value):
+            self.count += 1
+            self.total += value
+
+    @property
+    def mean(self):
+        return self.total / self.count if self.count else float('nan')
+
+
+def view_problem(image, camera):
+    """Why a decoded view cannot go to the detector (None when it can): the rig's size,
+    8 bits, grey or 3 channels."""
+    image = np.asarray(image)
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
+        return f'image shape {image.shape} (expected {camera.height}x{camera.width} grey or rgb)'
+    if image.shape[:2] != (camera.height, camera.width):
+        return (f'image is {image.shape[1]}x{image.shape[0]}, the rig says '
+                f'{camera.width}x{camera.height}')
+    if image.dtype != np.uint8:
+        return f'{image.dtype} pixels (8-bit images only)'
+    return None
+
+
+def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
+                      skeleton=None, progress=True):
+    """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
+    atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
+    missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
+    first reason), seconds, mean_error, mean_views, report (the reader's ReadReport).
+    Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
-    from monet_ros.fusion import FusionConfig, fuse_heatmaps
+    from monet_ros.commands.common import atomic_output_dir, check_new_output
+    from monet_ros.fusion import fuse_heatmaps
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
+    from monet_ros.io.multiview import image_topics
     from monet_ros.models import Detector
     from monet_ros.nodes.rig import load_node_rig, select_cameras
     from monet_ros.skeleton import load_skeleton
     from monet_ros.tracking import crop_boxes
 
-    if Path(out).exists():
-        raise FileExistsError(f'{out}: output exists; choose a new folder')
-    fusion_config = fusion_config or FusionConfig()
+    config = config or ProcessConfig()
+    fusion_config = config_subset(config, FusionConfig)
+    check_new_output(out, 'monet process')
     rig_cameras, frame_id = load_node_rig(rig or bag)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
+    if config.min_views > len(cameras):
+        raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
+                          f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
     detector = Detector.from_checkpoint(model, device=device)
     if skeleton is not None:
         names = list(load_skeleton(skeleton).keypoints)
         if names != list(detector.keypoints):
-            raise ValueError(f'skeleton {skeleton} keypoints {names} differ from the model '
-                             f'keypoints {list(detector.keypoints)}')
+            raise ConfigError('monet process', 'skeleton',
+                              f'{skeleton} keypoints {names} differ from the keypoints of '
+                              f'the model {model}: {list(detector.keypoints)}')
     reader = open_bag(bag)
-    topics = {}
-    for cam in cameras:
-        topic = cam.topic or f'/{cam.name}/image_raw'
-        if topic not in reader.topics and topic + '/compressed' in reader.topics:
-            topic += '/compressed'
-        if topic not in reader.topics:
-            raise ValueError(f'{bag}: no image topic {topic!r} for camera {cam.name!r}')
-        topics[cam.name] = topic
+    topics = image_topics(reader, cameras, bag)
     by_name = {cam.name: cam for cam in cameras}
-    figures = dict(frames=0, views=0, missing_views=0, seconds=0.0, errors=[], num_views=[])
+    figures = dict(frames=0, views=0, missing_views=0, skipped_views=Counter(),
+                   skip_reasons={}, seconds=0.0)
+    errors, num_views = RunningMean(), RunningMean()
     previous = None
     start = time.perf_counter()
-    with BagWriter(out) as writer:
-        frames = iter_multiview_frames(reader, topics, slop_ns=slop_ns)
+    with atomic_output_dir(out) as staging, BagWriter(staging) as writer:
+        frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6))
         for frame in tqdm(frames, desc='monet process', unit='frame', disable=not progress,
                           file=sys.stderr):
-            present = [by_name[n] for n in topics if n in frame.images]
+            present, images = [], []
+            for name in topics:
+                if name not in frame.images:
+                    continue
+                problem = view_problem(frame.images[name], by_name[name])
+                if problem is not None:
+                    figures['skipped_views'][name] += 1
+                    figures['skip_reasons'].setdefault(name, f'{problem} at stamp '
+                                                       f'{frame.stamp_ns}')
+                    continue
+                image = np.asarray(frame.images[name])
+                present.append(by_name[name])
+                images.append(np.repeat(image[..., None], 3, axis=2) if image.ndim == 2
+                              else image)
             figures['missing_views'] += len(topics) - len(present)
             if len(present) < fusion_config.min_views:
                 continue
-            images = [np.asarray(frame.images[cam.name]) for cam in present]
-            images = [np.repeat(im[..., None], 3, axis=2) if im.ndim == 2 else im
-                      for im in images]
-            boxes = crop_boxes(present, previous if track else None)
+            boxes = crop_boxes(present, previous if config.track else None)
             boxes = detector.boxes_for(present, boxes)
             heat, heat_cameras = detector.predict(images, present, boxes, keep_aspect=False)
             result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cameras]), present,
@@ -95,7 +155,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
             writer.write_keypoints3d('/monet/keypoints3d', frame.stamp_ns, frame_id,
                                      result.X, result.confidence, result.reprojection_error,
                                      result.num_views)
-            if heatmaps:
+            if config.heatmaps:
                 for cam, hm in zip(present, heat):
                     writer.write_heatmaps(f'/monet/{cam.name}/heatmaps', frame.stamp_ns, hm,
                                           cam.name)
@@ -103,38 +163,39 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
             previous = result.X if finite.sum() >= 3 else None
             figures['frames'] += 1
             figures['views'] += len(present)
-            figures['errors'].append(float(np.nanmean(result.reprojection_error))
-                                     if finite.any() else np.nan)
-            figures['num_views'].append(float(result.num_views.mean()))
+            errors.add(float(np.nanmean(result.reprojection_error)) if finite.any()
+                       else float('nan'))
+            num_views.add(float(result.num_views.mean()))
     figures['seconds'] = time.perf_counter() - start
+    figures['mean_error'], figures['mean_views'] = errors.mean, num_views.mean
     figures['report'] = reader.report
     return figures
 
 
 def run(args):
-    from monet_ros.fusion import FusionConfig
-    from monet_ros.nodes.runner import start_error
+    from monet_ros.commands.common import check_device
 
-    try:
-        config = FusionConfig(threshold_px=args.threshold_px,
-                              confidence_threshold=args.confidence_threshold,
-                              min_views=args.min_views, method=args.method)
-        figures = process_recording(
-            args.bag, args.model, args.out, rig=args.rig, cameras=args.cameras or (),
-            fusion_config=config, slop_ns=int(args.slop_ms * 1e6), track=not args.no_track,
-            heatmaps=args.heatmaps, skeleton=args.skeleton, device=args.device,
-            progress=not args.quiet)
-    except (ValueError, OSError) as error:
-        start_error('monet process', error)
-        return 2
-    errors = np.array(figures['errors'], float)
+    config = ProcessConfig(threshold_px=args.threshold_px,
+                           confidence_threshold=args.confidence_threshold,
+                           min_views=args.min_views, method=args.method,
+                           slop_ms=args.slop_ms, track=not args.no_track,
+                           heatmaps=args.heatmaps)
+    device = check_device('monet process', args.device)
+    figures = process_recording(
+        args.bag, args.model, args.out, rig=args.rig, cameras=args.cameras or (),
+        config=config, skeleton=args.skeleton, device=device, progress=not args.quiet)
     fps = figures['frames'] / figures['seconds'] if figures['seconds'] else 0.0
+    skipped = figures['skipped_views']
     print(f'monet process: {figures["frames"]} frames ({figures["views"]} views, '
-          f'{figures["missing_views"]} missing) in {figures["seconds"]:.1f} s '
-          f'({fps:.1f} frames/s); mean reprojection error '
-          f'{np.nanmean(errors) if np.isfinite(errors).any() else float("nan"):.2f} px; '
-          f'mean inlier views {np.mean(figures["num_views"]) if figures["num_views"] else 0:.2f}'
+          f'{figures["missing_views"]} missing'
+          f'{f", {sum(skipped.values())} of them skipped" if skipped else ""}) in '
+          f'{figures["seconds"]:.1f} s ({fps:.1f} frames/s); mean reprojection error '
+          f'{figures["mean_error"]:.2f} px; mean inlier views '
+          f'{0.0 if figures["mean_views"] != figures["mean_views"] else figures["mean_views"]:.2f}'
           f' -> {args.out}')
+    for name, count in sorted(skipped.items()):
+        print(f'monet process: skipped {count} views of {name}: '
+              f'{figures["skip_reasons"][name]}', file=sys.stderr)
     report = figures['report']
     if report is not None and not report.ok:
         print(f'monet process: reading {args.bag}: {report.summary()}', file=sys.stderr)

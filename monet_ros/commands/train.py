@@ -1,15 +1,27 @@
 """`monet train`: semi-supervised training from a recording + labels (the paper's modes)."""
 import argparse
-from dataclasses import fields
+from dataclasses import dataclass, fields
 import json
 from pathlib import Path
 import sys
 
-from monet_ros.config import ConfigError
+from monet_ros.config import setting, validate_config
 from monet_ros.learning.config import TrainConfig
 
 HELP = ('semi-supervised training from recordings + labels '
         '(modes: supervised, spatial, spatiotemporal, bootstrap1, bootstrap2, monet)')
+
+
+@dataclass(frozen=True)
+class TrainRunOptions:
+    """The options of `monet train` that are not TrainConfig (validated; errors name them)."""
+    max_instants: int = setting(0, 'read at most this many instants (0 = all)', minimum=0,
+                                maximum=100_000_000)
+    threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0,
+                           maximum=256)
+
+    def __post_init__(self):
+        validate_config(self)
 
 
 def add_arguments(parser):
@@ -54,31 +66,26 @@ def config_from_args(args):
 
 
 def run(args):
-    from monet_ros.learning.recording import RecordingError, load_recording
+    from monet_ros.commands.common import check_device, check_threads
+    from monet_ros.learning.recording import load_recording
     from monet_ros.learning.trainer import Trainer, TrainingData
     from monet_ros.models import build_model
 
-    if args.threads:
-        import torch
-        torch.set_num_threads(args.threads)
-    try:
-        config = config_from_args(args)
-    except ConfigError as error:
-        print(f'monet train: {error}', file=sys.stderr)
-        return 2
-    try:
-        recording = load_recording(args.data, rig=args.rig, labels=args.labels,
-                                   ground_truth=args.ground_truth, skeleton=args.skeleton,
-                                   max_instants=args.max_instants or None)
-    except (RecordingError, ValueError, OSError) as error:
-        print(f'monet train: {error}', file=sys.stderr)
-        return 1
+    options = TrainRunOptions(max_instants=args.max_instants, threads=args.threads)
+    config = config_from_args(args)
+    check_device('monet train', None if config.device == 'auto' else config.device)
+    check_threads('monet train', options.threads)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
+    recording = load_recording(args.data, rig=args.rig, labels=args.labels,
+                               ground_truth=args.ground_truth, skeleton=args.skeleton,
+                               max_instants=options.max_instants or None)
     report = getattr(recording, 'read_report', None)
     if report is not None and not report.ok:
         print(f'monet train: reading {args.data}: {report.summary()}', file=sys.stderr)
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
     data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
-    out = Path(args.out)
     if args.resume and (out / 'trainer_state.pt').exists():
         trainer = Trainer.resume(out, data, config=config)
         print(f'resumed at step {trainer.step_count}', file=sys.stderr)
@@ -88,7 +95,14 @@ def run(args):
           f'{len(data.labelled_instants)} labelled, {len(data.unlabeled_instants)} unlabeled, '
           f'{len(data.held_out)} held out; mode {config.mode}, {trainer.pseudo_label_count} '
           f'pseudo-labels, device {trainer.device}', file=sys.stderr)
-    summary = trainer.run(progress=not args.no_progress)
+    try:
+        summary = trainer.run(progress=not args.no_progress)
+    except RuntimeError as error:
+        # torch.save on a full disk: "enforce fail at inline_container.cc ... file write
+        # failed" names neither the folder nor the disk.
+        if 'inline_container' in str(error) or 'write failed' in str(error):
+            raise OSError(28, 'No space left on device', str(out)) from None
+        raise
     summary['checkpoint'] = str(out / 'model.pt')
     fit = summary['fit']
     print(f'fit to the labelled views: median {fit["median_px"]:.2f} px '

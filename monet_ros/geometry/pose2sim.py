@@ -29,10 +29,12 @@ def read_openpose_folder(folder, num_keypoints=25, person=0):
     for f, path in enumerate(files):
         try:
             people = json.loads(path.read_text())['people']
-        except (OSError, ValueError, KeyError) as exc:
+            found = len(people) > person and people[person].get('pose_keypoints_2d')
+            values = np.asarray(people[person]['pose_keypoints_2d'], dtype=np.float64) \
+                if found else None
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
             raise ValueError(f'{path}: not an OpenPose JSON file ({exc})') from None
-        if len(people) > person and people[person].get('pose_keypoints_2d'):
-            values = np.asarray(people[person]['pose_keypoints_2d'], dtype=np.float64)
+        if values is not None:
             if values.size != 3 * num_keypoints:
                 raise ValueError(f'{path}: pose_keypoints_2d has {values.size} values, '
                                  f'expected {3 * num_keypoints}')
@@ -43,14 +45,20 @@ def read_openpose_folder(folder, num_keypoints=25, person=0):
 def read_trc(path):
     """A .trc marker file -> (marker names, frame numbers (F,), coordinates (F, M, 3)) in
     the file's axes and units (NaN for empty cells)."""
-    lines = Path(path).read_text().splitlines()
-    names = [n for n in lines[3].split('\t')[2:] if n.strip()]
-    rows = [line.split('\t') for line in lines[5:] if line.strip()]
-    frames = np.array([int(float(r[0])) for r in rows])
-    values = np.full((len(rows), 3 * len(names)), np.nan)
-    for i, r in enumerate(rows):
-        cells = [float(c) if c.strip() else np.nan for c in r[2:2 + 3 * len(names)]]
-        values[i, :len(cells)] = cells
+    try:
+        lines = Path(path).read_text().splitlines()
+        names = [n for n in lines[3].split('\t')[2:] if n.strip()]
+        rows = [line.split('\t') for line in lines[5:] if line.strip()]
+        frames = np.array([int(float(r[0])) for r in rows])
+        values = np.full((len(rows), 3 * len(names)), np.nan)
+        for i, r in enumerate(rows):
+            cells = [float(c) if c.strip() else np.nan for c in r[2:2 + 3 * len(names)]]
+            values[i, :len(cells)] = cells
+    except (IndexError, ValueError, OverflowError, UnicodeDecodeError) as exc:
+        raise ValueError(f'{path}: not a .trc marker file ({type(exc).__name__}: '
+                         f'{exc})') from None
+    if not names or not rows:
+        raise ValueError(f'{path}: not a .trc marker file (no markers or no rows)')
     return names, frames, values.reshape(len(rows), len(names), 3)
 
 

@@ -1,7 +1,11 @@
 """Group synchronised camera views of a bag into multiview frames by header stamp."""
 from dataclasses import dataclass, field
+import math
 
 from .images import any_image_to_numpy
+
+# How far (stamp time) streams may be logged out of order before a view counts as lost.
+REORDER_NS = 1_000_000_000
 
 
 @dataclass
@@ -34,19 +38,53 @@ def _topic_map(image_topics, rig):
     return dict(zip(topics, names))
 
 
+def image_topics(reader, cameras, bag=None):
+    """camera name -> image topic in the recording, for every camera (ONE rule for `monet
+    process`, `monet train` / load_recording and the pipeline's transport): the camera's
+    `topic` (default /<name>/image_raw), else the same topic + '/compressed' (or without
+    it) when only that one is in the recording. Raises ValueError naming the camera, the
+    topics tried and the recording when none is there."""
+    known = set(reader.topics)
+    topics = {}
+    for cam in cameras:
+        base = cam.topic or f'/{cam.name}/image_raw'
+        raw = base[:-len('/compressed')] if base.endswith('/compressed') else base
+        tried = list(dict.fromkeys([base, raw, raw + '/compressed']))
+        found = next((t for t in tried if t in known), None)
+        if found is None:
+            raise ValueError(f'{bag or reader.path}: no image topic for camera {cam.name!r} '
+                             f'(tried {", ".join(tried)})')
+        topics[cam.name] = found
+    return topics
+
+
+def image_transport(topics):
+    """'compressed' when every topic of {camera: topic} is a /compressed one, else 'raw'."""
+    topics = list(topics.values()) if isinstance(topics, dict) else list(topics)
+    return 'compressed' if topics and all(t.endswith('/compressed') for t in topics) \
+        else 'raw'
+
+
 def iter_multiview_frames(reader, image_topics, slop_ns=0, rig=None, decode=True,
-                          max_pending=64):
+                          max_pending=64, reorder_ns=REORDER_NS):
     """Yield MultiviewFrame for every instant seen on any of the image topics.
 
     reader: a BagReader; image_topics: list of Image / CompressedImage topics (camera name
     = the topic's first name, or the rig camera whose `topic` matches) or a dict
-    camera -> topic. Views are grouped by header stamp: exactly (slop_ns=0) or with the
-    nearest stamp within slop_ns. A frame lacking views is still yielded with `missing`
-    listing them; views that fail to decode are missing too and counted in reader.report.
-    A frame is yielded once it is complete, or once every missing camera's stream has moved
-    past its stamp + slop, or when more than max_pending frames wait (bounded memory).
+    camera -> topic. Views are grouped by header stamp with the one rule of
+    monet_ros.sync.StampSynchronizer (exactly, slop_ns=0, or with the nearest stamp within
+    slop_ns), so the order in which they were logged does not matter within `reorder_ns`
+    of stamp time. A frame lacking views is still yielded with `missing` listing them.
+    Skipped and counted in reader.report (by topic, with the reason): views that fail to
+    decode (also `missing`), views whose camera repeats a stamp it already gave (a driver
+    that stamps every image 0: never merged into another instant), views of an instant
+    already yielded (late), messages without a header stamp. A frame is yielded once it is
+    complete, or once every missing camera's stream has moved past its stamp + slop +
+    reorder_ns, or when more than max_pending frames wait (bounded memory).
     decode=False gives the messages themselves in `images`.
     """
+    from monet_ros.sync import StampSynchronizer
+
     topic_to_cam = _topic_map(image_topics, rig)
     cams = list(dict.fromkeys(topic_to_cam.values()))
     known = set(reader.topics)
@@ -55,24 +93,15 @@ def iter_multiview_frames(reader, image_topics, slop_ns=0, rig=None, decode=True
     absent = {topic_to_cam[t] for t in topic_to_cam
               if t not in known and getattr(reader, 'topics_complete', True)}
     rig_by_name = {c.name: c for c in rig} if rig is not None else None
-    slop_ns = int(slop_ns)
-    last_stamp = {c: None for c in cams}
-    pending = []              # [stamp, {cam: BagMessage}] sorted by stamp
-
-    def passed(group):
-        stamp, views = group
-        for c in cams:
-            if c in views or c in absent:
-                continue
-            if last_stamp[c] is None or last_stamp[c] <= stamp + slop_ns:
-                return False
-        return True
+    sync = StampSynchronizer(cams, slop_ns=int(slop_ns), timeout_s=math.inf, min_keys=1,
+                             max_pending=max_pending, reorder_ns=reorder_ns,
+                             history=max(64, 2 * max_pending))
+    sync.set_expected([c for c in cams if c not in absent])
 
     def emit(group):
-        stamp, views = group
         images, stamps, missing = {}, {}, []
         for c in cams:
-            m = views.get(c)
+            m = group.items.get(c)
             if m is None:
                 missing.append(c)
                 continue
@@ -87,30 +116,24 @@ def iter_multiview_frames(reader, image_topics, slop_ns=0, rig=None, decode=True
                 images[c] = m
             stamps[c] = m.stamp_ns
         cameras = None if rig_by_name is None else {c: rig_by_name.get(c) for c in cams}
-        return MultiviewFrame(stamp, images, missing, stamps, cameras)
+        return MultiviewFrame(group.stamp_ns, images, missing, stamps, cameras)
 
     for m in reader.messages(topics=list(topic_to_cam)):
         cam = topic_to_cam[m.topic]
         try:
-            s = m.stamp_ns
+            s = int(m.stamp_ns)
         except (AttributeError, TypeError, ValueError) as exc:   # schema without a header
             reader.report.skip(m.topic, f'no usable header stamp: {exc}')
             continue
-        last_stamp[cam] = s if last_stamp[cam] is None else max(last_stamp[cam], s)
-        best, best_d = None, None
-        for group in pending:
-            d = abs(group[0] - s)
-            if d <= slop_ns and cam not in group[1] and (best is None or d < best_d):
-                best, best_d = group, d
-        if best is None:
-            k = len(pending)
-            while k > 0 and pending[k - 1][0] > s:
-                k -= 1
-            pending.insert(k, [s, {cam: m}])
-        else:
-            best[1][cam] = m
-        while pending and (len(pending[0][1]) == len(cams) or passed(pending[0])
-                           or len(pending) > max_pending):
-            yield emit(pending.pop(0))
-    while pending:
-        yield emit(pending.pop(0))
+        repeated, late = sync.stats.repeated, sync.stats.late
+        groups = sync.add(cam, s, m)
+        if sync.stats.repeated > repeated:
+            reader.report.skip(m.topic, f'camera {cam} repeats header stamp {s} (the driver '
+                               'does not stamp each image): not merged into another instant')
+        elif sync.stats.late > late:
+            reader.report.skip(m.topic, f'view of an instant already grouped (stamp {s}; '
+                               f'logged more than {reorder_ns / 1e9:g} s out of order)')
+        for group in groups:
+            yield emit(group)
+    for group in sync.flush():
+        yield emit(group)

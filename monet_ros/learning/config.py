@@ -10,6 +10,12 @@ from monet_ros.config import ConfigError, config_from_mapping, setting, validate
 from monet_ros.learning.dataset import AugmentConfig
 from monet_ros.learning.pseudo_labels import TrackingConfig
 
+# Bounds that keep a typo from asking for an absurd allocation (input side in px, channel
+# width, crops per step); far above anything the architectures are meant for.
+MAX_INPUT_SIZE = 2048
+MAX_WIDTH = 1024
+MAX_BATCH = 4096
+
 # The paper's rows (Table 1).
 MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 'monet')
 
@@ -40,15 +46,18 @@ class TrainConfig:
     architecture: str = setting('small', 'detector architecture',
                                 choices=('small', 'cpm', 'hourglass'))
     input_size: int = setting(0, "square network input side (px); 0 = the architecture's",
-                              minimum=0)
+                              minimum=0, maximum=MAX_INPUT_SIZE)
     width: int = setting(0, "channel width of the small/cpm nets; 0 = the architecture's",
-                         minimum=0)
-    steps: int = setting(2000, 'training steps', minimum=1)
-    batch_labelled: int = setting(8, 'labelled view crops per step', minimum=1)
-    batch_pseudo: int = setting(8, 'pseudo-labelled view crops per step', minimum=0)
-    batch_unlabeled: int = setting(2, 'unlabeled instants per step (L_E)', minimum=0)
+                         minimum=0, maximum=MAX_WIDTH)
+    steps: int = setting(2000, 'training steps', minimum=1, maximum=100_000_000)
+    batch_labelled: int = setting(8, 'labelled view crops per step', minimum=1,
+                                  maximum=MAX_BATCH)
+    batch_pseudo: int = setting(8, 'pseudo-labelled view crops per step', minimum=0,
+                                maximum=MAX_BATCH)
+    batch_unlabeled: int = setting(2, 'unlabeled instants per step (L_E)', minimum=0,
+                                   maximum=MAX_BATCH)
     views_per_instant: int = setting(4, 'views of each unlabeled instant (L_E pairs)',
-                                     minimum=2)
+                                     minimum=2, maximum=64)
     lambda_e: float = setting(5.0, 'weight of the epipolar divergence L_E', minimum=0.0)
     lambda_p: float = setting(1.0, 'weight of the pseudo-label loss L_B', minimum=0.0)
     epipolar_warmup: float = setting(0.3, 'monet: fraction of the steps trained without L_E '
@@ -118,11 +127,13 @@ class TrainConfig:
 
     def __post_init__(self):
         validate_config(self)
-        if self.input_size and self.input_size % 8:
+        if self.input_size and (self.input_size % 8 or self.input_size < 32):
             raise ConfigError('TrainConfig', 'input_size',
-                              f'must be a multiple of 8, got {self.input_size}')
-        if self.device != 'auto' and not (self.device == 'cpu' or
-                                          self.device.startswith('cuda')):
+                              f'must be 0 or a multiple of 8 >= 32, got {self.input_size}')
+        if self.width and self.width < 4:
+            raise ConfigError('TrainConfig', 'width', f'must be 0 or >= 4, got {self.width}')
+        if self.device not in ('auto', 'cpu', 'cuda') and not (
+                self.device.startswith('cuda:') and self.device[5:].isdigit()):
             raise ConfigError('TrainConfig', 'device',
                               f'expected auto, cpu, cuda or cuda:N, got {self.device!r}')
 

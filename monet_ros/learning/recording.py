@@ -119,6 +119,7 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     counted in the returned recording's `skipped`). skeleton: keypoint names / preset.
     """
     from monet_ros.io import iter_multiview_frames, open_bag, rig_from_bag
+    from monet_ros.io.multiview import image_topics
     from monet_ros.labels import read_labels
     from monet_ros.skeleton import load_skeleton
 
@@ -131,7 +132,7 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     reader = open_bag(parts['bag'])
     cameras = rig_from_bag(reader, rig_file=rig)
     names = [c.name for c in cameras]
-    topics = {c.name: c.topic or f'/{c.name}/image_raw' for c in cameras}
+    topics = image_topics(reader, cameras, parts['bag'])
     stamps, frames, skipped = [], {n: [] for n in names}, 0
     for frame in iter_multiview_frames(reader, topics, slop_ns=slop_ns):
         if frame.missing:

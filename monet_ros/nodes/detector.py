@@ -51,9 +51,10 @@ class DetectorConfig:
     rig: str = setting('', 'rig file or recording: camera names, image topics and the '
                        'extrinsics used to crop around /monet/keypoints3d (optional)')
     image_topic: str = setting('', 'image topic template, {camera} = name (default: the rig '
-                               'camera topic, else /{camera}/image_raw)')
+                               'camera topic, else /{camera}/image_raw)',
+                               template_fields=('camera',))
     camera_info_topic: str = setting('', 'camera_info topic template (default: camera_info '
-                                     'beside the image topic)')
+                                     'beside the image topic)', template_fields=('camera',))
     transport: str = setting('raw', 'raw = sensor_msgs/Image; compressed = CompressedImage '
                              'on <image_topic>/compressed', choices=('raw', 'compressed'))
     box: tuple[float, ...] = setting((), 'fixed crop box x0 y0 x1 y1 (pixel edges) when no '

@@ -45,9 +45,11 @@ class FusionNodeConfig(FusionConfig):
     skeleton: str = setting('human14', 'skeleton preset or YAML path: heatmap channel order '
                             'and bones of /monet/skeleton')
     frame_id: str = setting('', 'frame of the outputs (default: the rig frame)')
-    heatmap_topic: str = setting('/monet/{camera}/heatmaps', 'heatmap topic per camera')
+    heatmap_topic: str = setting('/monet/{camera}/heatmaps', 'heatmap topic per camera',
+                                 template_fields=('camera',))
     camera_info_topic: str = setting('/monet/{camera}/camera_info',
-                                     'heatmap virtual camera_info topic per camera')
+                                     'heatmap virtual camera_info topic per camera',
+                                     template_fields=('camera',))
     slop_ms: float = setting(0.0, 'stamp tolerance between cameras (0 = exact)', minimum=0.0)
     timeout_s: float = setting(0.3, 'wait this long for missing cameras of a frame, then '
                                'fuse the others', minimum=0.0)

@@ -78,9 +78,10 @@ class RigConfig:
         _check(-30.0 <= lo <= hi <= 85.0, 'dome_elevation_deg',
                f'must be (min, max) with -30 <= min <= max <= 85, got {self.dome_elevation_deg}')
         _check(0.0 <= self.jitter <= 5.0, 'jitter', f'must be in 0..5, got {self.jitter}')
-        _check(radial_monotonic(self.distortion5, self.max_normalized_radius * 1.25),
-               'distortion', f'{self.distortion} folds over inside the image (the radial '
-               'map is not monotonic); use smaller coefficients')
+        half = 1.25 * np.array([self.image_width, self.image_height]) / 2.0 / self.focal
+        _check(distortion_one_to_one(self.distortion5, *half), 'distortion',
+               f'{self.distortion} folds over inside the image (the distortion map is not '
+               'one-to-one there); use smaller coefficients')
 
     @property
     def distortion5(self):
@@ -97,6 +98,25 @@ class RigConfig:
     def max_normalized_radius(self):
         """Normalised radius of the image corner (ideal pinhole)."""
         return float(np.hypot(self.image_width / 2.0, self.image_height / 2.0) / self.focal)
+
+
+def distortion_one_to_one(dist5, x_max, y_max, samples=129):
+    """True when the OpenCV distortion map (k1, k2, p1, p2, k3; radial and tangential) keeps
+    its Jacobian determinant above 0.05 (no fold, no collapse) and finite on the normalised
+    rectangle |x| <= x_max, |y| <= y_max."""
+    k1, k2, p1, p2, k3 = (float(v) for v in dist5)
+    x, y = np.meshgrid(np.linspace(-x_max, x_max, samples), np.linspace(-y_max, y_max, samples))
+    with np.errstate(all='ignore'):
+        r2 = x * x + y * y
+        radial = 1 + k1 * r2 + k2 * r2 ** 2 + k3 * r2 ** 3
+        xd = x * radial + 2 * p1 * x * y + p2 * (r2 + 2 * x * x)
+        yd = y * radial + p1 * (r2 + 2 * y * y) + 2 * p2 * x * y
+        dx, dy = x[0, 1] - x[0, 0], y[1, 0] - y[0, 0]
+        dxd_dy, dxd_dx = np.gradient(xd, dy, dx)
+        dyd_dy, dyd_dx = np.gradient(yd, dy, dx)
+        det = dxd_dx * dyd_dy - dxd_dy * dyd_dx
+        return bool(np.all(np.isfinite(det)) and np.all(det > 0.05)
+                    and radial_monotonic(dist5, float(np.hypot(x_max, y_max))))
 
 
 def radial_monotonic(dist5, r_max, samples=512):

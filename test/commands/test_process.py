@@ -44,5 +44,6 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
     assert monet(args + ['--model', str(model), '--cameras', 'cam0', 'cam9']) == 2
     assert "unknown camera 'cam9'" in capsys.readouterr().err
     (tmp_path / 'out').mkdir()
+    (tmp_path / 'out' / 'something').write_text('')
     assert monet(args + ['--model', str(model)]) == 2
     assert 'output exists' in capsys.readouterr().err

@@ -100,4 +100,5 @@ def test_bad_arguments_are_named(folder, repo_root, tmp_path):
     proc = monet(repo_root, 'eval', tmp_path / 'missing.pt', '--data', data, '--out', tmp_path,
                  '--skeleton', 'human14')
     _, stderr = proc.communicate(timeout=60)
-    assert proc.returncode == 1
+    assert proc.returncode == 2
+    assert 'Traceback' not in stderr and len(stderr.strip().splitlines()) == 1

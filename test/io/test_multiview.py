@@ -71,7 +71,7 @@ def test_pending_frames_are_bounded(tmp_path):
     frames = []
     for f in gen:
         frames.append(f)
-        seen_pending.append(len(gen.gi_frame.f_locals['pending']) if gen.gi_frame else 0)
+        seen_pending.append(len(gen.gi_frame.f_locals['sync'].pending) if gen.gi_frame else 0)
     assert [f.stamp_ns for f in frames] == [T0 + k * DT for k in range(45)]
     assert [k for k, f in enumerate(frames) if f.missing] == list(range(2, 40))
     assert max(seen_pending) <= 5

@@ -20,8 +20,8 @@ def test_exact_match_releases_complete_groups_in_order():
     [group] = sync.add('c', 100, 'c1')
     assert group.stamp_ns == 100 and group.items == {'a': 'a1', 'b': 'b1', 'c': 'c1'}
     assert group.missing == ()
-    # 200 is still open; an item of 100 is now late.
-    assert sync.add('a', 100, 'again') == [] and sync.stats.late == 1
+    # 200 is still open; 'a' repeating stamp 100 is a repeat (dropped, counted).
+    assert sync.add('a', 100, 'again') == [] and sync.stats.repeated_by_key == {'a': 1}
     assert [len(p.items) for p in sync.pending] == [1]
 
 
@@ -33,8 +33,9 @@ def test_slop_matches_nearest_and_rejects_beyond():
     assert group.stamp_ns == 1020 and group.items == {'a': 'a1', 'b': 'b1'}
     assert sync.stats.dropped == 1         # the 1000 group had 1 of 2 keys (min_keys = all)
     sync.add('a', 2000, 'a2')
-    assert sync.add('b', 2006, 'b2') == []  # 6 ns apart > slop: a new group
-    assert [g.stamp_ns for g in sync.pending] == [2000, 2006]
+    assert sync.add('b', 2006, 'b2') == []  # 6 ns apart > slop: a new group; b moved past
+    assert [g.stamp_ns for g in sync.pending] == [2006]   # 2000 + slop: 2000 lost its b view
+    assert sync.stats.dropped == 2
 
 
 def test_timeout_releases_partial_group_when_a_key_is_silent():
@@ -77,7 +78,8 @@ def test_time_jumping_back_restarts_instead_of_dropping_everything():
     sync = StampSynchronizer(['a', 'b'], clock=FakeClock(), reset_after_ns=1000)
     sync.add('a', 5000, 1)
     assert len(sync.add('b', 5000, 1)) == 1
-    assert sync.add('a', 4500, 2) == [] and sync.stats.late == 1   # 500 ns back: late
+    # 500 ns back: an older instant (not late), but b already moved past it: dropped
+    assert sync.add('a', 4500, 2) == [] and sync.stats.late == 0 and sync.stats.dropped == 1
     sync.add('a', 100, 3)                                           # 4900 ns back: a reset
     [group] = sync.add('b', 100, 3)
     assert group.stamp_ns == 100 and sync.stats.resets == 1

@@ -1,0 +1,92 @@
+"""What every `monet` subcommand shares: bounded option checks, output folders written
+atomically, and OSError / device messages that name the path or option (not a subcommand)."""
+from contextlib import contextmanager
+import errno
+import os
+from pathlib import Path
+import shutil
+import tempfile
+
+from monet_ros.config import ConfigError
+
+# Upper bound of --threads (a typo such as 10000 would spawn that many threads).
+MAX_THREADS = 256
+
+
+def check_threads(owner, threads):
+    """Validate a --threads value (0 = torch default) and apply it. ConfigError names it."""
+    if isinstance(threads, bool) or not isinstance(threads, int) or not \
+            0 <= threads <= MAX_THREADS:
+        raise ConfigError(owner, 'threads', f'must be an integer in 0..{MAX_THREADS}, '
+                          f'got {threads!r}')
+    if threads:
+        import torch
+        torch.set_num_threads(threads)
+
+
+def check_device(owner, device, field='device'):
+    """A torch device string that exists here: '', None or 'auto' (CUDA when present), 'cpu',
+    'cuda' or 'cuda:N' (with CUDA available and N < the device count). Returns the device to
+    pass on (None for auto). ConfigError naming `field` otherwise."""
+    if device in (None, '', 'auto'):
+        return None
+    text = str(device)
+    if text == 'cpu':
+        return text
+    if text == 'cuda' or (text.startswith('cuda:') and text[5:].isdigit()):
+        import torch
+        if not torch.cuda.is_available():
+            raise ConfigError(owner, field, f'{text!r}: CUDA is not available on this machine '
+                              "(use 'cpu' or 'auto')")
+        index = int(text[5:]) if ':' in text else 0
+        if index >= torch.cuda.device_count():
+            raise ConfigError(owner, field, f'{text!r}: only {torch.cuda.device_count()} '
+                              'CUDA device(s)')
+        return text
+    raise ConfigError(owner, field, f'expected auto, cpu, cuda or cuda:N, got {text!r}')
+
+
+def os_error_text(error, path=None):
+    """One line for an OSError that names the file (the error's, else `path`) and, for a
+    full disk or a read-only file system, says so."""
+    where = error.filename or path
+    reason = error.strerror or str(error)
+    if error.errno == errno.ENOSPC:
+        reason = 'no space left on device (disk full)'
+    elif error.errno == errno.EROFS:
+        reason = 'read-only file system'
+    if error.filename2:
+        where = f'{where} -> {error.filename2}'
+    return f'{where}: {reason}' if where else reason
+
+
+def check_new_output(path, owner, field='out'):
+    """An output folder that must not exist yet (or be an empty folder): ConfigError naming
+    it when it is a file or holds something."""
+    path = Path(path)
+    if path.exists() or path.is_symlink():
+        if not path.is_dir():
+            raise ConfigError(owner, field, f'{path}: exists and is not a folder')
+        if any(path.iterdir()):
+            raise ConfigError(owner, field, f'{path}: output exists; choose a new folder')
+
+
+@contextmanager
+def atomic_output_dir(path):
+    """Yield a staging folder to write an output folder into; on success it is renamed to
+    `path` (which must not exist, or be an empty folder), on any failure (or Ctrl-C) it is
+    removed, so a failed run leaves nothing behind and can be rerun. The staging folder has
+    the same name as `path` (inside a hidden temporary folder beside it), so files named
+    after their folder (rosbag2's <folder>_0.mcap) keep the right name."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    holder = Path(tempfile.mkdtemp(prefix=f'.{path.name}.', suffix='.partial',
+                                   dir=path.parent))
+    staging = holder / path.name
+    try:
+        yield staging
+        if path.is_dir() and not any(path.iterdir()):
+            path.rmdir()
+        os.replace(staging, path)
+    finally:
+        shutil.rmtree(holder, ignore_errors=True)
