@@ -10,7 +10,7 @@ from math import comb
 
 import numpy as np
 
-from monet_ros.geometry.camera import project_views, stack_cameras
+from monet_ros.geometry.camera import project_views, stack_cameras, undistort_views
 
 
 def _prepare(points2d, cameras, weights):
@@ -27,11 +27,7 @@ def _prepare(points2d, cameras, weights):
             raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
         if np.any(w < 0):
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
-    ideal = obs.copy()
-    with np.errstate(all='ignore'):
-        for v, cam in enumerate(cameras):
-            if cam.has_distortion:
-                ideal[v] = cam.undistort_points(obs[v])
+    ideal = undistort_views(stack_cameras(cameras), obs)
     # missing: NaN input, zero/NaN weight, or a point the distortion model cannot invert
     missing = ~np.all(np.isfinite(ideal), axis=2) | ~np.isfinite(w) | (w <= 0)
     w = np.where(missing, 0.0, w)

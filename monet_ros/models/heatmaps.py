@@ -78,19 +78,23 @@ def decode_heatmaps(heatmaps, eps=1e-10):
         raise ValueError(f'decode_heatmaps: heatmaps must be at least 3x3, got {h}x{w}')
     dtype = heat.dtype if heat.dtype == torch.float64 else torch.float32
     flat = heat.to(dtype).reshape(b * c, h * w)
-    confidence, index = flat.max(dim=1)                            # (BC,)
+    if flat.device.type == 'cpu':  # numpy's argmax is ~15x faster than torch.max on CPU
+        index = torch.from_numpy(np.argmax(flat.detach().numpy(), axis=1))
+        confidence = flat.gather(1, index[:, None])[:, 0]         # (BC,)
+    else:
+        confidence, index = flat.max(dim=1)                        # (BC,)
     row = torch.div(index, w, rounding_mode='floor')
     col = index - row * w
     # 3-point windows centred at the argmax, moved inside the map at the border.
     col_c = col.clamp(1, w - 2)
     row_c = row.clamp(1, h - 2)
     floor = (confidence.abs() * eps).clamp_min(eps)[:, None]
-    logs = torch.log(torch.maximum(flat, floor))
     steps = torch.tensor([-1, 0, 1], device=flat.device)
     u_idx = row[:, None] * w + col_c[:, None] + steps               # (BC, 3) along the row
     v_idx = (row_c[:, None] + steps) * w + col[:, None]             # (BC, 3) along the column
-    lu = logs.gather(1, u_idx)
-    lv = logs.gather(1, v_idx)
+    # log of the 6 window values only (not of the whole map)
+    lu = torch.log(torch.maximum(flat.gather(1, u_idx), floor))
+    lv = torch.log(torch.maximum(flat.gather(1, v_idx), floor))
     u = col_c.to(dtype) + _vertex_offset(lu[:, 0], lu[:, 1], lu[:, 2])
     v = row_c.to(dtype) + _vertex_offset(lv[:, 0], lv[:, 1], lv[:, 2])
     u = torch.minimum(torch.maximum(u, col.to(dtype) - 1), col.to(dtype) + 1)
