@@ -5,6 +5,7 @@ goes to a temporary file in the same folder, is fsynced, then renamed over the t
 (os.replace is atomic on POSIX); the folder is fsynced so the rename survives a crash.
 """
 from contextlib import contextmanager
+import hashlib
 import os
 from pathlib import Path
 import tempfile
@@ -37,3 +38,12 @@ def atomic_write(path, mode='wb'):
             os.close(dir_fd)
     except OSError:
         pass
+
+
+def sha256_file(path):
+    """Hex sha256 of a file's bytes (read in 1 MiB blocks)."""
+    digest = hashlib.sha256()
+    with open(path, 'rb') as stream:
+        for block in iter(lambda: stream.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()

@@ -37,11 +37,17 @@ def add_arguments(parser):
     parser.add_argument('--heatmaps', action='store_true',
                         help='also write /monet/<cam>/heatmaps')
     parser.add_argument('--device', default=None, help='torch device (default: auto)')
+    parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
+                        help='detector inference backend (onnxruntime: exported once, cached '
+                        'beside the checkpoint)')
+    parser.add_argument('--threads', type=int, default=0,
+                        help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
 def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None, slop_ns=0,
-                      track=True, heatmaps=False, skeleton=None, device=None, progress=True):
+                      track=True, heatmaps=False, skeleton=None, device=None, progress=True,
+                      backend='torch', threads=0):
     """Detect + fuse every instant of `bag`; write `out`. Returns a dict of figures."""
     from tqdm import tqdm
 
@@ -57,7 +63,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
     fusion_config = fusion_config or FusionConfig()
     rig_cameras, frame_id = load_node_rig(rig or bag)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
-    detector = Detector.from_checkpoint(model, device=device)
+    if threads:
+        import torch
+        torch.set_num_threads(threads)
+    detector = Detector.from_checkpoint(model, device=device, backend=backend, threads=threads)
     if skeleton is not None:
         names = list(load_skeleton(skeleton).keypoints)
         if names != list(detector.keypoints):
@@ -123,7 +132,7 @@ def run(args):
             args.bag, args.model, args.out, rig=args.rig, cameras=args.cameras or (),
             fusion_config=config, slop_ns=int(args.slop_ms * 1e6), track=not args.no_track,
             heatmaps=args.heatmaps, skeleton=args.skeleton, device=args.device,
-            progress=not args.quiet)
+            progress=not args.quiet, backend=args.backend, threads=args.threads)
     except (ValueError, OSError) as error:
         start_error('monet process', error)
         return 2
