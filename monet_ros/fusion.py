@@ -13,6 +13,7 @@ import numpy as np
 from monet_ros.config import setting, validate_config
 from monet_ros.geometry import reprojection_error, triangulate_robust
 from monet_ros.models import decode_heatmaps
+from monet_ros.timing import NO_TIMER
 
 # Largest |S[0, 1]|, |S[1, 0]|, |S[2] - (0, 0, 1)| accepted for a crop/scale S.
 _CROP_TOL = 1e-6
@@ -88,12 +89,13 @@ def heat_to_source_points(peaks, S):
     return (peaks - offset) / scale
 
 
-def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig()):
+def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer=None):
     """Robust triangulation of decoded peaks.
 
     points2d (V, C, 2) source-image pixels; peak_confidence (V, C); cameras: V source
     cameras (Camera). Views below config.confidence_threshold are left out; the rest are
-    weighted by confidence. Returns a FusionResult.
+    weighted by confidence. timer: a monet_ros.timing.StageTimer given the wall time of
+    'undistort', 'triangulate' and 'errors' (reprojection errors). Returns a FusionResult.
     """
     start = time.perf_counter()
     points2d = np.asarray(points2d, np.float64).copy()
@@ -108,10 +110,12 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig()):
     weights = np.where(weak, 0.0, conf)
     X, inliers = triangulate_robust(points2d, cameras, weights=weights,
                                     threshold_px=config.threshold_px,
-                                    min_views=config.min_views, method=config.method)
+                                    min_views=config.min_views, method=config.method,
+                                    timer=timer)
     X = np.asarray(X, np.float64)
     inliers = np.asarray(inliers, bool) & ~weak & np.isfinite(X).all(axis=1)[None, :]
-    errors = np.asarray(reprojection_error(X, points2d, cameras), np.float64)
+    with (timer or NO_TIMER)('errors'):
+        errors = np.asarray(reprojection_error(X, points2d, cameras), np.float64)
     view_errors = np.where(inliers, errors, np.nan)
     num_views = inliers.sum(axis=0)
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -125,12 +129,13 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig()):
                         seconds=time.perf_counter() - start)
 
 
-def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig()):
+def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig(), timer=None):
     """Heatmaps of V views -> FusionResult.
 
     heatmaps: (V, C, h, w) array, or a list of V (C, h_v, w_v) arrays when grids differ;
     K_heat (V, 3, 3): intrinsics of each heatmap's virtual camera (its camera_info);
-    cameras: V source cameras (rig: K, dist, R, t of the full image).
+    cameras: V source cameras (rig: K, dist, R, t of the full image). timer: a
+    monet_ros.timing.StageTimer given the wall time of 'decode' and fuse_points' stages.
     """
     start = time.perf_counter()
     S = heat_to_source(K_heat, np.stack([cam.K for cam in cameras]))
@@ -145,6 +150,7 @@ def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig()):
             peaks = np.concatenate([np.asarray(p) for p, _ in decoded])
             conf = np.concatenate([np.asarray(c) for _, c in decoded])
     points = heat_to_source_points(np.asarray(peaks, np.float64), S)
-    result = fuse_points(points, np.asarray(conf, np.float64), cameras, config)
+    (timer or NO_TIMER).add('decode', time.perf_counter() - start)
+    result = fuse_points(points, np.asarray(conf, np.float64), cameras, config, timer)
     result.seconds = time.perf_counter() - start
     return result

@@ -4,7 +4,7 @@ A node times each stage of its hot path with `with timer('forward'):` (about 1 u
 overhead) and reports `timer.summary()` in /diagnostics; bench/pipeline.py reads those
 figures to print where the time of a frame goes.
 """
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 import time
 
 
@@ -37,3 +37,16 @@ class StageTimer:
             out[f'{stage}_ms_mean'] = f'{1e3 * total / max(calls, 1):.3f}'
             out[f'{stage}_calls'] = str(calls)
         return out
+
+
+class _NoTimer:
+    """A StageTimer stand-in that times nothing (the default of optional `timer` args)."""
+
+    def __call__(self, stage):
+        return nullcontext()
+
+    def add(self, stage, seconds, count=1):
+        pass
+
+
+NO_TIMER = _NoTimer()
