@@ -58,33 +58,40 @@ def crop_transform(box, out_size):
                      [0.0, 0.0, 1.0]])
 
 
-def _distortion_terms(d, x, y):
+def _model_terms(d12):
+    """(12 coefficients broadcastable against points, rational?, thin prism?) of distortion
+    vectors d12 (..., 12): the rational and prism terms are skipped when all zero."""
+    d12 = np.asarray(d12, np.float64)
+    coeffs = tuple(np.moveaxis(d12, -1, 0)[..., None]) if d12.ndim > 1 else tuple(d12)
+    return coeffs, bool(d12[..., 5:8].any()), bool(d12[..., 8:].any())
+
+
+def _distortion_terms(d, x, y, rational, prism):
     """Radial factor and tangential/prism offsets of the OpenCV model at ideal (x, y)."""
     k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
     r2 = x * x + y * y
     r4 = r2 * r2
     r6 = r4 * r2
     radial = 1 + k1 * r2 + k2 * r4 + k3 * r6
-    if np.any(k4) or np.any(k5) or np.any(k6):  # rational model (skipped when all zero)
+    if rational:
         radial = radial / (1 + k4 * r2 + k5 * r4 + k6 * r6)
     xy2 = 2 * x * y
     dx = p1 * xy2 + p2 * (r2 + 2 * x * x)
     dy = p1 * (r2 + 2 * y * y) + p2 * xy2
-    if np.any(s1) or np.any(s2) or np.any(s3) or np.any(s4):  # thin prism
+    if prism:
         dx = dx + s1 * r2 + s2 * r4
         dy = dy + s3 * r2 + s4 * r4
     return radial, dx, dy
 
 
-def _undistort_newton(d, x0, y0, iterations, tol):
+def _undistort_newton(d12, x0, y0, iterations, tol):
     """Ideal normalised (x, y) with distort(x, y) = (x0, y0): Newton's method on the OpenCV
-    model with its analytic 2x2 Jacobian, all points at once (d: the 12 coefficients, each
-    broadcastable against x0). Stops after `iterations` or when every finite step is
-    <= tol; NaN where the result does not reproduce (x0, y0) to 1e-9 (relative) or lies
-    past a fold of the model (Jacobian determinant <= 0): no unique inverse there."""
-    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
-    rational = bool(np.any(k4) or np.any(k5) or np.any(k6))
-    prism = bool(np.any(s1) or np.any(s2) or np.any(s3) or np.any(s4))
+    model with its analytic 2x2 Jacobian, all points at once (d12: (12,) or, for V
+    cameras, (V, 12) against x0, y0 (V, N)). Stops after `iterations` (>= 1) or when every
+    finite step is <= tol; NaN where the last iterate before the final step misses
+    (x0, y0) by more than 1e-9 (relative) or lies past a fold of the model (Jacobian
+    determinant <= 0): no unique inverse there."""
+    (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4), rational, prism = _model_terms(d12)
 
     def model(x, y):
         """Residual of distort(x, y) - (x0, y0) and the Jacobian (xx, xy, yx, yy)."""
@@ -113,7 +120,7 @@ def _undistort_newton(d, x0, y0, iterations, tol):
 
     x, y = x0, y0
     with np.errstate(all='ignore'):
-        for _ in range(iterations):
+        for _ in range(max(1, iterations)):
             fx, fy, jxx, jxy, jyx, jyy = model(x, y)
             det = jxx * jyy - jxy * jyx
             step_x = (jyy * fx - jxy * fy) / det
@@ -123,9 +130,10 @@ def _undistort_newton(d, x0, y0, iterations, tol):
             change = np.maximum(np.abs(step_x), np.abs(step_y))
             if np.max(change, initial=0.0, where=np.isfinite(change)) <= tol:
                 break
-        fx, fy, jxx, jxy, jyx, jyy = model(x, y)
+        # the residual and Jacobian of the last evaluated iterate (the final step only
+        # refines it further): no extra evaluation of the model
         failed = ~((np.hypot(fx, fy) <= 1e-9 * np.maximum(1.0, np.hypot(x0, y0)))
-                   & (jxx * jyy - jxy * jyx > 0))
+                   & (det > 0))
     return np.where(failed, np.nan, x), np.where(failed, np.nan, y)
 
 
@@ -232,7 +240,8 @@ class Camera:
         if not self.has_distortion:
             return xy.copy()
         x, y = xy[..., 0], xy[..., 1]
-        radial, dx, dy = _distortion_terms(self._d12, x, y)
+        d, rational, prism = _model_terms(self._d12)
+        radial, dx, dy = _distortion_terms(d, x, y, rational, prism)
         return np.stack([x * radial + dx, y * radial + dy], axis=-1)
 
     def normalized_to_pixels(self, xy):
@@ -267,7 +276,7 @@ class Camera:
         xy0 = np.asarray(xy, dtype=np.float64)
         if not self.has_distortion:
             return xy0.copy()
-        x, y = _undistort_newton(tuple(self._d12), xy0[..., 0], xy0[..., 1], iterations, tol)
+        x, y = _undistort_newton(self._d12, xy0[..., 0], xy0[..., 1], iterations, tol)
         return np.stack([x, y], axis=-1)
 
     def undistort_points(self, uv):
@@ -340,8 +349,8 @@ def project_views(cameras, X):
     Xc = _apply_views(Rt, X)
     x = Xc[..., 0] / Xc[..., 2]
     y = Xc[..., 1] / Xc[..., 2]
-    d = tuple(p['d12'].T[:, :, None])  # 12 arrays (V, 1), broadcast over (..., V, N)
-    radial, dx, dy = _distortion_terms(d, x, y)
+    d, rational, prism = _model_terms(p['d12'])  # 12 arrays (V, 1), over (..., V, N)
+    radial, dx, dy = _distortion_terms(d, x, y, rational, prism)
     xd = x * radial + dx
     yd = y * radial + dy
     K = p['K'][:, None]  # (V, 1, 3, 3)
@@ -367,7 +376,6 @@ def undistort_views(cameras, uv):
     K = p['K'][:, None]  # (V, 1, 3, 3)
     y0 = (uv[..., 1] - K[..., 1, 2]) / K[..., 1, 1]
     x0 = (uv[..., 0] - K[..., 0, 2] - K[..., 0, 1] * y0) / K[..., 0, 0]
-    d = tuple(p['d12'].T[:, :, None])  # 12 arrays (V, 1), broadcast over (V, N)
-    x, y = _undistort_newton(d, x0, y0, 20, 1e-15)
+    x, y = _undistort_newton(p['d12'], x0, y0, 20, 1e-15)
     return np.stack([K[..., 0, 0] * x + K[..., 0, 1] * y + K[..., 0, 2],
                      K[..., 1, 1] * y + K[..., 1, 2]], axis=-1)
