@@ -109,11 +109,15 @@ class OnnxRunner:
 
 def onnx_runner_for(model, checkpoint, device='cpu', threads=0, sha256=None):
     """OnnxRunner of `model` (loaded from `checkpoint`), exporting it beside the checkpoint
-    first unless that export exists (keyed by the checkpoint's sha256)."""
+    first unless that export exists (keyed by the checkpoint's sha256). Where that folder
+    is not writable the export is used from memory (and made again at the next start)."""
     sha256 = sha256 or sha256_file(checkpoint)
     path = onnx_path_for(checkpoint, sha256)
     if not path.is_file():
         data = export_onnx(model)
-        with atomic_write(path) as stream:
-            stream.write(data)
+        try:
+            with atomic_write(path) as stream:
+                stream.write(data)
+        except OSError:
+            return OnnxRunner(data, device=device, threads=threads)
     return OnnxRunner(path, device=device, threads=threads)

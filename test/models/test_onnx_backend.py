@@ -108,3 +108,18 @@ def test_raw_layouts_crop_like_rgb(layout, scene):
     got = detector.predict(list(np.ascontiguousarray(raw)), cameras, boxes,
                            encodings=[layout] * 3)[0]
     np.testing.assert_array_equal(got, expected)
+
+
+def test_unwritable_export_path_runs_from_memory(scene, tmp_path):
+    """When the export cannot be written beside the checkpoint (here a folder is in the
+    way, which fails for root too), the export runs from memory."""
+    cameras, images = scene
+    path = tmp_path / 'net.pt'
+    save_checkpoint(path, _model('small', 2), {'keypoints': [f'k{i}' for i in range(5)]})
+    onnx_path_for(path, sha256_file(path)).mkdir()
+    detector = Detector.from_checkpoint(path, device='cpu', backend='onnxruntime')
+    assert detector.runner.path is None
+    assert not [p for p in tmp_path.iterdir() if p.is_file() and p.suffix != '.pt']
+    expected = Detector.from_checkpoint(path, device='cpu').predict(images, cameras)[0]
+    np.testing.assert_allclose(detector.predict(images, cameras)[0], expected, atol=1e-4,
+                               rtol=0)
