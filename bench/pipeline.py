@@ -85,6 +85,7 @@ def fusion_micro(views, runs):
     rig = make_rig(RigConfig(num_cameras=views))
     maps, K_heat, peaks = synthetic_heatmaps(rig)
     config = FusionConfig()
+    maps = list(maps)  # one (C, h, w) array per view, as the fusion node holds them
     fusion = median_time(lambda: fuse_heatmaps(maps, K_heat, rig, config), runs)
     plain = median_time(lambda: triangulate(peaks, rig), runs)
     timer = StageTimer()
@@ -340,7 +341,8 @@ def main():
           f'{" ".join(f"{x:.1f}" for x in os.getloadavg())} at start; network threads '
           f'{args.threads}; small net ({HEIGHT}x{WIDTH} images cropped to 256x256)')
 
-    print('\n## Fusion per frame (fuse_heatmaps from 64x64 heatmaps, 14 keypoints)')
+    print('\n## Fusion per frame (fuse_heatmaps of V separate 14x64x64 heatmaps, as the node '
+          'holds them, to 3D; torch threads 1 as the fusion node)')
     print('| views | fuse_heatmaps ms | stages ms: decode / undistort / triangulate / errors |'
           ' baseline: plain DLT ms | undistort_views ms | max error vs cv2.undistortPoints '
           'converged / default 5 iterations (px) |')
