@@ -1,16 +1,28 @@
-"""Live pipeline figures: end-to-end latency and throughput, detector images/s, fusion time.
+"""Live pipeline figures: both process layouts end to end, per-stage profile, fusion and
+detector micro-benchmarks, side by side in one run.
 
-    .venv/bin/python bench/pipeline.py [--cameras 4 8] [--seconds 10] [--rate 30]
+    .venv/bin/python bench/pipeline.py                 # the full run (~4 min, quiet machine)
+    .venv/bin/python bench/pipeline.py --quick         # every table, tiny sizes (~1 min)
 
-End to end: this script publishes V camera streams (640x480 rgb8 + camera_info, stamped
-with the wall clock) at `--rate` Hz to a real detector process (one node, all cameras
-batched, small net, CPU) and a real fusion process, and times each /monet/keypoints3d
-from its image stamp to its arrival here. Micro-benchmarks (in this process, median of
---runs): Detector.predict of V images in one batch against V single-image calls (the
-baseline: one camera per forward), and fuse_heatmaps per frame against plain DLT without
-outlier rejection (geometry.triangulate). Prints tables; never asserts.
+End to end (`--cameras`, default 4 and 8 at `--rate` 30 Hz, plus `--extra` 4@60): V
+camera streams (640x480 rgb8 + camera_info, stamped with the wall clock) go through a real
+detector node (all cameras batched, small net, CPU) and a real fusion node, timed from each
+image stamp to the arrival of its /monet/keypoints3d, in two layouts:
+  three-process: the camera publisher (this bench, as the player or a camera driver would),
+      the detector and the fusion each in their own process, over DDS with the Fast DDS
+      shared-memory profile (config/fastdds_profile.xml) given to every publisher;
+  in-process: publisher, detector and fusion nodes in ONE process and executor (as
+      `monet pipeline`).
+Each run also prints the per-stage profile the nodes report in /diagnostics (mean ms per
+batch / frame: detector convert, crop, forward, publish; fusion receive per view, decode,
+undistort, triangulate, errors, publish).
+Micro-benchmarks (this process, median of --runs): fuse_heatmaps per frame at 4/8/35 views
+against plain DLT of the same peaks (geometry.triangulate) with the stage split, the
+undistortion's error against cv2.undistortPoints, and Detector.predict images/s with the
+torch and the ONNX Runtime backends. Prints tables and the load average; never asserts.
 """
 import argparse
+import json
 import os
 from pathlib import Path
 import random
@@ -25,12 +37,15 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from monet_ros.fusion import FusionConfig, fuse_heatmaps  # noqa: E402
-from monet_ros.geometry import save_rig, triangulate  # noqa: E402
-from monet_ros.models import Detector, build_model, decode_heatmaps, save_checkpoint  # noqa: E402
+from monet_ros.geometry import save_rig, triangulate, undistort_views  # noqa: E402
+from monet_ros.models import Detector, build_model, save_checkpoint  # noqa: E402
 from monet_ros.skeleton import load_skeleton  # noqa: E402
 from monet_ros.synth.rig import RigConfig, make_rig  # noqa: E402
+from monet_ros.timing import StageTimer  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480
+DETECTOR_STAGES = ('convert', 'crop', 'forward', 'publish')
+FUSION_STAGES = ('receive', 'decode', 'undistort', 'triangulate', 'errors', 'publish')
 
 
 def median_time(fn, runs):
@@ -43,183 +58,345 @@ def median_time(fn, runs):
     return float(np.median(times))
 
 
-def frames_for(rig, rng, count=8):
-    """A few noise frames per camera (content does not change the cost of a forward)."""
-    return [rng.integers(0, 255, (len(rig), HEIGHT, WIDTH, 3), dtype=np.uint8)
-            for _ in range(count)]
+def keypoint_names():
+    return list(load_skeleton('human14').keypoints)
 
 
-def micro(views, runs, threads):
-    import torch
-    torch.set_num_threads(threads)
-    rig = make_rig(RigConfig(num_cameras=views))
-    model = build_model('small', 14)
-    detector = Detector(model, {'keypoints': list(load_skeleton('human14').keypoints)},
-                        device='cpu')
-    images = frames_for(rig, np.random.default_rng(0), 1)[0]
-    boxes = np.array([[160, 60, 480, 420]] * views, float)
-    batched = median_time(lambda: detector.predict(list(images), rig, boxes), runs)
-    single = median_time(lambda: [detector.predict([images[v]], [rig[v]], boxes[v:v + 1])
-                                  for v in range(views)], runs)
-    heat, heat_cams = detector.predict(list(images), rig, boxes)
-    # Heatmaps with one clear peak per keypoint (a trained net's output shape).
+# ----------------------------------------------------------------------------- micro
+def synthetic_heatmaps(rig, size=(64, 64)):
+    """Heatmaps with one clear Gaussian peak per keypoint (a trained net's output shape) of
+    14 points seen by every camera, their virtual cameras and the true peaks (source px)."""
     X = np.random.default_rng(1).uniform([-0.3, -0.3, 0.5], [0.3, 0.3, 1.6], (14, 3))
-    h, w = heat.shape[2:]
+    h, w = size
+    heat_cams = [cam.crop((80, 0, 560, 480), (w, h)) for cam in rig]
     vv, uu = np.mgrid[0:h, 0:w]
     maps = []
     for cam in heat_cams:
         uv = cam.project(X)
         d2 = (uu[None] - uv[:, 0, None, None]) ** 2 + (vv[None] - uv[:, 1, None, None]) ** 2
         maps.append(np.exp(-d2 / 8.0).astype(np.float32))
-    maps = np.stack(maps)
-    K_heat = np.stack([c.K for c in heat_cams])
-    config = FusionConfig()
-    fusion = median_time(lambda: fuse_heatmaps(maps, K_heat, rig, config), runs * 5)
-    decode = median_time(lambda: decode_heatmaps(maps), runs * 5)
     peaks = np.stack([cam.project(X) for cam in rig])
-    plain = median_time(lambda: triangulate(peaks, rig), runs * 5)
-    return dict(views=views, batched=batched, single=single, fusion=fusion, decode=decode,
-                plain=plain, heat=heat.shape)
+    return np.stack(maps), np.stack([c.K for c in heat_cams]), peaks
 
 
-def end_to_end(views, seconds, rate, workdir, threads):
-    """Real detector + fusion processes fed by this process; returns figures."""
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    from sensor_msgs.msg import CameraInfo, Image, PointCloud2
-    import yaml
+def fusion_micro(views, runs):
+    import torch
+    torch.set_num_threads(1)  # as the fusion node (its `threads` parameter, default 1)
+    rig = make_rig(RigConfig(num_cameras=views))
+    maps, K_heat, peaks = synthetic_heatmaps(rig)
+    config = FusionConfig()
+    maps = list(maps)  # one (C, h, w) array per view, as the fusion node holds them
+    fusion = median_time(lambda: fuse_heatmaps(maps, K_heat, rig, config), runs)
+    plain = median_time(lambda: triangulate(peaks, rig), runs)
+    timer = StageTimer()
+    for _ in range(runs):
+        fuse_heatmaps(maps, K_heat, rig, config, timer)
+    stages = {k: 1e3 * timer.totals[k] / timer.counts[k] for k in timer.totals}
+    # undistortion against OpenCV over every 8th pixel of each image
+    import cv2
+    u, v = np.meshgrid(np.arange(0, WIDTH, 8.0), np.arange(0, HEIGHT, 8.0))
+    grid = np.stack([u.ravel(), v.ravel()], axis=1)
+    ours = undistort_views(rig, np.repeat(grid[None], views, axis=0))
+    converged = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-16)
+    err_conv = err_default = 0.0
+    for i, cam in enumerate(rig):
+        ref = cv2.undistortPoints(grid[:, None], cam.K, cam.dist, P=cam.K,
+                                  criteria=converged)[:, 0]
+        default = cv2.undistortPoints(grid[:, None], cam.K, cam.dist, P=cam.K)[:, 0]
+        err_conv = max(err_conv, float(np.abs(ours[i] - ref).max()))
+        err_default = max(err_default, float(np.abs(ours[i] - default).max()))
+    undist = median_time(lambda: undistort_views(rig, peaks), runs)
+    return dict(views=views, fusion=fusion, plain=plain, stages=stages, undist=undist,
+                err_conv=err_conv, err_default=err_default,
+                distorted=any(c.has_distortion for c in rig))
 
-    from monet_ros.io import camera_info_from_camera, header_stamp_ns, numpy_to_image_msg
-    from monet_ros.nodes.qos import IMAGE_OUT, STREAM_IN
 
+def detector_micro(views, runs, threads, architecture, workdir):
+    """images/s of Detector.predict (V 640x480 views, one batch) per backend."""
+    import torch
+    torch.set_num_threads(threads)
+    rig = make_rig(RigConfig(num_cameras=views))
+    path = workdir / f'{architecture}.pt'
+    if not path.exists():
+        torch.manual_seed(0)
+        save_checkpoint(path, build_model(architecture, 14), {'keypoints': keypoint_names()})
+    images = np.random.default_rng(0).integers(0, 255, (views, HEIGHT, WIDTH, 3), np.uint8)
+    boxes = np.array([[160, 60, 480, 420]] * views, float)
+    out = {}
+    for backend in ('torch', 'onnxruntime'):
+        try:
+            detector = Detector.from_checkpoint(path, device='cpu', backend=backend,
+                                                threads=threads)
+        except ValueError as error:  # e.g. onnxruntime not installed
+            out[backend] = str(error)
+            continue
+        seconds = median_time(lambda d=detector: d.predict(images, rig, boxes), runs)
+        out[backend] = views / seconds
+    return out
+
+
+# ----------------------------------------------------------------------------- live
+def run_env(workdir):
+    env = dict(os.environ)
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    env.update(ROS_DOMAIN_ID=str(random.randint(1, 101)), ROS_LOG_DIR=str(workdir / 'log'),
+               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONPATH=str(REPO),
+               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / 'config' / 'fastdds_profile.xml'),
+               PYTHONUNBUFFERED='1')
+    return env
+
+
+def live(layout, views, rate, seconds, warmup, threads, backend, workdir):
+    """One end-to-end run in a fresh process (clean DDS state); returns its figures."""
     rig = make_rig(RigConfig(num_cameras=views))
     rig_path = workdir / f'rig{views}.yaml'
     save_rig(rig_path, rig)
     model_path = workdir / 'small.pt'
     if not model_path.exists():
-        save_checkpoint(model_path, build_model('small', 14),
-                        {'keypoints': list(load_skeleton('human14').keypoints)})
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    env.update(ROS_DOMAIN_ID=str(random.randint(1, 101)), ROS_LOG_DIR=str(workdir / 'log'),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONPATH=str(REPO),
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / 'config' / 'fastdds_profile.xml'))
-    params = workdir / f'params{views}.yaml'
-    params.write_text(yaml.safe_dump({
-        'detector': {'ros__parameters': {'rig': str(rig_path), 'model': str(model_path),
-                                         'device': 'cpu', 'threads': threads}},
-        'fusion': {'ros__parameters': {'rig': str(rig_path)}}}))
-    procs = [subprocess.Popen([sys.executable, '-m', f'monet_ros.nodes.{name}', '--ros-args',
-                               '--params-file', str(params)], env=env,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-             for name in ('fusion', 'detector')]
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    context = Context()
-    rclpy.init(context=context, domain_id=int(env['ROS_DOMAIN_ID']))
-    node = Node('bench', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    latencies, arrivals = [], []
-    node.create_subscription(
-        PointCloud2, '/monet/keypoints3d',
-        lambda m: (latencies.append(time.time_ns() - header_stamp_ns(m)),
-                   arrivals.append(time.monotonic())), STREAM_IN)
-    heat_count = [0]
-    for cam in rig:
-        node.create_subscription(Image, f'/monet/{cam.name}/heatmaps',
-                                 lambda m: heat_count.__setitem__(0, heat_count[0] + 1),
+        import torch
+        torch.manual_seed(0)
+        save_checkpoint(model_path, build_model('small', 14), {'keypoints': keypoint_names()})
+    spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
+                threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
+                workdir=str(workdir))
+    proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
+                          env=run_env(workdir), capture_output=True, text=True,
+                          timeout=300 + seconds + warmup)
+    for line in reversed(proc.stdout.splitlines()):
+        if line.startswith('{'):
+            return json.loads(line)
+    return dict(error=(proc.stderr or proc.stdout).strip().splitlines()[-1:] or
+                [f'exit {proc.returncode}'])
+
+
+class Feeder:
+    """The camera side and the stopwatch: publishes V image streams at `rate` and times
+    every /monet/keypoints3d from its image stamp; keeps the nodes' latest /diagnostics."""
+
+    def __init__(self, node, rig):
+        from diagnostic_msgs.msg import DiagnosticArray
+        from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+
+        from monet_ros.io import header_stamp_ns, numpy_to_image_msg
+        from monet_ros.nodes.qos import IMAGE_OUT, STREAM_IN
+
+        self.node, self.rig = node, rig
+        self.latencies, self.heat_count, self.diagnostics = [], [0], {}
+        node.create_subscription(
+            PointCloud2, '/monet/keypoints3d',
+            lambda m: self.latencies.append(time.time_ns() - header_stamp_ns(m)), STREAM_IN)
+        for cam in rig:
+            node.create_subscription(Image, f'/monet/{cam.name}/heatmaps',
+                                     lambda m: self.heat_count.__setitem__(
+                                         0, self.heat_count[0] + 1), STREAM_IN)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diagnostics,
                                  STREAM_IN)
-    pubs = [(node.create_publisher(Image, cam.topic, IMAGE_OUT),
-             node.create_publisher(CameraInfo, f'/{cam.name}/camera_info', IMAGE_OUT))
-            for cam in rig]
-    frames = frames_for(rig, np.random.default_rng(2))
-    messages = [[numpy_to_image_msg(f[v], 0, cam.name) for v, cam in enumerate(rig)]
-                for f in frames]
-    try:
+        self.pubs = [(node.create_publisher(Image, cam.topic, IMAGE_OUT),
+                      node.create_publisher(CameraInfo, f'/{cam.name}/camera_info',
+                                            IMAGE_OUT)) for cam in rig]
+        rng = np.random.default_rng(2)
+        frames = [rng.integers(0, 255, (len(rig), HEIGHT, WIDTH, 3), np.uint8)
+                  for _ in range(4)]
+        self.messages = [[numpy_to_image_msg(f[v], 0, cam.name) for v, cam in enumerate(rig)]
+                         for f in frames]
+
+    def on_diagnostics(self, msg):
+        for status in msg.status:
+            if status.name.startswith('monet detector') or status.name == 'monet fusion':
+                kind = 'detector' if status.name.startswith('monet detector') else 'fusion'
+                self.diagnostics[kind] = {kv.key: kv.value for kv in status.values}
+
+    def run(self, spin_once, rate, seconds, warmup):
+        from monet_ros.io import camera_info_from_camera
+
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and not all(
-                p[0].get_subscription_count() for p in pubs):
-            executor.spin_once(timeout_sec=0.1)
+                p[0].get_subscription_count() for p in self.pubs):
+            spin_once(0.1)
         published = 0
-        start = time.monotonic()
-        warmup = 3.0
-        next_tick = start
+        start = next_tick = time.monotonic()
         measured_from = None
         while time.monotonic() - start < warmup + seconds:
             now = time.monotonic()
             if now >= next_tick:
                 next_tick += 1.0 / rate
                 stamp = time.time_ns()
-                for v, cam in enumerate(rig):
-                    image = messages[published % len(messages)][v]
+                for v, cam in enumerate(self.rig):
+                    image = self.messages[published % len(self.messages)][v]
                     image.header.stamp.sec, image.header.stamp.nanosec = divmod(stamp, 10**9)
-                    pubs[v][1].publish(camera_info_from_camera(cam, stamp, cam.name))
-                    pubs[v][0].publish(image)
+                    self.pubs[v][1].publish(camera_info_from_camera(cam, stamp, cam.name))
+                    self.pubs[v][0].publish(image)
                 published += 1
                 if measured_from is None and now - start >= warmup:
-                    measured_from = (now, len(latencies), heat_count[0], published)
-            executor.spin_once(timeout_sec=max(0.0, min(0.005, next_tick - time.monotonic())))
+                    measured_from = (now, len(self.latencies), self.heat_count[0], published)
+            spin_once(max(0.0, min(0.005, next_tick - time.monotonic())))
         end = time.monotonic()
-        for _ in range(40):
-            executor.spin_once(timeout_sec=0.05)
+        settle = time.monotonic() + 1.5  # the frames in flight, and one more /diagnostics
+        while time.monotonic() < settle:
+            spin_once(0.05)
+        t0, n0, h0, p0 = measured_from
+        window = end - t0
+        lat = np.array(self.latencies[n0:], float) / 1e6
+        return dict(published=(published - p0) / window,
+                    fused=(len(self.latencies) - n0) / window,
+                    heat=(self.heat_count[0] - h0) / window,
+                    median=float(np.median(lat)) if lat.size else float('nan'),
+                    p95=float(np.percentile(lat, 95)) if lat.size else float('nan'),
+                    diagnostics=self.diagnostics)
+
+
+def worker(spec):
+    """Body of one live run (in its own process): see live()."""
+    import rclpy
+    from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
+    from rclpy.node import Node
+
+    from monet_ros.geometry import load_rig
+    from monet_ros.nodes.runner import stop_executor
+
+    rig = load_rig(spec['rig'])
+    detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
+                           threads=spec['threads'], backend=spec['backend'])
+    fusion_params = dict(rig=spec['rig'])
+    procs, nodes = [], []
+    if spec['layout'] == 'three-process':
+        import yaml
+        params = Path(spec['workdir']) / f'params_{os.getpid()}.yaml'
+        params.write_text(yaml.safe_dump({'detector': {'ros__parameters': detector_params},
+                                          'fusion': {'ros__parameters': fusion_params}}))
+        procs = [subprocess.Popen([sys.executable, '-m', f'monet_ros.nodes.{name}',
+                                   '--ros-args', '--params-file', str(params)],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                 for name in ('fusion', 'detector')]
+    rclpy.init()
+    executor = None
+    try:
+        if spec['layout'] == 'in-process':
+            from monet_ros.nodes.detector import DetectorNode
+            from monet_ros.nodes.fusion import FusionNode
+            nodes = [FusionNode(overrides=fusion_params),
+                     DetectorNode(overrides=detector_params)]
+            executor = MultiThreadedExecutor(num_threads=4)
+        else:
+            executor = SingleThreadedExecutor()
+        bench = Node('bench')
+        nodes.append(bench)
+        for node in nodes:
+            executor.add_node(node)
+        feeder = Feeder(bench, rig)
+        result = feeder.run(lambda t: executor.spin_once(timeout_sec=t), spec['rate'],
+                            spec['seconds'], spec['warmup'])
     finally:
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        if executor is not None:
+            stop_executor(executor)
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown()
         for proc in procs:
             proc.terminate()
         for proc in procs:
             proc.wait(timeout=30)
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
-    t0, n0, h0, p0 = measured_from
-    window = end - t0
-    lat = np.array(latencies[n0:], float) / 1e6
-    return dict(views=views, published=(published - p0) / window,
-                fused=(len(latencies) - n0) / window, heat=(heat_count[0] - h0) / window,
-                median=float(np.median(lat)) if lat.size else float('nan'),
-                p95=float(np.percentile(lat, 95)) if lat.size else float('nan'))
+    print(json.dumps(result), flush=True)
+    return 0
 
 
+def stage_text(diagnostics, kind, stages):
+    values = diagnostics.get(kind, {})
+    parts = [f'{s} {float(values[f"{s}_ms_mean"]):.2f}' for s in stages
+             if f'{s}_ms_mean' in values]
+    return ', '.join(parts) or 'n/a'
+
+
+# ----------------------------------------------------------------------------- main
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--cameras', type=int, nargs='+', default=[4, 8])
-    parser.add_argument('--seconds', type=float, default=10.0, help='measured seconds per run')
+    parser.add_argument('--cameras', type=int, nargs='+', default=[4, 8],
+                        help='camera counts of the end-to-end runs at --rate')
     parser.add_argument('--rate', type=float, default=30.0, help='camera rate (Hz)')
-    parser.add_argument('--runs', type=int, default=5, help='micro-benchmark repetitions')
-    parser.add_argument('--threads', type=int, default=2, help='torch threads')
+    parser.add_argument('--extra', nargs='*', default=['4@60'],
+                        help='more end-to-end runs as CAMERAS@HZ (default 4@60)')
+    parser.add_argument('--layouts', nargs='+', default=['in-process', 'three-process'],
+                        choices=['in-process', 'three-process'])
+    parser.add_argument('--seconds', type=float, default=10.0, help='measured seconds per run')
+    parser.add_argument('--warmup', type=float, default=3.0, help='seconds before measuring')
+    parser.add_argument('--runs', type=int, default=20, help='micro-benchmark repetitions')
+    parser.add_argument('--threads', type=int, default=2, help='network CPU threads')
+    parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
+                        help='detector backend of the end-to-end runs')
+    parser.add_argument('--fusion-views', type=int, nargs='+', default=[4, 8, 35])
+    parser.add_argument('--detector-views', type=int, nargs='+', default=[4, 8])
+    parser.add_argument('--architectures', nargs='+', default=['small'],
+                        help='networks of the torch / ONNX Runtime comparison')
     parser.add_argument('--skip-live', action='store_true', help='micro-benchmarks only')
+    parser.add_argument('--quick', action='store_true',
+                        help='every table at tiny sizes (2 cameras, 2 s runs, few repeats)')
+    parser.add_argument('--worker', help=argparse.SUPPRESS)
     args = parser.parse_args()
-    print(f'# machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start; '
-          f'small net, CPU, torch threads {args.threads}')
-    rows = [micro(v, args.runs, args.threads) for v in args.cameras]
-    print('\n## Detector (one forward of V views, crop -> small net) and fusion, per frame')
-    print('| views | batched forward ms | baseline: V single forwards ms | images/s batched |'
-          ' images/s single | fuse_heatmaps ms | (decode ms) | baseline: plain DLT ms |')
-    print('|---|---|---|---|---|---|---|---|')
-    for r in rows:
-        print(f'| {r["views"]} | {1e3 * r["batched"]:.1f} | {1e3 * r["single"]:.1f} | '
-              f'{r["views"] / r["batched"]:.1f} | {r["views"] / r["single"]:.1f} | '
-              f'{1e3 * r["fusion"]:.2f} | {1e3 * r["decode"]:.2f} | {1e3 * r["plain"]:.2f} |')
-    if args.skip_live:
-        return 0
-    print(f'\n## End to end at {args.rate:.0f} Hz, {WIDTH}x{HEIGHT} rgb8 (detector and fusion '
-          f'processes, {args.seconds:.0f} s measured after 3 s warm-up)')
-    print('| cameras | published frames/s | keypoints3d/s | heatmaps/s (detector images/s) |'
-          ' latency median ms | latency p95 ms |')
+    if args.worker:
+        return worker(json.loads(args.worker))
+    if args.quick:
+        args.cameras, args.extra, args.seconds, args.warmup = [2], ['2@60'], 2.0, 2.0
+        args.runs, args.fusion_views, args.detector_views = 3, [4, 35], [2]
+    print(f'# machine: {os.cpu_count()} CPUs, load average '
+          f'{" ".join(f"{x:.1f}" for x in os.getloadavg())} at start; network threads '
+          f'{args.threads}; small net ({HEIGHT}x{WIDTH} images cropped to 256x256)')
+
+    print('\n## Fusion per frame (fuse_heatmaps of V separate 14x64x64 heatmaps, as the node '
+          'holds them, to 3D; torch threads 1 as the fusion node)')
+    print('| views | fuse_heatmaps ms | stages ms: decode / undistort / triangulate / errors |'
+          ' baseline: plain DLT ms | undistort_views ms | max error vs cv2.undistortPoints '
+          'converged / default 5 iterations (px) |')
     print('|---|---|---|---|---|---|')
+    for views in args.fusion_views:
+        r = fusion_micro(views, args.runs * 5)
+        s = r['stages']
+        print(f'| {views} | {1e3 * r["fusion"]:.2f} | {s["decode"]:.2f} / {s["undistort"]:.2f}'
+              f' / {s["triangulate"]:.2f} / {s["errors"]:.2f} | {1e3 * r["plain"]:.2f} | '
+              f'{1e3 * r["undist"]:.3f} | {r["err_conv"]:.1e} / {r["err_default"]:.1e}'
+              f'{"" if r["distorted"] else " (no distortion)"} |', flush=True)
+
     with tempfile.TemporaryDirectory() as tmp:
-        for v in args.cameras:
-            r = end_to_end(v, args.seconds, args.rate, Path(tmp), args.threads)
-            print(f'| {v} | {r["published"]:.1f} | {r["fused"]:.1f} | {r["heat"]:.1f} | '
-                  f'{r["median"]:.0f} | {r["p95"]:.0f} |', flush=True)
-    print(f'# load average {os.getloadavg()[0]:.1f} at the end (a shared machine inflates '
-          'every figure)')
+        workdir = Path(tmp)
+        print(f'\n## Detector images/s (Detector.predict of V 640x480 views in one batch, '
+              f'{args.threads} thread(s))')
+        print('| network | views | torch | onnxruntime | onnxruntime / torch |')
+        print('|---|---|---|---|---|')
+        for arch in args.architectures:
+            for views in args.detector_views:
+                r = detector_micro(views, args.runs, args.threads, arch, workdir)
+                ratio = (f'{r["onnxruntime"] / r["torch"]:.2f}x'
+                         if all(isinstance(r[b], float) for b in r) else 'n/a')
+                cells = [f'{r[b]:.1f}' if isinstance(r[b], float) else r[b] for b in r]
+                print(f'| {arch} | {views} | {cells[0]} | {cells[1]} | {ratio} |', flush=True)
+        if args.skip_live:
+            return 0
+        runs = [(v, args.rate) for v in args.cameras]
+        for item in args.extra:
+            cams, _, hz = item.partition('@')
+            runs.append((int(cams), float(hz)))
+        print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend}, '
+              f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up')
+        print('| cameras @ Hz | layout | published frames/s | keypoints3d/s | detector images/s'
+              ' | latency median ms | latency p95 ms | detector ms/batch: convert, crop, '
+              'forward, publish | fusion ms: receive (per view), decode, undistort, '
+              'triangulate, errors, publish | load |')
+        print('|---|---|---|---|---|---|---|---|---|---|')
+        for views, rate in runs:
+            for layout in args.layouts:
+                r = live(layout, views, rate, args.seconds, args.warmup, args.threads,
+                         args.backend, workdir)
+                load = os.getloadavg()[0]
+                if 'error' in r:
+                    print(f'| {views} @ {rate:.0f} | {layout} | failed: {r["error"]} |||||||'
+                          f' {load:.1f} |', flush=True)
+                    continue
+                d = r['diagnostics']
+                print(f'| {views} @ {rate:.0f} | {layout} | {r["published"]:.1f} | '
+                      f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | '
+                      f'{r["p95"]:.0f} | {stage_text(d, "detector", DETECTOR_STAGES)} | '
+                      f'{stage_text(d, "fusion", FUSION_STAGES)} | {load:.1f} |', flush=True)
+    print(f'# load average {" ".join(f"{x:.1f}" for x in os.getloadavg())} at the end (a '
+          'shared machine inflates every figure)')
     return 0
 
 

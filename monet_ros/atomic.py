@@ -6,6 +6,7 @@ goes to a temporary file in the same folder, is fsynced, then renamed over the t
 """
 from contextlib import contextmanager
 import errno
+import hashlib
 import os
 from pathlib import Path
 import shutil
@@ -77,3 +78,12 @@ def atomic_write(path, mode='wb'):
             os.close(dir_fd)
     except OSError:
         pass
+
+
+def sha256_file(path):
+    """Hex sha256 of a file's bytes (read in 1 MiB blocks)."""
+    digest = hashlib.sha256()
+    with open(path, 'rb') as stream:
+        for block in iter(lambda: stream.read(1 << 20), b''):
+            digest.update(block)
+    return digest.hexdigest()

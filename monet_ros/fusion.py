@@ -14,6 +14,7 @@ import numpy as np
 from monet_ros.config import setting, validate_config
 from monet_ros.geometry import reprojection_error, triangulate_robust
 from monet_ros.models import decode_heatmaps
+from monet_ros.timing import NO_TIMER
 
 # Largest |S[0, 1]|, |S[1, 0]|, |S[2] - (0, 0, 1)| accepted for a crop/scale S.
 _CROP_TOL = 1e-6
@@ -105,12 +106,13 @@ def heat_to_source_points(peaks, S):
     return (peaks - offset) / scale
 
 
-def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig()):
+def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer=None):
     """Robust triangulation of decoded peaks.
 
     points2d (V, C, 2) source-image pixels; peak_confidence (V, C); cameras: V source
     cameras (Camera). Views below config.confidence_threshold are left out; the rest are
-    weighted by confidence. Returns a FusionResult.
+    weighted by confidence. timer: a monet_ros.timing.StageTimer given the wall time of
+    'undistort', 'triangulate' and 'errors' (reprojection errors). Returns a FusionResult.
     """
     start = time.perf_counter()
     points2d = np.asarray(points2d, np.float64).copy()
@@ -125,10 +127,12 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig()):
     weights = np.where(weak, 0.0, conf)
     X, inliers = triangulate_robust(points2d, cameras, weights=weights,
                                     threshold_px=config.threshold_px,
-                                    min_views=config.min_views, method=config.method)
+                                    min_views=config.min_views, method=config.method,
+                                    timer=timer)
     X = np.asarray(X, np.float64)
     inliers = np.asarray(inliers, bool) & ~weak & np.isfinite(X).all(axis=1)[None, :]
-    errors = np.asarray(reprojection_error(X, points2d, cameras), np.float64)
+    with (timer or NO_TIMER)('errors'):
+        errors = np.asarray(reprojection_error(X, points2d, cameras), np.float64)
     view_errors = np.where(inliers, errors, np.nan)
     num_views = inliers.sum(axis=0)
     with np.errstate(invalid='ignore', divide='ignore'):
@@ -165,7 +169,7 @@ def _usable_views(heatmaps, S, bad_K):
     return skipped, channels
 
 
-def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig()):
+def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig(), timer=None):
     """Heatmaps of V views -> FusionResult.
 
     heatmaps: (V, C, h, w) array, or a list of V (C, h_v, w_v) arrays when grids differ;
@@ -174,7 +178,8 @@ def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig()):
     A view that cannot be used (grid smaller than 3x3, other channel count, non-finite
     values, K not a crop/scale of its camera's K) is left out as missing and named in
     result.skipped_views; the other views are fused. ValueError (naming view 0's
-    problem) only when no view is usable.
+    problem) only when no view is usable. timer: a monet_ros.timing.StageTimer given the
+    wall time of 'decode' and fuse_points' stages.
     """
     start = time.perf_counter()
     if len(heatmaps) != len(cameras):
@@ -195,7 +200,8 @@ def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig()):
             p, c = decode_heatmaps(heatmaps[v][None])
             peaks[v], conf[v] = p[0], c[0]
     points = heat_to_source_points(peaks, S)
-    result = fuse_points(points, conf, cameras, config)
+    (timer or NO_TIMER).add('decode', time.perf_counter() - start)
+    result = fuse_points(points, conf, cameras, config, timer)
     result.skipped_views = skipped
     result.seconds = time.perf_counter() - start
     return result

@@ -46,6 +46,11 @@ def add_arguments(parser):
     parser.add_argument('--threshold-px', type=float, default=15.0,
                         help='fusion inlier threshold in image pixels')
     parser.add_argument('--device', default='', help="torch device ('' = auto)")
+    parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
+                        help='detector inference backend (onnxruntime: exported once, cached '
+                        'beside the checkpoint)')
+    parser.add_argument('--threads', type=int, default=0,
+                        help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--workdir', help='where the demo recording and model are cached '
                         '(default: ~/.cache/monet_ros/demo)')
     parser.add_argument('--start-delay', type=float, default=0.5,
@@ -221,7 +226,8 @@ def run(args):
                 transport = image_transport(args.bag, fusion.cameras)
                 detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
                                                        model=str(args.model), transport=transport,
-                                                       device=args.device))
+                                                       device=args.device, backend=args.backend,
+                                                       threads=args.threads))
                 nodes.append(detector)
                 check_skeleton(fusion, detector, args.skeleton, args.model)
                 player = PlayerNode(overrides=dict(

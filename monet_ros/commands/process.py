@@ -43,6 +43,11 @@ def add_arguments(parser):
     parser.add_argument('--heatmaps', action='store_true',
                         help='also write /monet/<cam>/heatmaps')
     parser.add_argument('--device', default=None, help='torch device (default: auto)')
+    parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
+                        help='detector inference backend (onnxruntime: exported once, cached '
+                        'beside the checkpoint)')
+    parser.add_argument('--threads', type=int, default=0,
+                        help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
@@ -86,11 +91,12 @@ def view_problem(image, camera):
 
 
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
-                      skeleton=None, progress=True):
+                      skeleton=None, progress=True, backend='torch', threads=0):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
     first reason), seconds, mean_error, mean_views, report (the reader's ReadReport).
+    backend: 'torch' or 'onnxruntime'; threads: CPU threads (0 = the library's default).
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
@@ -111,7 +117,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     if config.min_views > len(cameras):
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
-    detector = Detector.from_checkpoint(model, device=device)
+    detector = Detector.from_checkpoint(model, device=device, backend=backend, threads=threads)
     if skeleton is not None:
         names = list(load_skeleton(skeleton).keypoints)
         if names != list(detector.keypoints):
@@ -173,7 +179,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
 
 
 def run(args):
-    from monet_ros.commands.common import check_device
+    from monet_ros.commands.common import check_device, check_threads
 
     config = ProcessConfig(threshold_px=args.threshold_px,
                            confidence_threshold=args.confidence_threshold,
@@ -181,9 +187,11 @@ def run(args):
                            slop_ms=args.slop_ms, track=not args.no_track,
                            heatmaps=args.heatmaps)
     device = check_device('monet process', args.device)
+    check_threads('monet process', args.threads)
     figures = process_recording(
         args.bag, args.model, args.out, rig=args.rig, cameras=args.cameras or (),
-        config=config, skeleton=args.skeleton, device=device, progress=not args.quiet)
+        config=config, skeleton=args.skeleton, device=device, progress=not args.quiet,
+        backend=args.backend, threads=args.threads)
     fps = figures['frames'] / figures['seconds'] if figures['seconds'] else 0.0
     skipped = figures['skipped_views']
     print(f'monet process: {figures["frames"]} frames ({figures["views"]} views, '

@@ -5,6 +5,7 @@ from monet_ros.geometry.camera import (
     crop_transform,
     project_views,
     stack_cameras,
+    undistort_views,
 )
 from monet_ros.geometry.epipolar import (
     apply_homography,
@@ -26,6 +27,7 @@ from monet_ros.geometry.triangulation import (
 
 __all__ = [
     'Camera', 'CameraError', 'crop_transform', 'project_views', 'stack_cameras',
+    'undistort_views',
     'apply_homography', 'epipolar_lines', 'fundamental_from_params', 'fundamental_matrix',
     'rectification_homographies', 'rectifying_rotation', 'relative_pose', 'skew_matrix',
     'stereo_rectify',

@@ -61,22 +61,83 @@ def crop_transform(box, out_size):
                      [0.0, 0.0, 1.0]])
 
 
-def _distortion_terms(d, x, y):
+def _model_terms(d12):
+    """(12 coefficients broadcastable against points, rational?, thin prism?) of distortion
+    vectors d12 (..., 12): the rational and prism terms are skipped when all zero."""
+    d12 = np.asarray(d12, np.float64)
+    coeffs = tuple(np.moveaxis(d12, -1, 0)[..., None]) if d12.ndim > 1 else tuple(d12)
+    return coeffs, bool(d12[..., 5:8].any()), bool(d12[..., 8:].any())
+
+
+def _distortion_terms(d, x, y, rational, prism):
     """Radial factor and tangential/prism offsets of the OpenCV model at ideal (x, y)."""
     k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
     r2 = x * x + y * y
     r4 = r2 * r2
     r6 = r4 * r2
     radial = 1 + k1 * r2 + k2 * r4 + k3 * r6
-    if np.any(k4) or np.any(k5) or np.any(k6):  # rational model (skipped when all zero)
+    if rational:
         radial = radial / (1 + k4 * r2 + k5 * r4 + k6 * r6)
     xy2 = 2 * x * y
     dx = p1 * xy2 + p2 * (r2 + 2 * x * x)
     dy = p1 * (r2 + 2 * y * y) + p2 * xy2
-    if np.any(s1) or np.any(s2) or np.any(s3) or np.any(s4):  # thin prism
+    if prism:
         dx = dx + s1 * r2 + s2 * r4
         dy = dy + s3 * r2 + s4 * r4
     return radial, dx, dy
+
+
+def _undistort_newton(d12, x0, y0, iterations, tol):
+    """Ideal normalised (x, y) with distort(x, y) = (x0, y0): Newton's method on the OpenCV
+    model with its analytic 2x2 Jacobian, all points at once (d12: (12,) or, for V
+    cameras, (V, 12) against x0, y0 (V, N)). Stops after `iterations` (>= 1) or when every
+    finite step is <= tol; NaN where the last iterate before the final step misses
+    (x0, y0) by more than 1e-9 (relative) or lies past a fold of the model (Jacobian
+    determinant <= 0): no unique inverse there."""
+    (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4), rational, prism = _model_terms(d12)
+
+    def model(x, y):
+        """Residual of distort(x, y) - (x0, y0) and the Jacobian (xx, xy, yx, yy)."""
+        r2 = x * x + y * y
+        radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        slope = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
+        if rational:
+            den = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
+            slope = (slope - radial * (k4 + r2 * (2 * k5 + 3 * k6 * r2)) / den) / den
+            radial = radial / den
+        xy2 = 2 * x * y
+        fx = x * radial + p1 * xy2 + p2 * (r2 + 2 * x * x) - x0
+        fy = y * radial + p1 * (r2 + 2 * y * y) + p2 * xy2 - y0
+        cross = xy2 * slope + 2 * (p1 * x + p2 * y)
+        jxx = radial + 2 * x * x * slope + 2 * p1 * y + 6 * p2 * x
+        jyy = radial + 2 * y * y * slope + 6 * p1 * y + 2 * p2 * x
+        jxy = jyx = cross
+        if prism:
+            fx = fx + r2 * (s1 + s2 * r2)
+            fy = fy + r2 * (s3 + s4 * r2)
+            gx = 2 * (s1 + 2 * s2 * r2)
+            gy = 2 * (s3 + 2 * s4 * r2)
+            jxx, jxy = jxx + gx * x, jxy + gx * y
+            jyx, jyy = jyx + gy * x, jyy + gy * y
+        return fx, fy, jxx, jxy, jyx, jyy
+
+    x, y = x0, y0
+    with np.errstate(all='ignore'):
+        for _ in range(max(1, iterations)):
+            fx, fy, jxx, jxy, jyx, jyy = model(x, y)
+            det = jxx * jyy - jxy * jyx
+            step_x = (jyy * fx - jxy * fy) / det
+            step_y = (jxx * fy - jyx * fx) / det
+            x = x - step_x
+            y = y - step_y
+            change = np.maximum(np.abs(step_x), np.abs(step_y))
+            if np.max(change, initial=0.0, where=np.isfinite(change)) <= tol:
+                break
+        # the residual and Jacobian of the last evaluated iterate (the final step only
+        # refines it further): no extra evaluation of the model
+        failed = ~((np.hypot(fx, fy) <= 1e-9 * np.maximum(1.0, np.hypot(x0, y0)))
+                   & (det > 0))
+    return np.where(failed, np.nan, x), np.where(failed, np.nan, y)
 
 
 @dataclass(frozen=True, eq=False)
@@ -185,7 +246,8 @@ class Camera:
         if not self.has_distortion:
             return xy.copy()
         x, y = xy[..., 0], xy[..., 1]
-        radial, dx, dy = _distortion_terms(self._d12, x, y)
+        d, rational, prism = _model_terms(self._d12)
+        radial, dx, dy = _distortion_terms(d, x, y, rational, prism)
         return np.stack([x * radial + dx, y * radial + dy], axis=-1)
 
     def normalized_to_pixels(self, xy):
@@ -212,38 +274,21 @@ class Camera:
         xy = Xc[..., :2] / Xc[..., 2:3]
         return self.normalized_to_pixels(self.distort_normalized(xy))
 
-    def undistort_normalized(self, xy, iterations=100, tol=1e-15):
-        """Distorted normalised coordinates (..., 2) -> ideal ones (fixed-point inversion of
-        the distortion model, as cv2.undistortPoints but iterated to convergence); NaN where
-        it does not converge (a point outside the model's invertible region)."""
+    def undistort_normalized(self, xy, iterations=20, tol=1e-15):
+        """Distorted normalised coordinates (..., 2) -> ideal ones: the inverse of the
+        distortion model by Newton's method (analytic Jacobian, all points at once; the
+        answer of cv2.undistortPoints iterated to convergence). NaN where the model has no
+        unique inverse (a point outside its invertible region) and for NaN input."""
         xy0 = np.asarray(xy, dtype=np.float64)
         if not self.has_distortion:
             return xy0.copy()
-        x0, y0 = xy0[..., 0], xy0[..., 1]
-        x, y = x0.copy(), y0.copy()
-        for _ in range(iterations):
-            radial, dx, dy = _distortion_terms(self._d12, x, y)
-            x_new = (x0 - dx) / radial
-            y_new = (y0 - dy) / radial
-            with np.errstate(invalid='ignore'):
-                change = np.nanmax(np.abs(np.concatenate([(x_new - x).ravel(),
-                                                          (y_new - y).ravel(), [0.0]])))
-            x, y = x_new, y_new
-            if change <= tol:
-                break
-        # points the model cannot invert (outside its valid region) become NaN
-        radial, dx, dy = _distortion_terms(self._d12, x, y)
-        with np.errstate(invalid='ignore'):
-            residual = np.hypot(x * radial + dx - x0, y * radial + dy - y0)
-            failed = ~(residual <= 1e-9 * np.maximum(1.0, np.hypot(x0, y0)))
-        x = np.where(failed, np.nan, x)
-        y = np.where(failed, np.nan, y)
+        x, y = _undistort_newton(self._d12, xy0[..., 0], xy0[..., 1], iterations, tol)
         return np.stack([x, y], axis=-1)
 
     def undistort_points(self, uv):
         """Observed pixels uv (N, 2) -> ideal pinhole pixels (N, 2) of the same K.
 
-        Inverse of `project`'s distortion, iterated to convergence; honours the skew in K.
+        Inverse of `project`'s distortion (undistort_normalized); honours the skew in K.
         NaN rows stay NaN; points where the inversion fails become NaN. Without distortion
         the input is returned (as a copy).
         """
@@ -310,11 +355,33 @@ def project_views(cameras, X):
     Xc = _apply_views(Rt, X)
     x = Xc[..., 0] / Xc[..., 2]
     y = Xc[..., 1] / Xc[..., 2]
-    d = tuple(p['d12'].T[:, :, None])  # 12 arrays (V, 1), broadcast over (..., V, N)
-    radial, dx, dy = _distortion_terms(d, x, y)
+    d, rational, prism = _model_terms(p['d12'])  # 12 arrays (V, 1), over (..., V, N)
+    radial, dx, dy = _distortion_terms(d, x, y, rational, prism)
     xd = x * radial + dx
     yd = y * radial + dy
     K = p['K'][:, None]  # (V, 1, 3, 3)
     u = K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2]
     v = K[..., 1, 1] * yd + K[..., 1, 2]
     return np.stack([u, v], axis=-1)
+
+
+def undistort_views(cameras, uv):
+    """Observed pixels of every camera of a rig at once -> ideal pinhole pixels (same K).
+
+    uv: (V, N, 2) pixels (view v seen by camera v); `cameras` is a list of Camera or the
+    dict of stack_cameras. The same model and answer as Camera.undistort_points, in one
+    batched Newton solve over all views (no Python loop over views or points). NaN rows
+    stay NaN; points where the inversion fails become NaN.
+    """
+    p = cameras if isinstance(cameras, dict) else stack_cameras(cameras)
+    uv = np.asarray(uv, dtype=np.float64)
+    if uv.ndim != 3 or uv.shape[0] != len(p['K']) or uv.shape[2] != 2:
+        raise ValueError(f'uv must have shape (V={len(p["K"])}, N, 2), got {uv.shape}')
+    if not p['d12'].any():
+        return uv.copy()
+    K = p['K'][:, None]  # (V, 1, 3, 3)
+    y0 = (uv[..., 1] - K[..., 1, 2]) / K[..., 1, 1]
+    x0 = (uv[..., 0] - K[..., 0, 2] - K[..., 0, 1] * y0) / K[..., 0, 0]
+    x, y = _undistort_newton(p['d12'], x0, y0, 20, 1e-15)
+    return np.stack([K[..., 0, 0] * x + K[..., 0, 1] * y + K[..., 0, 2],
+                     K[..., 1, 1] * y + K[..., 1, 2]], axis=-1)

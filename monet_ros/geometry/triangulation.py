@@ -16,7 +16,8 @@ from math import comb
 
 import numpy as np
 
-from monet_ros.geometry.camera import project_views, stack_cameras
+from monet_ros.geometry.camera import project_views, stack_cameras, undistort_views
+from monet_ros.timing import NO_TIMER
 
 
 def _prepare(points2d, cameras, weights):
@@ -33,11 +34,7 @@ def _prepare(points2d, cameras, weights):
             raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
         if np.any(w < 0):
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
-    ideal = obs.copy()
-    with np.errstate(all='ignore'):
-        for v, cam in enumerate(cameras):
-            if cam.has_distortion:
-                ideal[v] = cam.undistort_points(obs[v])
+    ideal = undistort_views(stack_cameras(cameras), obs)
     # missing: NaN input, zero/NaN weight, or a point the distortion model cannot invert
     missing = ~np.all(np.isfinite(ideal), axis=2) | ~np.isfinite(w) | (w <= 0)
     w = np.where(missing, 0.0, w)
@@ -229,7 +226,8 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
 
 
 def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_views=2,
-                       method='exclusion', max_subsets=20, max_hypotheses=20, seed=0):
+                       method='exclusion', max_subsets=20, max_hypotheses=20, seed=0,
+                       timer=None):
     """Outlier-robust triangulation, batched over keypoints.
 
     method='exclusion' (Pose2Sim's rule): triangulate with all available views; while the
@@ -245,12 +243,22 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     reprojection error < threshold_px; the hypothesis with most inliers (then lowest mean
     inlier error) wins and is refined by weighted DLT on its inliers; NaN with fewer than
     min_views inliers.
+    timer: a monet_ros.timing.StageTimer to account 'undistort' and 'triangulate' to.
     Returns (X (N, 3), inlier_mask (V, N) bool of the views used)."""
     if min_views < 2:
         raise ValueError(f'min_views must be >= 2, got {min_views}')
     if not threshold_px > 0:
         raise ValueError(f'threshold_px must be > 0, got {threshold_px}')
-    obs, ideal, w = _prepare(points2d, cameras, weights)
+    timer = timer or NO_TIMER
+    with timer('undistort'):
+        obs, ideal, w = _prepare(points2d, cameras, weights)
+    with timer('triangulate'):
+        return _robust(obs, ideal, w, cameras, threshold_px, min_views, method, max_subsets,
+                       max_hypotheses, seed)
+
+
+def _robust(obs, ideal, w, cameras, threshold_px, min_views, method, max_subsets,
+            max_hypotheses, seed):
     rig = stack_cameras(cameras)
     B = dlt_rows(ideal, rig['P'])
     if method == 'exclusion':

@@ -200,3 +200,38 @@ def encode_compressed(image, fmt='jpeg', quality=90):
     if not ok:
         raise ValueError(f'OpenCV could not encode a {arr.shape} {arr.dtype} image as {fmt}')
     return fmt, buf.reshape(-1)
+
+
+# 8-bit layouts a detector can crop straight from the message buffer (channels per pixel)
+CROPPABLE = {'rgb8': 3, 'bgr8': 3, 'rgba8': 4, 'bgra8': 4, 'mono8': 1, '8uc1': 1, '8uc3': 3}
+
+
+def image_for_crop(msg):
+    """(array, layout) of an Image message for cropping: the raw buffer (H, W, ch), no copy,
+    when its encoding is one of CROPPABLE (layout = that encoding, lower case; 8UC3 is read
+    as rgb8 and 8UC1 as mono8, as image_to_numpy does), else the decoded (H, W, 3) rgb image and
+    'rgb8'. Convert the crop with raw_to_rgb8(crop, layout): no full-frame colour conversion.
+    Raises ImageDecodeError like image_to_numpy."""
+    enc = str(msg.encoding).lower()
+    if enc in CROPPABLE:
+        layout = {'8uc1': 'mono8', '8uc3': 'rgb8'}.get(enc, enc)
+        return raw_image_array(msg), layout
+    return image_to_numpy(msg), 'rgb8'
+
+
+def raw_to_rgb8(array, layout):
+    """(H, W, ch) uint8 pixels in `layout` (a CROPPABLE encoding) -> (H, W, 3) uint8 rgb."""
+    arr = np.asarray(array)
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
+    if layout == 'rgb8':
+        return arr
+    if layout == 'bgr8':
+        return arr[:, :, ::-1]
+    if layout == 'rgba8':
+        return arr[:, :, :3]
+    if layout == 'bgra8':
+        return arr[:, :, 2::-1]
+    if layout == 'mono8':
+        return np.repeat(arr[:, :, :1], 3, axis=2)
+    raise ImageDecodeError(f'raw_to_rgb8: unsupported layout {layout!r}')

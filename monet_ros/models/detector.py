@@ -9,9 +9,12 @@ import copy
 import numpy as np
 import torch
 
+from monet_ros.io.images import raw_to_rgb8
 from monet_ros.models.checkpoint import load_checkpoint
 from monet_ros.models.crop import crop_images, fit_boxes_to_aspect, full_frame_boxes
 from monet_ros.models.layers import fuse_for_inference
+from monet_ros.models.onnx_backend import BACKENDS, OnnxRunner, export_onnx, onnx_runner_for
+from monet_ros.timing import StageTimer
 
 
 def images_to_tensor(images, device='cpu'):
@@ -34,10 +37,14 @@ class Detector:
     model: a detector from build_model / load_checkpoint (it is copied, put in eval mode,
     BatchNorm folded into the convolutions, so the caller's model is never changed).
     metadata: its checkpoint metadata (at least 'keypoints'). device: None = CUDA when
-    available, else CPU.
+    available, else CPU. backend: 'torch' or 'onnxruntime' (the same network exported to
+    ONNX, see monet_ros.models.onnx_backend; exported in memory here, or cached beside the
+    checkpoint by from_checkpoint). threads: CPU threads of the onnxruntime session
+    (0 = its default; torch's are process-wide: torch.set_num_threads).
     """
 
-    def __init__(self, model, metadata, device=None, fuse=True):
+    def __init__(self, model, metadata, device=None, fuse=True, backend='torch', threads=0,
+                 checkpoint=None):
         keypoints = list(metadata.get('keypoints', []))
         if len(keypoints) != model.num_keypoints:
             raise ValueError(f'Detector: metadata.keypoints has {len(keypoints)} names but the '
@@ -46,6 +53,8 @@ class Detector:
         if architecture != model.architecture:
             raise ValueError(f'Detector: metadata.architecture is {architecture!r} but the '
                              f'model is {model.architecture!r}')
+        if backend not in BACKENDS:
+            raise ValueError(f'Detector: backend must be one of {BACKENDS}, got {backend!r}')
         if device is None:
             device = 'cuda' if torch.cuda.is_available() else 'cpu'
         self.device = torch.device(device)
@@ -56,13 +65,33 @@ class Detector:
         self.keypoints = keypoints
         self.input_size = tuple(model.input_size)       # (H, W)
         self.heatmap_size = tuple(model.heatmap_size)   # (h, w)
+        self.backend = backend
+        self.runner = None
+        if backend == 'onnxruntime':
+            cpu_model = copy.deepcopy(self.model).cpu()
+            self.runner = (onnx_runner_for(cpu_model, checkpoint, self.device, threads)
+                           if checkpoint is not None else
+                           OnnxRunner(export_onnx(cpu_model), self.device, threads))
+        self._input = None  # pre-allocated network input, grown with the batch size
+        self.timer = StageTimer()  # 'crop' and 'forward' wall time of predict
+
+    def input_buffer(self, n):
+        """The (n, 3, H, W) float32 network-input tensor (pre-allocated, reused)."""
+        if self._input is None or self._input.shape[0] < n:
+            h, w = self.input_size
+            device = 'cpu' if self.backend == 'onnxruntime' else self.device
+            self._input = torch.empty((n, 3, h, w), dtype=torch.float32, device=device)
+        return self._input[:n]
 
     @classmethod
-    def from_checkpoint(cls, path, device=None, architecture=None, num_keypoints=None):
-        """Detector of a checkpoint file (CheckpointError names the file and field)."""
+    def from_checkpoint(cls, path, device=None, architecture=None, num_keypoints=None,
+                        backend='torch', threads=0):
+        """Detector of a checkpoint file (CheckpointError names the file and field); with
+        backend 'onnxruntime' the export is cached beside it, keyed by its sha256."""
         model, metadata = load_checkpoint(path, architecture=architecture,
                                           num_keypoints=num_keypoints)
-        return cls(model, metadata, device=device)
+        return cls(model, metadata, device=device, backend=backend, threads=threads,
+                   checkpoint=path)
 
     def boxes_for(self, cameras, boxes=None, keep_aspect=True):
         """The crop boxes predict uses: (N, 4) edge coordinates.
@@ -79,31 +108,58 @@ class Detector:
                              f'{boxes.shape}')
         return fit_boxes_to_aspect(boxes, aspect) if keep_aspect else boxes
 
-    def predict(self, images, cameras, boxes=None, keep_aspect=True):
+    def predict(self, images, cameras, boxes=None, keep_aspect=True, encodings=None):
         """Heatmaps of N synchronized views.
 
         images: (N, H, W, 3) uint8 RGB (or a sequence of (H_i, W_i, 3) for mixed sizes), one
         per camera; cameras: list of N Camera (image size must match); boxes: (N, 4) pixel-edge
-        boxes or None (full frames); see boxes_for.
+        boxes or None (full frames); see boxes_for. encodings: None (all rgb8) or, per image,
+        the channel layout it is in ('rgb8', 'bgr8', 'rgba8', 'bgra8', 'mono8' with (H, W, 4)
+        or (H, W, 1) arrays as raw message buffers): each crop is converted to RGB, never the
+        full frame.
         -> heatmaps (N, C, h, w) float32 numpy, heat_cameras: list of N Camera, the virtual
         cameras of the heatmaps, cam.crop(box, (w, h)) (K_heat = S K, heatmap pixels).
         """
         if len(images) != len(cameras):
             raise ValueError(f'Detector: {len(images)} images but {len(cameras)} cameras')
-        for image, camera in zip(images, cameras):
+        encodings = ['rgb8'] * len(images) if encodings is None else list(encodings)
+        if len(encodings) != len(images):
+            raise ValueError(f'Detector: {len(encodings)} encodings for {len(images)} images')
+        for image, camera, encoding in zip(images, cameras, encodings):
             shape = np.shape(image)
-            if len(shape) != 3 or shape[2] != 3 or np.asarray(image).dtype != np.uint8:
-                raise ValueError(f'Detector: image of camera {camera.name!r} must be (H, W, 3) '
-                                 f'uint8 RGB, got {shape} {np.asarray(image).dtype}')
+            channels = {'rgba8': 4, 'bgra8': 4, 'mono8': 1}.get(encoding, 3)
+            if len(shape) != 3 or shape[2] != channels or np.asarray(image).dtype != np.uint8:
+                raise ValueError(f'Detector: image of camera {camera.name!r} must be (H, W, '
+                                 f'{channels}) uint8 {encoding}, got {shape} '
+                                 f'{np.asarray(image).dtype}')
             if shape[:2] != (camera.height, camera.width):
                 raise ValueError(f'Detector: image of camera {camera.name!r} is '
                                  f'{shape[1]}x{shape[0]} but the camera is '
                                  f'{camera.width}x{camera.height}')
         boxes = self.boxes_for(cameras, boxes, keep_aspect)
         h_in, w_in = self.input_size
-        crops = crop_images(images, boxes, (w_in, h_in))
-        with torch.inference_mode():
-            heatmaps = self.model(images_to_tensor(crops, self.device))[-1]
+        with self.timer('crop'):
+            if all(e == 'rgb8' for e in encodings):
+                crops = crop_images(images, boxes, (w_in, h_in))
+            else:  # crop in the message's own layout, then convert the (small) crop
+                crops = np.stack([raw_to_rgb8(crop_images([image], box[None], (w_in, h_in))[0],
+                                              encoding)
+                                  for image, box, encoding in zip(images, boxes, encodings)])
+        with self.timer('forward'):
+            heatmaps = self.forward(crops)
         h, w = self.heatmap_size
         heat_cameras = [camera.crop(box, (w, h)) for camera, box in zip(cameras, boxes)]
-        return heatmaps.float().cpu().numpy(), heat_cameras
+        return heatmaps, heat_cameras
+
+    def forward(self, crops):
+        """(N, H, W, 3) uint8 RGB network-input crops -> (N, C, h, w) float32 numpy heatmaps,
+        through the chosen backend (the same conversion as images_to_tensor, into the
+        pre-allocated input tensor)."""
+        buffer = self.input_buffer(len(crops))
+        with torch.inference_mode():
+            source = torch.from_numpy(np.ascontiguousarray(crops)).to(buffer.device)
+            buffer.copy_(source.permute(0, 3, 1, 2)).div_(255.0)
+            if self.runner is not None:
+                return self.runner(buffer.numpy())
+            heatmaps = self.model(buffer)[-1]
+        return heatmaps.float().cpu().numpy()

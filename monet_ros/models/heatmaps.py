@@ -55,8 +55,8 @@ def _vertex_offset(left, centre, right):
     """Vertex of the parabola through (-1, left), (0, centre), (1, right); 0 when not a maximum."""
     curvature = left - 2 * centre + right
     ok = curvature < 0
-    offset = 0.5 * (left - right) / torch.where(ok, curvature, torch.ones_like(curvature))
-    return torch.where(ok, offset, torch.zeros_like(offset))
+    offset = 0.5 * (left - right) / np.where(ok, curvature, 1)
+    return np.where(ok, offset, 0).astype(left.dtype)
 
 
 def decode_heatmaps(heatmaps, eps=1e-10):
@@ -68,38 +68,45 @@ def decode_heatmaps(heatmaps, eps=1e-10):
     heatmaps: (B, C, h, w), h, w >= 3.
     -> peaks (B, C, 2) float (u, v) heatmap pixels, confidence (B, C) = the maximum value
     (<= 0 for an empty map; its peak is then the plain argmax).
+    Computed with numpy on the host (a torch tensor is read there and the results are
+    returned as tensors on its device; no gradient): numpy's argmax and the few small
+    per-peak operations cost a fraction of torch's per-call overhead in the fusion loop.
     """
-    heat, was_numpy = _as_tensor(heatmaps)
+    is_torch = isinstance(heatmaps, torch.Tensor)
+    heat = heatmaps.detach().cpu().numpy() if is_torch else np.asarray(heatmaps)
     if heat.ndim != 4:
         raise ValueError(
             f'decode_heatmaps: heatmaps must be (B, C, h, w), got {tuple(heat.shape)}')
     b, c, h, w = heat.shape
     if h < 3 or w < 3:
         raise ValueError(f'decode_heatmaps: heatmaps must be at least 3x3, got {h}x{w}')
-    dtype = heat.dtype if heat.dtype == torch.float64 else torch.float32
-    flat = heat.to(dtype).reshape(b * c, h * w)
-    confidence, index = flat.max(dim=1)                            # (BC,)
-    row = torch.div(index, w, rounding_mode='floor')
-    col = index - row * w
+    dtype = np.float64 if heat.dtype == np.float64 else np.float32
+    flat = heat.reshape(b * c, h * w).astype(dtype, copy=False)
+    index = np.argmax(flat, axis=1)                                  # (BC,)
+    confidence = np.take_along_axis(flat, index[:, None], axis=1)[:, 0]
+    row, col = np.divmod(index, w)
     # 3-point windows centred at the argmax, moved inside the map at the border.
-    col_c = col.clamp(1, w - 2)
-    row_c = row.clamp(1, h - 2)
-    floor = (confidence.abs() * eps).clamp_min(eps)[:, None]
-    logs = torch.log(torch.maximum(flat, floor))
-    steps = torch.tensor([-1, 0, 1], device=flat.device)
-    u_idx = row[:, None] * w + col_c[:, None] + steps               # (BC, 3) along the row
-    v_idx = (row_c[:, None] + steps) * w + col[:, None]             # (BC, 3) along the column
-    lu = logs.gather(1, u_idx)
-    lv = logs.gather(1, v_idx)
-    u = col_c.to(dtype) + _vertex_offset(lu[:, 0], lu[:, 1], lu[:, 2])
-    v = row_c.to(dtype) + _vertex_offset(lv[:, 0], lv[:, 1], lv[:, 2])
-    u = torch.minimum(torch.maximum(u, col.to(dtype) - 1), col.to(dtype) + 1)
-    v = torch.minimum(torch.maximum(v, row.to(dtype) - 1), row.to(dtype) + 1)
+    col_c = np.clip(col, 1, w - 2)
+    row_c = np.clip(row, 1, h - 2)
+    floor = np.maximum(np.abs(confidence) * dtype(eps), dtype(eps))[:, None]
+    steps = np.array([-1, 0, 1])
+    u_idx = (row * w + col_c)[:, None] + steps                       # (BC, 3) along the row
+    v_idx = (row_c[:, None] + steps) * w + col[:, None]              # (BC, 3) along the column
+    # log of the 6 window values only (not of the whole map)
+    with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
+        lu = np.log(np.maximum(np.take_along_axis(flat, u_idx, axis=1), floor))
+        lv = np.log(np.maximum(np.take_along_axis(flat, v_idx, axis=1), floor))
+        u = col_c.astype(dtype) + _vertex_offset(lu[:, 0], lu[:, 1], lu[:, 2])
+        v = row_c.astype(dtype) + _vertex_offset(lv[:, 0], lv[:, 1], lv[:, 2])
+    colf, rowf = col.astype(dtype), row.astype(dtype)
+    u = np.minimum(np.maximum(u, colf - 1), colf + 1)
+    v = np.minimum(np.maximum(v, rowf - 1), rowf + 1)
     empty = confidence <= 0
-    u = torch.where(empty, col.to(dtype), u)
-    v = torch.where(empty, row.to(dtype), v)
-    peaks = torch.stack([u, v], dim=-1).reshape(b, c, 2)
+    u = np.where(empty, colf, u)
+    v = np.where(empty, rowf, v)
+    peaks = np.stack([u, v], axis=-1).reshape(b, c, 2)
     confidence = confidence.reshape(b, c)
-    if was_numpy:
-        return peaks.numpy(), confidence.numpy()
+    if is_torch:
+        return (torch.from_numpy(peaks).to(heatmaps.device),
+                torch.from_numpy(np.ascontiguousarray(confidence)).to(heatmaps.device))
     return peaks, confidence

@@ -9,7 +9,6 @@ was processed is counted as dropped; a bad message is counted and logged, never 
 The checkpoint is hot-reloaded from /monet/model (std_msgs/String JSON {path, sha256}).
 """
 from dataclasses import dataclass
-import hashlib
 import json
 from pathlib import Path
 import sys
@@ -22,6 +21,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 from std_msgs.msg import String
 
+from monet_ros.atomic import sha256_file
 from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.io import (
     camera_from_camera_info,
@@ -30,16 +30,16 @@ from monet_ros.io import (
     compressed_image_to_numpy,
     header_stamp_ns,
     heatmaps_to_image_msg,
-    image_to_numpy,
     numpy_to_image_msg,
 )
-from monet_ros.io.images import to_rgb8
+from monet_ros.io.images import image_for_crop, raw_to_rgb8, to_rgb8
 from monet_ros.models import CheckpointError, Detector, decode_heatmaps
 from monet_ros.models.crop import crop_images
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import run_node
+from monet_ros.timing import StageTimer
 from monet_ros.tracking import crop_boxes
 
 
@@ -72,18 +72,14 @@ class DetectorConfig:
     overlay: bool = setting(False, 'also publish /monet/<cam>/overlay (rgb8 crop, heatmaps, '
                             'peaks)')
     device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
-    threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0)
+    threads: int = setting(0, 'CPU threads of the network (torch and onnxruntime; 0 = their '
+                           'default)', minimum=0)
+    backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
+                           'exported to ONNX once, cached beside the checkpoint)',
+                           choices=('torch', 'onnxruntime'))
 
     def __post_init__(self):
         validate_config(self)
-
-
-def sha256_file(path):
-    digest = hashlib.sha256()
-    with open(path, 'rb') as stream:
-        for block in iter(lambda: stream.read(1 << 20), b''):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 class CameraSlot:
@@ -163,6 +159,7 @@ class DetectorNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         self.batches = 0
         self.forward_seconds = []
+        self.timer = StageTimer()  # convert, publish (crop, forward: self.detector.timer)
         self.model_reloads = self.model_rejects = 0
         self.get_logger().info(
             f'detecting {len(self.slots)} camera(s) '
@@ -173,7 +170,9 @@ class DetectorNode(Node):
     def load_detector(self, path):
         if not Path(path).is_file():
             raise CheckpointError(f'{path}: checkpoint file not found (parameter model)')
-        return Detector.from_checkpoint(path, device=self.config.device or None)
+        return Detector.from_checkpoint(path, device=self.config.device or None,
+                                        backend=self.config.backend,
+                                        threads=self.config.threads)
 
     # ------------------------------------------------------------------ input
     def bad_message(self, slot, topic, error):
@@ -217,12 +216,23 @@ class DetectorNode(Node):
 
     # ------------------------------------------------------------------ detection
     def decode(self, slot, msg):
-        """(image (H, W, 3) uint8 rgb, Camera) of a message, or None (counted as bad)."""
+        """(image (H, W, ch) uint8, its layout, Camera) of a message, or None (counted as
+        bad). Raw rgb8/bgr8/rgba8/bgra8/mono8 images stay the message buffer (no copy): the
+        detector converts only the crop (raw_to_rgb8)."""
         topic = slot.image_topic
         try:
-            image = (compressed_image_to_numpy(msg) if isinstance(msg, CompressedImage)
-                     else image_to_numpy(msg))
-            image = to_rgb8(image)        # grey / 16-bit / float -> the network's rgb8
+            if isinstance(msg, CompressedImage):
+                image, layout = to_rgb8(compressed_image_to_numpy(msg)), 'rgb8'
+            else:
+                image, layout = image_for_crop(msg)
+                if layout == 'rgb8' and (image.dtype != np.uint8 or image.ndim != 3):
+                    image = to_rgb8(image)        # grey / 16-bit / float -> the network's rgb8
+            if image.ndim == 2:
+                image, layout = image[..., None], 'mono8'
+            channels = {'rgba8': 4, 'bgra8': 4, 'mono8': 1}.get(layout, 3)
+            if image.dtype != np.uint8 or image.shape[2] != channels:
+                raise ValueError(f'need an 8-bit colour or mono image, got {image.dtype} '
+                                 f'{image.shape}')
             camera = slot.camera or slot.rig_camera
             if camera is None:
                 raise ValueError(f'no camera_info on {slot.info_topic} yet')
@@ -232,7 +242,7 @@ class DetectorNode(Node):
         except ValueError as error:
             self.bad_message(slot, topic, error)
             return None
-        return image, camera
+        return image, layout, camera
 
     def crop_boxes(self, cameras):
         """(V, 4) boxes: tracked subject (when fresh keypoints3d and rig extrinsics), else
@@ -247,39 +257,44 @@ class DetectorNode(Node):
 
     def process(self):
         work = []
-        for slot in self.slots:
-            if slot.pending is None:
-                continue
-            msg, _ = slot.pending
-            slot.pending = None
-            decoded = self.decode(slot, msg)
-            if decoded is not None:
-                work.append((slot, msg, *decoded))
+        with self.timer('convert'):
+            for slot in self.slots:
+                if slot.pending is None:
+                    continue
+                msg, _ = slot.pending
+                slot.pending = None
+                decoded = self.decode(slot, msg)
+                if decoded is not None:
+                    work.append((slot, msg, *decoded))
         if not work:
             return
-        cameras = [w[3] for w in work]
+        cameras = [w[4] for w in work]
         boxes = self.detector.boxes_for(cameras, self.crop_boxes(cameras))
         start = time.perf_counter()
         heatmaps, heat_cameras = self.detector.predict([w[2] for w in work], cameras, boxes,
-                                                       keep_aspect=False)
+                                                       keep_aspect=False,
+                                                       encodings=[w[3] for w in work])
         self.forward_seconds = (self.forward_seconds + [time.perf_counter() - start])[-100:]
         self.batches += 1
-        for (slot, msg, image, _), heat, heat_cam, box in zip(work, heatmaps, heat_cameras,
-                                                              boxes):
+        start = time.perf_counter()
+        for (slot, msg, image, layout, _), heat, heat_cam, box in zip(
+                work, heatmaps, heat_cameras, boxes):
             stamp = header_stamp_ns(msg)
             frame_id = msg.header.frame_id
             heat_pub, info_pub, overlay_pub = self.pubs[slot.name]
             info_pub.publish(camera_info_from_camera(heat_cam, stamp, frame_id))
             heat_pub.publish(heatmaps_to_image_msg(heat, stamp, frame_id))
             if overlay_pub is not None:
-                overlay_pub.publish(numpy_to_image_msg(self.overlay(image, box, heat), stamp,
-                                                       frame_id))
+                overlay_pub.publish(numpy_to_image_msg(self.overlay(image, box, heat, layout),
+                                                       stamp, frame_id))
             slot.processed += 1
+        self.timer.add('publish', time.perf_counter() - start)
 
-    def overlay(self, image, box, heat):
+    def overlay(self, image, box, heat, layout='rgb8'):
         """rgb8 network-input crop with the channel-max heatmap blended in and the peaks."""
         h_in, w_in = self.detector.input_size
-        crop = crop_images([image], box[None], (w_in, h_in))[0]
+        crop = np.ascontiguousarray(
+            raw_to_rgb8(crop_images([image], box[None], (w_in, h_in))[0], layout))
         peak_map = cv2.resize(heat.max(axis=0), (w_in, h_in), interpolation=cv2.INTER_LINEAR)
         colour = cv2.applyColorMap(np.clip(peak_map * 255, 0, 255).astype(np.uint8),
                                    cv2.COLORMAP_JET)[..., ::-1]
@@ -333,6 +348,8 @@ class DetectorNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         forward_ms = 1e3 * float(np.median(self.forward_seconds)) if self.forward_seconds \
             else 0.0
+        # per-batch stage times (ms) since start: convert, crop, forward, publish
+        stages = {**self.timer.summary(), **self.detector.timer.summary()}
         for slot in self.slots:
             level = DiagnosticStatus.OK if slot.processed else DiagnosticStatus.WARN
             msg.status.append(DiagnosticStatus(
@@ -343,7 +360,8 @@ class DetectorNode(Node):
                     ('dropped_stale', slot.dropped), ('bad_messages', slot.bad),
                     ('forward_ms_median', f'{forward_ms:.2f}'),
                     ('model_sha256', self.model_sha256), ('model_reloads', self.model_reloads),
-                    ('model_rejects', self.model_rejects), ('last_bad_message', slot.last_bad))]))
+                    ('model_rejects', self.model_rejects), ('last_bad_message', slot.last_bad),
+                    ('backend', self.detector.backend), *stages.items())]))
         self.pub_diag.publish(msg)
 
 

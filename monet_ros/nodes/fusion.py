@@ -32,6 +32,7 @@ from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import run_node
 from monet_ros.nodes.sync import StampSynchronizer
 from monet_ros.skeleton import load_skeleton
+from monet_ros.timing import StageTimer
 
 # Unpaired heatmaps / camera_info kept per camera while waiting for their partner.
 _PAIR_BACKLOG = 30
@@ -84,6 +85,7 @@ class FusionNode(Node):
         super().__init__(node_name, **kwargs)
         self.config = config = declare_config(self, FusionNodeConfig, overrides)
         self.core_config = config_subset(config, FusionConfig)
+        self.timer = StageTimer()  # per-stage wall time, reported in /diagnostics
         if config.threads:
             import torch
             torch.set_num_threads(config.threads)
@@ -145,6 +147,7 @@ class FusionNode(Node):
             self.fuse(group)
 
     def on_pair(self, name, stamp, heat_msg, info_msg):
+        start = time.perf_counter()
         try:
             heat = image_msg_to_heatmaps(heat_msg)
             if heat.shape[0] != self.skeleton.num_keypoints:
@@ -159,6 +162,7 @@ class FusionNode(Node):
         except ValueError as error:
             self.bad_message(name, error)
             return
+        self.timer.add('receive', time.perf_counter() - start)
         for group in self.sync.add(name, stamp, (heat, K)):
             self.fuse(group)
 
@@ -185,7 +189,7 @@ class FusionNode(Node):
         heat = [group.items[self.names[i]][0] for i in views]
         K_heat = np.stack([group.items[self.names[i]][1] for i in views])
         try:
-            result = fuse_heatmaps(heat, K_heat, cameras, self.core_config)
+            result = fuse_heatmaps(heat, K_heat, cameras, self.core_config, self.timer)
         except ValueError as error:
             # e.g. a camera_info whose K is not a crop of the rig camera: name the view.
             message = str(error)
@@ -206,11 +210,13 @@ class FusionNode(Node):
             stats.fused += 1
             stats.errors = (stats.errors + [float(errors[k])])[-100:]
         self.last_result, self.last_stamp_ns = result, group.stamp_ns
+        start = time.perf_counter()
         self.pub_points.publish(keypoints3d_to_cloud(
             group.stamp_ns, self.frame_id, result.X, result.confidence,
             result.reprojection_error, result.num_views))
         self.pub_skeleton.publish(skeleton_marker_array(
             group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices))
+        self.timer.add('publish', time.perf_counter() - start)
         for listener in self.listeners:
             listener(group.stamp_ns, result)
 
@@ -227,7 +233,10 @@ class FusionNode(Node):
                 ('frames', self.frames), ('partial_frames', self.partial_frames),
                 ('dropped_frames', self.sync.stats.dropped), ('late_views', self.sync.stats.late),
                 ('time_resets', self.sync.stats.resets),
-                ('fusion_ms_median', f'{fusion_ms:.3f}'))])
+                ('fusion_ms_median', f'{fusion_ms:.3f}'),
+                # mean ms per call since start: receive (per view), decode, undistort,
+                # triangulate, errors, publish (per frame)
+                *self.timer.summary().items())])
         msg.status.append(summary)
         for name, stats in self.stats.items():
             silent_for = None if stats.last_seen is None else now - stats.last_seen

@@ -47,3 +47,23 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
     (tmp_path / 'out' / 'something').write_text('')
     assert monet(args + ['--model', str(model)]) == 2
     assert 'output exists' in capsys.readouterr().err
+
+
+def test_onnxruntime_backend_writes_the_torch_heatmaps(tmp_path, capsys):
+    from monet_ros.io import image_msg_to_heatmaps
+
+    noise_recording(tmp_path / 'rec', cameras=2, frames=2)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    heat = {}
+    for backend in ('torch', 'onnxruntime'):
+        out = tmp_path / backend
+        assert monet(['process', str(tmp_path / 'rec'), '--model', str(model), '--out',
+                      str(out), '--no-track', '--heatmaps', '--quiet', '--backend', backend,
+                      '--threads', '1']) == 0
+        heat[backend] = [(m.topic, m.stamp_ns, image_msg_to_heatmaps(m.msg))
+                         for m in open_bag(out).messages() if m.topic.endswith('/heatmaps')]
+    assert len(heat['torch']) == 4
+    assert [h[:2] for h in heat['onnxruntime']] == [h[:2] for h in heat['torch']]
+    for (_, _, a), (_, _, b) in zip(heat['torch'], heat['onnxruntime']):
+        np.testing.assert_allclose(b, a, atol=1e-4, rtol=0)
+    assert list(tmp_path.glob('model.*.onnx'))  # the export, cached beside the checkpoint

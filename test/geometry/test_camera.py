@@ -4,7 +4,7 @@ from helpers.rigs import random_camera, random_points
 import numpy as np
 import pytest
 
-from monet_ros.geometry import Camera, CameraError, crop_transform
+from monet_ros.geometry import Camera, CameraError, crop_transform, load_rig, undistort_views
 
 
 @pytest.mark.parametrize('dist_len', [0, 4, 5, 8, 12])
@@ -63,6 +63,82 @@ def test_undistort_keeps_nan_rows():
     assert np.all(np.isnan(out[1])) and np.all(np.isfinite(out[[0, 2]]))
     wild = cam.replace(dist=np.array([5.0, 50.0, 0.0, 0.0, 500.0]))
     assert np.all(np.isnan(wild.undistort_points(np.array([[1e9, -1e9]]))))
+
+
+def _pixel_grid(cam, step=16):
+    """Every `step`-th pixel of the image, edges included: (M, 2)."""
+    u, v = np.meshgrid(np.r_[np.arange(0, cam.width, step), cam.width - 1],
+                       np.r_[np.arange(0, cam.height, step), cam.height - 1])
+    return np.stack([u.ravel(), v.ravel()], axis=1).astype(np.float64)
+
+
+def _opencv_undistort(cam, uv, iterations=200):
+    """cv2.undistortPoints iterated to convergence (its default stops after 5 steps)."""
+    criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, iterations, 1e-16)
+    return cv2.undistortPoints(uv[:, None], cam.K, cam.dist, P=cam.K, criteria=criteria)[:, 0]
+
+
+def _distorted_rigs(shared_data):
+    rng = np.random.default_rng(11)
+    rigs = {f'random dist{n}': [random_camera(rng, name=f'c{i}', dist_len=n) for i in range(3)]
+            for n in (4, 5, 8, 12)}
+    strong = np.array([-0.35, 0.12, 0.001, -0.002, -0.02])  # wide-angle barrel
+    rigs['strong barrel'] = [random_camera(rng).replace(dist=strong)]
+    rigs['pose2sim'] = load_rig(
+        shared_data / 'pose2sim_demo_balancing/S00_Calibration/Calib_qualisys.toml')
+    return rigs
+
+
+def test_undistort_matches_opencv_inside_the_image(shared_data):
+    """Every pixel (16-px grid) of distorted rigs, the real Pose2Sim calibration included:
+    Camera.undistort_points and undistort_views (the batched fusion path) agree with
+    OpenCV to 0.01 px (in fact to 1e-6) and are exact inverses of project."""
+    rigs = _distorted_rigs(shared_data)
+    assert any(np.any(c.dist) for c in rigs['pose2sim'])
+    for name, rig in rigs.items():
+        grids = [_pixel_grid(c) for c in rig]
+        n = min(len(g) for g in grids)
+        uv = np.stack([g[:n] for g in grids])
+        batched = undistort_views(rig, uv)
+        for v, cam in enumerate(rig):
+            ours = cam.undistort_points(uv[v])
+            ref = _opencv_undistort(cam, uv[v])
+            assert np.all(np.isfinite(ours)), name
+            error = np.abs(ours - ref).max()
+            assert error <= 0.01 and error < 1e-6, f'{name} {cam.name}: {error} px'
+            np.testing.assert_allclose(batched[v], ours, atol=1e-9)
+            # back through the distortion model: the observed pixels again
+            xy = cam.pixels_to_normalized(ours)
+            back = cam.normalized_to_pixels(cam.distort_normalized(xy))
+            np.testing.assert_allclose(back, uv[v], atol=1e-8, err_msg=name)
+
+
+def test_undistort_views_mixed_rig_and_missing_points():
+    rng = np.random.default_rng(12)
+    rig = [random_camera(rng, name='a'), random_camera(rng, name='b', distortion=False),
+           random_camera(rng, name='c', dist_len=12)]
+    uv = rng.uniform([0, 0], [1280, 960], (3, 50, 2))
+    uv[0, 3] = np.nan
+    uv[2, 7, 1] = np.nan
+    out = undistort_views(rig, uv)
+    for v, cam in enumerate(rig):
+        np.testing.assert_allclose(out[v], cam.undistort_points(uv[v]), atol=1e-9)
+    np.testing.assert_allclose(out[1], uv[1], atol=1e-9)  # no distortion: unchanged
+    assert np.isnan(out[0, 3]).all() and np.isnan(out[2, 7]).all()
+    assert np.isfinite(np.delete(out[0], 3, axis=0)).all()
+    with pytest.raises(ValueError, match='uv must have shape'):
+        undistort_views(rig, uv[:2])
+
+
+def test_undistort_past_the_fold_is_nan():
+    """Barrel distortion folds over beyond some radius: there r(1 + k1 r^2) is no longer
+    invertible, and a distorted point beyond the largest reachable radius has no inverse."""
+    cam = random_camera(np.random.default_rng(13)).replace(dist=np.array([-0.5, 0, 0, 0]))
+    # r_d = r (1 - 0.5 r^2) peaks at r = sqrt(2/3), r_d = 0.544
+    xy = np.array([[0.5, 0.0], [0.6, 0.0], [0.0, -0.7]])
+    out = cam.undistort_normalized(xy)
+    assert np.isfinite(out[0]).all() and np.isnan(out[1:]).all()
+    np.testing.assert_allclose(cam.distort_normalized(out[:1]), xy[:1], atol=1e-12)
 
 
 def _valid_kwargs():

@@ -10,7 +10,9 @@ from monet_ros.io.images import (
     compressed_image_to_numpy,
     encode_compressed,
     image_fields,
+    image_for_crop,
     image_to_numpy,
+    raw_to_rgb8,
 )
 
 
@@ -121,3 +123,31 @@ def test_bad_inputs_raise_named_errors():
         compressed_image_to_numpy(SimpleNamespace(format='jpeg', data=b'not a jpeg'))
     with pytest.raises(ValueError, match='needs 3 channel'):
         image_fields(np.zeros((4, 4), np.uint8), 'rgb8')
+
+
+@pytest.mark.parametrize('encoding', ['rgb8', 'bgr8', 'rgba8', 'bgra8', 'mono8', '8UC1',
+                                      '8UC3', 'bayer_rggb8'])
+def test_image_for_crop_keeps_the_buffer_and_converts_like_image_to_numpy(encoding):
+    """A crop taken from the raw buffer and converted (raw_to_rgb8) equals the same crop of
+    the fully decoded image; the raw buffer is the message data (no copy)."""
+    rgb = smooth_rgb()
+    source = rgb[..., 0] if encoding.lower() in ('mono8', '8uc1', 'bayer_rggb8') else rgb
+    if encoding in ('rgba8', 'bgra8'):
+        source = np.concatenate([rgb, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        if encoding == 'bgra8':
+            source = source[..., [2, 1, 0, 3]]
+    elif encoding == 'bgr8':
+        source = rgb[..., ::-1]
+    msg = msg_from(source, encoding, step=source[0].size + 8)  # padded rows
+    raw, layout = image_for_crop(msg)
+    decoded = image_to_numpy(msg)
+    if decoded.ndim == 2:
+        decoded = np.repeat(decoded[..., None], 3, axis=2)
+    crop = (slice(5, 30), slice(7, 50))
+    np.testing.assert_array_equal(raw_to_rgb8(raw[crop], layout), decoded[crop])
+    if not encoding.startswith('bayer'):
+        assert np.shares_memory(raw, np.frombuffer(msg.data, np.uint8))
+    else:
+        assert layout == 'rgb8'
+    with pytest.raises(ImageDecodeError, match='unsupported layout'):
+        raw_to_rgb8(raw, 'yuv422')

@@ -207,3 +207,54 @@ def test_bad_parameters_fail_at_start(ros_env, setup, change, message):
     with NodeProcess('detector', ros_env, params) as node:
         assert node.wait(timeout=90) == 2, node.output()
         assert message in node.output()
+
+
+def test_onnxruntime_backend_gives_the_torch_frame_and_reports_stages(ros_env, setup):
+    """backend onnxruntime: the same heatmaps as torch (1e-4) for a bgr8 frame (cropped in
+    its own layout), the export cached beside the checkpoint, per-stage timers in
+    /diagnostics."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    from monet_ros.atomic import sha256_file
+    from monet_ros.models.onnx_backend import onnx_path_for
+
+    rig, rig_path, first, _, images = setup
+    box = [100.0, 50.0, 400.0, 450.0]
+    params = dict(rig=str(rig_path), model=str(first), box=box, track=False, device='cpu',
+                  backend='onnxruntime', threads=1)
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = Stream(ros, rig)
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        for heat_pub, info_pub in stream.pubs.values():
+            ros.wait_for_subscribers(heat_pub, timeout=120, process=node)
+            ros.wait_for_subscribers(info_pub, process=node)
+        for _ in range(20):  # the same frames as bgr8 messages
+            for cam, image in zip(rig, images):
+                stream.pubs[cam.name][1].publish(camera_info_from_camera(cam, T0, cam.name))
+                stream.pubs[cam.name][0].publish(numpy_to_image_msg(image, T0, cam.name,
+                                                                    encoding='bgr8'))
+            if ros.spin_until(lambda: all(stream.result(c.name, T0) for c in rig),
+                              timeout=1.5, process=node):
+                break
+        got = {c.name: stream.result(c.name, T0) for c in rig}
+        assert all(got.values()), node.output()
+        aspect = INPUT[1] / INPUT[0]
+        boxes = np.array([expected_box(box, aspect)] * len(rig))
+        expected = reference(first, images, rig, boxes)  # the torch backend, rgb frames
+        for v, cam in enumerate(rig):
+            heat = image_msg_to_heatmaps(got[cam.name][0])
+            np.testing.assert_allclose(heat, expected[v], atol=1e-4, rtol=0)
+        assert onnx_path_for(first, sha256_file(first)).is_file()
+
+        def stage_report():
+            for msg in diagnostics:
+                for status in msg.status:
+                    values = {kv.key: kv.value for kv in status.values}
+                    if values.get('backend') == 'onnxruntime' and 'forward_calls' in values:
+                        return values
+            return None
+        assert ros.spin_until(lambda: stage_report() is not None, timeout=30, process=node)
+        values = stage_report()
+        for stage in ('convert', 'crop', 'forward', 'publish'):
+            assert float(values[f'{stage}_ms_mean']) > 0, values
+            assert int(values[f'{stage}_calls']) >= 1

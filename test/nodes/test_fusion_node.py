@@ -139,6 +139,13 @@ def test_fuses_excludes_the_wrong_view_and_reports_true_errors(ros_env, rig_file
     assert values['mean_reprojection_error_px'] == 'nan'   # never an inlier
     values = {kv.key: kv.value for kv in status['monet fusion: cam0'].values}
     assert np.isfinite(float(values['mean_reprojection_error_px']))
+    # the per-stage profile: every stage ran once per fused frame (receive once per view)
+    summary = {kv.key: kv.value for kv in status['monet fusion'].values}
+    fused = int(summary['frames'])
+    for stage in ('decode', 'undistort', 'triangulate', 'errors', 'publish'):
+        assert int(summary[f'{stage}_calls']) == fused, (stage, summary)
+        assert float(summary[f'{stage}_ms_mean']) > 0
+    assert int(summary['receive_calls']) >= fused
 
 
 def test_keeps_publishing_when_a_camera_goes_silent(ros_env, rig_file):
