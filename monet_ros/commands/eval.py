@@ -18,6 +18,10 @@ def add_arguments(parser):
     parser.add_argument('--from-json', help='re-render the report from a results.json')
     parser.add_argument('--device', default=None, help='torch device (default: CUDA if present)')
     parser.add_argument('--threads', type=int, default=0, help='torch CPU threads (0 = default)')
+    parser.add_argument('--labels', help="labels CSV for --data (default: the data folder's); "
+                        'checked against the recording like monet train')
+    from monet_ros.commands.labels import add_label_arguments
+    add_label_arguments(parser)
 
 
 def run(args):
@@ -39,11 +43,14 @@ def run(args):
         if not args.checkpoints or not args.data:
             print('monet eval: give checkpoints and --data (or --from-json)', file=sys.stderr)
             return 2
+        from monet_ros.commands.labels import label_options_from_args
         try:
-            recordings = [load_recording(d, skeleton=args.skeleton) for d in args.data]
+            options = label_options_from_args(args)
+            recordings = [load_recording(d, skeleton=args.skeleton, labels=args.labels,
+                                         label_options=options) for d in args.data]
         except (RecordingError, ValueError, OSError) as error:
             print(f'monet eval: {error}', file=sys.stderr)
-            return 1
+            return 2
         summaries = []
         for path in args.checkpoints:
             try:

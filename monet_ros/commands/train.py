@@ -18,7 +18,9 @@ def add_arguments(parser):
     parser.add_argument('--out', required=True, help='output folder (checkpoints, log)')
     parser.add_argument('--rig', help="rig file (default: the data folder's rig.yaml, else "
                         "the bag's CameraInfo + /tf_static)")
-    parser.add_argument('--labels', help="labels CSV (default: the data folder's labels.csv)")
+    parser.add_argument('--labels', help="labels CSV, stamp_ns- or frame-keyed (default: the "
+                        "data folder's labels.csv); checked against the recording, see "
+                        '--camera-map / --skip-bad-labels')
     parser.add_argument('--ground-truth', help='ground_truth.npz (for ground-truth crop boxes)')
     parser.add_argument('--skeleton', default='human14', help='skeleton preset or YAML file')
     parser.add_argument('--max-instants', type=int, default=0,
@@ -29,6 +31,8 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='torch CPU threads (0 = torch default; 1 is fastest on a busy '
                         'machine)')
+    from monet_ros.commands.labels import add_label_arguments
+    add_label_arguments(parser)
     group = parser.add_argument_group('training configuration (TrainConfig)')
     for f in fields(TrainConfig):
         flag = '--' + f.name.replace('_', '-')
@@ -66,15 +70,29 @@ def run(args):
     except ConfigError as error:
         print(f'monet train: {error}', file=sys.stderr)
         return 2
+    from monet_ros.commands.labels import label_options_from_args
     try:
         recording = load_recording(args.data, rig=args.rig, labels=args.labels,
                                    ground_truth=args.ground_truth, skeleton=args.skeleton,
-                                   max_instants=args.max_instants or None)
+                                   max_instants=args.max_instants or None,
+                                   label_options=label_options_from_args(args))
     except (RecordingError, ValueError, OSError) as error:
         print(f'monet train: {error}', file=sys.stderr)
-        return 1
+        return 2
+    if recording.label_report is not None:
+        print(f'monet train: labels: {recording.label_report.summary()}', file=sys.stderr)
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
-    data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
+    try:
+        data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
+    except ValueError as error:
+        labelled = recording.labelled_instants
+        where = (f'{len(labelled)} labelled instants (indices {labelled.tolist()[:8]}) of '
+                 f'{recording.num_instants}' if len(labelled) else 'no labelled instant: '
+                 'give --labels (or a labels.csv beside the recording)')
+        print(f'monet train: {error}; {where}; --eval-fraction {config.eval_fraction} holds '
+              'out the tail (use --eval-fraction 0 to train on every labelled instant)',
+              file=sys.stderr)
+        return 2
     out = Path(args.out)
     if args.resume and (out / 'trainer_state.pt').exists():
         trainer = Trainer.resume(out, data, config=config)
