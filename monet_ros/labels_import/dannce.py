@@ -53,7 +53,7 @@ def read_dannce(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
         points = data.reshape(len(frames), K, 2)
         for i, k in zip(*np.nonzero(np.isfinite(points).all(-1))):
             u, v_ = points[i, k]
-            rows.append(LabelRow(str(path), i + 1, None, int(frames[i]), cam, keypoints[k],
+            rows.append(LabelRow(str(path), int(i) + 1, None, int(frames[i]), cam, keypoints[k],
                                  float(u), float(v_),
                                  f'labelData{{{v + 1}}}.data_2d row {i + 1} kp{k}'))
     return rows, keypoints, 0

@@ -86,7 +86,8 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
                      else str(key).replace('\\', '/').split('/'))
             frame = frame_of_image(parts[-1])
             if frame is None:
-                raise LabelError(f'{source}:{where}: field image: {"/".join(parts)!r} has no '
+                name = '/'.join(parts)
+                raise LabelError(f'{source}:{where or line}: field image: {name!r} has no '
                                  'frame number in its name (expected e.g. img0042.png)')
             video = parts[-2] if len(parts) > 1 else Path(source).stem
             cam = camera_for(video, cameras, camera, camera_map)

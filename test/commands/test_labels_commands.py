@@ -118,3 +118,41 @@ def test_info_lists_instants_stamps_and_labelled_frames(folder, repo_root):
     assert '  cam2: 6 labelled keypoints' in out
     proc = monet(repo_root, 'info', data / 'nothing')
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_labels_import_dlc_project_round_trips_to_the_recordings_labels(folder, tmp_path,
+                                                                        capsys):
+    import pandas as pd
+
+    from monet_ros.cli import main
+    from monet_ros.labels import read_labels
+
+    data, rec, skeleton = folder
+    labelled = rec.labelled_instants
+    for v, cam in enumerate(rec.cameras):
+        video = tmp_path / 'dlc' / 'labeled-data' / f'session1_{cam.name}'
+        video.mkdir(parents=True)
+        cols = pd.MultiIndex.from_product([['me'], list(rec.keypoints), ['x', 'y']],
+                                          names=['scorer', 'bodyparts', 'coords'])
+        index = pd.MultiIndex.from_tuples([('labeled-data', video.name, f'img{t:04d}.png')
+                                           for t in labelled])
+        pd.DataFrame(rec.labels[labelled, v].reshape(len(labelled), -1), index=index,
+                     columns=cols).to_csv(video / 'CollectedData_me.csv')
+    out = tmp_path / 'labels.csv'
+    assert main(['labels', 'import', 'dlc', str(tmp_path / 'dlc'), '--rec', str(data),
+                 '--out', str(out), '--skeleton', str(skeleton)]) == 0
+    assert 'monet labels import: 18 labels at 2 instants x 3 cameras' in capsys.readouterr().out
+    got, want = read_labels(out, rec.keypoints), read_labels(data / 'labels.csv', rec.keypoints)
+    assert got.stamps == want.stamps
+    for s in want.stamps:
+        np.testing.assert_array_equal(got.points(s, ['cam0', 'cam1', 'cam2']),
+                                      want.points(s, ['cam0', 'cam1', 'cam2']))
+    # a frame beyond the recording: one line naming the file, line and field
+    extra = tmp_path / 'dlc' / 'labeled-data' / 'session1_cam1' / 'CollectedData_me.csv'
+    extra.write_text(extra.read_text() + 'labeled-data,session1_cam1,img0040.png'
+                     + ',1' * 6 + '\n')
+    assert main(['labels', 'import', 'dlc', str(tmp_path / 'dlc'), '--rec', str(data),
+                 '--out', str(out), '--skeleton', str(skeleton)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith(f'{extra}:6: field frame: 40 is not an instant of the recording '
+                        '(0 .. 11) (--skip-bad-labels drops and counts such rows)')
