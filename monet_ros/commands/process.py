@@ -1,7 +1,13 @@
 """`monet process`: the detector + fusion core over a recording, offline and as fast as
 possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 MCAP.
 
-    monet process REC --model CKPT --out OUT [--rig RIG] [--heatmaps]
+    monet process REC --model CKPT --out OUT [--rig RIG] [--heatmaps] [--threads N]
+        [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx]
+
+Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
+(monet_ros.io.export_results): keypoints3d.csv (anipose's 3D CSV layout),
+keypoints3d.trc (OpenSim / Pose2Sim), keypoints.nwb (NWB + ndx-pose, 3D and the 2D
+detections per camera) and detections2d.npz (2D detections + crop cameras).
 
 The same functions as the live nodes: Detector.predict (one batched forward per instant),
 tracking.crop_boxes (crop around the previous instant's 3D keypoints), fusion.fuse_heatmaps.
@@ -38,15 +44,26 @@ def add_arguments(parser):
                         help='also write /monet/<cam>/heatmaps')
     parser.add_argument('--device', default=None, help='torch device (default: auto)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
+    parser.add_argument('--threads', type=int, default=0,
+                        help='torch CPU threads (0 = torch default)')
+    parser.add_argument('--export', default='csv,trc,nwb,npz',
+                        help='analysis files written into OUT: any of csv (anipose), trc, '
+                        'nwb (ndx-pose), npz (2D detections + crop cameras); "none" for none')
+    parser.add_argument('--trc-axes', choices=('xyz', 'yzx'), default='xyz',
+                        help='TRC axes: world as is, or yzx = Y-up as Pose2Sim/OpenSim')
 
 
 def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None, slop_ns=0,
-                      track=True, heatmaps=False, skeleton=None, device=None, progress=True):
-    """Detect + fuse every instant of `bag`; write `out`. Returns a dict of figures."""
+                      track=True, heatmaps=False, skeleton=None, device=None, progress=True,
+                      exports=(), trc_axes='xyz'):
+    """Detect + fuse every instant of `bag`; write `out` (+ the `exports` formats of
+    monet_ros.io.export_results inside it). Returns a dict of figures (summary: per-joint
+    dropout and inlier views; exports: {format: path})."""
     from tqdm import tqdm
 
     from monet_ros.fusion import FusionConfig, fuse_heatmaps
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
+    from monet_ros.io.export_results import ResultsCollector
     from monet_ros.models import Detector
     from monet_ros.nodes.rig import load_node_rig, select_cameras
     from monet_ros.skeleton import load_skeleton
@@ -58,7 +75,9 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
     rig_cameras, frame_id = load_node_rig(rig or bag)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
     detector = Detector.from_checkpoint(model, device=device)
+    edges = None
     if skeleton is not None:
+        edges = load_skeleton(skeleton).bone_indices
         names = list(load_skeleton(skeleton).keypoints)
         if names != list(detector.keypoints):
             raise ValueError(f'skeleton {skeleton} keypoints {names} differ from the model '
@@ -73,6 +92,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
             raise ValueError(f'{bag}: no image topic {topic!r} for camera {cam.name!r}')
         topics[cam.name] = topic
     by_name = {cam.name: cam for cam in cameras}
+    collector = ResultsCollector(cameras, detector.keypoints)
     figures = dict(frames=0, views=0, missing_views=0, seconds=0.0, errors=[], num_views=[])
     previous = None
     start = time.perf_counter()
@@ -99,6 +119,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
                 for cam, hm in zip(present, heat):
                     writer.write_heatmaps(f'/monet/{cam.name}/heatmaps', frame.stamp_ns, hm,
                                           cam.name)
+            collector.add(frame.stamp_ns, present, result, heat_cameras)
             finite = np.isfinite(result.X).all(axis=1)
             previous = result.X if finite.sum() >= 3 else None
             figures['frames'] += 1
@@ -107,15 +128,25 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
                                      if finite.any() else np.nan)
             figures['num_views'].append(float(result.num_views.mean()))
     figures['seconds'] = time.perf_counter() - start
+    figures['summary'] = collector.summary()
+    figures['exports'] = collector.write(out, exports, edges=edges, trc_axes=trc_axes)
     figures['report'] = reader.report
     return figures
 
 
 def run(args):
     from monet_ros.fusion import FusionConfig
+    from monet_ros.io.export_results import parse_formats
     from monet_ros.nodes.runner import start_error
 
+    if args.threads < 0:
+        start_error('monet process', ValueError(f'--threads must be >= 0, got {args.threads}'))
+        return 2
+    if args.threads:
+        import torch
+        torch.set_num_threads(args.threads)
     try:
+        exports = parse_formats(args.export)
         config = FusionConfig(threshold_px=args.threshold_px,
                               confidence_threshold=args.confidence_threshold,
                               min_views=args.min_views, method=args.method)
@@ -123,7 +154,7 @@ def run(args):
             args.bag, args.model, args.out, rig=args.rig, cameras=args.cameras or (),
             fusion_config=config, slop_ns=int(args.slop_ms * 1e6), track=not args.no_track,
             heatmaps=args.heatmaps, skeleton=args.skeleton, device=args.device,
-            progress=not args.quiet)
+            progress=not args.quiet, exports=exports, trc_axes=args.trc_axes)
     except (ValueError, OSError) as error:
         start_error('monet process', error)
         return 2
@@ -135,6 +166,16 @@ def run(args):
           f'{np.nanmean(errors) if np.isfinite(errors).any() else float("nan"):.2f} px; '
           f'mean inlier views {np.mean(figures["num_views"]) if figures["num_views"] else 0:.2f}'
           f' -> {args.out}')
+    summary = figures['summary']
+    if summary['frames']:
+        dropout = ', '.join(f'{k} {100 * v:.0f}%' for k, v in summary['dropout'].items())
+        views = ', '.join(f'{k} {v:.1f}' for k, v in summary['inlier_views'].items())
+        print(f'monet process: per-joint dropout (not triangulated): {dropout}')
+        print(f'monet process: mean inlier views per joint: {views}')
+        print('monet process: reprojection error measures agreement between the views used, '
+              'not accuracy: score accuracy with `monet eval --reference`')
+    for fmt, path in figures['exports'].items():
+        print(f'monet process: wrote {fmt}: {path}')
     report = figures['report']
     if report is not None and not report.ok:
         print(f'monet process: reading {args.bag}: {report.summary()}', file=sys.stderr)
