@@ -1,4 +1,6 @@
-"""`monet eval`: PCK and reprojection-error tables (rows = modes, columns = datasets)."""
+"""`monet eval`: PCK and reprojection-error tables (rows = modes, columns = datasets);
+with --reference, accuracy against labels or a 3D reference in px and mm, one row per
+checkpoint (commands/eval_reference.py)."""
 from pathlib import Path
 import sys
 
@@ -20,8 +22,10 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0, help='torch CPU threads (0 = default)')
     parser.add_argument('--labels', help="labels CSV for --data (default: the data folder's); "
                         'checked against the recording like monet train')
+    from monet_ros.commands.eval_reference import add_reference_arguments
     from monet_ros.commands.labels import add_label_arguments
     add_label_arguments(parser)
+    add_reference_arguments(parser)
 
 
 def run(args):
@@ -37,6 +41,9 @@ def run(args):
     if args.threads:
         import torch
         torch.set_num_threads(args.threads)
+    if args.reference:
+        from monet_ros.commands.eval_reference import run_reference
+        return run_reference(args)
     if args.from_json:
         summaries = load_summaries(args.from_json)
     else:
