@@ -31,6 +31,9 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='torch CPU threads (0 = torch default; 1 is fastest on a busy '
                         'machine)')
+    parser.add_argument('--holdout-labelled', type=int, default=0, metavar='N',
+                        help='leave N labelled instants out of training and report the '
+                        "model's error on them (px, mm) at the end (0 = off)")
     from monet_ros.commands.labels import add_label_arguments
     add_label_arguments(parser)
     group = parser.add_argument_group('training configuration (TrainConfig)')
@@ -81,6 +84,12 @@ def run(args):
         return 2
     if recording.label_report is not None:
         print(f'monet train: labels: {recording.label_report.summary()}', file=sys.stderr)
+    from monet_ros.commands.train_holdout import hold_out, score_holdout
+    try:
+        held, held_path = hold_out(recording, args.holdout_labelled, args.out)
+    except (ValueError, OSError) as error:
+        print(f'monet train: {error}', file=sys.stderr)
+        return 2
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
     try:
         data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
@@ -105,6 +114,17 @@ def run(args):
           f'pseudo-labels, device {trainer.device}', file=sys.stderr)
     summary = trainer.run(progress=not args.no_progress)
     summary['checkpoint'] = str(out / 'model.pt')
+    if held_path is not None:
+        from monet_ros.learning.recording import find_recording_parts
+        parts = find_recording_parts(args.data)
+        figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
+                                held_path, recording)
+        summary['holdout'] = {'instants': held.tolist(), **figures}
+        print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
+              f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '
+              f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.0f} mm, mean '
+              f'{figures["mm_mean"]:.0f} mm, coverage {100 * figures["coverage"]:.0f}% '
+              '(as monet process runs the model)', file=sys.stderr)
     print(json.dumps(summary, indent=1))
     return 0
 

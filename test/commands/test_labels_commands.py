@@ -156,3 +156,33 @@ def test_labels_import_dlc_project_round_trips_to_the_recordings_labels(folder, 
     err = capsys.readouterr().err.strip()
     assert err.endswith(f'{extra}:6: field frame: 40 is not an instant of the recording '
                         '(0 .. 11) (--skip-bad-labels drops and counts such rows)')
+
+
+def test_train_leave_instants_out_check(tmp_path, repo_root):
+    import json
+
+    from monet_ros.labels import read_labels
+
+    rec = blob_recording(num_views=3, T=12, C=3, labelled=(2, 5, 9))
+    data = write_blob_folder(rec, tmp_path / 'data')
+    (tmp_path / 'blobs.yaml').write_text(SKELETON)
+    out = tmp_path / 'run'
+    proc = monet(repo_root, 'train', data, '--skeleton', tmp_path / 'blobs.yaml', '--out', out,
+                 '--holdout-labelled', '1', *TRAIN)
+    assert proc.returncode == 0, proc.stderr
+    # instant 5 is left out: 2 labelled instants train, its labels are written aside
+    assert ', 2 labelled, ' in proc.stderr
+    held = read_labels(out / 'heldout_labels.csv', ('k0', 'k1', 'k2'))
+    assert held.stamps == [int(rec.stamps[5])]
+    np.testing.assert_array_equal(held.points(rec.stamps[5], ['cam0', 'cam1', 'cam2']),
+                                  rec.labels[5])
+    assert 'held-out labelled instants [5]: 2D median ' in proc.stderr
+    assert 'px, PCK@10px' in proc.stderr and '(as monet process runs the model)' in proc.stderr
+    summary = json.loads(proc.stdout)
+    assert summary['holdout']['instants'] == [5] and summary['holdout']['views_2d'] == 9
+    assert summary['holdout']['joints_3d'] == 3
+    proc = monet(repo_root, 'train', data, '--skeleton', tmp_path / 'blobs.yaml', '--out',
+                 tmp_path / 'x', '--holdout-labelled', '3', *TRAIN)
+    assert proc.returncode == 2
+    assert '--holdout-labelled 3 needs at least 4 labelled instants, the recording has 3' in \
+        proc.stderr
