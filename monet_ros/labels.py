@@ -517,9 +517,10 @@ def match_camera_names(cameras, names, what='file'):
             out[cam] = hits[0]
         elif not hits:
             hint = [n for n in names if _canonical(cam) in _canonical(n)]
+            stem = Path(hint[0]).stem if hint else ''
             problems.append(f'camera {cam!r} matches no {what}'
-                            + (f' (looks like {hint[0]!r}: --camera-map {cam}=NAME renames '
-                               'it)' if hint else ''))
+                            + (f' (looks like {hint[0]!r}: --camera-map {cam}={stem})'
+                               if hint else ''))
         else:
             problems.append(f'camera {cam!r} matches several {what}s ({", ".join(hits)})')
     claimed = {}
