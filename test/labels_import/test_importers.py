@@ -33,7 +33,7 @@ def test_image_names_give_frame_indices():
     assert frame_of_image('frame_12_cam2.jpg') == 2 and frame_of_image('img.png') is None
 
 
-@pytest.mark.parametrize('layout', ['csv-3index', 'csv-path', 'h5'])
+@pytest.mark.parametrize('layout', ['csv-3index', 'csv-path', 'h5', 'h5-table'])
 def test_deeplabcut_collected_data(tmp_path, layout):
     rng = np.random.default_rng(1)
     values = rng.uniform(0, 500, (3, 4))
@@ -44,13 +44,14 @@ def test_deeplabcut_collected_data(tmp_path, layout):
     for cam, video in (('cam2', 'trial1_cam2'), ('cam10', 'trial1_cam10')):
         folder = project / 'labeled-data' / video
         folder.mkdir(parents=True)
-        if layout == 'csv-path':
+        if layout in ('csv-path', 'h5-table'):
             index = [f'labeled-data/{video}/{im}' for im in images]
         else:
             index = pd.MultiIndex.from_tuples([('labeled-data', video, im) for im in images])
         df = dlc_frame(index, values)
-        if layout == 'h5':      # pandas' table format refuses MultiIndex columns: fixed
-            df.to_hdf(folder / 'CollectedData_Alice.h5', key='df_with_missing', mode='w')
+        if layout.startswith('h5'):   # pandas' table format needs a flat index (paths)
+            df.to_hdf(folder / 'CollectedData_Alice.h5', key='df_with_missing', mode='w',
+                      format='table' if layout == 'h5-table' else 'fixed')
         else:
             df.to_csv(folder / 'CollectedData_Alice.csv')
         for i, frame in enumerate((3, 42, 107)):
