@@ -29,9 +29,11 @@ player read.
   other difference is an error. --resize s scales images and calibration together
   (cv2.INTER_AREA; Camera.crop of the full frame, the same mapping as cv2.resize).
 - Frames are streamed one instant at a time (memory: one frame per camera); a tqdm
-  progress bar shows the instants written.
+  progress bar shows the instants written. A failed or interrupted import removes its
+  output folder, so the same command can be rerun.
 """
 from pathlib import Path
+import shutil
 import sys
 
 import numpy as np
@@ -286,10 +288,14 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
             for n in names:
                 while sources[n].read() is not None:
                     skipped[n] += 1
+    except BaseException:
+        shutil.rmtree(out, ignore_errors=True)   # no half-written recording (rerun works)
+        raise
     finally:
         for s in sources.values():
             s.close()
     if not stamps:
+        shutil.rmtree(out, ignore_errors=True)
         raise ImportVideoError(f'{session}: no frame could be read')
     return dict(cameras=final, files=files, instants=len(stamps), stamps=(stamps[0],
                 stamps[-1]), fps=fps, notes=notes, skipped=skipped,

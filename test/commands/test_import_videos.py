@@ -142,3 +142,34 @@ def test_real_pose2sim_videos_and_calibration(shared_data, tmp_path, capsys):
         np.testing.assert_allclose(ours[name].t, cam.t, atol=1e-9)
     rec = load_recording(out, skeleton=('a',))
     np.testing.assert_array_equal(np.diff(rec.stamps), [16_666_667, 16_666_666])
+
+
+def test_negative_offset_delays_a_camera_and_a_failed_import_leaves_nothing(session,
+                                                                            tmp_path, capsys):
+    root, cams, frames = session
+    out = tmp_path / 'late'
+    assert main(['import', 'videos', str(root / 'videos'), '--calibration',
+                 str(root / 'calibration.yaml'), '--out', str(out), '--fps', '30', '--raw',
+                 '--offsets', 'cam2=-1', '--quiet']) == 0
+    capsys.readouterr()
+    bag = open_bag(out)
+    stamps = {t: [m.stamp_ns for m in bag.messages([f'/{t}/image_raw'])] for t in
+              ('cam0', 'cam2')}
+    start = 1_767_225_600_000_000_000                 # the default --start-ns
+    assert stamps['cam0'] == [start + round(i * 1e9 / FPS) for i in range(8)]
+    assert stamps['cam2'] == [start + round(i * 1e9 / FPS) for i in range(1, 9)]
+    rec = load_recording(out, skeleton=('a',))
+    assert rec.skipped == 2                       # instant 0 lacks cam2, instant 8 the others
+    names = [c.name for c in rec.cameras]
+    np.testing.assert_array_equal(rec.frames[names.index('cam2')], frames[2, :7])
+    np.testing.assert_array_equal(rec.frames[names.index('cam0')], frames[0, 1:8])
+    # one image of another size half way: exit 2 naming it, and no output folder left
+    import shutil
+    broken = tmp_path / 'broken'
+    shutil.copytree(root / 'videos', broken)
+    cv2.imwrite(str(broken / 'trial_cam2' / '0004.png'), np.zeros((10, 10, 3), np.uint8))
+    args = ['import', 'videos', str(broken), '--calibration', str(root / 'calibration.yaml'),
+            '--out', str(tmp_path / 'b'), '--fps', '30', '--quiet']
+    assert main(args) == 2
+    assert 'trial_cam2: frame 4 is 10x10, the first was 64x48' in capsys.readouterr().err
+    assert not (tmp_path / 'b').exists()
