@@ -58,7 +58,7 @@ def run_reference(args):
         px = _thresholds(args.px_thresholds, '--px-thresholds')
         mm = _thresholds(args.mm_thresholds, '--mm-thresholds')
         options = label_options_from_args(args)
-        index = recording_index(args.data[0], rig=args.rig)
+        index = recording_index(args.data[0], rig=args.rig, camera_map=options.camera_map)
         references = {}
         with tempfile.TemporaryDirectory(prefix='monet-eval-') as tmp:
             for n, path in enumerate(args.checkpoints):
@@ -71,7 +71,8 @@ def run_reference(args):
                 reference = references[keypoints]
                 out = Path(tmp) / f'run{n}'
                 process_recording(index.bag, path, out, rig=args.rig, device=args.device,
-                                  progress=False, exports=('csv', 'npz'))
+                                  progress=False, exports=('csv', 'npz'),
+                                  camera_map=options.camera_map)
                 table = read_anipose_csv(out / 'keypoints3d.csv')
                 det = np.load(out / 'detections2d.npz')
                 names = [c.name for c in index.cameras]

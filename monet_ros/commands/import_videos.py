@@ -22,12 +22,13 @@ player read.
   default; --format jpeg|png, png is lossless) or /NAME/image_raw (Image rgb8, --raw,
   lossless), /NAME/camera_info every frame (K, D, size; frame NAME_optical), and one
   /tf_static (world -> NAME_optical).
-- Image size: the calibration's size must be the video's. When the video is the
-  calibration scaled by s (both axes), K is scaled (c' = (c + 0.5) s - 0.5). When it
-  differs by at most 16 px (codec padding: Pose2Sim's demo videos are 1080 wide, its
-  calibration says 1088), the video's size is used with K unchanged and a warning. Any
-  other difference is an error. --resize s scales images and calibration together
-  (cv2.INTER_AREA; Camera.crop of the full frame, the same mapping as cv2.resize).
+- Image size (monet_ros.io.rig_fit.fit_camera): the calibration's size must be the
+  video's. When the video is the calibration scaled by s (both axes), K is scaled
+  (c' = (c + 0.5) s - 0.5). When it differs by at most 16 px (codec padding: Pose2Sim's
+  demo videos are 1080 wide, its calibration says 1088), the video's size is used with K
+  unchanged and a note. Any other difference is an error. --resize s scales images and
+  calibration together (cv2.INTER_AREA; Camera.crop of the full frame, the same mapping
+  as cv2.resize).
 - Frames are streamed one instant at a time (memory: one frame per camera); a tqdm
   progress bar shows the instants written. A failed or interrupted import removes its
   output folder, so the same command can be rerun.
@@ -42,7 +43,6 @@ HELP = 'videos (or image folders) + calibration -> a rosbag2 MCAP recording'
 VIDEO_SUFFIXES = ('.mp4', '.avi', '.mkv', '.mov', '.mpg', '.mpeg', '.m4v', '.webm', '.wmv',
                   '.mts', '.ts', '.flv')
 IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff')
-SIZE_SLACK_PX = 16
 DEFAULT_START_NS = 1_767_225_600_000_000_000          # 2026-01-01T00:00:00Z
 
 
@@ -153,26 +153,6 @@ def session_entries(session):
     return out
 
 
-def fit_camera(cam, width, height, source):
-    """(camera for a width x height image, note or ''): exact, scaled, or padded (module
-    docstring); ImportVideoError otherwise."""
-    if (cam.width, cam.height) == (width, height):
-        return cam, ''
-    sx, sy = width / cam.width, height / cam.height
-    if abs(sx - sy) * max(cam.width, cam.height) <= 1.0:
-        scaled = cam.crop((0, 0, cam.width, cam.height), (width, height))
-        return scaled, (f'{cam.name}: calibration {cam.width}x{cam.height} scaled by '
-                        f'{sx:.4g} to the video {width}x{height}')
-    if abs(cam.width - width) <= SIZE_SLACK_PX and abs(cam.height - height) <= SIZE_SLACK_PX:
-        return cam.replace(width=width, height=height), (
-            f'{cam.name}: calibration says {cam.width}x{cam.height}, {source} is '
-            f'{width}x{height} (codec padding?); K kept as calibrated, image size taken from '
-            'the video')
-    raise ImportVideoError(f'{source}: image {width}x{height} does not fit camera {cam.name}'
-                           f' of the calibration ({cam.width}x{cam.height}); not a scale '
-                           f'of it nor within {SIZE_SLACK_PX} px')
-
-
 def _offsets(items, names):
     out = {}
     for item in items:
@@ -198,6 +178,7 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
 
     from monet_ros.geometry import load_rig
     from monet_ros.io import BagWriter
+    from monet_ros.io.rig_fit import fit_camera
     from monet_ros.labels import match_camera_names, parse_name_map
 
     if not 0 < resize <= 1:

@@ -23,6 +23,7 @@ class RecordingIndex:
     stamps: np.ndarray
     complete: np.ndarray
     reader: object
+    notes: list = None
 
 
 def image_topic(reader, cam):
@@ -34,15 +35,21 @@ def image_topic(reader, cam):
     return topic
 
 
-def recording_index(path, rig=None, slop_ns=0):
+def recording_index(path, rig=None, slop_ns=0, camera_map=()):
     """RecordingIndex of a recording (rosbag2 folder, .mcap, or `monet synth` folder), read
-    without decoding images. Raises RecordingError naming the bag when it has no instant."""
+    without decoding images. A rig file's cameras are renamed by camera_map and fitted to
+    the images (io.rig_fit; `notes` says how). Raises RecordingError naming the bag when it
+    has no instant."""
     from monet_ros.io import iter_multiview_frames, open_bag, rig_from_bag
     from monet_ros.learning.recording import RecordingError, find_recording_parts
 
     parts = find_recording_parts(path)
     reader = open_bag(parts['bag'])
     cameras = list(rig_from_bag(reader, rig_file=rig or parts['rig']))
+    notes = []
+    if rig or parts['rig']:
+        from monet_ros.io.rig_fit import fit_rig_to_bag
+        cameras, notes = fit_rig_to_bag(cameras, reader, camera_map)
     topics = {c.name: image_topic(reader, c) for c in cameras}
     stamps, complete = [], []
     for frame in iter_multiview_frames(reader, topics, slop_ns=slop_ns, decode=False):
@@ -51,7 +58,7 @@ def recording_index(path, rig=None, slop_ns=0):
     if not stamps:
         raise RecordingError(f'{parts["bag"]}: no image on {sorted(topics.values())}')
     return RecordingIndex(parts['bag'], cameras, topics, np.array(stamps, np.int64),
-                          np.array(complete, bool), reader)
+                          np.array(complete, bool), reader, notes)
 
 
 def _ranges(indices):
@@ -89,10 +96,10 @@ def run(args):
     from monet_ros.skeleton import SkeletonError, load_skeleton
 
     try:
-        index = recording_index(args.rec, rig=args.rig)
+        options = label_options_from_args(args)
+        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map)
         labels = report = None
         if args.labels:
-            options = label_options_from_args(args)
             rows = read_label_rows(args.labels)
             mapped = dict(options.keypoint_map)
             keypoints = (tuple(load_skeleton(args.skeleton).keypoints) if args.skeleton
@@ -105,6 +112,8 @@ def run(args):
         return 2
     out = sys.stdout
     print(f'recording: {index.bag}', file=out)
+    for note in index.notes or ():
+        print(f'note: {note}', file=out)
     print('topics:', file=out)
     for info in sorted(index.reader.topics.values(), key=lambda t: t.name):
         count = '?' if info.count is None else info.count

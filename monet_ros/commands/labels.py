@@ -61,7 +61,7 @@ def run(args):
 
     try:
         options = label_options_from_args(args)
-        index = recording_index(args.rec, rig=args.rig)
+        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map)
         cameras = [c.name for c in index.cameras]
         result = import_labels(args.format, args.path, cameras=cameras, camera=args.camera,
                                min_score=args.min_score, camera_map=dict(options.camera_map))

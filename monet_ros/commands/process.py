@@ -28,6 +28,8 @@ def add_arguments(parser):
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
                         '/tf_static)')
     parser.add_argument('--cameras', nargs='+', help='cameras to use (default: all)')
+    parser.add_argument('--camera-map', action='append', default=[], metavar='SRC=DST',
+                        help="rename --rig cameras to the recording's (e.g. cam_01=cam01)")
     parser.add_argument('--skeleton', default=None,
                         help='skeleton preset or YAML; checked against the model keypoints')
     parser.add_argument('--slop-ms', type=float, default=0.0,
@@ -55,7 +57,7 @@ def add_arguments(parser):
 
 def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None, slop_ns=0,
                       track=True, heatmaps=False, skeleton=None, device=None, progress=True,
-                      exports=(), trc_axes='xyz'):
+                      exports=(), trc_axes='xyz', camera_map=()):
     """Detect + fuse every instant of `bag`; write `out` (+ the `exports` formats of
     monet_ros.io.export_results inside it). Returns a dict of figures (summary: per-joint
     dropout and inlier views; exports: {format: path})."""
@@ -73,6 +75,9 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
         raise FileExistsError(f'{out}: output exists; choose a new folder')
     fusion_config = fusion_config or FusionConfig()
     rig_cameras, frame_id = load_node_rig(rig or bag)
+    if rig is not None and Path(rig).is_file():    # a calibration file: fit it to the images
+        from monet_ros.io.rig_fit import fit_rig_to_bag
+        rig_cameras, _ = fit_rig_to_bag(rig_cameras, open_bag(bag), camera_map)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
     detector = Detector.from_checkpoint(model, device=device)
     edges = None
@@ -137,6 +142,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
 def run(args):
     from monet_ros.fusion import FusionConfig
     from monet_ros.io.export_results import parse_formats
+    from monet_ros.labels import parse_name_map
     from monet_ros.nodes.runner import start_error
 
     if args.threads < 0:
@@ -154,7 +160,8 @@ def run(args):
             args.bag, args.model, args.out, rig=args.rig, cameras=args.cameras or (),
             fusion_config=config, slop_ns=int(args.slop_ms * 1e6), track=not args.no_track,
             heatmaps=args.heatmaps, skeleton=args.skeleton, device=args.device,
-            progress=not args.quiet, exports=exports, trc_axes=args.trc_axes)
+            progress=not args.quiet, exports=exports, trc_axes=args.trc_axes,
+            camera_map=parse_name_map(args.camera_map))
     except (ValueError, OSError) as error:
         start_error('monet process', error)
         return 2

@@ -82,6 +82,8 @@ def run(args):
     except (RecordingError, ValueError, OSError) as error:
         print(f'monet train: {error}', file=sys.stderr)
         return 2
+    for note in recording.rig_notes:
+        print(f'monet train: note: {note}', file=sys.stderr)
     if recording.label_report is not None:
         print(f'monet train: labels: {recording.label_report.summary()}', file=sys.stderr)
     from monet_ros.commands.train_holdout import hold_out, score_holdout
@@ -118,7 +120,8 @@ def run(args):
         from monet_ros.learning.recording import find_recording_parts
         parts = find_recording_parts(args.data)
         figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
-                                held_path, recording)
+                                held_path, recording,
+                                label_options_from_args(args).camera_map)
         summary['holdout'] = {'instants': held.tolist(), **figures}
         print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
               f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '

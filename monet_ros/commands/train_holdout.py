@@ -40,7 +40,7 @@ def hold_out(recording, n, out):
     return held, path
 
 
-def score_holdout(bag, rig, model, labels_path, recording):
+def score_holdout(bag, rig, model, labels_path, recording, camera_map=()):
     """Figures (evaluation.reference.score) of `model` on the held-out labels."""
     from monet_ros.commands.info import RecordingIndex
     from monet_ros.commands.process import process_recording
@@ -52,7 +52,8 @@ def score_holdout(bag, rig, model, labels_path, recording):
     reference = load_reference(labels_path, index, recording.keypoints, fmt='labels')
     with tempfile.TemporaryDirectory(prefix='monet-holdout-') as tmp:
         out = Path(tmp) / 'p'
-        process_recording(bag, model, out, rig=rig, progress=False, exports=('csv', 'npz'))
+        process_recording(bag, model, out, rig=rig, progress=False, exports=('csv', 'npz'),
+                          camera_map=camera_map)
         table = read_anipose_csv(out / 'keypoints3d.csv')
         det = np.load(out / 'detections2d.npz')
     names = list(det['cameras'])

@@ -121,6 +121,9 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     checked by monet_ros.labels.resolve_labels with label_options (LabelOptions: name maps,
     skip_bad); a frame index counts every instant of the bag, incomplete ones included.
     The returned recording's `label_report` says how many rows were used / skipped.
+    A rig file's cameras are renamed by label_options.camera_map and fitted to the images
+    (monet_ros.io.rig_fit: a full-resolution calibration for a half-resolution recording is
+    scaled); `rig_notes` says what was adapted.
     Raises RecordingError (or LabelError, a ValueError) naming the file, line and field.
     """
     from monet_ros.io import iter_multiview_frames, open_bag, rig_from_bag
@@ -135,6 +138,11 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
         else tuple(skeleton)
     reader = open_bag(parts['bag'])
     cameras = rig_from_bag(reader, rig_file=rig)
+    rig_notes = []
+    if rig is not None:       # a calibration file: names mapped, size fitted to the images
+        from monet_ros.io.rig_fit import fit_rig_to_bag
+        cameras, rig_notes = fit_rig_to_bag(
+            cameras, reader, (label_options or LabelOptions()).camera_map)
     names = [c.name for c in cameras]
     topics = {c.name: c.topic or f'/{c.name}/image_raw' for c in cameras}
     stamps, frames, skipped = [], {n: [] for n in names}, 0
@@ -190,4 +198,5 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
                           [np.stack(frames[n]) for n in names], keypoints, label_array, gt)
     recording.skipped = skipped
     recording.label_report = label_report
+    recording.rig_notes = rig_notes
     return recording
