@@ -76,3 +76,33 @@ def test_trc_reference_in_mm_and_y_up(scene, tmp_path):
     long = write_trc(tmp_path / 'long.trc', KP, 10**18 + np.arange(9) * 33_333_333, X[[0] * 9])
     with pytest.raises(LabelError, match=r'long.trc: frame 5 .* is not an instant'):
         load_reference(long, index, KP)
+
+
+def test_real_pose2sim_trc_and_its_projections_agree(shared_data, tmp_path):
+    """Pose2Sim's .trc (Y-up, metres) on the derived 4-camera bag: projected into 3
+    instants as frame-indexed labels with the calibration's camera names, the labels'
+    triangulation returns the .trc points (real distortion, real geometry)."""
+    from monet_ros.commands.info import recording_index
+    from monet_ros.io.export_tables import read_trc
+
+    index = recording_index(shared_data / 'derived_pose2sim_4cam_mcap'
+                            / 'pose2sim_balancing_4cam')
+    trc_path = next((shared_data / 'pose2sim_demo_balancing').rglob('*.trc'))
+    names = read_trc(trc_path)['keypoints']
+    ref3d = load_reference(trc_path, index, names, axes='yzx')
+    assert ref3d.kind == '3d' and np.isfinite(ref3d.X).all(-1).mean() > 0.99
+    lines = ['frame,camera,keypoint,u,v']
+    for t in (10, 50, 90):
+        for cam in index.cameras:
+            for k, (u, v) in zip(names, cam.project(ref3d.X[t])):
+                lines.append(f'{t},{cam.name.replace("cam", "cam_")},{k},{float(u)!r},'
+                             f'{float(v)!r}')
+    (tmp_path / 'frames.csv').write_text('\n'.join(lines) + '\n')
+    with pytest.raises(LabelError, match=r"field camera: 'cam_01' .* did you mean 'cam01'"):
+        load_reference(tmp_path / 'frames.csv', index, names)
+    ref2d = load_reference(tmp_path / 'frames.csv', index, names, options=LabelOptions(
+        camera_map=tuple((f'cam_0{i}', f'cam0{i}') for i in range(1, 5))))
+    np.testing.assert_allclose(ref2d.X[[10, 50, 90]], ref3d.X[[10, 50, 90]], atol=1e-6)
+    figures = score(ref2d, index.stamps, ref3d.X, ref2d.points2d)
+    assert figures['mm_median'] < 1e-3 and figures['px_median'] == 0.0
+    assert figures['views_2d'] == 3 * 4 * 21 and figures['coverage'] == 1.0
