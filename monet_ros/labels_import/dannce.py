@@ -25,7 +25,7 @@ def read_dannce(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
     import scipy.io as sio
     try:
         mat = sio.loadmat(path)
-    except (OSError, ValueError, NotImplementedError, TypeError) as error:
+    except Exception as error:    # noqa: BLE001 - scipy raises many kinds for non-.mat input
         raise LabelError(f'{path}: cannot read as a Label3D .mat file ({error})') from None
     for key in ('camnames', 'labelData'):
         if key not in mat:

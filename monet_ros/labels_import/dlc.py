@@ -158,8 +158,9 @@ def read_dlc_h5(path, **kwargs):
     import pandas as pd
     try:
         frame = pd.read_hdf(path)
-    except (OSError, ValueError, KeyError, TypeError, ImportError) as error:
-        raise LabelError(f'{path}: cannot read as a DeepLabCut H5 table ({error})') from None
+    except Exception as error:    # noqa: BLE001 - PyTables / pandas raise many kinds
+        text = str(error).strip().splitlines()[-1] if str(error).strip() else type(error).__name__
+        raise LabelError(f'{path}: cannot read as a DeepLabCut H5 table ({text})') from None
     columns = list(frame.columns)
     if not columns or not isinstance(columns[0], tuple):
         raise LabelError(f'{path}: columns are not a (scorer, bodyparts, coords) MultiIndex')
