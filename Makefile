@@ -14,7 +14,7 @@ $(STAMP): requirements.txt setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
-	$(PY) -c "import rclpy, torch, cv2, mcap, rosbags; print('environment ready: torch', torch.__version__)"
+	$(PY) -c "import rclpy, torch, cv2, mcap, rosbags, h5py, pandas, pynwb, ndx_pose; print('environment ready: torch', torch.__version__)"
 	touch $(STAMP)
 
 demo: $(STAMP)

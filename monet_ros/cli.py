@@ -29,6 +29,9 @@ SUBCOMMANDS = {
     'demo': 'demo',
     'process': 'process',
     'pipeline': 'pipeline',
+    'import': 'import_videos',
+    'labels': 'labels',
+    'info': 'info',
 }
 
 

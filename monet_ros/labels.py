@@ -1,4 +1,5 @@
-"""2D keypoint labels of multiview recordings: a small CSV format (no ROS).
+"""2D keypoint labels of multiview recordings: the canonical table and its ONE validator
+(no ROS). Used by `monet train`, `monet eval`, `monet info`, `monet labels import`.
 
 Format (UTF-8 CSV, one labelled keypoint per row, comma separated, header required)::
 
@@ -17,18 +18,43 @@ A keypoint that is not labelled in a view simply has no row. Rows may come in an
 a (stamp_ns, camera, keypoint) triple may appear only once. `monet synth` labels every
 keypoint that projects inside the image, occluded ones included (see its README).
 
+A frame-indexed variant has `frame` (the 0-based index of the recording's multiview
+instant, as `monet info` lists them) instead of `stamp_ns`::
+
+    frame,camera,keypoint,u,v
+    42,cam0,head,312.25,101.5
+
 read_labels(path, keypoints) -> Labels: stamp_ns -> camera -> (C, 2) float64 array in
-keypoint order, NaN where unlabelled. write_labels(path, rows) writes atomically.
+keypoint order, NaN where unlabelled (stamp-keyed files only). write_labels(path, rows)
+writes atomically.
+
+Labels against a recording (any source: either CSV, or an importer in
+monet_ros.labels_import) go through ONE validator, `resolve_labels(rows, stamps, cameras,
+keypoints, options)`:
+- camera and keypoint names are mapped (`LabelOptions.camera_map`, `keypoint_map`, e.g.
+  cam_01 -> cam01) and must then name a rig camera / skeleton keypoint;
+- a `frame` must be an instant index 0..T-1; a `stamp_ns` matches the NEAREST instant
+  within half the recording's median frame period (so a few ns of rounding match); a
+  stamp that only matches after x1e6 / x1e3 / x1e9 is reported as milliseconds /
+  microseconds / seconds instead of nanoseconds;
+- u must lie in [-0.5, width - 0.5] and v in [-0.5, height - 0.5] (pixel-edge box of the
+  camera's image, the convention of `monet synth`);
+- a (instant, camera, keypoint) may be labelled once.
+Every bad row raises LabelError naming file, line and field; with
+`LabelOptions(skip_bad=True)` (`--skip-bad-labels`) it is dropped and counted by kind in
+the returned LabelReport instead. Nothing is dropped silently.
 """
 import csv
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 import os
 from pathlib import Path
+import re
 
 import numpy as np
 
 HEADER = ('stamp_ns', 'camera', 'keypoint', 'u', 'v')
+FRAME_HEADER = ('frame', 'camera', 'keypoint', 'u', 'v')
 
 
 class LabelError(ValueError):
@@ -92,88 +118,143 @@ def _keypoint_names(keypoints):
     return tuple(str(k) for k in names)
 
 
-def read_labels(path, keypoints=None):
-    """Labels from a CSV file (format in the module docstring).
+@dataclass(frozen=True)
+class LabelRow:
+    """One label as read from a source, before it is checked against a recording.
 
-    keypoints: a Skeleton or a list of names fixing the channel order (a row naming any
-    other keypoint is an error); None = the names found in the file, sorted.
-    Raises LabelError naming the file, line and field for any malformed row.
+    source: file name (for messages); line: 1-based line (CSV) or row/record number;
+    stamp_ns or frame (exactly one is not None); camera, keypoint: names as in the source;
+    u, v: pixels (finite). where: how to name the place in messages (default 'line N')."""
+    source: str
+    line: int
+    stamp_ns: int | None
+    frame: int | None
+    camera: str
+    keypoint: str
+    u: float
+    v: float
+    where: str = ''
+
+    @property
+    def place(self):
+        return f'{self.source}:{self.where or self.line}'
+
+
+def read_label_rows(path):
+    """LabelRow list of a stamp-keyed or frame-indexed labels CSV (module docstring).
+
+    Only the syntax is checked here (header, field count, integer stamp/frame, finite u/v,
+    non-empty names); names, instants and bounds are checked by resolve_labels. Raises
+    LabelError naming the file, line and field.
     """
     path = Path(path)
-    names = _keypoint_names(keypoints)
     try:
         handle = open(path, newline='', encoding='utf-8-sig')
     except OSError as error:
         raise LabelError(f'{path}: cannot open labels file ({error.strerror})') from None
-    parsed = []
+    rows = []
     with handle:
         reader = csv.reader(handle)
         try:
             header = next(reader, None)
             if header is None:
                 raise LabelError(f'{path}: empty file, expected the header '
-                                 f'{",".join(HEADER)}')
-            if tuple(h.strip() for h in header) != HEADER:
+                                 f'{",".join(HEADER)} or {",".join(FRAME_HEADER)}')
+            header = tuple(h.strip() for h in header)
+            if header not in (HEADER, FRAME_HEADER):
                 raise LabelError(f'{path}:1: header is {",".join(header)!r}, expected '
-                                 f'{",".join(HEADER)!r}')
+                                 f'{",".join(HEADER)!r} or {",".join(FRAME_HEADER)!r}')
             for row in reader:
-                line = reader.line_num
                 if not row or all(not cell.strip() for cell in row):
                     continue
-                parsed.append(_parse_row(path, line, row, names))
+                rows.append(_parse_row(path, reader.line_num, row, header))
         except csv.Error as error:
             raise LabelError(f'{path}:{reader.line_num}: not valid CSV ({error})') from None
         except UnicodeDecodeError as error:
             raise LabelError(f'{path}: not UTF-8 text ({error})') from None
+    return rows
+
+
+def read_labels(path, keypoints=None):
+    """Labels from a stamp-keyed CSV file (format in the module docstring), without a
+    recording: stamps are kept as written, cameras as named.
+
+    keypoints: a Skeleton or a list of names fixing the channel order (a row naming any
+    other keypoint is an error); None = the names found in the file, sorted.
+    Raises LabelError naming the file, line and field for any malformed row, and for a
+    frame-indexed file (that needs a recording: resolve_labels / load_recording).
+    """
+    rows = read_label_rows(path)
+    names = _keypoint_names(keypoints)
+    for row in rows:
+        if row.stamp_ns is None:
+            raise LabelError(f'{row.place}: field frame: a frame-indexed labels file needs '
+                             'a recording to resolve frames to stamps (monet train/eval '
+                             '--labels, or monet labels import frames)')
+        if names is not None and row.keypoint not in names:
+            raise LabelError(f'{row.place}: field keypoint: {row.keypoint!r} is not a '
+                             f'keypoint of the skeleton ({", ".join(names)})')
     if names is None:
-        names = tuple(sorted({row[2] for row in parsed}))
+        names = tuple(sorted({row.keypoint for row in rows}))
+    return _build_labels(rows, names, [r.stamp_ns for r in rows], [r.camera for r in rows],
+                         [r.keypoint for r in rows])
+
+
+def _build_labels(rows, names, stamps, cameras, keypoints):
+    """Labels from rows and their resolved stamp, camera, keypoint; duplicates raise."""
     index = {k: i for i, k in enumerate(names)}
     frames = {}
     seen = {}
-    for line, stamp, camera, keypoint, u, v in ((r[5], *r[:5]) for r in parsed):
+    for row, stamp, camera, keypoint in zip(rows, stamps, cameras, keypoints):
         key = (stamp, camera, keypoint)
         if key in seen:
-            raise LabelError(f'{path}:{line}: duplicate label for stamp_ns={stamp} '
-                             f'camera={camera} keypoint={keypoint} (first on line '
-                             f'{seen[key]})')
-        seen[key] = line
+            raise LabelError(f'{row.place}: duplicate label for stamp_ns={stamp} '
+                             f'camera={camera} keypoint={keypoint} '
+                             f'({_first(seen[key], row)})')
+        seen[key] = row
         views = frames.setdefault(stamp, {})
         if camera not in views:
             views[camera] = np.full((len(names), 2), np.nan)
-        views[camera][index[keypoint]] = (u, v)
-    return Labels(keypoints=names, frames=frames)
+        views[camera][index[keypoint]] = (row.u, row.v)
+    return Labels(keypoints=tuple(names), frames=frames)
 
 
-def _parse_row(path, line, row, names):
-    """(stamp_ns, camera, keypoint, u, v, line) of one CSV row, or LabelError."""
-    if len(row) != len(HEADER):
-        raise LabelError(f'{path}:{line}: expected {len(HEADER)} fields '
-                         f'({",".join(HEADER)}), got {len(row)}')
-    stamp_text, camera, keypoint, u_text, v_text = (cell.strip() for cell in row)
+def _first(first, row):
+    """'first on line N' (same file) or 'first at FILE:WHERE'."""
+    if first.source == row.source:
+        return f'first on {first.where or f"line {first.line}"}'
+    return f'first at {first.place}'
+
+
+def _parse_row(path, line, row, header):
+    """LabelRow of one CSV row, or LabelError."""
+    if len(row) != len(header):
+        raise LabelError(f'{path}:{line}: expected {len(header)} fields '
+                         f'({",".join(header)}), got {len(row)}')
+    key_text, camera, keypoint, u_text, v_text = (cell.strip() for cell in row)
+    key = header[0]
     try:
-        stamp = int(stamp_text)
+        value = int(key_text)
     except ValueError:
-        raise LabelError(f'{path}:{line}: field stamp_ns: {stamp_text!r} is not an integer '
-                         'number of nanoseconds') from None
-    if stamp < 0:
-        raise LabelError(f'{path}:{line}: field stamp_ns: must be >= 0, got {stamp}')
+        what = 'an integer number of nanoseconds' if key == 'stamp_ns' else 'an integer'
+        raise LabelError(f'{path}:{line}: field {key}: {key_text!r} is not {what}') from None
+    if value < 0:
+        raise LabelError(f'{path}:{line}: field {key}: must be >= 0, got {value}')
     if not camera:
         raise LabelError(f'{path}:{line}: field camera: empty')
     if not keypoint:
         raise LabelError(f'{path}:{line}: field keypoint: empty')
-    if names is not None and keypoint not in names:
-        raise LabelError(f'{path}:{line}: field keypoint: {keypoint!r} is not a keypoint of '
-                         f'the skeleton ({", ".join(names)})')
     coords = []
-    for field, text in (('u', u_text), ('v', v_text)):
+    for name, text in (('u', u_text), ('v', v_text)):
         try:
-            value = float(text)
+            number = float(text)
         except ValueError:
-            value = math.nan
-        if not math.isfinite(value):
-            raise LabelError(f'{path}:{line}: field {field}: {text!r} is not a finite number')
-        coords.append(value)
-    return stamp, camera, keypoint, coords[0], coords[1], line
+            number = math.nan
+        if not math.isfinite(number):
+            raise LabelError(f'{path}:{line}: field {name}: {text!r} is not a finite number')
+        coords.append(number)
+    stamp, frame = (value, None) if key == 'stamp_ns' else (None, value)
+    return LabelRow(str(path), line, stamp, frame, camera, keypoint, coords[0], coords[1])
 
 
 def write_labels(path, rows):
@@ -213,3 +294,240 @@ def label_rows(stamps, cameras, keypoints, points2d):
                 u, v = points2d[i, j, c]
                 if np.isfinite(u) and np.isfinite(v):
                     yield int(stamp), cam, name, float(u), float(v)
+
+
+# ------------------------------------------------------------------- the label validator
+
+STAMP_UNITS = (('milliseconds', 1_000_000), ('microseconds', 1_000), ('seconds', 1_000_000_000))
+SKIP_KINDS = ('camera', 'keypoint', 'instant', 'bounds', 'duplicate')
+
+
+def parse_name_map(items, what='camera'):
+    """('a=b', 'c=d,e=f', ...) or a dict -> tuple of (source, target) pairs.
+
+    Raises LabelError naming the bad item (an entry without '=' or an empty side)."""
+    if isinstance(items, dict):
+        return tuple((str(k), str(v)) for k, v in items.items())
+    pairs = []
+    for item in items or ():
+        if isinstance(item, (tuple, list)) and len(item) == 2:
+            pairs.append((str(item[0]), str(item[1])))
+            continue
+        for part in str(item).split(','):
+            if not part.strip():
+                continue
+            source, sep, target = part.partition('=')
+            if not sep or not source.strip() or not target.strip():
+                raise LabelError(f'--{what}-map: {part!r} is not NAME=NEW_NAME')
+            pairs.append((source.strip(), target.strip()))
+    return tuple(pairs)
+
+
+@dataclass(frozen=True)
+class LabelOptions:
+    """How labels are matched to a recording (validated on construction).
+
+    camera_map, keypoint_map: (source name, recording name) pairs ('cam_01=cam01' strings
+    are accepted too); skip_bad: drop and count bad rows instead of raising;
+    stamp_tolerance: fraction of the median frame period within which a stamp matches its
+    nearest instant (0 < x <= 0.5; default 0.5 = half a frame period)."""
+    camera_map: tuple = ()
+    keypoint_map: tuple = ()
+    skip_bad: bool = False
+    stamp_tolerance: float = 0.5
+
+    def __post_init__(self):
+        object.__setattr__(self, 'camera_map', parse_name_map(self.camera_map, 'camera'))
+        object.__setattr__(self, 'keypoint_map', parse_name_map(self.keypoint_map, 'keypoint'))
+        if not isinstance(self.skip_bad, bool):
+            raise LabelError(f'skip_bad must be true or false, got {self.skip_bad!r}')
+        tol = self.stamp_tolerance
+        if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol <= 0.5:
+            raise LabelError(f'stamp_tolerance must be in (0, 0.5] frame periods, got {tol!r}')
+
+
+@dataclass
+class LabelReport:
+    """What resolve_labels did: rows read, kept, and dropped per kind (skip_bad only),
+    with the first message of each kind."""
+    rows: int = 0
+    kept: int = 0
+    skipped: dict = field(default_factory=dict)
+    first: dict = field(default_factory=dict)
+
+    @property
+    def total_skipped(self):
+        return sum(self.skipped.values())
+
+    def summary(self):
+        text = f'{self.kept} of {self.rows} label rows used'
+        if self.skipped:
+            parts = ', '.join(f'{n} ({kind})' for kind, n in sorted(self.skipped.items()))
+            text += f'; skipped {parts} (first: {next(iter(self.first.values()))})'
+        return text
+
+
+def _nearest(stamps, value):
+    """(index, |difference|) of the recording stamp nearest `value` (Python ints)."""
+    i = int(np.searchsorted(stamps, min(max(value, int(stamps[0])), int(stamps[-1]))))
+    best = None
+    for j in (i - 1, i):
+        if 0 <= j < len(stamps):
+            d = abs(int(stamps[j]) - value)
+            if best is None or d < best[1]:
+                best = (j, d)
+    return best
+
+
+def _stamp_problem(stamp, stamps, tolerance_ns):
+    """None when `stamp` matches an instant, else the reason (text)."""
+    first, last = int(stamps[0]), int(stamps[-1])
+    for unit, factor in STAMP_UNITS:
+        j, d = _nearest(stamps, stamp * factor)
+        if d <= tolerance_ns:
+            return (f'{stamp} matches no instant, but x{factor} matches instant {j} '
+                    f'({int(stamps[j])}): the stamp looks like {unit}, expected nanoseconds')
+    j, d = _nearest(stamps, stamp)
+    if stamp < first - tolerance_ns or stamp > last + tolerance_ns:
+        return (f'{stamp} is outside the recording ({first} .. {last} ns, '
+                f'{len(stamps)} instants)')
+    return (f'{stamp} matches no instant: the nearest ({j}, {int(stamps[j])}) is {d} ns '
+            f'away, more than the tolerance {tolerance_ns} ns')
+
+
+def frame_period_ns(stamps):
+    """Median difference of consecutive stamps (ns), 0 for fewer than 2 instants."""
+    stamps = np.asarray(stamps, dtype=np.int64)
+    return int(np.median(np.diff(stamps))) if len(stamps) > 1 else 0
+
+
+def resolve_labels(rows, stamps, cameras, keypoints, options=None, valid=None):
+    """Check label rows against a recording -> (Labels keyed by the recording's stamps,
+    LabelReport). The ONE label validator (rules in the module docstring).
+
+    rows: LabelRow iterable (read_label_rows or an importer); stamps: (T,) int ns of the
+    recording's instants, increasing (a row's frame indexes them); cameras: Camera list
+    (name, width, height) or (name, width, height) tuples; keypoints: a Skeleton or names;
+    options: LabelOptions; valid: optional (T,) bool, False where an instant cannot be
+    used (e.g. a view is missing) - labels there are 'instant' errors too.
+    Raises LabelError (file:line: field ...: reason) for the first bad row unless
+    options.skip_bad; then bad rows are counted in the report.
+    """
+    options = options or LabelOptions()
+    names = _keypoint_names(keypoints)
+    stamps = np.asarray(stamps, dtype=np.int64)
+    sizes = {}
+    for cam in cameras:
+        name, width, height = (cam if isinstance(cam, tuple)
+                               else (cam.name, cam.width, cam.height))
+        sizes[name] = (int(width), int(height))
+    camera_map, keypoint_map = dict(options.camera_map), dict(options.keypoint_map)
+    period = frame_period_ns(stamps)
+    tolerance_ns = int(period * options.stamp_tolerance)
+    report = LabelReport()
+    kept, kept_stamps, kept_cams, kept_kps, seen = [], [], [], [], {}
+
+    def bad(kind, row, field_name, reason):
+        message = f'{row.place}: field {field_name}: {reason}'
+        if not options.skip_bad:
+            raise LabelError(message + ' (--skip-bad-labels drops and counts such rows)')
+        report.skipped[kind] = report.skipped.get(kind, 0) + 1
+        report.first.setdefault(kind, message)
+
+    for row in rows:
+        report.rows += 1
+        camera = camera_map.get(row.camera, row.camera)
+        if camera not in sizes:
+            hint = _name_hint(row.camera, sizes, 'camera')
+            bad('camera', row, 'camera', f'{row.camera!r}'
+                + (f' (mapped to {camera!r})' if camera != row.camera else '')
+                + f' is not a camera of the recording ({", ".join(sorted(sizes))}){hint}')
+            continue
+        keypoint = keypoint_map.get(row.keypoint, row.keypoint)
+        if keypoint not in names:
+            hint = _name_hint(row.keypoint, names, 'keypoint')
+            bad('keypoint', row, 'keypoint', f'{row.keypoint!r} is not a keypoint of the '
+                f'skeleton ({", ".join(names)}){hint}')
+            continue
+        if len(stamps) == 0:
+            bad('instant', row, 'frame' if row.stamp_ns is None else 'stamp_ns',
+                'the recording has no instant')
+            continue
+        if row.frame is not None:
+            if not 0 <= row.frame < len(stamps):
+                bad('instant', row, 'frame', f'{row.frame} is not an instant of the recording '
+                    f'(0 .. {len(stamps) - 1})')
+                continue
+            t = row.frame
+        else:
+            t, d = _nearest(stamps, row.stamp_ns)
+            if d > tolerance_ns:
+                bad('instant', row, 'stamp_ns',
+                    _stamp_problem(row.stamp_ns, stamps, tolerance_ns))
+                continue
+        if valid is not None and not valid[t]:
+            bad('instant', row, 'frame' if row.stamp_ns is None else 'stamp_ns',
+                f'instant {t} ({int(stamps[t])}) is incomplete (a view is missing)')
+            continue
+        width, height = sizes[camera]
+        out = [(f, x, n) for f, x, n in (('u', row.u, width), ('v', row.v, height))
+               if not -0.5 <= x <= n - 0.5]
+        if out:
+            f, x, n = out[0]
+            bad('bounds', row, f, f'{x!r} lies outside the image of {camera} '
+                f'({width}x{height}: -0.5 .. {n - 0.5})')
+            continue
+        key = (t, camera, keypoint)
+        if key in seen:
+            bad('duplicate', row, 'keypoint', f'{keypoint} of {camera} at instant {t} is '
+                f'labelled twice ({_first(seen[key], row)})')
+            continue
+        seen[key] = row
+        kept.append(row)
+        kept_stamps.append(int(stamps[t]))
+        kept_cams.append(camera)
+        kept_kps.append(keypoint)
+    report.kept = len(kept)
+    return _build_labels(kept, names, kept_stamps, kept_cams, kept_kps), report
+
+
+def _canonical(name):
+    """Lower-case alphanumerics without leading zeros in numbers ('Cam_01' -> 'cam1')."""
+    return re.sub(r'0+(\d)', r'\1', re.sub(r'[^0-9a-z]', '', name.lower()))
+
+
+def _name_hint(name, known, what):
+    """'; did you mean X? (--what-map NAME=X)' when one known name looks the same."""
+    near = [k for k in known if _canonical(k) == _canonical(name)]
+    if len(near) == 1:
+        return f'; did you mean {near[0]!r}? (--{what}-map {name}={near[0]})'
+    return f'; map names with --{what}-map {name}=NAME'
+
+
+def match_camera_names(cameras, names, what='file'):
+    """{camera: name} matching each camera to the one name (e.g. a video file name) that
+    contains it, as anipose does; the longest camera name wins when several fit (cam1 vs
+    cam10). Raises LabelError listing what failed (a camera matching no name or several,
+    a name claimed by two cameras)."""
+    out, problems = {}, []
+    for cam in cameras:
+        hits = [n for n in names if cam in n
+                and not any(len(o) > len(cam) and o in n and cam in o for o in cameras)]
+        if len(hits) == 1:
+            out[cam] = hits[0]
+        elif not hits:
+            hint = [n for n in names if _canonical(cam) in _canonical(n)]
+            stem = Path(hint[0]).stem if hint else ''
+            problems.append(f'camera {cam!r} matches no {what}'
+                            + (f' (looks like {hint[0]!r}: --camera-map {cam}={stem})'
+                               if hint else ''))
+        else:
+            problems.append(f'camera {cam!r} matches several {what}s ({", ".join(hits)})')
+    claimed = {}
+    for cam, n in out.items():
+        claimed.setdefault(n, []).append(cam)
+    problems += [f'{what} {n!r} matches cameras {", ".join(c)}' for n, c in claimed.items()
+                 if len(c) > 1]
+    if problems:
+        raise LabelError('; '.join(problems) + f' ({what}s: {", ".join(names)})')
+    return out

@@ -1,4 +1,6 @@
-"""`monet eval`: PCK and reprojection-error tables (rows = modes, columns = datasets)."""
+"""`monet eval`: PCK and reprojection-error tables (rows = modes, columns = datasets);
+with --reference, accuracy against labels or a 3D reference in px and mm, one row per
+checkpoint (commands/eval_reference.py)."""
 from pathlib import Path
 import sys
 
@@ -18,6 +20,12 @@ def add_arguments(parser):
     parser.add_argument('--from-json', help='re-render the report from a results.json')
     parser.add_argument('--device', default=None, help='torch device (default: CUDA if present)')
     parser.add_argument('--threads', type=int, default=0, help='torch CPU threads (0 = default)')
+    parser.add_argument('--labels', help="labels CSV for --data (default: the data folder's); "
+                        'checked against the recording like monet train')
+    from monet_ros.commands.eval_reference import add_reference_arguments
+    from monet_ros.commands.labels import add_label_arguments
+    add_label_arguments(parser)
+    add_reference_arguments(parser)
 
 
 def load_results_json(path):
@@ -53,16 +61,23 @@ def run(args):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
+    if args.reference:
+        from monet_ros.commands.eval_reference import run_reference
+        return run_reference(args)
     if args.from_json:
         summaries = load_results_json(args.from_json)
     else:
         if not args.checkpoints or not args.data:
             raise ValueError('give checkpoints and --data (or --from-json)')
-        recordings = [load_recording(d, skeleton=args.skeleton) for d in args.data]
+        from monet_ros.commands.labels import label_options_from_args
+        options = label_options_from_args(args)
+        recordings = [load_recording(d, skeleton=args.skeleton, labels=args.labels,
+                                     label_options=options) for d in args.data]
         for data, rec in zip(args.data, recordings):
             if rec.gt3d is None:
                 raise ValueError(f'--data {data}: no ground truth (ground_truth.npz beside '
-                                 'the recording); monet eval needs 3D ground truth')
+                                 'the recording); monet eval needs 3D ground truth (or give '
+                                 '--reference)')
         summaries = []
         for path in args.checkpoints:
             detector = Detector.from_checkpoint(path, device=device)

@@ -95,6 +95,9 @@ class Summary:
         self.last_fused = None
         self.cond = threading.Condition(self.lock)
         self.last_stamp = -1
+        self.joint_fused = None   # (C,) frames in which each joint was triangulated
+        self.joint_views = None   # (C,) sum of its inlier views over those frames
+        self.names = None         # keypoint names (the fusion node's skeleton)
 
     def on_image(self, topic, stamp_ns, wall):
         with self.lock:
@@ -121,6 +124,12 @@ class Summary:
                 self.error_sum += mean
                 self.error_count += 1
             self.last_stamp = max(self.last_stamp, stamp_ns)
+            fused = np.isfinite(result.X).all(axis=1)
+            if self.joint_fused is None or len(self.joint_fused) != len(fused):
+                self.joint_fused = np.zeros(len(fused), np.int64)
+                self.joint_views = np.zeros(len(fused), np.int64)
+            self.joint_fused += fused
+            self.joint_views += np.where(fused, result.num_views, 0).astype(np.int64)
             self.cond.notify_all()
 
     def gate(self, timeout_s=5.0):
@@ -153,7 +162,22 @@ class Summary:
             parts.append(f'reprojection error {np.mean(err):5.2f} px')
         elif window is None and self.error_count:
             parts.append(f'reprojection error {error_mean:5.2f} px')
+        if window is None and self.joint_fused is not None and self.frames:
+            parts.append(self.joint_line())
         return ' | '.join(parts)
+
+    def joint_line(self, names=None):
+        """Per-joint dropout and inlier views, and what reprojection error means."""
+        with self.lock:
+            fused, views, frames = self.joint_fused.copy(), self.joint_views.copy(), self.frames
+        dropout = 1.0 - fused / max(frames, 1)
+        names = names or self.names or [f'joint {c}' for c in range(len(fused))]
+        worst = int(np.argmax(dropout))
+        mean_views = views.sum() / max(fused.sum(), 1)
+        return (f'joints triangulated {100 * (1 - dropout.mean()):.0f}% (most dropped: '
+                f'{names[worst]} {100 * dropout[worst]:.0f}%), mean inlier views '
+                f'{mean_views:.2f} (reprojection error is agreement between views, not '
+                'accuracy)')
 
 
 def image_transport(bag, cameras):
@@ -243,6 +267,7 @@ def run(args):
             fusion.listeners.append(summary.on_fused)
             if score is not None:
                 fusion.listeners.append(score.on_fused)
+            summary.names = list(fusion.skeleton.keypoints)
             player.listeners.append(summary.on_image)
             if args.lockstep:
                 player.gate = summary.gate()

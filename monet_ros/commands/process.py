@@ -1,7 +1,13 @@
 """`monet process`: the detector + fusion core over a recording, offline and as fast as
 possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 MCAP.
 
-    monet process REC --model CKPT --out OUT [--rig RIG] [--heatmaps]
+    monet process REC --model CKPT --out OUT [--rig RIG] [--heatmaps] [--threads N]
+        [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx]
+
+Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
+(monet_ros.io.export_results): keypoints3d.csv (anipose's 3D CSV layout),
+keypoints3d.trc (OpenSim / Pose2Sim), keypoints.nwb (NWB + ndx-pose, 3D and the 2D
+detections per camera) and detections2d.npz (2D detections + crop cameras).
 
 The same functions as the live nodes: Detector.predict (one batched forward per instant),
 tracking.crop_boxes (crop around the previous instant's 3D keypoints), fusion.fuse_heatmaps.
@@ -9,6 +15,7 @@ tracking.crop_boxes (crop around the previous instant's 3D keypoints), fusion.fu
 from collections import Counter
 from dataclasses import dataclass
 import math
+from pathlib import Path
 import sys
 import time
 
@@ -28,6 +35,8 @@ def add_arguments(parser):
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
                         '/tf_static)')
     parser.add_argument('--cameras', nargs='+', help='cameras to use (default: all)')
+    parser.add_argument('--camera-map', action='append', default=[], metavar='SRC=DST',
+                        help="rename --rig cameras to the recording's (e.g. cam_01=cam01)")
     parser.add_argument('--skeleton', default=None,
                         help='skeleton preset or YAML; checked against the model keypoints')
     parser.add_argument('--slop-ms', type=float, default=0.0,
@@ -49,6 +58,11 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
+    parser.add_argument('--export', default='csv,trc,nwb,npz',
+                        help='analysis files written into OUT: any of csv (anipose), trc, '
+                        'nwb (ndx-pose), npz (2D detections + crop cameras); "none" for none')
+    parser.add_argument('--trc-axes', choices=('xyz', 'yzx'), default='xyz',
+                        help='TRC axes: world as is, or yzx = Y-up as Pose2Sim/OpenSim')
 
 
 @dataclass(frozen=True)
@@ -91,18 +105,22 @@ def view_problem(image, camera):
 
 
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
-                      skeleton=None, progress=True, backend='torch', threads=0):
+                      skeleton=None, progress=True, backend='torch', threads=0, exports=(),
+                      trc_axes='xyz', camera_map=()):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
     first reason), seconds, mean_error, mean_views, report (the reader's ReadReport).
     backend: 'torch' or 'onnxruntime'; threads: CPU threads (0 = the library's default).
+    exports: formats of monet_ros.io.export_results written inside `out` (figures['exports']:
+    {format: path}; figures['summary']: per-joint dropout and inlier views).
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
     from monet_ros.commands.common import atomic_output_dir, check_new_output
     from monet_ros.fusion import fuse_heatmaps
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
+    from monet_ros.io.export_results import ResultsCollector
     from monet_ros.io.multiview import image_topics
     from monet_ros.models import Detector
     from monet_ros.nodes.rig import load_node_rig, select_cameras
@@ -113,12 +131,17 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     fusion_config = config_subset(config, FusionConfig)
     check_new_output(out, 'monet process')
     rig_cameras, frame_id = load_node_rig(rig or bag)
+    if rig is not None and Path(rig).is_file():    # a calibration file: fit it to the images
+        from monet_ros.io.rig_fit import fit_rig_to_bag
+        rig_cameras, _ = fit_rig_to_bag(rig_cameras, open_bag(bag), camera_map)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
     if config.min_views > len(cameras):
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
     detector = Detector.from_checkpoint(model, device=device, backend=backend, threads=threads)
+    edges = None
     if skeleton is not None:
+        edges = load_skeleton(skeleton).bone_indices
         names = list(load_skeleton(skeleton).keypoints)
         if names != list(detector.keypoints):
             raise ConfigError('monet process', 'skeleton',
@@ -130,6 +153,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     figures = dict(frames=0, views=0, missing_views=0, skipped_views=Counter(),
                    skip_reasons={}, seconds=0.0)
     errors, num_views = RunningMean(), RunningMean()
+    collector = ResultsCollector(cameras, detector.keypoints)
     previous = None
     start = time.perf_counter()
     with atomic_output_dir(out) as staging, BagWriter(staging) as writer:
@@ -165,6 +189,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                 for cam, hm in zip(present, heat):
                     writer.write_heatmaps(f'/monet/{cam.name}/heatmaps', frame.stamp_ns, hm,
                                           cam.name)
+            collector.add(frame.stamp_ns, present, result, heat_cameras)
             finite = np.isfinite(result.X).all(axis=1)
             previous = result.X if finite.sum() >= 3 else None
             figures['frames'] += 1
@@ -172,6 +197,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
             errors.add(float(np.nanmean(result.reprojection_error)) if finite.any()
                        else float('nan'))
             num_views.add(float(result.num_views.mean()))
+        written = collector.write(staging, exports, edges=edges, trc_axes=trc_axes)
+    figures['exports'] = {fmt: Path(out) / Path(path).relative_to(staging)
+                          for fmt, path in written.items()}
+    figures['summary'] = collector.summary()
     figures['seconds'] = time.perf_counter() - start
     figures['mean_error'], figures['mean_views'] = errors.mean, num_views.mean
     figures['report'] = reader.report
@@ -180,6 +209,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
 
 def run(args):
     from monet_ros.commands.common import check_device, check_threads
+    from monet_ros.io.export_results import parse_formats
+    from monet_ros.labels import parse_name_map
 
     config = ProcessConfig(threshold_px=args.threshold_px,
                            confidence_threshold=args.confidence_threshold,
@@ -191,7 +222,8 @@ def run(args):
     figures = process_recording(
         args.bag, args.model, args.out, rig=args.rig, cameras=args.cameras or (),
         config=config, skeleton=args.skeleton, device=device, progress=not args.quiet,
-        backend=args.backend, threads=args.threads)
+        backend=args.backend, threads=args.threads, exports=parse_formats(args.export),
+        trc_axes=args.trc_axes, camera_map=parse_name_map(args.camera_map))
     fps = figures['frames'] / figures['seconds'] if figures['seconds'] else 0.0
     skipped = figures['skipped_views']
     print(f'monet process: {figures["frames"]} frames ({figures["views"]} views, '
@@ -204,6 +236,16 @@ def run(args):
     for name, count in sorted(skipped.items()):
         print(f'monet process: skipped {count} views of {name}: '
               f'{figures["skip_reasons"][name]}', file=sys.stderr)
+    summary = figures['summary']
+    if summary['frames']:
+        dropout = ', '.join(f'{k} {100 * v:.0f}%' for k, v in summary['dropout'].items())
+        views = ', '.join(f'{k} {v:.1f}' for k, v in summary['inlier_views'].items())
+        print(f'monet process: per-joint dropout (not triangulated): {dropout}')
+        print(f'monet process: mean inlier views per joint: {views}')
+        print('monet process: reprojection error measures agreement between the views used, '
+              'not accuracy: score accuracy with `monet eval --reference`')
+    for fmt, path in figures['exports'].items():
+        print(f'monet process: wrote {fmt}: {path}')
     report = figures['report']
     if report is not None and not report.ok:
         print(f'monet process: reading {args.bag}: {report.summary()}', file=sys.stderr)

@@ -30,7 +30,9 @@ def add_arguments(parser):
     parser.add_argument('--out', required=True, help='output folder (checkpoints, log)')
     parser.add_argument('--rig', help="rig file (default: the data folder's rig.yaml, else "
                         "the bag's CameraInfo + /tf_static)")
-    parser.add_argument('--labels', help="labels CSV (default: the data folder's labels.csv)")
+    parser.add_argument('--labels', help="labels CSV, stamp_ns- or frame-keyed (default: the "
+                        "data folder's labels.csv); checked against the recording, see "
+                        '--camera-map / --skip-bad-labels')
     parser.add_argument('--ground-truth', help='ground_truth.npz (for ground-truth crop boxes)')
     parser.add_argument('--skeleton', default='human14', help='skeleton preset or YAML file')
     parser.add_argument('--max-instants', type=int, default=0,
@@ -41,6 +43,11 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='torch CPU threads (0 = torch default; 1 is fastest on a busy '
                         'machine)')
+    parser.add_argument('--holdout-labelled', type=int, default=0, metavar='N',
+                        help='leave N labelled instants out of training and report the '
+                        "model's error on them (px, mm) at the end (0 = off)")
+    from monet_ros.commands.labels import add_label_arguments
+    add_label_arguments(parser)
     group = parser.add_argument_group('training configuration (TrainConfig)')
     for f in fields(TrainConfig):
         flag = '--' + f.name.replace('_', '-')
@@ -67,6 +74,8 @@ def config_from_args(args):
 
 def run(args):
     from monet_ros.commands.common import check_device, check_threads
+    from monet_ros.commands.labels import label_options_from_args
+    from monet_ros.commands.train_holdout import hold_out, score_holdout
     from monet_ros.learning.recording import load_recording
     from monet_ros.learning.trainer import Trainer, TrainingData
     from monet_ros.models import build_model
@@ -80,12 +89,27 @@ def run(args):
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
     recording = load_recording(args.data, rig=args.rig, labels=args.labels,
                                ground_truth=args.ground_truth, skeleton=args.skeleton,
-                               max_instants=options.max_instants or None)
+                               max_instants=options.max_instants or None,
+                               label_options=label_options_from_args(args))
     report = getattr(recording, 'read_report', None)
     if report is not None and not report.ok:
         print(f'monet train: reading {args.data}: {report.summary()}', file=sys.stderr)
+    for note in recording.rig_notes:
+        print(f'monet train: note: {note}', file=sys.stderr)
+    if recording.label_report is not None:
+        print(f'monet train: labels: {recording.label_report.summary()}', file=sys.stderr)
+    held, held_path = hold_out(recording, args.holdout_labelled, args.out)
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
-    data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
+    try:
+        data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
+    except ValueError as error:
+        labelled = recording.labelled_instants
+        where = (f'{len(labelled)} labelled instants (indices {labelled.tolist()[:8]}) of '
+                 f'{recording.num_instants}' if len(labelled) else 'no labelled instant: '
+                 'give --labels (or a labels.csv beside the recording)')
+        raise ValueError(f'{error}; {where}; --eval-fraction {config.eval_fraction} holds '
+                         'out the tail (use --eval-fraction 0 to train on every labelled '
+                         'instant)') from None
     if args.resume and (out / 'trainer_state.pt').exists():
         trainer = Trainer.resume(out, data, config=config)
         print(f'resumed at step {trainer.step_count}', file=sys.stderr)
@@ -117,6 +141,18 @@ def run(args):
               'unusable:', file=sys.stderr)
         for message in summary['warnings']:
             print(f'  WARNING: {message}', file=sys.stderr)
+    if held_path is not None:
+        from monet_ros.learning.recording import find_recording_parts
+        parts = find_recording_parts(args.data)
+        figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
+                                held_path, recording,
+                                label_options_from_args(args).camera_map)
+        summary['holdout'] = {'instants': held.tolist(), **figures}
+        print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
+              f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '
+              f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.0f} mm, mean '
+              f'{figures["mm_mean"]:.0f} mm, coverage {100 * figures["coverage"]:.0f}% '
+              '(as monet process runs the model)', file=sys.stderr)
     print(json.dumps(summary, indent=1))
     return 0
 

@@ -110,17 +110,25 @@ def find_recording_parts(path):
 
 
 def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='human14',
-                   slop_ns=0, max_instants=None, name=None):
+                   slop_ns=0, max_instants=None, name=None, label_options=None):
     """Decode a recording (rosbag2 folder, .mcap, or a `monet synth` output folder) into memory.
 
     rig: rig file (default: the folder's rig.yaml, else CameraInfo + /tf_static of the bag);
     labels: labels CSV (default: the folder's labels.csv; none = no labels); ground_truth:
     ground_truth.npz (default: the folder's). Instants that lack a view are skipped (and
     counted in the returned recording's `skipped`). skeleton: keypoint names / preset.
+    labels may also be a list of monet_ros.labels.LabelRow (an importer's output); they are
+    checked by monet_ros.labels.resolve_labels with label_options (LabelOptions: name maps,
+    skip_bad); a frame index counts every instant of the bag, incomplete ones included.
+    The returned recording's `label_report` says how many rows were used / skipped.
+    A rig file's cameras are renamed by label_options.camera_map and fitted to the images
+    (monet_ros.io.rig_fit: a full-resolution calibration for a half-resolution recording is
+    scaled); `rig_notes` says what was adapted.
+    Raises RecordingError (or LabelError, a ValueError) naming the file, line and field.
     """
     from monet_ros.io import iter_multiview_frames, open_bag, rig_from_bag
     from monet_ros.io.multiview import image_topics
-    from monet_ros.labels import read_labels
+    from monet_ros.labels import LabelOptions, read_label_rows, resolve_labels
     from monet_ros.skeleton import load_skeleton
 
     parts = find_recording_parts(path)
@@ -131,10 +139,18 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
         else tuple(skeleton)
     reader = open_bag(parts['bag'])
     cameras = rig_from_bag(reader, rig_file=rig)
+    rig_notes = []
+    if rig is not None:       # a calibration file: names mapped, size fitted to the images
+        from monet_ros.io.rig_fit import fit_rig_to_bag
+        cameras, rig_notes = fit_rig_to_bag(
+            cameras, reader, (label_options or LabelOptions()).camera_map)
     names = [c.name for c in cameras]
     topics = image_topics(reader, cameras, parts['bag'])
     stamps, frames, skipped = [], {n: [] for n in names}, 0
+    all_stamps, complete = [], []          # every instant (labels' frame indices count these)
     for frame in iter_multiview_frames(reader, topics, slop_ns=slop_ns):
+        all_stamps.append(int(frame.stamp_ns))
+        complete.append(not frame.missing)
         if frame.missing:
             skipped += 1
             continue
@@ -154,15 +170,35 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
         raise RecordingError(f'{parts["bag"]}: no complete multiview instant on {topics}')
     stamps = np.array(stamps, dtype=np.int64)
     label_array = np.full((len(stamps), len(names), len(keypoints), 2), np.nan)
+    label_report = None
     if labels is not None:
-        table = read_labels(labels, keypoints)
+        rows = read_label_rows(labels) if isinstance(labels, (str, Path)) else list(labels)
+        truncated = bool(max_instants) and len(stamps) >= max_instants
+        beyond = 0
+        if truncated:                     # rows after the last instant read are not errors
+            limit = all_stamps[-1] + (all_stamps[-1] - all_stamps[0]) // max(
+                len(all_stamps) - 1, 1) // 2
+            keep = [r for r in rows if (r.frame is not None and r.frame < len(all_stamps))
+                    or (r.stamp_ns is not None and r.stamp_ns <= limit)]
+            beyond, rows = len(rows) - len(keep), keep
+        table, label_report = resolve_labels(rows, all_stamps, cameras, keypoints,
+                                             label_options or LabelOptions(), valid=complete)
+        if beyond:
+            label_report.skipped['beyond --max-instants'] = beyond
+            label_report.first.setdefault('beyond --max-instants',
+                                          f'{beyond} rows after instant {max_instants}')
+            label_report.rows += beyond
+        if label_report.rows and not label_report.kept:
+            raise RecordingError(f'{labels if isinstance(labels, (str, Path)) else "labels"}:'
+                                 f' no label matches the recording: {label_report.summary()}')
         index = {int(s): i for i, s in enumerate(stamps)}
         for stamp in table.stamps:
-            if int(stamp) in index:
-                label_array[index[int(stamp)]] = table.points(stamp, names)
+            label_array[index[int(stamp)]] = table.points(stamp, names)
     gt = load_ground_truth(ground_truth, stamps, len(keypoints)) if ground_truth else None
     recording = Recording(name or Path(path).name, cameras, stamps,
                           [np.stack(frames[n]) for n in names], keypoints, label_array, gt)
     recording.skipped = skipped
     recording.read_report = reader.report      # what the bag read skipped (ok False: print)
+    recording.label_report = label_report
+    recording.rig_notes = rig_notes
     return recording

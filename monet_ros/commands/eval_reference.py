@@ -1,0 +1,114 @@
+"""`monet eval CKPT... --data REC --reference REF`: every checkpoint run over the recording
+exactly as `monet process` runs it (the same function, tracked crops), then scored against
+a reference (monet_ros.evaluation.reference): ONE row per checkpoint with 2D pixel error
+and PCK@px on labelled views, 3D error in mm (median / mean / p90), PCK@mm and coverage.
+Writes OUT/reference.csv and OUT/reference.json.
+"""
+import csv
+import json
+from pathlib import Path
+import sys
+import tempfile
+
+import numpy as np
+
+
+def add_reference_arguments(parser):
+    parser.add_argument('--reference', help='score against this reference instead of a synth '
+                        'ground truth: labels CSV, DeepLabCut/Lightning Pose/SLEAP/anipose/'
+                        'DANNCE labels, TRC or anipose 3D CSV')
+    parser.add_argument('--reference-format', default='auto',
+                        choices=('auto', 'trc', 'anipose3d', 'labels', 'dlc', 'lightning-pose',
+                                 'sleap', 'anipose', 'dannce'),
+                        help='reference format (default: from the file)')
+    parser.add_argument('--reference-axes', choices=('xyz', 'yzx'), default='xyz',
+                        help='TRC axes: yzx for a Y-up file (Pose2Sim)')
+    parser.add_argument('--rig', help="rig file (default: the recording's)")
+    parser.add_argument('--px-thresholds', default='5,10,20', help='2D PCK thresholds (px)')
+    parser.add_argument('--mm-thresholds', default='25,50,100', help='3D PCK thresholds (mm)')
+
+
+def _thresholds(text, flag):
+    try:
+        values = tuple(float(t) for t in str(text).split(',') if t.strip())
+    except ValueError:
+        values = ()
+    if not values or not all(np.isfinite(v) and v > 0 for v in values):
+        raise ValueError(f'{flag}: expected positive numbers separated by commas, got {text!r}')
+    return values
+
+
+def run_reference(args):
+    from monet_ros.commands.info import recording_index
+    from monet_ros.commands.labels import label_options_from_args
+    from monet_ros.commands.process import process_recording
+    from monet_ros.evaluation.reference import load_reference, score
+    from monet_ros.io.export_tables import ExportError, read_anipose_csv
+    from monet_ros.labels import LabelError
+    from monet_ros.learning.recording import RecordingError
+    from monet_ros.models import CheckpointError, load_checkpoint
+
+    prog = 'monet eval'
+    if len(args.data) != 1 or not args.checkpoints:
+        print(f'{prog}: --reference needs checkpoints and exactly one --data recording',
+              file=sys.stderr)
+        return 2
+    rows = []
+    try:
+        px = _thresholds(args.px_thresholds, '--px-thresholds')
+        mm = _thresholds(args.mm_thresholds, '--mm-thresholds')
+        options = label_options_from_args(args)
+        index = recording_index(args.data[0], rig=args.rig, camera_map=options.camera_map)
+        references = {}
+        with tempfile.TemporaryDirectory(prefix='monet-eval-') as tmp:
+            for n, path in enumerate(args.checkpoints):
+                _, meta = load_checkpoint(path)
+                keypoints = tuple(meta['keypoints'])
+                if keypoints not in references:
+                    references[keypoints] = load_reference(
+                        args.reference, index, keypoints, fmt=args.reference_format,
+                        options=options, axes=args.reference_axes)
+                reference = references[keypoints]
+                out = Path(tmp) / f'run{n}'
+                process_recording(index.bag, path, out, rig=args.rig, device=args.device,
+                                  progress=False, exports=('csv', 'npz'),
+                                  camera_map=options.camera_map)
+                table = read_anipose_csv(out / 'keypoints3d.csv')
+                det = np.load(out / 'detections2d.npz')
+                names = [c.name for c in index.cameras]
+                order = [list(det['cameras']).index(c) if c in det['cameras'] else None
+                         for c in names]
+                p2 = np.full((len(table['stamps_ns']), len(names), len(keypoints), 2), np.nan)
+                for v, o in enumerate(order):
+                    if o is not None:
+                        p2[:, v] = det['points2d'][:, o]
+                figures = score(reference, table['stamps_ns'], table['X'], p2, px, mm)
+                rows.append(dict(checkpoint=str(path), mode=meta.get('mode') or Path(path).stem,
+                                 step=meta.get('step'), **figures))
+    except (LabelError, ExportError, RecordingError, CheckpointError, ValueError,
+            OSError) as error:
+        print(f'{prog}: {error}', file=sys.stderr)
+        return 2
+    out_dir = Path(args.out)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    with open(out_dir / 'reference.csv', 'w', newline='') as f:
+        w = csv.DictWriter(f, fieldnames=keys, lineterminator='\n')
+        w.writeheader()
+        w.writerows(rows)
+    (out_dir / 'reference.json').write_text(json.dumps(rows, indent=1))
+    ref = next(iter(references.values()))
+    cols = ['mode', 'step', 'px_median', *[f'pck2d@{t:g}px' for t in px], 'mm_median',
+            'mm_mean', 'mm_p90', *[f'pck3d@{t:g}mm' for t in mm], 'coverage']
+    cols = [c for c in cols if c in keys]
+    print(f'reference: {args.reference} ({ref.kind}, {rows[0]["joints_3d"]} joints in 3D'
+          + (f', {rows[0].get("views_2d")} labelled views' if ref.kind == '2d' else '')
+          + (f'; not in the model: {", ".join(ref.unused)}' if ref.unused else '') + ')')
+    print('| ' + ' | '.join(['checkpoint', *cols]) + ' |')
+    print('|' + '---|' * (len(cols) + 1))
+    for r in rows:
+        cells = [r['checkpoint']] + [
+            f'{r[c]:.3g}' if isinstance(r[c], float) else str(r[c]) for c in cols]
+        print('| ' + ' | '.join(cells) + ' |')
+    print('written: ' + str(out_dir / 'reference.csv'), file=sys.stderr)
+    return 0

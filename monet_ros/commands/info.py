@@ -1,0 +1,148 @@
+"""`monet info REC [--labels L]`: what a recording holds - topics, cameras, instants
+(frame indices), stamps (first / last / rate) and which instants are labelled.
+
+Frame indices are those that frame-indexed labels (frame,camera,keypoint,u,v) and the
+importers use: the 0-based index of each multiview instant (views grouped by header
+stamp), incomplete instants included.
+"""
+from dataclasses import dataclass
+import sys
+
+import numpy as np
+
+HELP = 'list topics, cameras, instants, stamps and labelled instants of a recording'
+
+
+@dataclass
+class RecordingIndex:
+    """bag path; cameras (Camera list); topics {camera: image topic}; stamps (T,) int64 ns
+    of every instant; complete (T,) bool (every camera has a view); reader (BagReader)."""
+    bag: object
+    cameras: list
+    topics: dict
+    stamps: np.ndarray
+    complete: np.ndarray
+    reader: object
+    notes: list = None
+
+
+def image_topic(reader, cam):
+    """The image topic of a camera in the bag: its rig topic or /<name>/image_raw, or that
+    topic + '/compressed' when only the compressed one was recorded."""
+    topic = cam.topic or f'/{cam.name}/image_raw'
+    if topic not in reader.topics and topic + '/compressed' in reader.topics:
+        topic += '/compressed'
+    return topic
+
+
+def recording_index(path, rig=None, slop_ns=0, camera_map=()):
+    """RecordingIndex of a recording (rosbag2 folder, .mcap, or `monet synth` folder), read
+    without decoding images. A rig file's cameras are renamed by camera_map and fitted to
+    the images (io.rig_fit; `notes` says how). Raises RecordingError naming the bag when it
+    has no instant."""
+    from monet_ros.io import iter_multiview_frames, open_bag, rig_from_bag
+    from monet_ros.learning.recording import RecordingError, find_recording_parts
+
+    parts = find_recording_parts(path)
+    reader = open_bag(parts['bag'])
+    cameras = list(rig_from_bag(reader, rig_file=rig or parts['rig']))
+    notes = []
+    if rig or parts['rig']:
+        from monet_ros.io.rig_fit import fit_rig_to_bag
+        cameras, notes = fit_rig_to_bag(cameras, reader, camera_map)
+    topics = {c.name: image_topic(reader, c) for c in cameras}
+    stamps, complete = [], []
+    for frame in iter_multiview_frames(reader, topics, slop_ns=slop_ns, decode=False):
+        stamps.append(int(frame.stamp_ns))
+        complete.append(not frame.missing)
+    if not stamps:
+        raise RecordingError(f'{parts["bag"]}: no image on {sorted(topics.values())}')
+    return RecordingIndex(parts['bag'], cameras, topics, np.array(stamps, np.int64),
+                          np.array(complete, bool), reader, notes)
+
+
+def _ranges(indices):
+    """[1, 2, 3, 7] -> '1-3, 7'."""
+    out, run = [], []
+    for i in indices:
+        if run and i == run[-1] + 1:
+            run.append(i)
+            continue
+        if run:
+            out.append(f'{run[0]}-{run[-1]}' if len(run) > 1 else str(run[0]))
+        run = [i]
+    if run:
+        out.append(f'{run[0]}-{run[-1]}' if len(run) > 1 else str(run[0]))
+    return ', '.join(out)
+
+
+def add_arguments(parser):
+    from monet_ros.commands.labels import add_label_arguments
+    parser.add_argument('rec', help='recording: rosbag2 folder, .mcap or `monet synth` folder')
+    parser.add_argument('--rig', help="rig file (default: the recording's)")
+    parser.add_argument('--labels', help='labels CSV (stamp- or frame-keyed) to check against '
+                        'the recording and list')
+    parser.add_argument('--skeleton', default=None, help='skeleton preset or YAML for '
+                        '--labels (default: the keypoints named in the file)')
+    parser.add_argument('--stamps', action='store_true', help='print every instant: frame '
+                        'index, stamp_ns, complete')
+    add_label_arguments(parser)
+
+
+def run(args):
+    from monet_ros.commands.labels import label_options_from_args
+    from monet_ros.labels import LabelError, read_label_rows, resolve_labels
+    from monet_ros.learning.recording import RecordingError
+    from monet_ros.skeleton import SkeletonError, load_skeleton
+
+    try:
+        options = label_options_from_args(args)
+        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map)
+        labels = report = None
+        if args.labels:
+            rows = read_label_rows(args.labels)
+            mapped = dict(options.keypoint_map)
+            keypoints = (tuple(load_skeleton(args.skeleton).keypoints) if args.skeleton
+                         else tuple(dict.fromkeys(mapped.get(r.keypoint, r.keypoint)
+                                                  for r in rows)))
+            labels, report = resolve_labels(rows, index.stamps, index.cameras, keypoints,
+                                            options, valid=index.complete)
+    except (LabelError, RecordingError, SkeletonError, ValueError, OSError) as error:
+        print(f'monet info: {error}', file=sys.stderr)
+        return 2
+    out = sys.stdout
+    print(f'recording: {index.bag}', file=out)
+    for note in index.notes or ():
+        print(f'note: {note}', file=out)
+    print('topics:', file=out)
+    for info in sorted(index.reader.topics.values(), key=lambda t: t.name):
+        count = '?' if info.count is None else info.count
+        print(f'  {info.name}  {info.msgtype}  {count} messages', file=out)
+    print('cameras:', file=out)
+    for cam in index.cameras:
+        print(f'  {cam.name}  {cam.width}x{cam.height}  fx {cam.K[0, 0]:.1f} fy '
+              f'{cam.K[1, 1]:.1f}  image topic {index.topics[cam.name]}', file=out)
+    stamps = index.stamps
+    T = len(stamps)
+    period = float(np.median(np.diff(stamps))) if T > 1 else 0.0
+    rate = f'{1e9 / period:.3f} Hz' if period > 0 else 'n/a'
+    print(f'instants: {T} (frames 0-{T - 1}), {int(index.complete.sum())} complete, '
+          f'{T - int(index.complete.sum())} missing a view', file=out)
+    print(f'stamps: first {stamps[0]} ns, last {stamps[-1]} ns, rate {rate} '
+          f'(median period {period:.0f} ns)', file=out)
+    if args.stamps:
+        for i, (s, c) in enumerate(zip(stamps, index.complete)):
+            print(f'  {i} {s} {"complete" if c else "incomplete"}', file=out)
+    if labels is not None:
+        where = {int(s): i for i, s in enumerate(stamps)}
+        frames = sorted(where[s] for s in labels.stamps)
+        print(f'labels: {args.labels}: {report.summary()}', file=out)
+        print(f'labelled instants ({len(frames)}): {_ranges(frames) or "none"}', file=out)
+        for cam in index.cameras:
+            n = sum(int(np.isfinite(v[cam.name][:, 0]).sum()) for v in labels.frames.values()
+                    if cam.name in v)
+            print(f'  {cam.name}: {n} labelled keypoints', file=out)
+    report = index.reader.report
+    if report is not None and not report.ok:
+        print(f'monet info: reading {args.rec}: {report.summary()}', file=sys.stderr)
+    return 0

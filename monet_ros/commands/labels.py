@@ -1,0 +1,83 @@
+"""`monet labels import FORMAT PATH --rec REC --out labels.csv`: labels of other tools ->
+the canonical stamp-keyed labels CSV of a recording (monet_ros.labels), checked by the one
+label validator. Also the label options shared by train, eval and info.
+
+Formats (monet_ros.labels_import): dlc (DeepLabCut / Lightning Pose CollectedData CSV or
+H5), sleap (SLEAP analysis HDF5), anipose (pose-2d H5 per camera), dannce (Label3D .mat),
+frames (frame-indexed CSV frame,camera,keypoint,u,v), stamps (stamp-keyed CSV).
+"""
+import sys
+
+HELP = 'import labels (DeepLabCut, Lightning Pose, SLEAP, anipose, DANNCE, CSV) for a recording'
+
+
+def add_label_arguments(parser):
+    """--camera-map, --keypoint-map, --skip-bad-labels (one spelling for every command)."""
+    parser.add_argument('--camera-map', action='append', default=[], metavar='SRC=DST',
+                        help="rename label cameras to the recording's (e.g. cam_01=cam01; "
+                        'repeatable or comma separated)')
+    parser.add_argument('--keypoint-map', action='append', default=[], metavar='SRC=DST',
+                        help="rename label keypoints to the skeleton's (repeatable)")
+    parser.add_argument('--skip-bad-labels', action='store_true',
+                        help='drop and count label rows that match no camera, keypoint or '
+                        'instant or lie outside the image (default: such a row is an error)')
+
+
+def label_options_from_args(args):
+    """LabelOptions of the arguments above (LabelError on a bad map entry)."""
+    from monet_ros.labels import LabelOptions
+    return LabelOptions(camera_map=tuple(args.camera_map), keypoint_map=tuple(args.keypoint_map),
+                        skip_bad=bool(args.skip_bad_labels))
+
+
+def add_arguments(parser):
+    from monet_ros.labels_import import FORMATS
+    sub = parser.add_subparsers(dest='labels_command', metavar='ACTION')
+    sub.required = True
+    imp = sub.add_parser('import', help='convert labels to the labels CSV of a recording',
+                         description=__doc__.split('\n\n')[0])
+    imp.add_argument('format', choices=sorted(FORMATS), help='source format')
+    imp.add_argument('path', nargs='+', help='labels file(s) or project folder')
+    imp.add_argument('--rec', required=True, help='recording (rosbag2 folder, .mcap or '
+                     '`monet synth` folder) whose instants and cameras the labels refer to')
+    imp.add_argument('--rig', help="rig file (default: the recording's)")
+    imp.add_argument('--out', required=True, help='output labels CSV (stamp_ns,camera,...)')
+    imp.add_argument('--skeleton', default=None, help='skeleton preset or YAML (default: the '
+                     'keypoints found in the labels, in their order)')
+    imp.add_argument('--camera', help='camera of every row (single-camera files whose name '
+                     'does not contain the camera name)')
+    imp.add_argument('--min-score', type=float, default=0.0,
+                     help='drop points whose likelihood/score is below this (anipose, SLEAP '
+                     'predictions; counted)')
+    add_label_arguments(imp)
+
+
+def run(args):
+    from monet_ros.commands.info import recording_index
+    from monet_ros.labels import LabelError, resolve_labels, write_labels
+    from monet_ros.labels_import import import_labels
+    from monet_ros.learning.recording import RecordingError
+    from monet_ros.skeleton import SkeletonError, load_skeleton
+
+    try:
+        options = label_options_from_args(args)
+        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map)
+        cameras = [c.name for c in index.cameras]
+        result = import_labels(args.format, args.path, cameras=cameras, camera=args.camera,
+                               min_score=args.min_score, camera_map=dict(options.camera_map))
+        if args.skeleton:
+            keypoints = tuple(load_skeleton(args.skeleton).keypoints)
+        else:
+            mapped = dict(options.keypoint_map)
+            keypoints = tuple(dict.fromkeys(mapped.get(k, k) for k in result.keypoints))
+        labels, report = resolve_labels(result.rows, index.stamps, index.cameras, keypoints,
+                                        options, valid=index.complete)
+        count = write_labels(args.out, labels)
+    except (LabelError, RecordingError, SkeletonError, ValueError,
+            OSError) as error:
+        print(f'monet labels import: {error}', file=sys.stderr)
+        return 2
+    extra = f'; {result.note}' if result.note else ''
+    print(f'monet labels import: {count} labels at {len(labels)} instants x '
+          f'{len(labels.cameras)} cameras -> {args.out} ({report.summary()}{extra})')
+    return 0

@@ -1,0 +1,65 @@
+"""Leave-instants-out check for `monet train --holdout-labelled N`: N labelled instants
+(spread over the labelled ones: every k-th, k = L / N) lose their labels before training;
+after training, the saved model runs over the recording exactly as `monet process` runs
+it (tracked crops), and its 2D detections and 3D points are scored against those labels
+(pixels on the labelled views; mm against the labels' own triangulation) with
+monet_ros.evaluation.reference - an accuracy figure, unlike the reprojection error.
+"""
+from pathlib import Path
+import tempfile
+
+import numpy as np
+
+
+def choose_holdout(labelled, n):
+    """n of the labelled instant indices, evenly spread (deterministic); ValueError when
+    fewer than n + 1 are labelled (training needs one)."""
+    labelled = np.asarray(labelled)
+    if n <= 0:
+        return labelled[:0]
+    if len(labelled) < n + 1:
+        raise ValueError(f'--holdout-labelled {n} needs at least {n + 1} labelled instants, '
+                         f'the recording has {len(labelled)}')
+    picks = np.round((np.arange(n) + 0.5) * len(labelled) / n - 0.5).astype(int)
+    return labelled[np.unique(picks)]
+
+
+def hold_out(recording, n, out):
+    """Remove the labels of n labelled instants from `recording` (in place) and write them
+    to OUT/heldout_labels.csv -> (instant indices, path) or ((), None) when n == 0."""
+    from monet_ros.labels import label_rows, write_labels
+    held = choose_holdout(recording.labelled_instants, n)
+    if not len(held):
+        return held, None
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / 'heldout_labels.csv'
+    write_labels(path, label_rows(recording.stamps[held], [c.name for c in recording.cameras],
+                                  recording.keypoints, recording.labels[held]))
+    recording.labels[held] = np.nan
+    return held, path
+
+
+def score_holdout(bag, rig, model, labels_path, recording, camera_map=()):
+    """Figures (evaluation.reference.score) of `model` on the held-out labels."""
+    from monet_ros.commands.info import RecordingIndex
+    from monet_ros.commands.process import process_recording
+    from monet_ros.evaluation.reference import load_reference, score
+    from monet_ros.io.export_tables import read_anipose_csv
+
+    index = RecordingIndex(bag, list(recording.cameras), {}, recording.stamps,
+                           np.ones(len(recording.stamps), bool), None)
+    reference = load_reference(labels_path, index, recording.keypoints, fmt='labels')
+    with tempfile.TemporaryDirectory(prefix='monet-holdout-') as tmp:
+        out = Path(tmp) / 'p'
+        process_recording(bag, model, out, rig=rig, progress=False, exports=('csv', 'npz'),
+                          camera_map=camera_map)
+        table = read_anipose_csv(out / 'keypoints3d.csv')
+        det = np.load(out / 'detections2d.npz')
+    names = list(det['cameras'])
+    p2 = np.full(det['points2d'].shape[:1] + (len(recording.cameras),)
+                 + det['points2d'].shape[2:], np.nan)
+    for v, cam in enumerate(recording.cameras):
+        if cam.name in names:
+            p2[:, v] = det['points2d'][:, names.index(cam.name)]
+    return score(reference, table['stamps_ns'], table['X'], p2)

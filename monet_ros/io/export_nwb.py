@@ -1,0 +1,83 @@
+"""Per-frame keypoints as NWB with ndx-pose (pynwb 4.2 + ndx-pose 0.4; no ROS).
+
+write_nwb(path, result) writes one NWBFile holding, in processing module 'behavior':
+- Skeletons with one Skeleton (nodes = keypoints, edges = the skeleton's bones when given);
+- MultiCameraPoseEstimation 'monet_pose': one PoseEstimationSeries per keypoint with the
+  3D points (T, 3) in the rig's world frame (metres), confidence = mean peak value of the
+  inlier views, timestamps = header stamps in seconds from the first instant; and one
+  PoseEstimation per camera ('<camera>_2d', device = a CalibratedCamera with K, R, t, dist
+  of the source image) whose PoseEstimationSeries hold the 2D detections (T, 2) in source
+  image pixels with the heatmap peak value as confidence (NaN where not detected).
+session_start_time = the first stamp (UTC). read back with pynwb.NWBHDF5IO (ndx_pose
+imported).
+"""
+from datetime import datetime, timezone
+import os
+from pathlib import Path
+
+import numpy as np
+
+
+def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidence2d,
+              edges=None, description='monet_ros multiview keypoints'):
+    """keypoints (C,); stamps_ns (T,); X (T, C, 3); score (T, C); cameras: V Camera;
+    points2d (T, V, C, 2) source px; confidence2d (T, V, C). Atomic (tmp + os.replace)."""
+    from ndx_pose import (
+        CalibratedCamera,
+        MultiCameraPoseEstimation,
+        PoseEstimation,
+        PoseEstimationSeries,
+        Skeleton,
+        Skeletons,
+    )
+    from pynwb import NWBHDF5IO, NWBFile
+
+    import monet_ros
+
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    start = datetime.fromtimestamp(int(stamps[0]) // 1_000_000_000, tz=timezone.utc) \
+        if len(stamps) else datetime.now(timezone.utc)
+    times = (stamps - stamps[0]) / 1e9 if len(stamps) else np.zeros(0)
+    nwb = NWBFile(session_description=description, identifier=f'monet-{int(stamps[0])}'
+                  if len(stamps) else 'monet', session_start_time=start)
+    behavior = nwb.create_processing_module('behavior', 'keypoints from monet_ros')
+    skeleton = Skeleton(name='skeleton', nodes=list(keypoints),
+                        edges=np.asarray(edges if edges is not None else np.zeros((0, 2)),
+                                         dtype='uint8'))
+    behavior.add(Skeletons(skeletons=[skeleton]))
+    version = getattr(monet_ros, '__version__', '')
+    per_camera = []
+    for v, cam in enumerate(cameras):
+        device = CalibratedCamera(name=cam.name, intrinsic_matrix=np.asarray(cam.K),
+                                  rotation_matrix=np.asarray(cam.R),
+                                  translation_vector=np.asarray(cam.t),
+                                  distortion_coefficients=np.asarray(cam.dist),
+                                  description=f'{cam.width}x{cam.height} px')
+        nwb.add_device(device)
+        series = [PoseEstimationSeries(
+            name=k, data=np.asarray(points2d[:, v, c], float), unit='pixels',
+            reference_frame=f'{cam.name} source image, pixel centres on integers',
+            confidence=np.asarray(confidence2d[:, v, c], float),
+            confidence_definition='heatmap peak value', timestamps=times)
+            for c, k in enumerate(keypoints)]
+        per_camera.append(PoseEstimation(
+            name=f'{cam.name}_2d', pose_estimation_series=series, device=device,
+            description=f'2D detections of {cam.name}', scorer='monet_ros detector',
+            source_software='monet_ros', source_software_version=str(version),
+            skeleton=skeleton))
+    series3d = [PoseEstimationSeries(
+        name=k, data=np.asarray(X[:, c], float), unit='meters',
+        reference_frame='rig world frame', confidence=np.asarray(score[:, c], float),
+        confidence_definition='mean heatmap peak value of the inlier views',
+        timestamps=times) for c, k in enumerate(keypoints)]
+    behavior.add(MultiCameraPoseEstimation(
+        name='monet_pose', pose_estimation_series=series3d, pose_estimations=per_camera,
+        description='triangulated keypoints (robust DLT over inlier views)',
+        scorer='monet_ros fusion', source_software='monet_ros',
+        source_software_version=str(version), skeleton=skeleton))
+    path = Path(path)
+    tmp = path.with_name(f'.{path.stem}.tmp.nwb')
+    with NWBHDF5IO(str(tmp), 'w') as io:
+        io.write(nwb)
+    os.replace(tmp, path)
+    return path

@@ -1,0 +1,124 @@
+"""Collect the per-frame results of offline processing and write them as analysis files
+beside the recording output (no ROS): anipose CSV and TRC (export_tables), NWB with
+ndx-pose (export_nwb) and the 2D detections with their crop cameras (detections2d.npz).
+
+detections2d.npz: stamps_ns (T,), cameras (V,), keypoints (C,), points2d (T, V, C, 2)
+decoded peaks in SOURCE image pixels (NaN = view missing or below the confidence
+threshold), confidence (T, V, C) heatmap peak values, inliers (T, V, C) bool (views used
+by the triangulation), K_heat (T, V, 3, 3) the heatmap's virtual camera (crop + scale of
+the source camera: K_heat = S K, NaN where the view is missing), heat_size (2,) (w, h).
+With the rig, points2d and K_heat let 2D accuracy be scored against labels.
+"""
+import os
+from pathlib import Path
+
+import numpy as np
+
+FORMATS = ('csv', 'trc', 'nwb', 'npz')
+FILE_NAMES = {'csv': 'keypoints3d.csv', 'trc': 'keypoints3d.trc', 'nwb': 'keypoints.nwb',
+              'npz': 'detections2d.npz'}
+
+
+def parse_formats(text):
+    """'csv,trc' -> ('csv', 'trc'); '' or 'none' -> (); ValueError naming a bad one."""
+    items = tuple(t.strip() for t in str(text).split(',') if t.strip())
+    if items in ((), ('none',)):
+        return ()
+    bad = [t for t in items if t not in FORMATS]
+    if bad:
+        raise ValueError(f'--export: unknown format {bad[0]!r}; one of {", ".join(FORMATS)}')
+    return items
+
+
+class ResultsCollector:
+    """Per-frame FusionResults of V cameras (names fixed at construction) and C keypoints."""
+
+    def __init__(self, cameras, keypoints):
+        self.cameras = list(cameras)
+        self.names = [c.name for c in self.cameras]
+        self.keypoints = tuple(keypoints)
+        self.stamps, self.X, self.error, self.ncams, self.score = [], [], [], [], []
+        self.points2d, self.conf2d, self.inliers, self.K_heat = [], [], [], []
+        self.heat_size = None
+
+    def add(self, stamp_ns, present, result, heat_cameras):
+        """present: the Cameras of this frame's views (order of result's V axis);
+        heat_cameras: their heatmap cameras."""
+        V, C = len(self.names), len(self.keypoints)
+        p2 = np.full((V, C, 2), np.nan)
+        cf = np.full((V, C), np.nan)
+        inl = np.zeros((V, C), bool)
+        K = np.full((V, 3, 3), np.nan)
+        for i, (cam, hc) in enumerate(zip(present, heat_cameras)):
+            v = self.names.index(cam.name)
+            p2[v], cf[v], inl[v], K[v] = (result.points2d[i], result.peak_confidence[i],
+                                          result.inliers[i], hc.K)
+            self.heat_size = (hc.width, hc.height)
+        self.stamps.append(int(stamp_ns))
+        self.X.append(result.X)
+        self.error.append(result.reprojection_error)
+        self.ncams.append(result.num_views)
+        self.score.append(result.confidence)
+        self.points2d.append(p2)
+        self.conf2d.append(cf)
+        self.inliers.append(inl)
+        self.K_heat.append(K)
+
+    def arrays(self):
+        """dict of stacked arrays (T leading)."""
+        C, V = len(self.keypoints), len(self.names)
+        shape = {'X': (0, C, 3), 'error': (0, C), 'ncams': (0, C), 'score': (0, C),
+                 'points2d': (0, V, C, 2), 'conf2d': (0, V, C), 'inliers': (0, V, C),
+                 'K_heat': (0, V, 3, 3)}
+        out = {k: (np.stack(getattr(self, k)) if getattr(self, k) else np.zeros(s))
+               for k, s in shape.items()}
+        out['stamps'] = np.array(self.stamps, np.int64)
+        return out
+
+    def summary(self):
+        """dict: frames, per-joint dropout (fraction of frames not triangulated), mean
+        inlier views per joint, mean inlier views overall."""
+        a = self.arrays()
+        if not len(a['stamps']):
+            return dict(frames=0, dropout={}, inlier_views={}, mean_inlier_views=float('nan'))
+        missing = ~np.isfinite(a['X']).all(-1)
+        views = np.where(missing, np.nan, a['ncams'].astype(float))
+        counts = np.isfinite(views).sum(axis=0)
+        per_joint = np.where(counts > 0, np.nansum(views, axis=0) / np.maximum(counts, 1),
+                             np.nan)
+        return dict(frames=len(a['stamps']),
+                    dropout=dict(zip(self.keypoints, missing.mean(axis=0).tolist())),
+                    inlier_views=dict(zip(self.keypoints, np.asarray(per_joint).tolist())),
+                    mean_inlier_views=float(np.nanmean(views)) if np.isfinite(views).any()
+                    else float('nan'))
+
+    def write(self, folder, formats=FORMATS, edges=None, trc_axes='xyz'):
+        """Write the chosen formats into `folder` -> {format: path}."""
+        from monet_ros.io.export_tables import write_anipose_csv, write_trc
+        folder = Path(folder)
+        a = self.arrays()
+        out = {}
+        if 'csv' in formats:
+            out['csv'] = write_anipose_csv(folder / FILE_NAMES['csv'], self.keypoints,
+                                           a['stamps'], a['X'], a['error'], a['ncams'],
+                                           a['score'])
+        if 'trc' in formats:
+            out['trc'] = write_trc(folder / FILE_NAMES['trc'], self.keypoints, a['stamps'],
+                                   a['X'], axes=trc_axes)
+        if 'npz' in formats:
+            path = folder / FILE_NAMES['npz']
+            tmp = folder / ('.tmp_' + FILE_NAMES['npz'])
+            with open(tmp, 'wb') as f:
+                np.savez_compressed(f, stamps_ns=a['stamps'], cameras=np.array(self.names),
+                                    keypoints=np.array(self.keypoints),
+                                    points2d=a['points2d'], confidence=a['conf2d'],
+                                    inliers=a['inliers'], K_heat=a['K_heat'],
+                                    heat_size=np.array(self.heat_size or (0, 0)))
+            os.replace(tmp, path)
+            out['npz'] = path
+        if 'nwb' in formats and len(a['stamps']):
+            from monet_ros.io.export_nwb import write_nwb
+            out['nwb'] = write_nwb(folder / FILE_NAMES['nwb'], self.keypoints, a['stamps'],
+                                   a['X'], a['score'], self.cameras, a['points2d'],
+                                   a['conf2d'], edges=edges)
+        return out

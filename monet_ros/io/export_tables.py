@@ -1,0 +1,197 @@
+"""Per-frame 3D keypoints as analysis tables: anipose's CSV and OpenSim / Pose2Sim TRC
+(writers and readers; no ROS).
+
+anipose CSV (what `anipose triangulate` writes, one row per frame): for every keypoint K
+the columns K_x, K_y, K_z (world units of the rig, metres here), K_error (mean
+reprojection error of the inlier views, px), K_ncams (inlier views), K_score (mean peak
+confidence), then fnum (frame number); monet adds stamp_ns (header stamp, ns) at the end.
+Missing values are empty cells (pandas' default), as anipose's own files.
+
+TRC (OpenSim's marker file, the layout Pose2Sim writes; tab separated):
+    PathFileType  4  (X/Y/Z)  <file name>
+    DataRate CameraRate NumFrames NumMarkers Units OrigDataRate OrigDataStartFrame
+    OrigNumFrames / their values
+    Frame#  Time  <marker 1>  ''  ''  <marker 2> ...
+    ''  ''  X1 Y1 Z1 X2 ...
+    then one row per frame: Frame# (1-based), Time (s), X Y Z per marker.
+monet writes the rig's world frame as it is (Units m); Pose2Sim's demo .trc is Y-up
+(trc(X, Y, Z) = world(Y, Z, X)): pass axes='yzx' for OpenSim's convention. Frame numbers
+count instants from the first processed one at the median frame period, so a gap in the
+recording is a gap in Frame#; Time = Frame# / DataRate as Pose2Sim writes it (the rate is
+the median stamp period's, snapped to 0.001 Hz when within 1e-4 Hz).
+"""
+import csv
+import os
+from pathlib import Path
+
+import numpy as np
+
+from monet_ros.labels import frame_period_ns
+
+FIELDS = ('x', 'y', 'z', 'error', 'ncams', 'score')
+AXES = {'xyz': (0, 1, 2), 'yzx': (1, 2, 0)}
+
+
+class ExportError(ValueError):
+    """A table that cannot be written or read; the message names the file and field."""
+
+
+def frame_numbers(stamps_ns):
+    """(T,) 0-based frame numbers of stamps at the median period (gaps kept); (T,) zeros
+    for a single instant."""
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    period = frame_period_ns(stamps)
+    if period <= 0:
+        return np.zeros(len(stamps), np.int64)
+    return np.round((stamps - stamps[0]) / period).astype(np.int64)
+
+
+def _cell(x, integer=False):
+    if not np.isfinite(x):
+        return ''
+    return str(int(x)) if integer else repr(float(x))
+
+
+def _atomic_writer(path):
+    path = Path(path)
+    return path, path.with_name(path.name + '.tmp')
+
+
+def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score):
+    """Write anipose's 3D CSV. X (T, C, 3); error, ncams, score (T, C). Atomic."""
+    X = np.asarray(X, float)
+    T, C = X.shape[:2]
+    fnum = frame_numbers(stamps_ns)
+    path, tmp = _atomic_writer(path)
+    with open(tmp, 'w', newline='', encoding='utf-8') as f:
+        w = csv.writer(f, lineterminator='\n')
+        w.writerow([f'{k}_{field}' for k in keypoints for field in FIELDS]
+                   + ['fnum', 'stamp_ns'])
+        for t in range(T):
+            row = []
+            for c in range(C):
+                row += [_cell(X[t, c, 0]), _cell(X[t, c, 1]), _cell(X[t, c, 2]),
+                        _cell(error[t, c]), _cell(ncams[t, c], True), _cell(score[t, c])]
+            w.writerow(row + [int(fnum[t]), int(stamps_ns[t])])
+    os.replace(tmp, path)
+    return path
+
+
+def read_anipose_csv(path):
+    """dict(keypoints, fnum (T,), stamps_ns (T,) or None, X (T, C, 3), error, ncams, score
+    (T, C)) of an anipose 3D CSV (anipose's own or ours). Raises ExportError naming the
+    file, line and column."""
+    path = Path(path)
+    try:
+        with open(path, newline='', encoding='utf-8-sig') as f:
+            rows = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError, csv.Error) as error:
+        raise ExportError(f'{path}: cannot read ({error})') from None
+    if not rows:
+        raise ExportError(f'{path}: empty file')
+    header = rows[0]
+    keypoints = [h[:-2] for h in header if h.endswith('_x') and h[:-2] + '_z' in header]
+    if not keypoints:
+        raise ExportError(f'{path}:1: no <keypoint>_x/_y/_z columns (anipose 3D layout)')
+    col = {h: i for i, h in enumerate(header)}
+    T, C = len(rows) - 1, len(keypoints)
+    out = {f: np.full((T, C), np.nan) for f in FIELDS}
+    for t, row in enumerate(rows[1:]):
+        for c, k in enumerate(keypoints):
+            for f in FIELDS:
+                i = col.get(f'{k}_{f}')
+                if i is None or i >= len(row) or not row[i].strip():
+                    continue
+                try:
+                    out[f][t, c] = float(row[i])
+                except ValueError:
+                    raise ExportError(f'{path}:{t + 2}: column {k}_{f}: {row[i]!r} is not a '
+                                      'number') from None
+
+    def ints(name):
+        if name not in col:
+            return None
+        def one(text):
+            try:
+                return int(text)
+            except ValueError:
+                return int(float(text))        # '7.0' as pandas may write it
+        try:
+            return np.array([one(r[col[name]]) for r in rows[1:]], np.int64)
+        except (ValueError, IndexError, OverflowError):
+            raise ExportError(f'{path}: column {name}: not integers') from None
+    fnum = ints('fnum')
+    return dict(keypoints=tuple(keypoints), fnum=np.arange(T) if fnum is None else fnum,
+                stamps_ns=ints('stamp_ns'), X=np.stack([out['x'], out['y'], out['z']], -1),
+                error=out['error'], ncams=out['ncams'], score=out['score'])
+
+
+def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m'):
+    """Write a TRC marker file (module docstring). X (T, C, 3) world; axes 'xyz' (as is) or
+    'yzx' (Y-up as Pose2Sim / OpenSim: trc = world(Y, Z, X)). Atomic."""
+    if axes not in AXES:
+        raise ExportError(f'axes must be one of {sorted(AXES)}, got {axes!r}')
+    X = np.asarray(X, float)[..., list(AXES[axes])]
+    T, C = X.shape[:2]
+    period = frame_period_ns(stamps_ns)
+    rate = 1e9 / period if period > 0 else 0.0
+    if abs(rate - round(rate, 3)) < 1e-4:      # integer-ns periods: 16666667 ns -> 60 Hz
+        rate = round(rate, 3)
+    fnum = frame_numbers(stamps_ns) + 1
+    path, tmp = _atomic_writer(path)
+    rate_text = f'{rate:g}'
+    lines = [f'PathFileType\t4\t(X/Y/Z)\t{path.name}',
+             'DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\t'
+             'OrigDataStartFrame\tOrigNumFrames',
+             f'{rate_text}\t{rate_text}\t{T}\t{C}\t{units}\t{rate_text}\t'
+             f'{int(fnum[0]) if T else 1}\t{T}',
+             'Frame#\tTime\t' + ''.join(f'{k}\t\t\t' for k in keypoints)[:-1],
+             '\t\t' + '\t'.join(f'{a}{c + 1}' for c in range(C) for a in 'XYZ')]
+    for t in range(T):
+        time = float(fnum[t] / rate) if rate else 0.0
+        lines.append(f'{int(fnum[t])}\t{time!r}\t'
+                     + '\t'.join(_cell(v) for v in X[t].reshape(-1)))
+    with open(tmp, 'w', encoding='utf-8', newline='') as f:
+        f.write('\n'.join(lines) + '\n')
+    os.replace(tmp, path)
+    return path
+
+
+def read_trc(path, axes='xyz'):
+    """dict(keypoints, frames (T,) 1-based, times (T,) s, X (T, C, 3), rate, units) of a TRC
+    file (Pose2Sim's, OpenSim's or ours). axes='yzx' undoes a Y-up file (world = trc(Z, X,
+    Y)). Missing / NaN values are NaN. Raises ExportError naming the file, line, field."""
+    path = Path(path)
+    if axes not in AXES:
+        raise ExportError(f'axes must be one of {sorted(AXES)}, got {axes!r}')
+    try:
+        lines = Path(path).read_text(encoding='utf-8-sig').splitlines()
+    except (OSError, UnicodeDecodeError) as error:
+        raise ExportError(f'{path}: cannot read ({error})') from None
+    if len(lines) < 5 or not lines[0].startswith('PathFileType'):
+        raise ExportError(f'{path}:1: not a TRC file (expected PathFileType ...)')
+    keys, values = lines[1].split('\t'), lines[2].split('\t')
+    meta = dict(zip((k.strip() for k in keys), (v.strip() for v in values)))
+    try:
+        rate = float(meta.get('DataRate', 'nan'))
+    except ValueError:
+        raise ExportError(f'{path}:3: field DataRate: {meta.get("DataRate")!r}') from None
+    names = [n.strip() for n in lines[3].split('\t')[2:] if n.strip()]
+    frames, times, data = [], [], []
+    for number, line in enumerate(lines[5:], start=6):
+        if not line.strip():
+            continue
+        cells = line.split('\t')
+        try:
+            frames.append(int(float(cells[0])))
+            times.append(float(cells[1]))
+            row = [float(c) if c.strip() else np.nan for c in cells[2:2 + 3 * len(names)]]
+        except (ValueError, IndexError):
+            raise ExportError(f'{path}:{number}: not a row of numbers') from None
+        row += [np.nan] * (3 * len(names) - len(row))
+        data.append(row)
+    X = np.array(data, float).reshape(len(data), len(names), 3)
+    inverse = np.argsort(AXES[axes])
+    return dict(keypoints=tuple(names), frames=np.array(frames, np.int64),
+                times=np.array(times), X=X[..., inverse], rate=rate,
+                units=meta.get('Units', ''))

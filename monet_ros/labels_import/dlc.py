@@ -1,0 +1,197 @@
+"""DeepLabCut and Lightning Pose labels: CollectedData_<scorer>.csv / .h5 (labelled
+frames) and per-video prediction tables (<video>DLC_<model>.csv / .h5, also anipose's
+pose-2d files).
+
+Layout (DeepLabCut's published format, a pandas DataFrame):
+- columns: a MultiIndex (scorer, bodyparts, coords) or, for multi-animal projects,
+  (scorer, individuals, bodyparts, coords); coords are x, y (labels) or x, y, likelihood
+  (predictions). In the CSV these are the first 3 (4) rows, the first cell of each naming
+  the level ('scorer', 'individuals', 'bodyparts', 'coords').
+- index: the image path 'labeled-data/<video>/img0042.png' (one column), or since
+  DeepLabCut 2.2 the three parts ('labeled-data', '<video>', 'img0042.png') in three
+  columns; for predictions the frame number.
+- the H5 holds the same DataFrame (pandas.to_hdf, key 'df_with_missing').
+Frame index = the last number in the image name (img0042.png -> 42); camera = the
+recording camera whose name the video folder contains (Lightning Pose multiview:
+labeled-data/<session>_<view>/...), else the one in the file name
+(CollectedData_<view>.csv). Empty / NaN cells are unlabelled keypoints. With several
+individuals the keypoint is named '<individual>/<bodypart>'.
+"""
+import csv
+import math
+from pathlib import Path
+import re
+
+import numpy as np
+
+from monet_ros.labels import LabelError, LabelRow
+from monet_ros.labels_import import ImportResult, camera_for
+
+LEVELS = ('scorer', 'individuals', 'bodyparts', 'coords')
+_NUMBER = re.compile(r'(\d+)(?!.*\d)')
+
+
+def frame_of_image(name):
+    """Frame index of an image name: the last number of its file name (img0042.png -> 42);
+    None when it has none."""
+    match = _NUMBER.search(Path(str(name)).stem)
+    return int(match.group(1)) if match else None
+
+
+def _files(paths, suffixes):
+    out = []
+    for p in paths:
+        if p.is_dir():
+            out += sorted(f for f in p.rglob('*') if f.suffix.lower() in suffixes
+                          and (f.name.startswith('CollectedData') or 'DLC' in f.name))
+        else:
+            out.append(p)
+    if not out:
+        raise LabelError(f'{", ".join(map(str, paths))}: no DeepLabCut table (CollectedData*'
+                         f'{"/".join(suffixes)}) found')
+    return out
+
+
+def table_rows(source, columns, index, values, cameras=(), camera=None, min_score=0.0,
+               camera_map=None, where_of=None, line_of=None):
+    """LabelRows of one DeepLabCut-layout table.
+
+    columns: list of tuples whose last two levels are (bodypart, coord) and, with 3 levels
+    after the scorer, the individual before them; index: per row an image path / parts
+    tuple / frame number; values (N, K) float. Returns (rows, keypoints, dropped) where
+    dropped counts points below min_score."""
+    levels = [tuple(c) for c in columns]
+    groups = {}
+    for k, col in enumerate(levels):
+        if len(col) < 3:
+            raise LabelError(f'{source}: column {col} has no (scorer, bodyparts, coords) '
+                             'levels')
+        name = col[-2] if len(col) == 3 else f'{col[-3]}/{col[-2]}'
+        groups.setdefault(name, {})[str(col[-1])] = k
+    individuals = {c[-3] for c in levels if len(c) == 4}
+    if len(individuals) == 1:
+        groups = {k.split('/', 1)[1]: v for k, v in groups.items()}
+    for name, coords in groups.items():
+        if 'x' not in coords or 'y' not in coords:
+            raise LabelError(f'{source}: field coords: bodypart {name!r} lacks x or y '
+                             f'(has {", ".join(coords)})')
+    rows, dropped = [], 0
+    for r, key in enumerate(index):
+        where = where_of(r) if where_of else f'row {r + 1}'
+        line = line_of(r) if line_of else r + 1
+        if isinstance(key, (int, np.integer)):
+            frame, cam = int(key), camera_for(Path(source).stem, cameras, camera, camera_map)
+        else:
+            parts = ([str(p) for p in key] if isinstance(key, tuple)
+                     else str(key).replace('\\', '/').split('/'))
+            frame = frame_of_image(parts[-1])
+            if frame is None:
+                name = '/'.join(parts)
+                raise LabelError(f'{source}:{where or line}: field image: {name!r} has no '
+                                 'frame number in its name (expected e.g. img0042.png)')
+            video = parts[-2] if len(parts) > 1 else Path(source).stem
+            cam = camera_for(video, cameras, camera, camera_map)
+            if cam == video and cam not in cameras:
+                cam = camera_for(Path(source).stem, cameras, camera, camera_map)
+                if cam not in cameras:
+                    cam = video
+        for name, coords in groups.items():
+            u, v = values[r, coords['x']], values[r, coords['y']]
+            if not (math.isfinite(u) and math.isfinite(v)):
+                continue
+            if 'likelihood' in coords and not values[r, coords['likelihood']] >= min_score:
+                dropped += 1
+                continue
+            rows.append(LabelRow(str(source), line, None, frame, cam, name, float(u),
+                                 float(v), where))
+    return rows, tuple(groups), dropped
+
+
+def read_dlc_csv(path, **kwargs):
+    """(rows, keypoints, dropped) of a DeepLabCut / Lightning Pose CSV table."""
+    try:
+        with open(path, newline='', encoding='utf-8-sig') as handle:
+            lines = list(csv.reader(handle))
+    except (OSError, UnicodeDecodeError, csv.Error) as error:
+        raise LabelError(f'{path}: cannot read as a DeepLabCut CSV ({error})') from None
+    header = []
+    while len(header) < len(lines) and lines[len(header)] and \
+            lines[len(header)][0].strip() in LEVELS:
+        header.append(lines[len(header)])
+    names = [h[0].strip() for h in header]
+    if 'bodyparts' not in names or 'coords' not in names or names[0] != 'scorer':
+        raise LabelError(f'{path}:1: expected header rows scorer, bodyparts, coords (first '
+                         f'cells), found {names or [lines[0][0] if lines else "nothing"]}')
+    coords_row = header[-1]
+    n_index = 1
+    while n_index < len(coords_row) and not coords_row[n_index].strip():
+        n_index += 1
+    width = len(coords_row)
+    columns = list(zip(*[h[n_index:width] for h in header]))
+    index, values, lines_of = [], [], []
+    for number, row in enumerate(lines[len(header):], start=len(header) + 1):
+        if not row or all(not c.strip() for c in row):
+            continue
+        if len(row) != width:
+            raise LabelError(f'{path}:{number}: expected {width} fields, got {len(row)}')
+        key = row[0] if n_index == 1 else tuple(row[:n_index])
+        if n_index == 1 and key.strip().lstrip('-').isdigit():
+            key = int(key)
+        index.append(key)
+        cells = []
+        for col, text in zip(columns, row[n_index:]):
+            text = text.strip()
+            try:
+                cells.append(float(text) if text else math.nan)
+            except ValueError:
+                raise LabelError(f'{path}:{number}: field {"/".join(col[1:])}: {text!r} is '
+                                 'not a number') from None
+        values.append(cells)
+        lines_of.append(number)
+    values = np.array(values, float).reshape(len(index), len(columns))
+    return table_rows(path, columns, index, values, line_of=lambda r: lines_of[r],
+                      where_of=lambda r: '', **kwargs)
+
+
+def read_dlc_h5(path, **kwargs):
+    """(rows, keypoints, dropped) of a DeepLabCut H5 table (pandas / PyTables)."""
+    import pandas as pd
+    try:
+        frame = pd.read_hdf(path)
+    except Exception as error:    # noqa: BLE001 - PyTables / pandas raise many kinds
+        text = str(error).strip().splitlines()[-1] if str(error).strip() else type(error).__name__
+        raise LabelError(f'{path}: cannot read as a DeepLabCut H5 table ({text})') from None
+    columns = list(frame.columns)
+    if not columns or not isinstance(columns[0], tuple):
+        raise LabelError(f'{path}: columns are not a (scorer, bodyparts, coords) MultiIndex')
+    index = [k if isinstance(k, tuple) else (int(k) if isinstance(k, (int, np.integer))
+                                             else str(k)) for k in frame.index]
+    values = frame.to_numpy(dtype=float, na_value=np.nan)
+    return table_rows(path, columns, index, values,
+                      where_of=lambda r: f'row {r + 1} ({index[r]})', **kwargs)
+
+
+def read_dlc_file(path, **kwargs):
+    suffix = Path(path).suffix.lower()
+    if suffix in ('.h5', '.hdf5'):
+        return read_dlc_h5(path, **kwargs)
+    if suffix == '.csv':
+        return read_dlc_csv(path, **kwargs)
+    raise LabelError(f'{path}: expected a DeepLabCut .csv or .h5 file')
+
+
+def import_dlc(paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
+    """ImportResult of DeepLabCut / Lightning Pose files or project folders (CollectedData
+    tables are preferred over their H5 twin when both are in a folder)."""
+    files = _files(paths, ('.csv', '.h5'))
+    csvs = {f.with_suffix('') for f in files if f.suffix == '.csv'}
+    files = [f for f in files if not (f.suffix == '.h5' and f.with_suffix('') in csvs)]
+    rows, keypoints, dropped = [], {}, 0
+    for f in files:
+        r, k, d = read_dlc_file(f, cameras=cameras, camera=camera, min_score=min_score,
+                                camera_map=camera_map)
+        rows += r
+        keypoints.update(dict.fromkeys(k))
+        dropped += d
+    note = f'{dropped} points below --min-score {min_score} left out' if dropped else ''
+    return ImportResult(rows, tuple(keypoints), note)

@@ -1,0 +1,99 @@
+"""SLEAP analysis HDF5 (File > Export Analysis HDF5, `sleap-convert --format analysis`).
+
+Published layout (datasets stored column-major for MATLAB, so h5py reads the transpose
+of the documented shapes):
+- tracks: documented (frames, nodes, 2, tracks) -> read (tracks, 2, nodes, frames), pixels,
+  NaN where a node is missing;
+- track_occupancy: documented (tracks, frames) -> read (frames, tracks), nonzero where a
+  track has an instance;
+- node_names (nodes,), track_names (tracks,): byte strings;
+- point_scores: documented (frames, nodes, tracks) -> read (tracks, nodes, frames);
+  optional, used by --min-score;
+- video_path: the video the file belongs to (its name gives the camera).
+The frame axis is the video's frame index. With several tracks the keypoint is named
+'<track>/<node>'.
+"""
+from pathlib import Path
+
+import numpy as np
+
+from monet_ros.labels import LabelError, LabelRow
+from monet_ros.labels_import import ImportResult, camera_for
+
+
+def _text(value):
+    if isinstance(value, np.ndarray):
+        value = value.item() if value.size == 1 else value.ravel()[0]
+    return value.decode('utf-8', 'replace') if isinstance(value, bytes) else str(value)
+
+
+def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
+    """(rows, keypoints, dropped) of one SLEAP analysis HDF5 file."""
+    import h5py
+    try:
+        handle = h5py.File(path, 'r')
+    except (OSError, ValueError) as error:
+        raise LabelError(f'{path}: cannot open as HDF5 ({error})') from None
+    with handle as f:
+        for key in ('tracks', 'node_names'):
+            if key not in f:
+                raise LabelError(f'{path}: field {key}: missing; not a SLEAP analysis file '
+                                 f'(has {", ".join(sorted(f.keys()))})')
+        tracks = np.asarray(f['tracks'][()], dtype=np.float64)
+        nodes = [_text(n) for n in f['node_names'][()]]
+        if tracks.ndim != 4 or tracks.shape[1] != 2 or tracks.shape[2] != len(nodes):
+            raise LabelError(f'{path}: field tracks: shape {tracks.shape}, expected (tracks, 2,'
+                             f' {len(nodes)} nodes, frames) as SLEAP writes it')
+        n_tracks, _, _, n_frames = tracks.shape
+        occupancy = np.ones((n_frames, n_tracks), bool)
+        if 'track_occupancy' in f:
+            occupancy = np.asarray(f['track_occupancy'][()]).astype(bool)
+            if occupancy.shape != (n_frames, n_tracks):
+                raise LabelError(f'{path}: field track_occupancy: shape {occupancy.shape}, '
+                                 f'expected ({n_frames}, {n_tracks})')
+        scores = None
+        if 'point_scores' in f and min_score > 0:
+            scores = np.asarray(f['point_scores'][()], dtype=np.float64)
+            if scores.shape != (n_tracks, len(nodes), n_frames):
+                raise LabelError(f'{path}: field point_scores: shape {scores.shape}, '
+                                 f'expected ({n_tracks}, {len(nodes)}, {n_frames})')
+        names = [_text(n) for n in f['track_names'][()]] if 'track_names' in f else []
+        video = _text(f['video_path'][()]) if 'video_path' in f else ''
+    names = names if len(names) == n_tracks else [f'track_{i}' for i in range(n_tracks)]
+    cam = camera_for(Path(video).stem if video else Path(path).stem, cameras, camera,
+                     camera_map)
+    if cam not in cameras and video:
+        by_file = camera_for(Path(path).stem, cameras, camera, camera_map)
+        cam = by_file if by_file in cameras else cam
+    keypoints = [n if n_tracks == 1 else f'{t}/{n}' for t in names for n in nodes]
+    # (tracks, 2, nodes, frames) -> (frames, tracks, nodes, 2)
+    points = tracks.transpose(3, 0, 2, 1)
+    ok = np.isfinite(points).all(-1) & occupancy[:, :, None]
+    dropped = 0
+    if scores is not None:
+        low = ok & ~(scores.transpose(2, 0, 1) >= min_score)
+        dropped = int(low.sum())
+        ok &= ~low
+    rows = []
+    for frame, track, node in zip(*np.nonzero(ok)):
+        u, v = points[frame, track, node]
+        rows.append(LabelRow(str(path), int(frame) + 1, None, int(frame), cam,
+                             keypoints[track * len(nodes) + node], float(u), float(v),
+                             f'frame {frame} track {names[track]} node {nodes[node]}'))
+    return rows, tuple(keypoints), dropped
+
+
+def import_sleap(paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
+    files = []
+    for p in paths:
+        files += sorted(p.rglob('*.h5')) + sorted(p.rglob('*.hdf5')) if p.is_dir() else [p]
+    if not files:
+        raise LabelError(f'{", ".join(map(str, paths))}: no SLEAP analysis .h5 file found')
+    rows, keypoints, dropped = [], {}, 0
+    for f in files:
+        r, k, d = read_sleap(f, cameras, camera, min_score, camera_map)
+        rows += r
+        keypoints.update(dict.fromkeys(k))
+        dropped += d
+    note = f'{dropped} points below --min-score {min_score} left out' if dropped else ''
+    return ImportResult(rows, tuple(keypoints), note)

@@ -1,0 +1,108 @@
+"""Reference scoring: 2D labels triangulated to the 3D reference, TRC in mm / Y-up to
+metres, exact px / mm figures for known offsets, coverage, names mapped or listed."""
+from dataclasses import dataclass
+
+from helpers.ring import random_points, ring_rig
+import numpy as np
+import pytest
+
+from monet_ros.evaluation.reference import guess_format, load_reference, score
+from monet_ros.io.export_tables import write_trc
+from monet_ros.labels import LabelError, LabelOptions, label_rows, write_labels
+
+KP = ('a', 'b', 'c')
+
+
+@dataclass
+class Index:
+    stamps: np.ndarray
+    cameras: list
+
+
+@pytest.fixture
+def scene():
+    cams = ring_rig(3, width=640, height=480, focal=500.0)
+    stamps = 10**18 + np.arange(5, dtype=np.int64) * 33_333_333
+    X = np.stack([random_points(3, seed=s, spread=0.2) for s in range(5)])   # (T, C, 3)
+    uv = np.stack([[c.project(X[t]) for c in cams] for t in range(5)])       # (T, V, C, 2)
+    return Index(stamps, cams), X, uv
+
+
+def test_labels_reference_is_triangulated_and_scored_exactly(scene, tmp_path):
+    index, X, uv = scene
+    labelled = [1, 3]
+    path = tmp_path / 'labels.csv'
+    write_labels(path, label_rows(index.stamps[labelled], [c.name for c in index.cameras],
+                                  KP, uv[labelled]))
+    assert guess_format(path) == 'labels'
+    ref = load_reference(path, index, KP)
+    assert ref.kind == '2d' and ref.unused == ()
+    np.testing.assert_allclose(ref.X[labelled], X[labelled], atol=1e-9)
+    assert np.isnan(ref.X[[0, 2, 4]]).all()
+    # predictions: 2D off by (3, 4) px -> 5 px; 3D off by 10 mm along x, joint c missing
+    pred_X = X.copy()
+    pred_X[..., 0] += 0.010
+    pred_X[:, 2] = np.nan
+    pred2 = uv + np.array([3.0, 4.0])
+    figures = score(ref, index.stamps, pred_X, pred2, (4.9, 5.1), (9.0, 11.0))
+    assert figures['views_2d'] == 2 * 3 * 3
+    assert figures['px_median'] == pytest.approx(5.0)
+    assert figures['pck2d@4.9px'] == 0.0 and figures['pck2d@5.1px'] == 1.0
+    assert figures['mm_median'] == pytest.approx(10.0, abs=1e-6)
+    assert figures['coverage'] == pytest.approx(4 / 6)
+    assert figures['pck3d@9mm'] == 0.0 and figures['pck3d@11mm'] == 1.0
+    # a keypoint the model lacks is listed; renamed ones map
+    rows = [(s, c, {'a': 'A'}.get(k, k), u, v) for s, c, k, u, v in
+            label_rows(index.stamps[labelled], [c.name for c in index.cameras], KP,
+                       uv[labelled])]
+    write_labels(tmp_path / 'renamed.csv', rows + [(index.stamps[1], 'cam0', 'z', 1.0, 1.0)])
+    ref = load_reference(tmp_path / 'renamed.csv', index, KP,
+                         options=LabelOptions(keypoint_map=('A=a',)))
+    assert ref.unused == ('z',)
+    np.testing.assert_allclose(ref.X[1], X[1], atol=1e-9)
+
+
+def test_trc_reference_in_mm_and_y_up(scene, tmp_path):
+    index, X, _ = scene
+    path = write_trc(tmp_path / 'ref.trc', KP, index.stamps, X * 1000.0, axes='yzx',
+                     units='mm')
+    ref = load_reference(path, index, KP, axes='yzx')
+    assert ref.kind == '3d'
+    np.testing.assert_allclose(ref.X, X, rtol=1e-12)
+    figures = score(ref, index.stamps[:3], X[:3])       # 2 instants never predicted
+    assert figures['mm_median'] == 0.0 and figures['coverage'] == pytest.approx(3 / 5)
+    with pytest.raises(LabelError, match='no reference keypoint'):
+        load_reference(path, index, ('x', 'y'))
+    long = write_trc(tmp_path / 'long.trc', KP, 10**18 + np.arange(9) * 33_333_333, X[[0] * 9])
+    with pytest.raises(LabelError, match=r'long.trc: frame 5 .* is not an instant'):
+        load_reference(long, index, KP)
+
+
+def test_real_pose2sim_trc_and_its_projections_agree(shared_data, tmp_path):
+    """Pose2Sim's .trc (Y-up, metres) on the derived 4-camera bag: projected into 3
+    instants as frame-indexed labels with the calibration's camera names, the labels'
+    triangulation returns the .trc points (real distortion, real geometry)."""
+    from monet_ros.commands.info import recording_index
+    from monet_ros.io.export_tables import read_trc
+
+    index = recording_index(shared_data / 'derived_pose2sim_4cam_mcap'
+                            / 'pose2sim_balancing_4cam')
+    trc_path = next((shared_data / 'pose2sim_demo_balancing').rglob('*.trc'))
+    names = read_trc(trc_path)['keypoints']
+    ref3d = load_reference(trc_path, index, names, axes='yzx')
+    assert ref3d.kind == '3d' and np.isfinite(ref3d.X).all(-1).mean() > 0.99
+    lines = ['frame,camera,keypoint,u,v']
+    for t in (10, 50, 90):
+        for cam in index.cameras:
+            for k, (u, v) in zip(names, cam.project(ref3d.X[t])):
+                lines.append(f'{t},{cam.name.replace("cam", "cam_")},{k},{float(u)!r},'
+                             f'{float(v)!r}')
+    (tmp_path / 'frames.csv').write_text('\n'.join(lines) + '\n')
+    with pytest.raises(LabelError, match=r"field camera: 'cam_01' .* did you mean 'cam01'"):
+        load_reference(tmp_path / 'frames.csv', index, names)
+    ref2d = load_reference(tmp_path / 'frames.csv', index, names, options=LabelOptions(
+        camera_map=tuple((f'cam_0{i}', f'cam0{i}') for i in range(1, 5))))
+    np.testing.assert_allclose(ref2d.X[[10, 50, 90]], ref3d.X[[10, 50, 90]], atol=1e-6)
+    figures = score(ref2d, index.stamps, ref3d.X, ref2d.points2d)
+    assert figures['mm_median'] < 1e-3 and figures['px_median'] == 0.0
+    assert figures['views_2d'] == 3 * 4 * 21 and figures['coverage'] == 1.0
