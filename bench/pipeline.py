@@ -2,7 +2,7 @@
 detector micro-benchmarks, side by side in one run.
 
     .venv/bin/python bench/pipeline.py                 # the full run (~4 min, quiet machine)
-    .venv/bin/python bench/pipeline.py --quick         # every table, tiny sizes (~1 min)
+    .venv/bin/python bench/pipeline.py --quick         # every table, tiny sizes (~1-2 min)
 
 End to end (`--cameras`, default 4 and 8 at `--rate` 30 Hz, plus `--extra` 4@60): V
 camera streams (640x480 rgb8 + camera_info, stamped with the wall clock) go through a real
