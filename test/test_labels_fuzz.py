@@ -41,7 +41,7 @@ def test_label_csv_sweep(tmp_path, seed):
         assert report.kept + report.total_skipped == report.rows == len(rows)
         assert labels.num_points == report.kept
         for views in labels.frames.values():          # what is kept lies in the image
-            for cam, pts in views.items():
+            for pts in views.values():
                 ok = np.isfinite(pts[:, 0])
                 assert ((pts[ok] >= -0.5) & (pts[ok] <= [63.5, 47.5])).all()
 

@@ -173,7 +173,8 @@ def load_bags(config, keypoints):
     from monet_ros.learning.recording import load_recording
     return concatenate_recordings([
         load_recording(bag, rig=config.rig or None, labels=config.labels or None,
-                       skeleton=list(keypoints), max_instants=config.max_instants or None)
+                       skeleton=list(keypoints), max_instants=config.max_instants or None,
+                       shared_labels=bool(config.labels) and len(config.bags) > 1)
         for bag in config.bags])
 
 

@@ -110,7 +110,8 @@ def find_recording_parts(path):
 
 
 def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='human14',
-                   slop_ns=0, max_instants=None, name=None, label_options=None):
+                   slop_ns=0, max_instants=None, name=None, label_options=None,
+                   shared_labels=False):
     """Decode a recording (rosbag2 folder, .mcap, or a `monet synth` output folder) into memory.
 
     rig: rig file (default: the folder's rig.yaml, else CameraInfo + /tf_static of the bag);
@@ -121,6 +122,9 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     checked by monet_ros.labels.resolve_labels with label_options (LabelOptions: name maps,
     skip_bad); a frame index counts every instant of the bag, incomplete ones included.
     The returned recording's `label_report` says how many rows were used / skipped.
+    shared_labels: the labels file covers several recordings (the learner's bags): rows
+    whose stamp lies outside this recording's time span are left to the others (counted as
+    'other recordings', not errors).
     A rig file's cameras are renamed by label_options.camera_map and fitted to the images
     (monet_ros.io.rig_fit: a full-resolution calibration for a half-resolution recording is
     scaled); `rig_notes` says what was adapted.
@@ -175,6 +179,11 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
         rows = read_label_rows(labels) if isinstance(labels, (str, Path)) else list(labels)
         truncated = bool(max_instants) and len(stamps) >= max_instants
         beyond = 0
+        if shared_labels:
+            half = (all_stamps[-1] - all_stamps[0]) // max(len(all_stamps) - 1, 1) // 2
+            mine = [r for r in rows if r.stamp_ns is None
+                    or all_stamps[0] - half <= r.stamp_ns <= all_stamps[-1] + half]
+            others, rows = len(rows) - len(mine), mine
         if truncated:                     # rows after the last instant read are not errors
             limit = all_stamps[-1] + (all_stamps[-1] - all_stamps[0]) // max(
                 len(all_stamps) - 1, 1) // 2
@@ -183,12 +192,17 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
             beyond, rows = len(rows) - len(keep), keep
         table, label_report = resolve_labels(rows, all_stamps, cameras, keypoints,
                                              label_options or LabelOptions(), valid=complete)
+        if shared_labels and others:
+            label_report.skipped['other recordings'] = others
+            label_report.first.setdefault('other recordings', f'{others} rows outside this '
+                                          "recording's time span")
+            label_report.rows += others
         if beyond:
             label_report.skipped['beyond --max-instants'] = beyond
             label_report.first.setdefault('beyond --max-instants',
                                           f'{beyond} rows after instant {max_instants}')
             label_report.rows += beyond
-        if label_report.rows and not label_report.kept:
+        if label_report.rows and not label_report.kept and not shared_labels:
             raise RecordingError(f'{labels if isinstance(labels, (str, Path)) else "labels"}:'
                                  f' no label matches the recording: {label_report.summary()}')
         index = {int(s): i for i, s in enumerate(stamps)}

@@ -186,3 +186,24 @@ def test_train_leave_instants_out_check(tmp_path, repo_root):
     assert proc.returncode == 2
     assert '--holdout-labelled 3 needs at least 4 labelled instants, the recording has 3' in \
         proc.stderr
+
+
+def test_one_labels_file_shared_by_several_recordings(folder, tmp_path):
+    """The learner's bags share one labels file: rows of the other recording are counted
+    as such, the rest must still pass the validator."""
+    from monet_ros.learning.recording import Recording
+
+    data, rec, _ = folder
+    later = Recording('later', rec.cameras, rec.stamps + 10**12, rec.frames, rec.keypoints,
+                      rec.labels, rec.gt3d)
+    data2 = write_blob_folder(later, tmp_path / 'data2')
+    both = tmp_path / 'both.csv'
+    both.write_text((data / 'labels.csv').read_text()
+                    + ''.join((data2 / 'labels.csv').read_text().splitlines(True)[1:]))
+    names = ('k0', 'k1', 'k2')
+    for folder_, expected in ((data, rec), (data2, later)):
+        got = load_recording(folder_, labels=both, skeleton=names, shared_labels=True)
+        np.testing.assert_array_equal(got.labels, expected.labels)
+        assert got.label_report.skipped == {'other recordings': 18}
+    with pytest.raises(LabelError, match='outside the recording'):
+        load_recording(data, labels=both, skeleton=names)
