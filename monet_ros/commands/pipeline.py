@@ -219,6 +219,7 @@ def run(args):
         args.model = args.model or assets.model
         args.skeleton = assets.skeleton
         args.loop = True                             # a 3 s recording: show it for a while
+        args.lockstep = True       # every frame fused: crops follow the subject, scores hold
         args.duration = args.duration or 20.0
     if not args.model:
         raise ConfigError('monet pipeline', 'model', '--model is required with --bag')

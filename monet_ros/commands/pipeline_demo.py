@@ -5,7 +5,9 @@ instants of 90 (the subject's left limbs in their own colour, so that left and r
 told apart), and a small detector trained on it with `monet train`'s default recipe (mode
 monet: labels, epipolar divergence on the unlabelled instants, bootstrapped pseudo-labels;
 warm-up + cosine learning rate), made once and cached in ~/.cache/monet_ros/demo/v2 (or
---workdir / $MONET_DEMO_DIR); later runs start at once. While the pipeline runs,
+--workdir / $MONET_DEMO_DIR); later runs start at once. The demo replays in lockstep (every
+frame fused before the next is published: crops follow the subject; at real-time pace the
+frames a busy CPU drops leave crops behind and the 3D error doubles). While it runs,
 GroundTruthScore compares every fused frame with the recording's ground truth: 3D error (mm),
 PCK of the detections (px) and left/right swaps, printed beside the reprojection error
 (which measures agreement between the views, not accuracy).

@@ -65,11 +65,11 @@ class TrainConfig:
                                      minimum=0.0, maximum=0.95)
     lr: float = setting(1e-3, 'Adam learning rate (peak, after the warm-up)', minimum=0.0,
                         exclusive_minimum=True)
-    lr_schedule: str = setting('cosine', 'learning-rate schedule after the warm-up: cosine '
-                               '(down to lr_final x lr at `steps`), step (x lr_decay every '
-                               'lr_decay_every steps) or constant',
-                               choices=('cosine', 'step', 'constant'))
-    lr_warmup_steps: int = setting(100, 'steps of linear learning-rate warm-up from lr / '
+    lr_schedule: str = setting('step', 'learning-rate schedule after the warm-up: step (x '
+                               'lr_decay every lr_decay_every steps), cosine (down to lr_final '
+                               'x lr at `steps`) or constant',
+                               choices=('step', 'cosine', 'constant'))
+    lr_warmup_steps: int = setting(0, 'steps of linear learning-rate warm-up from lr / '
                                    '(lr_warmup_steps + 1) to lr', minimum=0)
     lr_final: float = setting(0.02, 'cosine schedule: learning rate at the last step, as a '
                               'fraction of lr', minimum=0.0, maximum=1.0)

@@ -75,10 +75,6 @@ class LearnerConfig(TrainConfig):
                                    maximum=0.9)
     lr: float = setting(1e-4, 'Adam learning rate (fine-tuning a running detector)',
                         minimum=0.0, exclusive_minimum=True)
-    lr_schedule: str = setting('step', 'learning-rate schedule after the warm-up: step (x '
-                               'lr_decay every lr_decay_every steps), constant, or cosine '
-                               '(needs steps > 0)', choices=('cosine', 'step', 'constant'))
-    lr_warmup_steps: int = setting(0, 'steps of linear learning-rate warm-up', minimum=0)
 
     def __post_init__(self):
         super().__post_init__()

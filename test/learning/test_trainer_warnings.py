@@ -88,7 +88,8 @@ def test_bootstrap_cutoff_is_relative_to_the_labelled_peaks(recording):
 
 
 def test_learning_rate_schedule_warmup_then_cosine(recording):
-    config = TrainConfig(steps=50, lr=1e-3, lr_warmup_steps=10, lr_final=0.1)
+    config = TrainConfig(steps=50, lr=1e-3, lr_schedule='cosine', lr_warmup_steps=10,
+                         lr_final=0.1)
     factors = np.array([config.lr_factor(k) for k in range(50)])
     np.testing.assert_allclose(factors[:10], np.arange(1, 11) / 11)
     assert factors[10] == pytest.approx(1.0)
