@@ -4,7 +4,8 @@ possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 
     monet process REC --model CKPT --out OUT [--rig RIG] [--heatmaps]
 
 The same functions as the live nodes: Detector.predict (one batched forward per instant),
-tracking.crop_boxes (crop around the previous instant's 3D keypoints), fusion.fuse_heatmaps.
+crop_rule.TrackedCrops (the detector node's crop rule: around the previous instant's 3D
+keypoints), fusion.fuse_heatmaps.
 """
 from pathlib import Path
 import sys
@@ -45,12 +46,12 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
     """Detect + fuse every instant of `bag`; write `out`. Returns a dict of figures."""
     from tqdm import tqdm
 
+    from monet_ros.crop_rule import TrackedCrops
     from monet_ros.fusion import FusionConfig, fuse_heatmaps
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.models import Detector
     from monet_ros.nodes.rig import load_node_rig, select_cameras
     from monet_ros.skeleton import load_skeleton
-    from monet_ros.tracking import crop_boxes
 
     if Path(out).exists():
         raise FileExistsError(f'{out}: output exists; choose a new folder')
@@ -74,7 +75,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
         topics[cam.name] = topic
     by_name = {cam.name: cam for cam in cameras}
     figures = dict(frames=0, views=0, missing_views=0, seconds=0.0, errors=[], num_views=[])
-    previous = None
+    tracker = TrackedCrops()          # the detector node's defaults (track_* parameters)
     start = time.perf_counter()
     with BagWriter(out) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=slop_ns)
@@ -87,7 +88,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
             images = [np.asarray(frame.images[cam.name]) for cam in present]
             images = [np.repeat(im[..., None], 3, axis=2) if im.ndim == 2 else im
                       for im in images]
-            boxes = crop_boxes(present, previous if track else None)
+            boxes = tracker.boxes(present, frame.stamp_ns if track else None)
             boxes = detector.boxes_for(present, boxes)
             heat, heat_cameras = detector.predict(images, present, boxes, keep_aspect=False)
             result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cameras]), present,
@@ -100,7 +101,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), fusion_config=None,
                     writer.write_heatmaps(f'/monet/{cam.name}/heatmaps', frame.stamp_ns, hm,
                                           cam.name)
             finite = np.isfinite(result.X).all(axis=1)
-            previous = result.X if finite.sum() >= 3 else None
+            if track:
+                tracker.update(result.X, frame.stamp_ns)
             figures['frames'] += 1
             figures['views'] += len(present)
             figures['errors'].append(float(np.nanmean(result.reprojection_error))

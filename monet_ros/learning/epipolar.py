@@ -19,7 +19,8 @@ the spherical ("polar") form of stereo rectification rather than a planar homogr
 exactly the same epipolar lines, but columns stay evenly spaced along each line (a planar
 rectification stretches the side near the epipole by 1 / sin^2(a), 33x at 10 degrees) and no
 ray has to lie in front of a rectified image plane. The rectified window is the (theta, a)
-range of the warped heatmap border (corners and edge samples), theta shared by the pair and
+range of the warped heatmap border (corners and edge samples), theta the planes that both
+windows see (rows only one window sees would compare a detection with zero padding) and
 a per view; rows are chosen so that at each window's centre one rectified row step is at
 most ``max_spacing`` heatmap pixels, columns half that: a bilinear heatmap has cusps at pixel
 centres, so a sampled row max falls short of the supremum along the line linearly in the
@@ -102,7 +103,8 @@ class PairGeometry:
 
     R_rect (N, 3, 3): rows = baseline x, y, z of the shared rectified frame (world -> rect).
     proj_i, proj_j (N, 3, 3): K R R_rect^T, rectified direction -> homogeneous heatmap pixel.
-    theta_range (N, 2): epipolar-plane angles covered by both windows (shared rows).
+    theta_range (N, 2): epipolar-plane angles of the rows: with overlap=True (the
+        divergence) those covered by both windows, else (display) by either window.
     alpha_i, alpha_j (N, 2): ray-to-baseline angles covered by each window (columns).
     rows_needed, cols_needed (N,): grid size for ``max_spacing`` at the window centres.
     valid (N,) bool: False for degenerate pairs.
@@ -148,8 +150,12 @@ class PairGeometry:
 
 @torch.no_grad()
 def pair_geometry(K_i, R_i, t_i, size_i, K_j, R_j, t_j, size_j, min_angle_deg=10.0,
-                  max_spacing=1.0):
-    """Shared rectified frame, windows and degeneracy flags of N pairs; K, R, t (N, ...)."""
+                  max_spacing=1.0, overlap=True):
+    """Shared rectified frame, windows and degeneracy flags of N pairs; K, R, t (N, ...).
+
+    overlap: rows span the epipolar planes both windows see (a pair without any is invalid);
+    a row only one window sees has nothing to compare with (zero padding in the other), so
+    it would only add KL that no detection can remove. False: planes either window sees."""
     f64 = dict(dtype=torch.float64, device=K_i.device)
     K_i, R_i, t_i, K_j, R_j, t_j = (a.detach().to(**f64) for a in (K_i, R_i, t_i, K_j, R_j, t_j))
     n = K_i.shape[0]
@@ -204,8 +210,11 @@ def pair_geometry(K_i, R_i, t_i, size_i, K_j, R_j, t_j, size_j, min_angle_deg=10
                         alpha=torch.stack([alpha.amin(-1), alpha.amax(-1)], -1),
                         d_alpha=0.5 * max_spacing * pitch, d_theta=max_spacing * pitch / sin_c,
                         proj=proj)
-    lo = torch.minimum(out['i']['theta'][0], out['j']['theta'][0])
-    hi = torch.maximum(out['i']['theta'][1], out['j']['theta'][1])
+    pick_lo, pick_hi = (torch.maximum, torch.minimum) if overlap else (torch.minimum,
+                                                                          torch.maximum)
+    lo = pick_lo(out['i']['theta'][0], out['j']['theta'][0])
+    hi = pick_hi(out['i']['theta'][1], out['j']['theta'][1])
+    valid &= hi > lo
     theta_range = torch.stack([lo, hi], -1)
     rows_needed = (hi - lo) / torch.minimum(out['i']['d_theta'], out['j']['d_theta'])
     cols_needed = torch.maximum(
@@ -322,7 +331,7 @@ def _kl(p, q, eps):
 
 
 def _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols, eps, min_angle_deg,
-             max_spacing, max_grid):
+             max_spacing, max_grid, overlap=True):
     if heat_i.dim() != 4 or heat_j.dim() != 4:
         raise ValueError(f'heat_i and heat_j must be (B, C, H, W), got {tuple(heat_i.shape)} '
                          f'and {tuple(heat_j.shape)}')
@@ -333,21 +342,23 @@ def _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols, eps, min_
     _check_camera_batch('camera j', K_j, R_j, t_j, heat_j.shape[:1])
     _check_options(min_angle_deg, max_spacing, eps, rows, cols, max_grid)
     geom = pair_geometry(K_i, R_i, t_i, tuple(heat_i.shape[-2:]), K_j, R_j, t_j,
-                         tuple(heat_j.shape[-2:]), min_angle_deg, max_spacing)
+                         tuple(heat_j.shape[-2:]), min_angle_deg, max_spacing, overlap)
     max_grid = max_grid or 4 * max(*heat_i.shape[-2:], *heat_j.shape[-2:])
     return geom, geom.grid_size(rows, cols, max_grid)
 
 
 def rectify_pair(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, *, rows=None, cols=None,
-                 min_angle_deg=10.0, max_spacing=1.0, max_grid=None):
+                 min_angle_deg=10.0, max_spacing=1.0, max_grid=None, overlap=False):
     """Rectify two heatmap batches (B, C, H, W) so that row k of both is epipolar plane k.
 
     K (B, 3, 3) in heatmap pixels, R (B, 3, 3), t (B, 3) world -> camera. rows, cols: grid
     size (default: from ``max_spacing`` heatmap pixels at the window centres, at most
-    ``max_grid``, default 4 max(H, W)). Differentiable in the heatmaps.
+    ``max_grid``, default 4 max(H, W)). overlap: rows = the planes both windows see (those
+    the divergence compares); default False: every plane either window sees.
+    Differentiable in the heatmaps.
     """
     geom, (rows, cols) = _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols,
-                                  1.0, min_angle_deg, max_spacing, max_grid)
+                                  1.0, min_angle_deg, max_spacing, max_grid, overlap)
     rect_i, rect_j, theta = _rectify(heat_i, heat_j, geom, rows, cols)
     return RectifiedPair(rect_i, rect_j, theta, geom.R_rect, geom.valid)
 
@@ -359,8 +370,9 @@ def epipolar_divergence(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, *, eps=1e-
 
     heat_i, heat_j (B, C, H, W) non-negative heatmaps (negative values count as 0); K (B, 3, 3)
     in heatmap pixels; R (B, 3, 3), t (B, 3) world -> camera. Q(v) = max over row v of the
-    rectified heatmap, normalised over rows; eps is added inside the logarithms. Degenerate
-    pairs give 0 (no gradient); with ``return_valid=True`` returns (divergence, valid (B,)).
+    rectified heatmap, normalised over the rows (epipolar planes) that both windows see;
+    eps is added inside the logarithms. Degenerate pairs (and pairs without shared planes)
+    give 0 (no gradient); with ``return_valid=True`` returns (divergence, valid (B,)).
     """
     geom, (rows, cols) = _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols,
                                   eps, min_angle_deg, max_spacing, max_grid)

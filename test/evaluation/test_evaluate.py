@@ -5,8 +5,8 @@ from helpers.blobs import blob_recording
 import numpy as np
 import torch
 
+from monet_ros.crop_rule import recording_boxes
 from monet_ros.evaluation.evaluate import evaluate_detector
-from monet_ros.learning.trainer import crop_boxes
 from monet_ros.models import build_model, decode_heatmaps
 from monet_ros.models.detector import Detector
 
@@ -26,11 +26,12 @@ def test_evaluate_detector_matches_independent_computation():
     rec = blob_recording(num_views=4, T=6, C=3, labelled=(0,))
     model = build_model('small', 3, input_size=[48, 48], width=8)
     detector = Detector(model, {'keypoints': list(rec.keypoints)}, device='cpu')
-    boxes = crop_boxes(rec, 'ground_truth', 1.0, 0.25)
+    boxes = recording_boxes(rec, 'ground_truth', 1.0, 0.25)     # explicit benchmark option
     instants = np.array([3, 4, 5])
-    summary = evaluate_detector(detector, rec, instants, boxes, 'supervised', 'blobs')
+    summary = evaluate_detector(detector, rec, instants, boxes, 'supervised', 'blobs',
+                                crop='boxes')
 
-    distances, errors, gt_errors = [], [], []
+    distances, errors, gt_errors, errors2d = [], [], [], []
     for t in instants:
         heat, heat_cams = detector.predict(rec.images(t), rec.cameras, boxes[t])
         peaks, _ = decode_heatmaps(heat)
@@ -51,6 +52,7 @@ def test_evaluate_detector_matches_independent_computation():
                 gt, _ = cv2.projectPoints(rec.gt3d[t, c][None], cv2.Rodrigues(cam.R)[0], cam.t,
                                           cam.K, cam.dist)
                 errors.append(np.linalg.norm(proj[0, 0] - image_pts[v, c]))
+                errors2d.append(np.linalg.norm(image_pts[v, c] - gt[0, 0]))
                 gt_errors.append(np.linalg.norm(proj[0, 0] - gt[0, 0]))
     d = np.concatenate(distances)
     for alpha in (0.05, 0.1, 0.2):
@@ -58,4 +60,6 @@ def test_evaluate_detector_matches_independent_computation():
     assert abs(summary.reprojection_mean - np.mean(errors)) < 1e-6
     assert abs(summary.reprojection_std - np.std(errors)) < 1e-6
     assert abs(summary.gt_reprojection_mean - np.mean(gt_errors)) < 1e-6
+    assert abs(summary.extra['error2d_mean'] - np.mean(errors2d)) < 1e-6
+    assert abs(summary.extra['error2d_median'] - np.median(errors2d)) < 1e-6
     assert summary.instants == 3 and summary.pck.counts.tolist() == [12, 12, 12]
