@@ -4,19 +4,20 @@ Per instant, every view is cropped by the crop rule (monet_ros.crop_rule): by de
 live detector's tracked rule (around the previous instant's fused 3D keypoints, fused with
 monet_ros.fusion exactly as `monet process` does; given boxes as the fallback and the
 start), or, explicitly, given boxes (e.g. ground-truth boxes, a labelled benchmark option).
-The detector runs once over all views (models.Detector), peaks are decoded in heatmap pixels
-and compared with the ground truth projected into the heatmap's virtual camera (PCK, see
-evaluation.pck); then the peaks are mapped back to original pixels, triangulated from all
-views without RANSAC and reprojected (evaluation.reprojection).
+The detector runs once over all views (models.Detector), peaks are decoded in heatmap pixels,
+mapped back to original pixels and compared with the projected ground truth (2D error, PCK
+normalised by the ground-truth subject box, see evaluate_detector), then triangulated from
+all views without RANSAC and reprojected (evaluation.reprojection).
 """
 import numpy as np
 
 from monet_ros.crop_rule import TrackedCrops
-from monet_ros.evaluation.pck import normalised_distances, pck
+from monet_ros.evaluation.pck import pck
 from monet_ros.evaluation.report import EvalSummary
 from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
-from monet_ros.geometry import crop_transform, project_views
+from monet_ros.geometry import crop_transform
+from monet_ros.learning.dataset import boxes_from_points
 from monet_ros.learning.pseudo_labels import project_to_views
 from monet_ros.models import decode_heatmaps
 
@@ -72,9 +73,10 @@ def evaluate_detector(detector, recording, instants, boxes, mode='model', datase
     to the projected ground truth (original px, views where it is visible); error3d_mean /
     error3d_median (m), the all-view triangulation (no RANSAC) against the ground-truth 3D.
     PCK is over (instant, view, keypoint) where the ground truth projects inside the
-    original image; the heatmap window is the heatmap width. Reprojection: consistency of the
-    all-view triangulation with the detections, and of its reprojection with the ground
-    truth, in original pixels."""
+    original image, distances normalised by the side of the ground-truth subject box of the
+    view (square, 25% margin; = the heatmap window of a ground-truth crop). Reprojection:
+    consistency of the all-view triangulation with the detections, and of its reprojection
+    with the ground truth, in original pixels."""
     if recording.gt3d is None:
         raise ValueError(f'{recording.name}: evaluation needs ground-truth 3D keypoints')
     instants = np.asarray(instants, dtype=np.int64)
@@ -85,15 +87,15 @@ def evaluate_detector(detector, recording, instants, boxes, mode='model', datase
     gt2d = gt2d.reshape(V, N, C, 2).transpose(1, 0, 2, 3)                    # (N, V, C, 2)
     visible = np.isfinite(gt2d[..., 0])
     h, w = detector.heatmap_size
-    heat_cams_gt = np.empty_like(det['peaks_heat'])
-    for n in range(len(instants)):
-        cams = [c.replace(K=K, width=w, height=h)
-                for c, K in zip(recording.cameras, det['heat_K'][n])]
-        heat_cams_gt[n] = project_views(cams, gt3d[n])                        # (V, C, 2)
-    heat_cams_gt[~visible] = np.nan
-    distances = normalised_distances(det['peaks_heat'], heat_cams_gt, float(w))
+    # PCK: the distance in original pixels over the side of the ground-truth subject box of
+    # that view (square, 25% margin): one yardstick for every mode, whatever its crops. With
+    # ground-truth crops it is the paper's normalisation by the heatmap window.
+    side = boxes_from_points(gt2d, aspect=1.0, margin=0.25)                  # (N, V, 4)
+    side = side[..., 2] - side[..., 0]
+    error = np.linalg.norm(det['points'] - gt2d, axis=-1)                    # (N, V, C)
+    distances = np.where(visible, error / side[..., None], np.nan)
     result = pck(distances.reshape(-1, recording.num_keypoints), keypoints=recording.keypoints)
-    error2d = np.linalg.norm(det['points'] - gt2d, axis=-1)[visible]
+    error2d = error[visible]
     reproj = multiview_reprojection(det['points'], recording.cameras, gt3d)
     cons, gt_err = reproj.consistency_stats, reproj.gt_stats
     e3d = reproj.error3d_stats
