@@ -420,22 +420,56 @@ def valid_view_pairs(K, R, t, heatmap_size, valid=None, *, min_angle_deg=10.0):
     return b, i, j
 
 
+def line_weights(heat, K, R, t, pair_valid, parallel_deg=10.0):
+    """Per-keypoint weights (B, V, V, C) of the ordered terms (view i, partner j).
+
+    The epipolar line that partner j draws through keypoint c's expected position in view i
+    (the detached peak of heat[b, i, c]) runs towards the epipole of C_j. Partners whose
+    lines there lie within `parallel_deg` of each other constrain the same direction (the
+    paper uses pairs whose expected epipolar lines are not parallel); they share one weight,
+    1 / (number of such partners), so every distinct direction counts once per keypoint.
+    heat (B, V, C, h, w); K (B, V, 3, 3) heatmap px; R, t world -> camera; pair_valid
+    (B, V, V) bool. Weights are 0 where the pair is not valid; no gradient.
+    """
+    with torch.no_grad():
+        B, V, C, h, w = heat.shape
+        f64 = dict(dtype=torch.float64, device=heat.device)
+        K, R, t = (a.detach().to(**f64) for a in (K, R, t))
+        flat = heat.detach().reshape(B, V, C, h * w).argmax(-1)
+        p = torch.stack([(flat % w).to(**f64), (flat // w).to(**f64)], -1)   # (B, V, C, 2)
+        centres = -(R.transpose(-1, -2) @ t[..., None])[..., 0]               # (B, V, 3)
+        # epipole of C_j in view i, homogeneous: K_i (R_i C_j + t_i)        (B, i, j, 3)
+        cam = torch.einsum('bikl,bjl->bijk', R, centres) + t[:, :, None]
+        e = torch.einsum('bikl,bijl->bijk', K, cam)
+        d = e[:, :, :, None, :2] - p[:, :, None] * e[:, :, :, None, 2:]        # (B, i, j, C, 2)
+        d = d / d.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        cos = (d[:, :, :, None] * d[:, :, None]).sum(-1).abs()              # (B, i, j, j', C)
+        near = (cos >= math.cos(math.radians(parallel_deg))) & pair_valid[:, :, None, :, None]
+        count = near.sum(3).clamp_min(1).to(heat.dtype)                       # (B, i, j, C)
+        return pair_valid[..., None].to(heat.dtype) / count
+
+
 def multiview_epipolar_loss(heat, K, R, t, valid=None, *, eps=1e-6, rows=None, cols=None,
                             min_angle_deg=10.0, max_spacing=1.0, max_grid=None,
-                            reduction='mean'):
+                            reduction='mean', parallel_deg=10.0):
     """L_E: epipolar divergence over all keypoints and ordered pairs of valid views.
 
     heat (B, V, C, h, w) non-negative heatmaps; K (B, V, 3, 3) in heatmap pixels; R (B, V, 3, 3),
     t (B, V, 3) world -> camera; valid (B, V) bool views present (None = all). Every
     non-degenerate unordered pair is rectified once (all pairs in one grid_sample call) and
     both directions KL(Q_i || Q_j->i), KL(Q_j || Q_i->j) are used, i.e. all ordered pairs, as
-    in the paper's sum over each view's paired views. reduction: 'mean' over (ordered pair,
-    keypoint) terms or 'sum'. Returns a scalar (0, still attached to heat, if no valid pair).
+    in the paper's sum over each view's paired views. parallel_deg > 0: each term is weighted
+    by line_weights (partners drawing near-parallel lines through a keypoint share one
+    weight); 0 = every term weighs 1. reduction: weighted 'mean' over (ordered pair,
+    keypoint) terms or weighted 'sum'. Returns a scalar (0, still attached to heat, if no
+    valid pair).
     """
     if heat.dim() != 5:
         raise ValueError(f'heat must be (B, V, C, h, w), got {tuple(heat.shape)}')
     if reduction not in ('mean', 'sum'):
         raise ValueError(f"reduction must be 'mean' or 'sum', got {reduction!r}")
+    if not 0.0 <= parallel_deg < 90.0:
+        raise ValueError(f'parallel_deg must be in [0, 90), got {parallel_deg}')
     _check_options(min_angle_deg, max_spacing, eps, rows, cols, max_grid)
     if tuple(K.shape[:2]) != tuple(heat.shape[:2]):
         raise ValueError(f'K {tuple(K.shape)} does not match heat (B, V) {tuple(heat.shape[:2])}')
@@ -446,5 +480,15 @@ def multiview_epipolar_loss(heat, K, R, t, valid=None, *, eps=1e-6, rows=None, c
     rows, cols = geom.grid_size(rows, cols, max_grid or 4 * max(size))
     max_i, max_j = _row_max(heat[b, i], heat[b, j], geom, rows, cols)
     q_i, q_j = _row_distribution(max_i), _row_distribution(max_j)
-    terms = torch.cat([_kl(q_i, q_j, eps), _kl(q_j, q_i, eps)])
-    return terms.mean() if reduction == 'mean' else terms.sum()
+    terms = torch.cat([_kl(q_i, q_j, eps), _kl(q_j, q_i, eps)])            # (2N, C)
+    if parallel_deg > 0:
+        B, V = heat.shape[:2]
+        pair_valid = torch.zeros(B, V, V, dtype=torch.bool, device=heat.device)
+        pair_valid[b, i, j] = True
+        pair_valid[b, j, i] = True
+        weights = line_weights(heat, K, R, t, pair_valid, parallel_deg)
+        weights = torch.cat([weights[b, i, j], weights[b, j, i]])          # (2N, C)
+    else:
+        weights = torch.ones_like(terms)
+    total = (weights * terms).sum()
+    return total / weights.sum() if reduction == 'mean' else total

@@ -72,3 +72,31 @@ def test_the_minimum_shift_passes_no_gradient_to_the_minimum_pixel():
     shifted = heat - heat.amin(dim=(-2, -1), keepdim=True)
     grad_attached, = torch.autograd.grad(multiview_epipolar_loss(shifted, K, R, t), heat)
     assert grad_attached[0, :, 0, 45, 45].abs().min() > 0
+
+
+def test_partners_drawing_parallel_lines_through_a_keypoint_share_one_weight():
+    from monet_ros.learning.epipolar import line_weights
+    from monet_ros.synth.rig import look_at
+
+    X = np.array([0.0, 0.0, 1.0])                    # a keypoint
+    Y = np.array([-0.4, -0.5, 1.6])                  # another, off the plane below
+    C_i, C_1 = np.array([3.0, 0.0, 0.0]), np.array([0.0, 3.0, 1.0])
+    # C_2 lies in the epipolar plane (X, C_i, C_1): in view i, the lines that partners 1 and 2
+    # draw through X coincide; C_3 is off that plane
+    C_2 = C_i + 1.5 * (C_1 - C_i) - 0.5 * (X - C_i)
+    C_3 = np.array([0.0, -3.0, 3.0])
+    assert abs(np.dot(np.cross(C_1 - C_i, X - C_i), C_2 - C_i)) < 1e-12
+    # view i looks at X, which lands on a pixel centre: its peak is exactly X's projection
+    K = np.array([[40.0, 0, 22.0], [0, 40.0, 22.0], [0, 0, 1]])
+    Rs = [look_at(C_i, X)] + [look_at(c, (0.0, 0.0, 1.1)) for c in (C_1, C_2, C_3)]
+    ts = [-R @ c for R, c in zip(Rs, (C_i, C_1, C_2, C_3))]
+    peaks = [[(K @ (R @ P + t))[:2] / (K @ (R @ P + t))[2] for P in (X, Y)]
+             for R, t in zip(Rs, ts)]
+    heat = gaussians(peaks)[None]                                  # (1, V=4, C=2, 46, 46)
+    as_t = [torch.as_tensor(np.stack(a)[None]) for a in ([K] * 4, Rs, ts)]
+    pair_valid = ~torch.eye(4, dtype=torch.bool)[None]
+    # (far epipoles: lines through Y from partners 1 and 2 differ by ~1.9 degrees)
+    w = line_weights(heat, *as_t, pair_valid, parallel_deg=1.0)[0]    # (i, j, C)
+    np.testing.assert_allclose(w[0, 1:, 0].numpy(), [0.5, 0.5, 1.0])   # keypoint X
+    np.testing.assert_allclose(w[0, 1:, 1].numpy(), [1.0, 1.0, 1.0])   # keypoint Y
+    assert (w[torch.arange(4), torch.arange(4)] == 0).all()
