@@ -27,8 +27,9 @@ Forms (the lead runs the real figures; see bench/results/accuracy.md):
   reduced (default): ring8 + dome5, 240 instants, 300 steps, seed 0, small net 64 px
       (16x16 heatmaps, sigma 1 heatmap px = about 14 image px)
       .venv/bin/python bench/accuracy.py --out /tmp/monet_accuracy
-  full: ring8 + dome5 (non-coplanar, 5 cameras), 1500 instants, 3000 steps, seeds 0 1 2, small
-      net 184 px -> 46x46 heatmaps (the paper's), sigma 1 heatmap px (about 5 image px)
+  full: ring8 + dome5 (non-coplanar, 5 cameras, occluders), 1500 instants, 3000 steps,
+      seeds 0 1 2, small net 184 px -> 46x46 heatmaps (the paper's), sigma 1 heatmap px
+      (about 5 image px)
       .venv/bin/python bench/accuracy.py --full --out /tmp/monet_accuracy_full
   on CUDA: bench/accuracy_gpu.sh (the full form, --jobs for one large GPU).
 Tuning is done on seeds that are not reported (use --seeds 100 101 for tuning runs).
@@ -61,9 +62,13 @@ RIGS = {
               '--hfov', '60'],
     'dome6': ['--cameras', '6', '--layout', 'dome', '--width', '288', '--height', '224',
               '--hfov', '75'],
-    # non-coplanar, few views (limbs hidden by the body from some views)
+    # non-coplanar, few views, two pillars hiding legs from some views
     'dome5': ['--cameras', '5', '--layout', 'dome', '--width', '320', '--height', '240',
-              '--hfov', '70'],
+              '--hfov', '70', '--occluders', '2'],
+    # non-coplanar ring (centres 0.4-0.8 m above / below head height), left/right limbs in
+    # their own colours (bootstrapping's symmetric ambiguity removed)
+    'ring6h': ['--cameras', '6', '--layout', 'ring', '--width', '320', '--height', '240',
+               '--hfov', '60', '--height-spread', '0.8', '--asymmetric-limbs'],
     # few views: RANSAC bootstrapping needs 3 agreeing views of 4, so it labels less
     'ring4': ['--cameras', '4', '--layout', 'ring', '--width', '320', '--height', '240',
               '--hfov', '60'],

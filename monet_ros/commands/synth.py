@@ -54,6 +54,15 @@ def add_arguments(parser):
     parser.add_argument('--visible-labels-only', action='store_true',
                         help='label only keypoints not hidden by another limb (default: '
                              'every keypoint inside the image)')
+    parser.add_argument('--height-spread', type=float, default=d['height_spread'].default,
+                        help='ring: cameras alternately up to this many metres above / below '
+                             'the nominal height (non-coplanar; default %(default)s)')
+    parser.add_argument('--occluders', type=int, default=d['occluders'].default,
+                        help='static pillars (up to hip height) between the path and that '
+                             'many cameras, hiding limbs from some views (default %(default)s)')
+    parser.add_argument('--asymmetric-limbs', action='store_true',
+                        help='left arm and leg in their own colours (default: identical '
+                             'limbs, the symmetric ambiguity)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
@@ -70,7 +79,8 @@ def config_from_args(args):
         height=args.height, skeleton=args.skeleton, layout=args.layout,
         label_fraction=args.label_fraction, seed=args.seed, distortion=distortion,
         radius=args.radius, hfov_deg=args.hfov, noise=args.noise,
-        label_occluded=not args.visible_labels_only)
+        label_occluded=not args.visible_labels_only, height_spread=args.height_spread,
+        occluders=args.occluders, asymmetric_limbs=args.asymmetric_limbs)
 
 
 def run(args):

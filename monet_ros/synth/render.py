@@ -75,6 +75,11 @@ def part_colors(parts, rng):
     base['leg'] = base['hips']
     base['head'] = base['skin']
     base['tail'] = base['torso']
+    # options (no draws from rng: a seed's colours stay): left limbs in their own colours,
+    # neutral grey pillars
+    base['arm_l'] = 255.0 - base['arm']
+    base['leg_l'] = 255.0 - base['leg']
+    base['occluder'] = np.array([128.0, 124.0, 118.0])
     if 'paw' in parts or 'tail' in parts:          # an animal: one fur colour everywhere
         fur = np.array(PALETTES['torso'][rng.integers(5)], float) * 0.8 + 40
         for name in ('torso', 'head', 'leg', 'tail'):
