@@ -145,8 +145,7 @@ def train_and_evaluate(job):
         trainer = Trainer(config, data, Path(out) / 'runs' / rig / label)
         extra['pseudo_labels_initial'] = trainer.pseudo_label_count
         # share of the unlabeled train views x keypoints pseudo-labelled at the start
-        extra['pseudo_label_coverage'] = float(np.isfinite(
-            trainer.pseudo_only[data.unlabeled_instants, ..., 0]).mean())
+        extra['pseudo_label_coverage'] = trainer.pseudo_label_coverage
         summary = trainer.run(progress=False)
         extra['images_per_step'] = int(sum(len(p[1]) for p in trainer._batch_plan()))
         detector = Detector(trainer.model, trainer.metadata(), device=trainer.device)

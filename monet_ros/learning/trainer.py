@@ -213,6 +213,12 @@ class Trainer:
     def pseudo_label_count(self):
         return int(np.isfinite(self.pseudo_only[..., 0]).sum())
 
+    @property
+    def pseudo_label_coverage(self):
+        """Share of the unlabeled training (view, keypoint) cells that hold a pseudo-label."""
+        cells = self.pseudo_only[self.data.unlabeled_instants, ..., 0]
+        return float(np.isfinite(cells).mean()) if cells.size else 0.0
+
     def _sample(self, pool, n):
         idx = self.rng.choice(len(pool), size=n, replace=len(pool) < n)
         return pool[idx]
@@ -531,5 +537,6 @@ class Trainer:
         seconds = time.monotonic() - start
         return {'mode': self.config.mode, 'steps': self.step_count, 'seconds': seconds,
                 'steps_per_s': (self.step_count - first) / max(seconds, 1e-9),
-                'pseudo_labels': self.pseudo_label_count, 'last': self.last_terms}
+                'pseudo_labels': self.pseudo_label_count,
+                'pseudo_label_coverage': self.pseudo_label_coverage, 'last': self.last_terms}
 
