@@ -59,17 +59,17 @@ class DetectorConfig:
     box: tuple[float, ...] = setting((), 'fixed crop box x0 y0 x1 y1 (pixel edges) when no '
                                      'subject is tracked (default: full frame)', length=(0, 4))
     track: bool = setting(True, 'crop around the projection of the latest /monet/keypoints3d')
-    track_margin: float = setting(0.3, 'tracked box margin, fraction of its size per side',
-                                  minimum=0.0)
-    track_timeout_s: float = setting(1.0, "keypoints3d whose stamp is older than the image's "
-                                     'by more than this are not used for the crop (source '
-                                     'stamps, so a replay crops alike at any speed)',
-                                     minimum=0.0)
-    track_trim: float = setting(4.0, 'tracked box: leave out projected keypoints farther than '
-                                'this many robust sigmas (MAD) from the median (0 = none)',
-                                minimum=0.0)
-    min_track_keypoints: int = setting(3, 'fewest projected keypoints for a tracked crop',
-                                       minimum=1)
+    track_margin: float = setting(TrackedRule.margin, 'tracked box margin, fraction of its '
+                                  'size per side', minimum=0.0)
+    track_timeout_s: float = setting(
+        TrackedRule.timeout_ns / 1e9, "keypoints3d whose stamp is older than the image's by "
+        'more than this are not used for the crop (source stamps, so a replay crops alike at '
+        'any speed)', minimum=0.0)
+    track_trim: float = setting(
+        TrackedRule.trim, 'tracked box: leave out projected keypoints farther than this many '
+        'robust sigmas (MAD) from the median (0 = none)', minimum=0.0)
+    min_track_keypoints: int = setting(TrackedRule.min_points, 'fewest projected keypoints '
+                                       'for a tracked crop', minimum=1)
     batch_wait_ms: float = setting(15.0, 'with several cameras: wait this long for the other '
                                    "cameras' frames before running a partial batch",
                                    minimum=0.0)
