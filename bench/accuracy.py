@@ -22,7 +22,8 @@ For each synthetic rig (`monet synth`: a moving human, 14 keypoints, <1% labelle
      ratio baseline / MONET, and on how many seeds MONET is better).
 
 Forms (the lead runs the real figures; see bench/results/accuracy.md):
-  quick: 1 rig, 120 instants, 40 steps, 3 modes: runs end to end in about a minute
+  quick: 1 rig, 120 instants, 40 steps, 3 modes: runs end to end in about a minute (an
+      end-to-end check only: 40 steps do not beat the null row)
       .venv/bin/python bench/accuracy.py --quick --out /tmp/acc_quick
   reduced (default): ring8 + dome5, 240 instants, 300 steps, seed 0, small net 64 px
       (16x16 heatmaps, sigma 1 heatmap px = about 14 image px)
