@@ -1,29 +1,39 @@
-"""The paper's Table 1 and Figure 6 on synthetic recordings: all six modes, same step budget.
+"""The paper's Table 1 on synthetic rigs, on a yardstick that can tell: every mode and an
+image-blind null row, crops a deployed detector would have, ground-truth columns first.
 
 For each synthetic rig (`monet synth`: a moving human, 14 keypoints, <1% labelled instants):
-  1. the recording is rendered once (seeded) and decoded into memory;
+  1. the recording is rendered once per seed and decoded into memory;
   2. the labels of each labelled instant are kept in --label-views views only (chosen with
-     the seed; the paper's spatial augmentation needs unlabelled views), the contiguous tail
-     (--eval-fraction) is held out: never trained on, never tracked into;
-  3. every mode (supervised, spatial, spatiotemporal, bootstrap1, bootstrap2, monet) trains
-     the same network from the same initialisation (seed) for the same number of steps,
-     --jobs processes in parallel (forked after decoding, one torch thread each);
-  4. each model is evaluated on the held-out instants (evaluation.evaluate_detector):
-     reprojection error (all-view triangulation without RANSAC, mean +- std px vs the
-     detections, and vs the ground truth) and PCK at 0.01..0.2 of the heatmap window.
-Prints the table (rows = modes, columns = rigs) and writes results.md/.csv/.json and
-pck_<rig>.png (Figure 6) under --out, with the wall time, seeds and configuration.
+     the seed); the contiguous tail (--eval-fraction) is held out: never trained on, never
+     tracked into. Labelled instants are printed as trained (those in the tail are not);
+  3. every mode trains the same network from the same initialisation (seed) for the same
+     number of steps and the same number of images per step, --jobs processes in parallel;
+     training crops come from the labels and their spatiotemporal tracks (crop_rule,
+     'pseudo_labels'), with independent per-view scale/shift jitter (+-15% / +-8%);
+  4. each model, and the null detector (the mean labelled pose in the crop, whatever the
+     image), is evaluated on the held-out instants with the live detector's crop rule
+     (tracked: around the previous instant's fused 3D; `--eval-crop ground_truth` is the
+     explicit, labelled benchmark option). Columns, ground truth first: 2D error against
+     the projected ground truth (px mean, median), PCK@0.05/0.1/0.2 against it (fraction of
+     the heatmap window), 3D error of the all-view triangulation (mm), reprojection error
+     (px, agreement of the views, not accuracy). A cell where a mode does not beat the null
+     row is marked with a dagger.
+  5. with several seeds: mean ± std over seeds, and MONET paired with every baseline (per-seed
+     ratio baseline / MONET, and on how many seeds MONET is better).
 
-Forms (small net 64 px -> 16x16 heatmaps, width 24, Adam 1e-3, 3 labelled views per
-labelled instant; rigs ring8 and dome6; wall times measured 2026-11-23 on the 2-core
-development machine, quiet, 2 jobs, no GPU; figures in bench/results/accuracy.md):
-  reduced (default): 240 instants, 2 labelled (0.83%), 300 steps per mode, seed 0
-      .venv/bin/python bench/accuracy.py --out /tmp/monet_accuracy          # 2.0 min
-  medium, several seeds and a third rig with only 4 cameras:
-      .venv/bin/python bench/accuracy.py --out /tmp/acc_seeds --frames 600 --steps 1500 \
-          --rigs ring8 dome6 ring4 --seeds 1 2                             # 23.6 min
-  full: 1500 instants, 6 labelled (0.40%), 6000 steps per mode, seed 0
-      .venv/bin/python bench/accuracy.py --full --out /tmp/monet_accuracy_full   # 29.8 min
+Forms (the lead runs the real figures; see bench/results/accuracy.md):
+  quick: 1 rig, 120 instants, 40 steps, 3 modes: runs end to end in about a minute (an
+      end-to-end check only: 40 steps do not beat the null row)
+      .venv/bin/python bench/accuracy.py --quick --out /tmp/acc_quick
+  reduced (default): ring8 + dome5, 240 instants, 300 steps, seed 0, small net 64 px
+      (16x16 heatmaps, sigma 1 heatmap px = about 14 image px)
+      .venv/bin/python bench/accuracy.py --out /tmp/monet_accuracy
+  full: ring8 + dome5 (non-coplanar, 5 cameras, occluders), 1500 instants, 3000 steps,
+      seeds 0 1 2, small net 184 px -> 46x46 heatmaps (the paper's), sigma 1 heatmap px
+      (about 5 image px)
+      .venv/bin/python bench/accuracy.py --full --out /tmp/monet_accuracy_full
+  on CUDA: bench/accuracy_gpu.sh (the full form, --jobs for one large GPU).
+Tuning is done on seeds that are not reported (use --seeds 100 101 for tuning runs).
 Variants side by side: --set KEY=VALUE (any TrainConfig field) with --tag NAME --merge.
 """
 import argparse
@@ -41,25 +51,44 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from monet_ros.cli import main as monet_main  # noqa: E402
-from monet_ros.evaluation import markdown_table, write_report  # noqa: E402
+from monet_ros.evaluation import write_report  # noqa: E402
 from monet_ros.evaluation.report import MODE_TITLES  # noqa: E402
 from monet_ros.learning.config import MODES, TrainConfig  # noqa: E402
 
-# Two rigs: different camera count, layout, image size and field of view (intrinsics).
+# Rigs: different camera count, layout, image size and field of view (intrinsics). ring
+# rigs have every centre at about head height (epipolar lines of the upper body nearly
+# parallel: the paper's degenerate case); the dome rigs are non-coplanar.
 RIGS = {
     'ring8': ['--cameras', '8', '--layout', 'ring', '--width', '320', '--height', '240',
               '--hfov', '60'],
     'dome6': ['--cameras', '6', '--layout', 'dome', '--width', '288', '--height', '224',
               '--hfov', '75'],
+    # non-coplanar, few views, two pillars hiding legs from some views
+    'dome5': ['--cameras', '5', '--layout', 'dome', '--width', '320', '--height', '240',
+              '--hfov', '70', '--occluders', '2'],
+    # non-coplanar ring (centres 0.4-0.8 m above / below head height), left/right limbs in
+    # their own colours (bootstrapping's symmetric ambiguity removed)
+    'ring6h': ['--cameras', '6', '--layout', 'ring', '--width', '320', '--height', '240',
+               '--hfov', '60', '--height-spread', '0.8', '--distinct-sides'],
     # few views: RANSAC bootstrapping needs 3 agreeing views of 4, so it labels less
     'ring4': ['--cameras', '4', '--layout', 'ring', '--width', '320', '--height', '240',
               '--hfov', '60'],
 }
-DEFAULT_RIGS = ['ring8', 'dome6']
-REDUCED = dict(frames=240, label_fraction=0.008, steps=300, seeds=[0],
-               monet_bootstrap_rounds=2)
-FULL = dict(frames=1500, label_fraction=0.004, steps=6000, seeds=[0],
-            monet_bootstrap_rounds=2)
+DEFAULT_RIGS = ['ring8', 'dome5']
+ALL_MODES = ['null'] + list(MODES)
+QUICK = dict(frames=120, label_fraction=0.02, steps=40, seeds=[0], input_size=64,
+             sigma=1.0, rigs=['dome5'], modes=['null', 'supervised', 'monet'])
+REDUCED = dict(frames=240, label_fraction=0.008, steps=300, seeds=[0], input_size=64,
+               sigma=1.0, rigs=DEFAULT_RIGS, modes=ALL_MODES)
+FULL = dict(frames=1500, label_fraction=0.004, steps=3000, seeds=[0, 1, 2], input_size=184,
+            sigma=1.0, rigs=DEFAULT_RIGS, modes=ALL_MODES)
+# ground-truth columns first: (key, title, format, lower is better)
+COLUMNS = (('error2d_mean', '2D err. (px)', '.2f', True),
+           ('error2d_median', '2D med. (px)', '.2f', True),
+           ('pck@0.05', 'PCK@0.05', '.3f', False), ('pck@0.1', 'PCK@0.1', '.3f', False),
+           ('pck@0.2', 'PCK@0.2', '.3f', False),
+           ('error3d_mm', '3D err. (mm)', '.0f', True),
+           ('reprojection', 'reproj. (px)', '.2f', True))
 
 _DATA = {}          # rig -> TrainingData inputs, filled before forking
 
@@ -90,41 +119,97 @@ def keep_label_views(recording, count, seed):
 
 
 def train_and_evaluate(job):
-    """Worker: train one mode on one dataset, evaluate on the held-out tail -> summary JSON."""
+    """Worker: train one mode (or build the null detector) on one dataset, evaluate on the
+    held-out tail with the eval crop rule -> summary JSON."""
     import torch
 
     from monet_ros.evaluation.evaluate import evaluate_detector
+    from monet_ros.evaluation.null_detector import null_detector
     from monet_ros.learning.trainer import Trainer, TrainingData
     from monet_ros.models import build_model
     from monet_ros.models.detector import Detector
 
     torch.set_num_threads(1)
-    rig, config_dict, out, tag = job
+    rig, mode, config_dict, out, tag, eval_crop = job
     config = TrainConfig.from_dict(config_dict)
     recording = _DATA[rig]          # rig = the dataset name (rig, or rig-sSEED)
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
     data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
     start = time.monotonic()
-    label = config.mode + (f'+{tag}' if tag else '')
-    trainer = Trainer(config, data, Path(out) / 'runs' / rig / label)
-    pseudo_initial = trainer.pseudo_label_count
-    summary = trainer.run(progress=False)
+    label = mode + (f'+{tag}' if tag else '')
+    extra = {}
+    if mode == 'null':
+        detector = null_detector(data, config.sigma, device=config.device
+                                 if config.device != 'auto' else None)
+        summary = {'steps': 0, 'pseudo_labels': 0, 'last': {}}
+    else:
+        trainer = Trainer(config, data, Path(out) / 'runs' / rig / label)
+        extra['pseudo_labels_initial'] = trainer.pseudo_label_count
+        # share of the unlabeled train views x keypoints pseudo-labelled at the start
+        extra['pseudo_label_coverage'] = trainer.pseudo_label_coverage
+        summary = trainer.run(progress=False)
+        extra['images_per_step'] = int(sum(len(p[1]) for p in trainer._batch_plan()))
+        detector = Detector(trainer.model, trainer.metadata(), device=trainer.device)
     train_s = time.monotonic() - start
-    detector = Detector(trainer.model, trainer.metadata(), device=trainer.device)
-    result = evaluate_detector(detector, recording, data.held_out, data.boxes, label, rig)
+    boxes = data.boxes
+    if eval_crop == 'ground_truth':
+        from monet_ros.crop_rule import recording_boxes
+        h, w = detector.input_size
+        boxes = recording_boxes(recording, 'ground_truth', w / h, config.box_margin)
+    result = evaluate_detector(detector, recording, data.held_out, boxes, label, rig,
+                               crop='boxes' if eval_crop == 'ground_truth' else 'tracked')
+    result.extra.update(extra)
     result.extra.update({'train_seconds': round(train_s, 1), 'steps': summary['steps'],
-                         'pseudo_labels_initial': pseudo_initial,
                          'pseudo_labels_final': summary['pseudo_labels'],
-                         # share of the unlabeled train views x keypoints pseudo-labelled
-                         'pseudo_label_coverage': float(np.isfinite(
-                             trainer.pseudo_only[data.unlabeled_instants, ..., 0]).mean()),
-                         'seed': config.seed, 'eval_seconds':
+                         'labelled_instants_trained': int(len(data.labelled_instants)),
+                         'eval_crop': eval_crop, 'seed': config.seed, 'eval_seconds':
                          round(time.monotonic() - start - train_s, 1),
                          'last_terms': summary['last'], 'config': config.to_dict()})
-    print(f'[{rig} {label}] {summary["steps"]} steps in {train_s:.0f} s, '
-          f'reproj {result.reprojection_mean:.2f} px, PCK@0.1 {result.pck.at(0.1):.3f}',
-          file=sys.stderr, flush=True)
+    print(f'[{rig} {label}] {summary["steps"]} steps in {train_s:.0f} s, 2D error '
+          f'{result.extra["error2d_mean"]:.2f} px, PCK@0.1 {result.pck.at(0.1):.3f}, '
+          f'reproj {result.reprojection_mean:.2f} px', file=sys.stderr, flush=True)
     return result.to_json()
+
+
+def value(summary, key):
+    """A column's value of an EvalSummary (see COLUMNS)."""
+    if key.startswith('pck@'):
+        return summary.pck.at(float(key[4:]))
+    if key == 'error3d_mm':
+        return 1000 * summary.extra['error3d_mean']
+    if key == 'reprojection':
+        return summary.reprojection_mean
+    return summary.extra[key]
+
+
+def beats(a, b, lower):
+    return a < b if lower else a > b
+
+
+def result_table(summaries):
+    """Markdown: one row per (dataset, mode), ground-truth columns first; a dagger marks a
+    cell that does not beat the null row of its dataset."""
+    null = {s.dataset: s for s in summaries if s.mode.split('+')[0] == 'null'}
+    lines = ['| dataset | mode | ' + ' | '.join(c[1] for c in COLUMNS)
+             + ' | labelled instants trained | pseudo-labelled | images/step | train s |',
+             '|---|---|' + '---|' * (len(COLUMNS) + 4)]
+    for s in summaries:
+        cells = []
+        for key, _, fmt, lower in COLUMNS:
+            v = value(s, key)
+            mark = ''
+            if s.dataset in null and s is not null[s.dataset] and not beats(
+                    v, value(null[s.dataset], key), lower):
+                mark = ' †'
+            cells.append(f'{v:{fmt}}{mark}')
+        e = s.extra
+        lines.append(f'| {s.dataset} | {MODE_TITLES.get(s.mode, s.mode)} | '
+                     + ' | '.join(cells)
+                     + f' | {e.get("labelled_instants_trained", "")} '
+                     f'| {100 * e.get("pseudo_label_coverage", 0):.0f}% '
+                     f'| {e.get("images_per_step", "-")} | {e.get("train_seconds", 0):.0f} |')
+    lines.append('\n† = not better than the null row (mean pose in the crop) of that dataset.')
+    return '\n'.join(lines)
 
 
 def parse_overrides(pairs):
@@ -147,50 +232,62 @@ def dataset_name(rig, seed, seeds):
 
 
 def across_seeds(summaries, rigs, seeds):
-    """Markdown: per rig and mode, mean ± std over seeds of the held-out figures, and how
-    often each mode has the lowest reprojection error / highest PCK@0.1 of its seed."""
+    """Markdown: per rig, mean ± std over seeds of every column per mode (dagger: the mean
+    does not beat the null row's), then MONET paired with every baseline per seed."""
     cell = {(s.mode, s.dataset): s for s in summaries}
     present = {s.mode for s in summaries}
-    modes = [m for m in MODES if m in present] + sorted(present - set(MODES))
+    modes = [m for m in ALL_MODES if m in present] + sorted(present - set(ALL_MODES))
     lines = []
     for rig in rigs:
         names = [dataset_name(rig, seed, seeds) for seed in seeds]
         complete = [n for n in names if all((m, n) in cell for m in modes)]
         if not complete:
             continue
-        best_reproj = {n: min(modes, key=lambda m: cell[(m, n)].reprojection_mean)
-                       for n in complete}
-        best_pck = {n: max(modes, key=lambda m: cell[(m, n)].pck.at(0.1)) for n in complete}
         lines += [f'### {rig}: {len(complete)} seeds (mean ± std over seeds)', '',
-                  '| Mode | reproj. (px) | vs GT (px) | 3D error (mm) | PCK@0.05 | PCK@0.1 '
-                  '| PCK@0.2 | lowest reproj. | best PCK@0.1 | reproj. / MONET |',
-                  '|---|---|---|---|---|---|---|---|---|---|']
+                  '| Mode | ' + ' | '.join(c[1] for c in COLUMNS) + ' |',
+                  '|---|' + '---|' * len(COLUMNS)]
+        means = {m: {key: np.mean([value(cell[(m, n)], key) for n in complete])
+                     for key, *_ in COLUMNS} for m in modes}
         for m in modes:
-            rows = [cell[(m, n)] for n in complete]
-
-            def stat(values, fmt='.2f'):
-                v = np.asarray(values, dtype=np.float64)
-                return f'{v.mean():{fmt}} ± {v.std():{fmt}}'
-            ratio = [cell[(m, n)].reprojection_mean / cell[('monet', n)].reprojection_mean
-                     for n in complete] if 'monet' in modes else [np.nan]
-            lines.append(
-                f'| {MODE_TITLES.get(m, m)} | {stat([r.reprojection_mean for r in rows])} '
-                f'| {stat([r.gt_reprojection_mean for r in rows])} '
-                f'| {stat([1000 * r.extra["error3d_mean"] for r in rows], ".0f")} | '
-                + ' | '.join(stat([r.pck.at(a) for r in rows], '.3f') for a in (0.05, 0.1, 0.2))
-                + f' | {sum(best_reproj[n] == m for n in complete)}/{len(complete)} '
-                f'| {sum(best_pck[n] == m for n in complete)}/{len(complete)} '
-                f'| {stat(ratio)} |')
+            cells = []
+            for key, _, fmt, lower in COLUMNS:
+                v = np.array([value(cell[(m, n)], key) for n in complete])
+                mark = (' †' if 'null' in means and m != 'null'
+                        and not beats(v.mean(), means['null'][key], lower) else '')
+                cells.append(f'{v.mean():{fmt}} ± {v.std():{fmt}}{mark}')
+            lines.append(f'| {MODE_TITLES.get(m, m)} | ' + ' | '.join(cells) + ' |')
         lines.append('')
+        if 'monet' in modes:
+            lines += [f'#### {rig}: MONET paired with each baseline, per seed '
+                      '(ratio baseline / MONET for errors, MONET / baseline for PCK: > 1 = '
+                      'MONET better; wins = seeds where MONET is better)', '',
+                      '| baseline | ' + ' | '.join(c[1] for c in COLUMNS) + ' |',
+                      '|---|' + '---|' * len(COLUMNS)]
+            for m in modes:
+                if m == 'monet':
+                    continue
+                cells = []
+                for key, _, _, lower in COLUMNS:
+                    ours = np.array([value(cell[('monet', n)], key) for n in complete])
+                    theirs = np.array([value(cell[(m, n)], key) for n in complete])
+                    ratio = theirs / ours if lower else ours / theirs
+                    wins = int(sum(beats(o, t, lower) for o, t in zip(ours, theirs)))
+                    cells.append(' '.join(f'{r:.2f}' for r in ratio)
+                                 + f' ({wins}/{len(complete)})')
+                lines.append(f'| {MODE_TITLES.get(m, m)} | ' + ' | '.join(cells) + ' |')
+            lines.append('')
     return '\n'.join(lines)
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--out', default='/tmp/monet_accuracy')
-    parser.add_argument('--full', action='store_true', help='the full benchmark (long)')
-    parser.add_argument('--rigs', nargs='+', default=DEFAULT_RIGS, choices=list(RIGS))
-    parser.add_argument('--modes', nargs='+', default=list(MODES), choices=list(MODES))
+    form = parser.add_mutually_exclusive_group()
+    form.add_argument('--full', action='store_true', help='the full benchmark (long)')
+    form.add_argument('--quick', action='store_true',
+                      help='a minute end to end: 1 rig, 120 instants, 40 steps, 3 modes')
+    parser.add_argument('--rigs', nargs='+', default=None, choices=list(RIGS))
+    parser.add_argument('--modes', nargs='+', default=None, choices=ALL_MODES)
     parser.add_argument('--steps', type=int, default=0, help='override the step budget')
     parser.add_argument('--frames', type=int, default=0, help='override the frame count')
     parser.add_argument('--label-fraction', type=float, default=0.0,
@@ -200,13 +297,17 @@ def main(argv=None):
     parser.add_argument('--seeds', nargs='+', type=int, default=None,
                         help="seeds (scene, labels, initialisation); default: the preset's")
     parser.add_argument('--jobs', type=int, default=2, help='parallel training processes')
-    parser.add_argument('--input-size', type=int, default=64)
+    parser.add_argument('--input-size', type=int, default=0,
+                        help="network input side (default: the preset's; 184 -> 46x46 "
+                        'heatmaps)')
+    parser.add_argument('--sigma', type=float, default=0.0,
+                        help="target sigma in heatmap px (default: the preset's)")
     parser.add_argument('--width', type=int, default=24)
     parser.add_argument('--lr', type=float, default=1e-3)
     parser.add_argument('--device', default='auto')
-    parser.add_argument('--monet-bootstrap-rounds', type=int, default=None,
-                        help='monet: bootstrapping rounds feeding L_B (0 = spatial only); '
-                        "default: the preset's")
+    parser.add_argument('--eval-crop', choices=('tracked', 'ground_truth'), default='tracked',
+                        help="evaluation crops: the live detector's tracked rule (default) or "
+                        'ground-truth boxes (a benchmark option, labelled in the output)')
     parser.add_argument('--set', dest='overrides', action='append', default=[],
                         metavar='KEY=VALUE', help='any TrainConfig field, for every mode')
     parser.add_argument('--tag', default='',
@@ -215,43 +316,52 @@ def main(argv=None):
     parser.add_argument('--merge', action='store_true',
                         help='keep the (mode, dataset) results of OUT/results.json not rerun now')
     args = parser.parse_args(argv)
-    preset = dict(FULL if args.full else REDUCED)
-    for key in ('steps', 'frames', 'label_fraction'):
+    preset = dict(FULL if args.full else QUICK if args.quick else REDUCED)
+    for key in ('steps', 'frames', 'label_fraction', 'input_size', 'sigma', 'rigs', 'modes'):
         if getattr(args, key):
             preset[key] = getattr(args, key)
     seeds = args.seeds if args.seeds is not None else preset['seeds']
-    rounds = args.monet_bootstrap_rounds
-    rounds = preset['monet_bootstrap_rounds'] if rounds is None else rounds
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     wall = time.monotonic()
 
     from monet_ros.learning.recording import load_recording
+    from monet_ros.learning.trainer import split_instants
 
+    eval_fraction = TrainConfig().eval_fraction
+    overrides = parse_overrides(args.overrides)
+    eval_fraction = overrides.get('eval_fraction', eval_fraction)
     setup = {}
     for seed in seeds:
-        for rig in args.rigs:
+        for rig in preset['rigs']:
             name = dataset_name(rig, seed, seeds)
             folder = synthesise(out, name, rig, preset['frames'], preset['label_fraction'],
                                 seed)
             recording = load_recording(folder, name=name)
             labelled_all = recording.labelled_instants.tolist()
+            train, _ = split_instants(recording.num_instants, eval_fraction)
+            trained = [t for t in labelled_all if t <= train[-1]]
             kept = keep_label_views(recording, args.label_views, seed)
             _DATA[name] = recording
             setup[name] = {'folder': str(folder), 'seed': seed,
                            'instants': recording.num_instants, 'views': recording.num_views,
                            'labelled_instants': labelled_all,
-                           'labelled_fraction': len(labelled_all) / recording.num_instants,
+                           'labelled_instants_trained': trained,
+                           'labelled_fraction_trained': len(trained) / len(train),
                            'label_views_kept': kept}
-            share = 100 * len(labelled_all) / recording.num_instants
-            print(f'{name}: {recording.num_instants} instants x {recording.num_views} views, '
-                  f'labelled instants {labelled_all} ({share:.2f}%)', file=sys.stderr)
-    base = dict(architecture='small', input_size=args.input_size, width=args.width,
+            print(f'{name}: {recording.num_instants} instants x {recording.num_views} views; '
+                  f'labelled instants trained: {len(trained)} {trained} of {len(train)} '
+                  f'training instants ({100 * len(trained) / len(train):.2f}%); '
+                  f'{len(labelled_all) - len(trained)} more fall in the held-out tail and are '
+                  'not trained', file=sys.stderr)
+    base = dict(architecture='small', input_size=preset['input_size'], width=args.width,
                 steps=preset['steps'], checkpoint_every=preset['steps'], lr=args.lr,
-                device=args.device, monet_bootstrap_rounds=rounds, eval_fraction=0.2)
-    base.update(parse_overrides(args.overrides))
-    jobs = [(name, TrainConfig(mode=mode, **dict(base, seed=setup[name]['seed'])).to_dict(),
-             str(out), args.tag) for name in setup for mode in args.modes]
+                device=args.device, sigma=preset['sigma'], eval_fraction=0.2)
+    base.update(overrides)
+    jobs = [(name, mode, TrainConfig(mode='supervised' if mode == 'null' else mode,
+                                     **dict(base, seed=setup[name]['seed'])).to_dict(),
+             str(out), args.tag, args.eval_crop)
+            for name in setup for mode in preset['modes']]
     context = multiprocessing.get_context('fork')
     with ProcessPoolExecutor(max_workers=args.jobs, mp_context=context) as pool:
         results = list(pool.map(train_and_evaluate, jobs))
@@ -265,26 +375,19 @@ def main(argv=None):
                      if (s.mode, s.dataset) not in rerun] + summaries
     wall = time.monotonic() - wall
     paths = write_report(out, summaries, name='results')
-    print(markdown_table(summaries))
-    print('| dataset | mode | reproj. vs detections (px) | reproj. vs GT (px) | 3D error (m) '
-          '| PCK@0.05 | PCK@0.1 | PCK@0.2 | pseudo-labelled | train s |')
-    print('|---|---|---|---|---|---|---|---|---|---|')
-    for s in summaries:
-        e = s.extra
-        print(f'| {s.dataset} | {s.mode} | {s.reprojection_mean:.2f} ± {s.reprojection_std:.2f} '
-              f'| {s.gt_reprojection_mean:.2f} ± {s.gt_reprojection_std:.2f} '
-              f'| {e["error3d_mean"]:.3f} | {s.pck.at(0.05):.3f} | {s.pck.at(0.1):.3f} '
-              f'| {s.pck.at(0.2):.3f} | {100 * e.get("pseudo_label_coverage", 0):.0f}% '
-              f'| {e["train_seconds"]:.0f} |')
+    heat = TrainConfig(**dict(base, mode='supervised')).model_options()
+    print(f'## Held-out figures (eval crops: {args.eval_crop}; input {preset["input_size"]} px,'
+          f' sigma {preset["sigma"]} heatmap px; {heat})\n')
+    print(result_table(summaries))
     if len(seeds) > 1:
-        aggregate = across_seeds(summaries, args.rigs, seeds)
+        aggregate = across_seeds(summaries, preset['rigs'], seeds)
         (out / 'across_seeds.md').write_text(aggregate)
         print('\n' + aggregate)
     command = 'bench/accuracy.py ' + ' '.join(sys.argv[1:] if argv is None else argv)
     meta = {'command': command, 'wall_seconds': round(wall, 1), 'preset': preset,
             'label_views': args.label_views, 'seeds': seeds, 'jobs': args.jobs,
-            'config': base, 'datasets': setup, 'cpu_count': os.cpu_count(),
-            'load_average': os.getloadavg()}
+            'eval_crop': args.eval_crop, 'config': base, 'datasets': setup,
+            'cpu_count': os.cpu_count(), 'load_average': os.getloadavg()}
     (out / 'bench_meta.json').write_text(json.dumps(meta, indent=1))
     print(f'\nwall time {wall:.0f} s ({args.jobs} jobs, load average '
           f'{os.getloadavg()[0]:.1f} on {os.cpu_count()} cores); seeds {seeds}; '

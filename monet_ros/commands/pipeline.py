@@ -45,6 +45,9 @@ def add_arguments(parser):
                         help='stop after this many seconds (0 = at the end of the recording)')
     parser.add_argument('--threshold-px', type=float, default=15.0,
                         help='fusion inlier threshold in image pixels')
+    parser.add_argument('--confidence-threshold', type=float, default=0.1,
+                        help='heatmap peak value below which a view is ignored (as in '
+                        '`monet process`)')
     parser.add_argument('--device', default='', help="torch device ('' = auto)")
     parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
                         help='detector inference backend (onnxruntime: exported once, cached '
@@ -132,11 +135,20 @@ class Summary:
             self.joint_views += np.where(fused, result.num_views, 0).astype(np.int64)
             self.cond.notify_all()
 
-    def gate(self, timeout_s=5.0):
-        """Lockstep: a player gate that waits until the previous frame was fused."""
+    def gate(self, timeout_s=5.0, tracked=None):
+        """Lockstep: a player gate that waits until the previous frame was fused and, with
+        `tracked` (a callable -> stamp of the keypoints the detector crops around), until the
+        detector holds that frame's keypoints: every frame is cropped from the previous
+        one's 3D, as `monet process` does."""
+        def ready(previous_stamp):
+            return self.last_stamp >= previous_stamp and (
+                tracked is None or (tracked() or -1) >= previous_stamp)
+
         def wait(previous_stamp):
+            deadline = time.monotonic() + timeout_s
             with self.cond:
-                self.cond.wait_for(lambda: self.last_stamp >= previous_stamp, timeout_s)
+                while not ready(previous_stamp) and time.monotonic() < deadline:
+                    self.cond.wait(0.005)       # the detector's callback does not notify
         return wait
 
     def line(self, window=None):
@@ -246,7 +258,8 @@ def run(args):
             try:
                 fusion = FusionNode(overrides=dict(rig=str(rig), cameras=cameras,
                                                    skeleton=args.skeleton, threads=0,
-                                                   threshold_px=args.threshold_px))
+                                                   threshold_px=args.threshold_px,
+                                                   confidence_threshold=args.confidence_threshold))
                 nodes.append(fusion)
                 transport = image_transport(args.bag, fusion.cameras)
                 detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
@@ -271,7 +284,7 @@ def run(args):
             summary.names = list(fusion.skeleton.keypoints)
             player.listeners.append(summary.on_image)
             if args.lockstep:
-                player.gate = summary.gate()
+                player.gate = summary.gate(tracked=lambda: detector.tracker.stamp_ns)
             executor = MultiThreadedExecutor(num_threads=4)
             for node in nodes:
                 node.callback_guard = CallbackGuard(node)  # a bad message costs only itself

@@ -10,7 +10,8 @@ keypoints3d.trc (OpenSim / Pose2Sim), keypoints.nwb (NWB + ndx-pose, 3D and the 
 detections per camera) and detections2d.npz (2D detections + crop cameras).
 
 The same functions as the live nodes: Detector.predict (one batched forward per instant),
-tracking.crop_boxes (crop around the previous instant's 3D keypoints), fusion.fuse_heatmaps.
+crop_rule.TrackedCrops (the detector node's crop rule: around the previous instant's 3D
+keypoints), fusion.fuse_heatmaps.
 """
 from collections import Counter
 from dataclasses import dataclass
@@ -118,6 +119,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from tqdm import tqdm
 
     from monet_ros.commands.common import atomic_output_dir, check_new_output
+    from monet_ros.crop_rule import TrackedCrops
     from monet_ros.fusion import fuse_heatmaps
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.io.export_results import ResultsCollector
@@ -125,7 +127,6 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from monet_ros.models import Detector
     from monet_ros.nodes.rig import load_node_rig, select_cameras
     from monet_ros.skeleton import load_skeleton
-    from monet_ros.tracking import crop_boxes
 
     config = config or ProcessConfig()
     fusion_config = config_subset(config, FusionConfig)
@@ -154,7 +155,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                    skip_reasons={}, seconds=0.0)
     errors, num_views = RunningMean(), RunningMean()
     collector = ResultsCollector(cameras, detector.keypoints)
-    previous = None
+    tracker = TrackedCrops()          # the detector node's defaults (track_* parameters)
     start = time.perf_counter()
     with atomic_output_dir(out) as staging, BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6))
@@ -177,7 +178,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
             figures['missing_views'] += len(topics) - len(present)
             if len(present) < fusion_config.min_views:
                 continue
-            boxes = crop_boxes(present, previous if config.track else None)
+            boxes = tracker.boxes(present, frame.stamp_ns if config.track else None)
             boxes = detector.boxes_for(present, boxes)
             heat, heat_cameras = detector.predict(images, present, boxes, keep_aspect=False)
             result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cameras]), present,
@@ -191,7 +192,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                                           cam.name)
             collector.add(frame.stamp_ns, present, result, heat_cameras)
             finite = np.isfinite(result.X).all(axis=1)
-            previous = result.X if finite.sum() >= 3 else None
+            if config.track:
+                tracker.update(result.X, frame.stamp_ns)
             figures['frames'] += 1
             figures['views'] += len(present)
             errors.add(float(np.nanmean(result.reprojection_error)) if finite.any()

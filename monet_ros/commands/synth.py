@@ -57,6 +57,12 @@ def add_arguments(parser):
     parser.add_argument('--distinct-sides', action='store_true',
                         help="render the subject's left limbs in their own colour (default: "
                         'left and right look alike)')
+    parser.add_argument('--height-spread', type=float, default=d['height_spread'].default,
+                        help='ring: cameras alternately up to this many metres above / below '
+                             'the nominal height (non-coplanar; default %(default)s)')
+    parser.add_argument('--occluders', type=int, default=d['occluders'].default,
+                        help='static pillars (up to hip height) between the path and that '
+                             'many cameras, hiding limbs from some views (default %(default)s)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
@@ -73,7 +79,8 @@ def config_from_args(args):
         height=args.height, skeleton=args.skeleton, layout=args.layout,
         label_fraction=args.label_fraction, seed=args.seed, distortion=distortion,
         radius=args.radius, hfov_deg=args.hfov, noise=args.noise,
-        label_occluded=not args.visible_labels_only, distinct_sides=args.distinct_sides)
+        label_occluded=not args.visible_labels_only, height_spread=args.height_spread,
+        occluders=args.occluders, distinct_sides=args.distinct_sides)
 
 
 def run(args):

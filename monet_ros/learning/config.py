@@ -16,8 +16,9 @@ MAX_INPUT_SIZE = 2048
 MAX_WIDTH = 1024
 MAX_BATCH = 4096
 
-# The paper's rows (Table 1).
-MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 'monet')
+# The paper's rows (Table 1), then ablations.
+MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 'monet',
+         'bootstrap2_epipolar')
 
 
 @dataclass(frozen=True)
@@ -30,13 +31,18 @@ class ModeSpec:
     epipolar: bool
 
 
+# As in the paper: Bootstrapping I / II start from the spatiotemporal augmentation, and
+# MONET is L_L + lambda_e L_E + lambda_p L_B with L_B on the spatiotemporal augmentation.
+# bootstrap2_epipolar (ablation): Bootstrapping II's labels from the spatial augmentation
+# + L_E (this package's earlier `monet`).
 MODE_SPECS = {
     'supervised': ModeSpec(False, False, 0, False),
     'spatial': ModeSpec(True, False, 0, False),
     'spatiotemporal': ModeSpec(True, True, 0, False),
-    'bootstrap1': ModeSpec(True, False, 1, False),
-    'bootstrap2': ModeSpec(True, False, 2, False),
-    'monet': ModeSpec(True, False, 0, True),
+    'bootstrap1': ModeSpec(True, True, 1, False),
+    'bootstrap2': ModeSpec(True, True, 2, False),
+    'monet': ModeSpec(True, True, 0, True),
+    'bootstrap2_epipolar': ModeSpec(True, False, 2, True),
 }
 
 
@@ -86,8 +92,11 @@ class TrainConfig:
                                    '(0 = train on everything, for real use; e.g. 0.2 to keep '
                                    'a tail to measure generalisation on)', minimum=0.0,
                                    maximum=0.9)
-    box_source: str = setting('auto', 'crop boxes: ground_truth, labels, full or auto',
-                              choices=('auto', 'ground_truth', 'labels', 'full'))
+    box_source: str = setting('auto', 'training crop boxes (monet_ros.crop_rule): auto = '
+                              'pseudo_labels (labels + their spatiotemporal tracks), labels, '
+                              'full, or ground_truth (benchmark option only)',
+                              choices=('auto', 'pseudo_labels', 'labels', 'full',
+                                       'ground_truth'))
     box_margin: float = setting(0.25, 'crop margin around the keypoints (fraction)',
                                 minimum=0.0)
     cache_scale: float = setting(1.3, 'cached crop size / network crop (room to augment)',
@@ -108,12 +117,12 @@ class TrainConfig:
                                             minimum=0.0, exclusive_minimum=True)
     bootstrap_min_views: int = setting(3, 'bootstrapping: minimum inlier views', minimum=2)
     monet_bootstrap_rounds: int = setting(
-        2, "monet: bootstrapping rounds feeding L_B (the paper's bootstrapping prior; 2 = "
-        "Bootstrapping II's); 0 = L_B on spatial pseudo-labels only", minimum=0, maximum=3)
+        0, 'monet: bootstrapping rounds added to L_B (0 = the paper: L_B on the '
+        'spatiotemporal augmentation only)', minimum=0, maximum=3)
     monet_temporal: bool = setting(
-        False, 'monet: add spatiotemporal pseudo-labels (tracked, verified) to L_B; they take '
-        'precedence over bootstrapped ones')
-    track_horizon: int = setting(10, 'spatiotemporal: frames tracked each way', minimum=0)
+        True, "monet: L_B on the spatiotemporal augmentation (the paper's); false = spatial "
+        'only')
+    track_horizon: int = setting(50, 'spatiotemporal: frames tracked each way', minimum=0)
     track_ransac_px: float = setting(4.0, 'spatiotemporal: RANSAC threshold (px)', minimum=0.0,
                                      exclusive_minimum=True)
     track_min_views: int = setting(3, 'spatiotemporal: minimum verified views', minimum=2)

@@ -19,7 +19,8 @@ the spherical ("polar") form of stereo rectification rather than a planar homogr
 exactly the same epipolar lines, but columns stay evenly spaced along each line (a planar
 rectification stretches the side near the epipole by 1 / sin^2(a), 33x at 10 degrees) and no
 ray has to lie in front of a rectified image plane. The rectified window is the (theta, a)
-range of the warped heatmap border (corners and edge samples), theta shared by the pair and
+range of the warped heatmap border (corners and edge samples), theta the planes that both
+windows see (rows only one window sees would compare a detection with zero padding) and
 a per view; rows are chosen so that at each window's centre one rectified row step is at
 most ``max_spacing`` heatmap pixels, columns half that: a bilinear heatmap has cusps at pixel
 centres, so a sampled row max falls short of the supremum along the line linearly in the
@@ -102,7 +103,8 @@ class PairGeometry:
 
     R_rect (N, 3, 3): rows = baseline x, y, z of the shared rectified frame (world -> rect).
     proj_i, proj_j (N, 3, 3): K R R_rect^T, rectified direction -> homogeneous heatmap pixel.
-    theta_range (N, 2): epipolar-plane angles covered by both windows (shared rows).
+    theta_range (N, 2): epipolar-plane angles of the rows: with overlap=True (the
+        divergence) those covered by both windows, else (display) by either window.
     alpha_i, alpha_j (N, 2): ray-to-baseline angles covered by each window (columns).
     rows_needed, cols_needed (N,): grid size for ``max_spacing`` at the window centres.
     valid (N,) bool: False for degenerate pairs.
@@ -148,8 +150,12 @@ class PairGeometry:
 
 @torch.no_grad()
 def pair_geometry(K_i, R_i, t_i, size_i, K_j, R_j, t_j, size_j, min_angle_deg=10.0,
-                  max_spacing=1.0):
-    """Shared rectified frame, windows and degeneracy flags of N pairs; K, R, t (N, ...)."""
+                  max_spacing=1.0, overlap=True):
+    """Shared rectified frame, windows and degeneracy flags of N pairs; K, R, t (N, ...).
+
+    overlap: rows span the epipolar planes both windows see (a pair without any is invalid);
+    a row only one window sees has nothing to compare with (zero padding in the other), so
+    it would only add KL that no detection can remove. False: planes either window sees."""
     f64 = dict(dtype=torch.float64, device=K_i.device)
     K_i, R_i, t_i, K_j, R_j, t_j = (a.detach().to(**f64) for a in (K_i, R_i, t_i, K_j, R_j, t_j))
     n = K_i.shape[0]
@@ -204,8 +210,11 @@ def pair_geometry(K_i, R_i, t_i, size_i, K_j, R_j, t_j, size_j, min_angle_deg=10
                         alpha=torch.stack([alpha.amin(-1), alpha.amax(-1)], -1),
                         d_alpha=0.5 * max_spacing * pitch, d_theta=max_spacing * pitch / sin_c,
                         proj=proj)
-    lo = torch.minimum(out['i']['theta'][0], out['j']['theta'][0])
-    hi = torch.maximum(out['i']['theta'][1], out['j']['theta'][1])
+    pick_lo, pick_hi = (torch.maximum, torch.minimum) if overlap else (torch.minimum,
+                                                                          torch.maximum)
+    lo = pick_lo(out['i']['theta'][0], out['j']['theta'][0])
+    hi = pick_hi(out['i']['theta'][1], out['j']['theta'][1])
+    valid &= hi > lo
     theta_range = torch.stack([lo, hi], -1)
     rows_needed = (hi - lo) / torch.minimum(out['i']['d_theta'], out['j']['d_theta'])
     cols_needed = torch.maximum(
@@ -322,7 +331,7 @@ def _kl(p, q, eps):
 
 
 def _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols, eps, min_angle_deg,
-             max_spacing, max_grid):
+             max_spacing, max_grid, overlap=True):
     if heat_i.dim() != 4 or heat_j.dim() != 4:
         raise ValueError(f'heat_i and heat_j must be (B, C, H, W), got {tuple(heat_i.shape)} '
                          f'and {tuple(heat_j.shape)}')
@@ -333,21 +342,23 @@ def _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols, eps, min_
     _check_camera_batch('camera j', K_j, R_j, t_j, heat_j.shape[:1])
     _check_options(min_angle_deg, max_spacing, eps, rows, cols, max_grid)
     geom = pair_geometry(K_i, R_i, t_i, tuple(heat_i.shape[-2:]), K_j, R_j, t_j,
-                         tuple(heat_j.shape[-2:]), min_angle_deg, max_spacing)
+                         tuple(heat_j.shape[-2:]), min_angle_deg, max_spacing, overlap)
     max_grid = max_grid or 4 * max(*heat_i.shape[-2:], *heat_j.shape[-2:])
     return geom, geom.grid_size(rows, cols, max_grid)
 
 
 def rectify_pair(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, *, rows=None, cols=None,
-                 min_angle_deg=10.0, max_spacing=1.0, max_grid=None):
+                 min_angle_deg=10.0, max_spacing=1.0, max_grid=None, overlap=False):
     """Rectify two heatmap batches (B, C, H, W) so that row k of both is epipolar plane k.
 
     K (B, 3, 3) in heatmap pixels, R (B, 3, 3), t (B, 3) world -> camera. rows, cols: grid
     size (default: from ``max_spacing`` heatmap pixels at the window centres, at most
-    ``max_grid``, default 4 max(H, W)). Differentiable in the heatmaps.
+    ``max_grid``, default 4 max(H, W)). overlap: rows = the planes both windows see (those
+    the divergence compares); default False: every plane either window sees.
+    Differentiable in the heatmaps.
     """
     geom, (rows, cols) = _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols,
-                                  1.0, min_angle_deg, max_spacing, max_grid)
+                                  1.0, min_angle_deg, max_spacing, max_grid, overlap)
     rect_i, rect_j, theta = _rectify(heat_i, heat_j, geom, rows, cols)
     return RectifiedPair(rect_i, rect_j, theta, geom.R_rect, geom.valid)
 
@@ -359,8 +370,9 @@ def epipolar_divergence(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, *, eps=1e-
 
     heat_i, heat_j (B, C, H, W) non-negative heatmaps (negative values count as 0); K (B, 3, 3)
     in heatmap pixels; R (B, 3, 3), t (B, 3) world -> camera. Q(v) = max over row v of the
-    rectified heatmap, normalised over rows; eps is added inside the logarithms. Degenerate
-    pairs give 0 (no gradient); with ``return_valid=True`` returns (divergence, valid (B,)).
+    rectified heatmap, normalised over the rows (epipolar planes) that both windows see;
+    eps is added inside the logarithms. Degenerate pairs (and pairs without shared planes)
+    give 0 (no gradient); with ``return_valid=True`` returns (divergence, valid (B,)).
     """
     geom, (rows, cols) = _prepare(heat_i, heat_j, K_i, R_i, t_i, K_j, R_j, t_j, rows, cols,
                                   eps, min_angle_deg, max_spacing, max_grid)
@@ -408,22 +420,56 @@ def valid_view_pairs(K, R, t, heatmap_size, valid=None, *, min_angle_deg=10.0):
     return b, i, j
 
 
+def line_weights(heat, K, R, t, pair_valid, parallel_deg=10.0):
+    """Per-keypoint weights (B, V, V, C) of the ordered terms (view i, partner j).
+
+    The epipolar line that partner j draws through keypoint c's expected position in view i
+    (the detached peak of heat[b, i, c]) runs towards the epipole of C_j. Partners whose
+    lines there lie within `parallel_deg` of each other constrain the same direction (the
+    paper uses pairs whose expected epipolar lines are not parallel); they share one weight,
+    1 / (number of such partners), so every distinct direction counts once per keypoint.
+    heat (B, V, C, h, w); K (B, V, 3, 3) heatmap px; R, t world -> camera; pair_valid
+    (B, V, V) bool. Weights are 0 where the pair is not valid; no gradient.
+    """
+    with torch.no_grad():
+        B, V, C, h, w = heat.shape
+        f64 = dict(dtype=torch.float64, device=heat.device)
+        K, R, t = (a.detach().to(**f64) for a in (K, R, t))
+        flat = heat.detach().reshape(B, V, C, h * w).argmax(-1)
+        p = torch.stack([(flat % w).to(**f64), (flat // w).to(**f64)], -1)   # (B, V, C, 2)
+        centres = -(R.transpose(-1, -2) @ t[..., None])[..., 0]               # (B, V, 3)
+        # epipole of C_j in view i, homogeneous: K_i (R_i C_j + t_i)        (B, i, j, 3)
+        cam = torch.einsum('bikl,bjl->bijk', R, centres) + t[:, :, None]
+        e = torch.einsum('bikl,bijl->bijk', K, cam)
+        d = e[:, :, :, None, :2] - p[:, :, None] * e[:, :, :, None, 2:]        # (B, i, j, C, 2)
+        d = d / d.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+        cos = (d[:, :, :, None] * d[:, :, None]).sum(-1).abs()              # (B, i, j, j', C)
+        near = (cos >= math.cos(math.radians(parallel_deg))) & pair_valid[:, :, None, :, None]
+        count = near.sum(3).clamp_min(1).to(heat.dtype)                       # (B, i, j, C)
+        return pair_valid[..., None].to(heat.dtype) / count
+
+
 def multiview_epipolar_loss(heat, K, R, t, valid=None, *, eps=1e-6, rows=None, cols=None,
                             min_angle_deg=10.0, max_spacing=1.0, max_grid=None,
-                            reduction='mean'):
+                            reduction='mean', parallel_deg=10.0):
     """L_E: epipolar divergence over all keypoints and ordered pairs of valid views.
 
     heat (B, V, C, h, w) non-negative heatmaps; K (B, V, 3, 3) in heatmap pixels; R (B, V, 3, 3),
     t (B, V, 3) world -> camera; valid (B, V) bool views present (None = all). Every
     non-degenerate unordered pair is rectified once (all pairs in one grid_sample call) and
     both directions KL(Q_i || Q_j->i), KL(Q_j || Q_i->j) are used, i.e. all ordered pairs, as
-    in the paper's sum over each view's paired views. reduction: 'mean' over (ordered pair,
-    keypoint) terms or 'sum'. Returns a scalar (0, still attached to heat, if no valid pair).
+    in the paper's sum over each view's paired views. parallel_deg > 0: each term is weighted
+    by line_weights (partners drawing near-parallel lines through a keypoint share one
+    weight); 0 = every term weighs 1. reduction: weighted 'mean' over (ordered pair,
+    keypoint) terms or weighted 'sum'. Returns a scalar (0, still attached to heat, if no
+    valid pair).
     """
     if heat.dim() != 5:
         raise ValueError(f'heat must be (B, V, C, h, w), got {tuple(heat.shape)}')
     if reduction not in ('mean', 'sum'):
         raise ValueError(f"reduction must be 'mean' or 'sum', got {reduction!r}")
+    if not 0.0 <= parallel_deg < 90.0:
+        raise ValueError(f'parallel_deg must be in [0, 90), got {parallel_deg}')
     _check_options(min_angle_deg, max_spacing, eps, rows, cols, max_grid)
     if tuple(K.shape[:2]) != tuple(heat.shape[:2]):
         raise ValueError(f'K {tuple(K.shape)} does not match heat (B, V) {tuple(heat.shape[:2])}')
@@ -434,5 +480,15 @@ def multiview_epipolar_loss(heat, K, R, t, valid=None, *, eps=1e-6, rows=None, c
     rows, cols = geom.grid_size(rows, cols, max_grid or 4 * max(size))
     max_i, max_j = _row_max(heat[b, i], heat[b, j], geom, rows, cols)
     q_i, q_j = _row_distribution(max_i), _row_distribution(max_j)
-    terms = torch.cat([_kl(q_i, q_j, eps), _kl(q_j, q_i, eps)])
-    return terms.mean() if reduction == 'mean' else terms.sum()
+    terms = torch.cat([_kl(q_i, q_j, eps), _kl(q_j, q_i, eps)])            # (2N, C)
+    if parallel_deg > 0:
+        B, V = heat.shape[:2]
+        pair_valid = torch.zeros(B, V, V, dtype=torch.bool, device=heat.device)
+        pair_valid[b, i, j] = True
+        pair_valid[b, j, i] = True
+        weights = line_weights(heat, K, R, t, pair_valid, parallel_deg)
+        weights = torch.cat([weights[b, i, j], weights[b, j, i]])          # (2N, C)
+    else:
+        weights = torch.ones_like(terms)
+    total = (weights * terms).sum()
+    return total / weights.sum() if reduction == 'mean' else total

@@ -7,11 +7,13 @@
     trainer.save()
 
 Modes (config.mode) are the paper's rows: supervised (L_L), spatial / spatiotemporal
-(L_L + lambda_p L_B on augmented labels), bootstrap1 / bootstrap2 (the same, plus one or two
-rounds of detections -> RANSAC triangulation -> reprojection as labels, at evenly spaced
-steps), monet (L_L + lambda_e L_E on unlabeled instants, after a warm-up of
-epipolar_warmup x steps without L_E, + lambda_p L_B on spatial pseudo-labels and, with
-monet_bootstrap_rounds > 0, the bootstrapping prior: rounds of bootstrapped labels).
+(L_L + lambda_p L_B on augmented labels), bootstrap1 / bootstrap2 (the spatiotemporal
+augmentation plus one or two rounds of detections -> RANSAC triangulation -> reprojection
+as labels, at evenly spaced steps), monet (the paper's: L_L + lambda_e L_E on unlabeled
+instants, after a warm-up of epipolar_warmup x steps without L_E, + lambda_p L_B on the
+spatiotemporal augmentation; monet_bootstrap_rounds > 0 adds bootstrapped labels), and the
+ablation bootstrap2_epipolar (Bootstrapping II from spatial labels + L_E). Every mode sees
+the same number of images per step (see _batch_plan).
 State (weights, Adam, schedule, step, RNG, pseudo-labels) is checkpointed atomically and
 resumes exactly.
 
@@ -33,15 +35,15 @@ import torch
 from tqdm import tqdm
 
 from monet_ros.atomic import atomic_write, write_error
+from monet_ros.crop_rule import recording_boxes
 from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.learning.config import TrainConfig
-from monet_ros.learning.dataset import CropCache, boxes_from_points, fill_boxes
+from monet_ros.learning.dataset import CropCache
 from monet_ros.learning.epipolar import multiview_epipolar_loss
 from monet_ros.learning.losses import masked_heatmap_mse, objective
 from monet_ros.learning.pseudo_labels import (
     PseudoLabels,
     bootstrap_pseudo_labels,
-    project_to_views,
     spatial_pseudo_labels,
     spatiotemporal_pseudo_labels,
 )
@@ -56,8 +58,13 @@ def nonnegative(heat):
 
     The epipolar divergence clamps negative values; on raw network outputs an all-negative
     map is an empty distribution with zero divergence, a degenerate minimum that wrecks the
-    heatmaps. Shifting by the minimum keeps each map's shape (and its row maxima's order)."""
-    return heat - heat.amin(dim=(-2, -1), keepdim=True)
+    heatmaps. Shifting by the minimum keeps each map's shape (and its row maxima's order).
+    The shift is detached: through amin, every row maximum's gradient would also flow, with
+    the opposite sign, into the map's single minimum pixel (about a third of L_E's gradient,
+    spent moving a pixel no detection uses). Detached, L_E's gradient reaches the row-maximum
+    pixels only. (A spatial softmax would change what the maps mean, Gaussians of peak 1
+    trained by L_L's MSE; a non-negative head would change every network and checkpoint.)"""
+    return heat - heat.amin(dim=(-2, -1), keepdim=True).detach()
 
 
 def pick_device(name):
@@ -74,25 +81,13 @@ def split_instants(num_instants, eval_fraction):
     return np.arange(num_instants - n_eval), np.arange(num_instants - n_eval, num_instants)
 
 
-def crop_boxes(recording, source, aspect, margin):
-    """(T, V, 4) crop boxes: from ground-truth projections, from the (triangulated) labels,
-    or the full frame; instants without one take the nearest instant's box of that view."""
-    T, V = recording.num_instants, recording.num_views
+def crop_boxes(recording, source, aspect, margin, pseudo=None):
+    """(T, V, 4) training crop boxes (crop_rule.recording_boxes). 'auto' = 'pseudo_labels'
+    when `pseudo` (spatiotemporal tracks of the labels) is given, else 'labels': boxes a
+    user has, never the ground truth unless asked for explicitly."""
     if source == 'auto':
-        source = 'ground_truth' if recording.gt3d is not None else 'labels'
-    if source == 'ground_truth':
-        if recording.gt3d is None:
-            raise ValueError(f'{recording.name}: box_source ground_truth needs ground truth')
-        C = recording.num_keypoints
-        points = project_to_views(recording.gt3d.reshape(-1, 3), recording.cameras)
-        points = points.reshape(V, T, C, 2).transpose(1, 0, 2, 3)          # visible only
-    elif source == 'labels':
-        spatial = spatial_pseudo_labels(recording.labels, recording.cameras).points
-        points = np.where(np.isfinite(recording.labels), recording.labels, spatial)
-    else:
-        points = np.full((T, V, 1, 2), np.nan)
-    return fill_boxes(boxes_from_points(points, aspect=aspect, margin=margin),
-                      recording.cameras)
+        source = 'pseudo_labels' if pseudo is not None else 'labels'
+    return recording_boxes(recording, source, aspect, margin, pseudo=pseudo)
 
 
 class TrainingData:
@@ -113,13 +108,33 @@ class TrainingData:
         if self.labelled_instants.size == 0:
             raise ValueError(f'{recording.name}: no labelled instant in the training split')
         h_in, w_in = input_size
-        self.boxes = crop_boxes(recording, config.box_source, w_in / h_in, config.box_margin)
+        self._tracked = None
+        pseudo = (self.tracked_labels() if config.box_source in ('auto', 'pseudo_labels')
+                  else None)
+        self.boxes = crop_boxes(recording, config.box_source, w_in / h_in, config.box_margin,
+                                pseudo)
         self.cache = CropCache(recording, self.boxes, input_size, heatmap_size,
                                config.cache_scale)
 
     @property
     def cameras(self):
         return self.recording.cameras
+
+    def tracked_labels(self):
+        """(T, V, C, 2) spatiotemporal pseudo-labels of the train split (labels triangulated,
+        tracked config.tracking.horizon frames each way, verified), NaN elsewhere; computed
+        once (crop boxes and the temporal modes share it)."""
+        if self._tracked is None:
+            T, V, C, _ = self.labels.shape
+            spatial = spatial_pseudo_labels(self.labels, self.cameras)
+            seeds = np.full((len(self.train), C, 3), np.nan)
+            seeds[:] = spatial.points3d[self.train]
+            frames = _Frames(self.recording, self.train)
+            tracked = spatiotemporal_pseudo_labels(frames, self.cameras, seeds,
+                                                   self.config.tracking)
+            self._tracked = np.full((T, V, C, 2), np.nan)
+            self._tracked[self.train] = tracked.points
+        return self._tracked
 
     def initial_pseudo_labels(self, spec, tracking):
         """Spatial (and spatiotemporal) pseudo-labels of the train split, (T, V, C, 2)."""
@@ -130,12 +145,10 @@ class TrainingData:
         spatial = spatial_pseudo_labels(self.labels, self.cameras)
         points = spatial.points.copy()
         if spec.temporal:
-            seeds = np.full((len(self.train), C, 3), np.nan)
-            seeds[:] = spatial.points3d[self.train]
-            frames = _Frames(self.recording, self.train)
-            tracked = spatiotemporal_pseudo_labels(frames, self.cameras, seeds, tracking)
-            fill = np.isnan(points[self.train])
-            points[self.train] = np.where(fill, tracked.points, points[self.train])
+            if tracking != self.config.tracking:
+                raise ValueError('initial_pseudo_labels: tracking settings differ from the '
+                                 "data's config")
+            points = np.where(np.isnan(points), self.tracked_labels(), points)
         points[self.held_out] = np.nan
         return points
 
@@ -235,20 +248,36 @@ class Trainer:
     def pseudo_label_count(self):
         return int(np.isfinite(self.pseudo_only[..., 0]).sum())
 
+    @property
+    def pseudo_label_coverage(self):
+        """Share of the unlabeled training (view, keypoint) cells that hold a pseudo-label."""
+        cells = self.pseudo_only[self.data.unlabeled_instants, ..., 0]
+        return float(np.isfinite(cells).mean()) if cells.size else 0.0
+
     def _sample(self, pool, n):
         idx = self.rng.choice(len(pool), size=n, replace=len(pool) < n)
         return pool[idx]
 
     def _batch_plan(self):
+        """The (instant, view) crops of one step: parts ('L', pairs), ('B', pairs),
+        ('E', pairs, views per instant). Every mode sees the same number of images per step,
+        batch_labelled + batch_pseudo + batch_unlabeled x views: a part a mode does not use
+        (or cannot fill yet: no pseudo-labels, L_E in its warm-up) gives its share to
+        pseudo-labels when the mode has some, else to labels."""
         c = self.config
-        parts = [('L', self._sample(self.labelled_pool, c.batch_labelled))]
-        if self.spec_uses_pseudo and c.batch_pseudo and len(self.pseudo_pool):
-            parts.append(('B', self._sample(self.pseudo_pool, c.batch_pseudo)))
-        if self.epipolar_active and c.batch_unlabeled and len(self.data.unlabeled_instants):
-            V = self.data.recording.num_views
-            k = min(c.views_per_instant, V)
-            inst = self.rng.choice(self.data.unlabeled_instants, size=c.batch_unlabeled,
-                                   replace=len(self.data.unlabeled_instants) < c.batch_unlabeled)
+        V = self.data.recording.num_views
+        k = min(c.views_per_instant, V)
+        total = c.batch_labelled + c.batch_pseudo + c.batch_unlabeled * k
+        n_inst = c.batch_unlabeled if (self.epipolar_active and
+                                       len(self.data.unlabeled_instants)) else 0
+        use_b = self.spec_uses_pseudo and c.batch_pseudo and len(self.pseudo_pool)
+        n_b = (total - c.batch_labelled - n_inst * k) if use_b else 0
+        parts = [('L', self._sample(self.labelled_pool, total - n_b - n_inst * k))]
+        if n_b:
+            parts.append(('B', self._sample(self.pseudo_pool, n_b)))
+        if n_inst:
+            inst = self.rng.choice(self.data.unlabeled_instants, size=n_inst,
+                                   replace=len(self.data.unlabeled_instants) < n_inst)
             views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
             pairs = np.stack([np.repeat(inst, k), views.ravel()], axis=1)
             parts.append(('E', pairs, k))
@@ -616,6 +645,7 @@ class Trainer:
         fit = self.check_fit()
         return {'mode': self.config.mode, 'steps': self.step_count, 'seconds': seconds,
                 'steps_per_s': (self.step_count - first) / max(seconds, 1e-9),
-                'pseudo_labels': self.pseudo_label_count, 'last': self.last_terms,
+                'pseudo_labels': self.pseudo_label_count,
+                'pseudo_label_coverage': self.pseudo_label_coverage, 'last': self.last_terms,
                 'fit': fit, 'bootstrap': self.bootstrap_stats, 'warnings': list(self.warnings)}
 

@@ -3,9 +3,10 @@
 One or several cameras per node; the newest frame of every camera with a new frame is run
 through the network in one batched forward pass (monet_ros.models.Detector). The crop
 follows the subject (projection of the latest /monet/keypoints3d, when the rig gives the
-extrinsics), else `box`, else the full frame. The outputs keep the source stamp; the
-camera_info is the heatmap's virtual camera (K_heat = S K). A frame replaced before it
-was processed is counted as dropped; a bad message is counted and logged, never fatal.
+extrinsics; monet_ros.crop_rule, the one crop rule), else `box`, else the full frame.
+The outputs keep the source stamp; the camera_info is the heatmap's virtual camera
+(K_heat = S K). A frame replaced before it was processed is counted as dropped; a bad
+message is counted and logged, never fatal.
 The checkpoint is hot-reloaded from /monet/model (std_msgs/String JSON {path, sha256}).
 """
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ from std_msgs.msg import String
 
 from monet_ros.atomic import sha256_file
 from monet_ros.config import ConfigError, setting, validate_config
+from monet_ros.crop_rule import TrackedCrops, TrackedRule
 from monet_ros.io import (
     camera_from_camera_info,
     camera_info_from_camera,
@@ -40,7 +42,6 @@ from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import run_node
 from monet_ros.timing import StageTimer
-from monet_ros.tracking import crop_boxes
 
 
 @dataclass(frozen=True)
@@ -60,12 +61,17 @@ class DetectorConfig:
     box: tuple[float, ...] = setting((), 'fixed crop box x0 y0 x1 y1 (pixel edges) when no '
                                      'subject is tracked (default: full frame)', length=(0, 4))
     track: bool = setting(True, 'crop around the projection of the latest /monet/keypoints3d')
-    track_margin: float = setting(0.3, 'tracked box margin, fraction of its size per side',
-                                  minimum=0.0)
-    track_timeout_s: float = setting(1.0, 'keypoints3d older than this are not used for the '
-                                     'crop', minimum=0.0)
-    min_track_keypoints: int = setting(3, 'fewest projected keypoints for a tracked crop',
-                                       minimum=1)
+    track_margin: float = setting(TrackedRule.margin, 'tracked box margin, fraction of its '
+                                  'size per side', minimum=0.0)
+    track_timeout_s: float = setting(
+        TrackedRule.timeout_ns / 1e9, "keypoints3d whose stamp is older than the image's by "
+        'more than this are not used for the crop (source stamps, so a replay crops alike at '
+        'any speed)', minimum=0.0)
+    track_trim: float = setting(
+        TrackedRule.trim, 'tracked box: leave out projected keypoints farther than this many '
+        'robust sigmas (MAD) from the median (0 = none)', minimum=0.0)
+    min_track_keypoints: int = setting(TrackedRule.min_points, 'fewest projected keypoints '
+                                       'for a tracked crop', minimum=1)
     batch_wait_ms: float = setting(15.0, 'with several cameras: wait this long for the other '
                                    "cameras' frames before running a partial batch",
                                    minimum=0.0)
@@ -150,7 +156,9 @@ class DetectorNode(Node):
                                       STREAM_OUT),
                 self.create_publisher(Image, f'/monet/{slot.name}/overlay', STREAM_OUT)
                 if config.overlay else None)
-        self.keypoints = None        # (X (N, 3), arrival monotonic)
+        self.tracker = TrackedCrops(TrackedRule(
+            margin=config.track_margin, min_points=config.min_track_keypoints,
+            trim=config.track_trim, timeout_ns=int(round(config.track_timeout_s * 1e9))))
         self.create_subscription(PointCloud2, '/monet/keypoints3d', self.on_keypoints,
                                  STREAM_IN)
         self.create_subscription(String, '/monet/model', self.on_model, LATCHED)
@@ -203,7 +211,7 @@ class DetectorNode(Node):
 
     def on_keypoints(self, msg):
         try:
-            self.keypoints = (cloud_to_keypoints3d(msg)['X'], time.monotonic())
+            self.tracker.update(cloud_to_keypoints3d(msg)['X'], header_stamp_ns(msg))
         except ValueError as error:
             self.get_logger().warning(f'/monet/keypoints3d: bad message ({error})',
                                       throttle_duration_sec=5.0)
@@ -244,16 +252,13 @@ class DetectorNode(Node):
             return None
         return image, layout, camera
 
-    def crop_boxes(self, cameras):
-        """(V, 4) boxes: tracked subject (when fresh keypoints3d and rig extrinsics), else
-        `box`, else the full frame."""
-        fresh = (self.keypoints is not None and time.monotonic() - self.keypoints[1]
-                 <= self.config.track_timeout_s)
-        track = (self.config.track and fresh
-                 and all(s.rig_camera is not None for s in self.slots))
-        return crop_boxes(cameras, self.keypoints[0] if track else None,
-                          self.config.box or None, self.config.track_margin,
-                          self.config.min_track_keypoints)
+    def crop_boxes(self, cameras, stamp_ns):
+        """(V, 4) boxes of images stamped stamp_ns: the tracked rule (fresh keypoints3d and
+        rig extrinsics), else `box`, else the full frame."""
+        track = self.config.track and all(s.rig_camera is not None for s in self.slots)
+        if not track:
+            return TrackedCrops(self.tracker.rule).boxes(cameras, None, self.config.box or None)
+        return self.tracker.boxes(cameras, stamp_ns, self.config.box or None)
 
     def process(self):
         work = []
@@ -269,7 +274,8 @@ class DetectorNode(Node):
         if not work:
             return
         cameras = [w[4] for w in work]
-        boxes = self.detector.boxes_for(cameras, self.crop_boxes(cameras))
+        stamp = max(header_stamp_ns(w[1]) for w in work)
+        boxes = self.detector.boxes_for(cameras, self.crop_boxes(cameras, stamp))
         start = time.perf_counter()
         heatmaps, heat_cameras = self.detector.predict([w[2] for w in work], cameras, boxes,
                                                        keep_aspect=False,

@@ -41,7 +41,7 @@ FRAME_ID = 'world'
 # SynthConfig field -> RigConfig field (to name the user's field in errors)
 _RIG_FIELDS = {'cameras': 'num_cameras', 'layout': 'layout', 'width': 'image_width',
                'height': 'image_height', 'distortion': 'distortion', 'radius': 'radius',
-               'hfov_deg': 'hfov_deg', 'jitter': 'jitter'}
+               'hfov_deg': 'hfov_deg', 'jitter': 'jitter', 'height_spread': 'height_spread'}
 
 
 class SynthError(ValueError):
@@ -59,9 +59,13 @@ class SynthConfig:
     (k1[, k2, p1, p2, k3]); radius: camera distance (m; None = 4.0 for a human, 2.5 for a
     quadruped); hfov_deg: horizontal field of view; jitter: rig perturbation scale;
     label_occluded: label keypoints hidden by other limbs too (True) or only visible ones;
-    noise: sensor noise std (DN); start_ns: stamp of the first instant; distinct_sides:
-    the subject's left limbs in their own colour (left and right limbs look alike otherwise,
-    the symmetric ambiguity of real subjects).
+    noise: sensor noise std (DN); start_ns: stamp of the first instant.
+    height_spread: ring cameras alternately up to this many metres above / below the nominal
+    height (non-coplanar ring; 0 = coplanar); occluders: static pillars (up to hip height)
+    between the subject's path and that many cameras, hiding legs from some views;
+    distinct_sides: the subject's left limbs in their own colour (left and right limbs look
+    alike otherwise, the symmetric ambiguity of real subjects). All off by default: a seed's
+    bytes do not change.
     """
 
     cameras: int = 8
@@ -80,6 +84,8 @@ class SynthConfig:
     label_occluded: bool = True
     noise: float = 3.0
     start_ns: int = DEFAULT_START_NS
+    height_spread: float = 0.0
+    occluders: int = 0
     distinct_sides: bool = False
     rig: RigConfig = field(init=False, repr=False, compare=False)
 
@@ -108,6 +114,10 @@ class SynthConfig:
         for name in ('label_occluded', 'distinct_sides'):
             if not isinstance(getattr(self, name), bool):
                 bad(name, f'must be a bool, got {getattr(self, name)!r}')
+        if isinstance(self.occluders, bool) or not isinstance(self.occluders, (int, np.integer)) \
+                or not 0 <= self.occluders <= self.cameras:
+            bad('occluders', f'must be an integer in 0..cameras ({self.cameras}), got '
+                f'{self.occluders!r}')
         try:
             skeleton = load_skeleton(self.skeleton)
             subject = Subject(skeleton)
@@ -122,7 +132,7 @@ class SynthConfig:
                             camera_height=0.9 * height, target=(0.0, 0.0, 0.5 * height),
                             image_width=self.width, image_height=self.height,
                             hfov_deg=self.hfov_deg, distortion=tuple(self.distortion),
-                            jitter=self.jitter)
+                            jitter=self.jitter, height_spread=self.height_spread)
         except RigConfigError as error:
             message = str(error)
             for ours, theirs in _RIG_FIELDS.items():
@@ -175,11 +185,26 @@ def labelled_indices(config):
     return np.unique(np.clip(idx, 0, config.frames - 1))
 
 
+OCCLUDER_RADIUS = 0.15                 # metres
+OCCLUDER_HEIGHT = 0.55                 # fraction of the subject's height (legs, hands)
+
+
+def occluder_capsules(cameras, count, X):
+    """(count, 2, 3) end points of static pillars, each halfway between the centre of the
+    subject's path and one of `count` cameras spread over the rig, up to hip height."""
+    centre = np.nanmean(X.reshape(-1, 3), axis=0) * [1.0, 1.0, 0.0]
+    top = OCCLUDER_HEIGHT * (np.nanmax(X[..., 2]) - np.nanmin(X[..., 2]))
+    pick = np.floor(np.arange(count) * len(cameras) / count).astype(int)
+    feet = [centre + 0.5 * (cameras[v].center * [1.0, 1.0, 0.0] - centre) for v in pick]
+    return np.array([[f, f + [0.0, 0.0, top]] for f in feet])
+
+
 def plan(config):
     """Everything but the images: cameras, skeleton, subject, stamps, ground truth.
 
     Returns a dict: cameras, skeleton, subject, stamps (T,), times (T,), keypoints3d
-    (T, C, 3), A, B (T, P, 3) capsule axes, keypoints2d (T, V, C, 2), in_image, occluded
+    (T, C, 3), A, B (T, P, 3) capsule axes (the subject's, then the occluders'), radii (P,),
+    parts (P,) material names, keypoints2d (T, V, C, 2), in_image, occluded
     (T, V, C), labelled (T,) bool, label_mask (T, V, C) bool, root (T, 3) on the ground.
     """
     skeleton = load_skeleton(config.skeleton)
@@ -190,8 +215,17 @@ def plan(config):
     joints = subject.joints(times)
     X = np.stack([joints[k] for k in skeleton.keypoints], axis=1)
     A, B = subject.capsule_arrays(times, joints)
+    parts = sided_parts(subject.capsules) if config.distinct_sides else subject.parts
+    radii, attached = subject.radii, subject.attached
+    if config.occluders:
+        ends = occluder_capsules(cameras, config.occluders, X)           # (K, 2, 3)
+        A = np.concatenate([A, np.broadcast_to(ends[:, 0], (len(A), *ends[:, 0].shape))], 1)
+        B = np.concatenate([B, np.broadcast_to(ends[:, 1], (len(B), *ends[:, 1].shape))], 1)
+        radii = np.concatenate([radii, np.full(len(ends), OCCLUDER_RADIUS)])
+        attached = np.concatenate([attached, np.zeros((len(ends), X.shape[1]), bool)])
+        parts = parts + ('occluder',) * len(ends)
     uv, inside = in_image(cameras, X)
-    hidden = occlusion(cameras, X, A, B, subject.radii, subject.attached)
+    hidden = occlusion(cameras, X, A, B, radii, attached)
     labelled = np.zeros(config.frames, bool)
     labelled[labelled_indices(config)] = True
     mask = inside & labelled[:, None, None]
@@ -199,7 +233,8 @@ def plan(config):
         mask &= ~hidden
     root = joints[subject.root_joint] * [1.0, 1.0, 0.0]             # shadow centre
     return dict(cameras=cameras, skeleton=skeleton, subject=subject, stamps=stamps,
-                times=times, keypoints3d=X, A=A, B=B, keypoints2d=uv, in_image=inside,
+                times=times, keypoints3d=X, A=A, B=B, radii=radii, parts=parts,
+                keypoints2d=uv, in_image=inside,
                 occluded=hidden, labelled=labelled, label_mask=mask, root=root)
 
 
@@ -239,12 +274,11 @@ def synthesize(config, out, progress=True):
     start = time.perf_counter()
     out = _check_output(out)
     p = plan(config)
-    cameras, subject = p['cameras'], p['subject']
+    cameras = p['cameras']
     render_config = RenderConfig(noise=config.noise)
-    parts = sided_parts(subject.capsules) if config.distinct_sides else subject.parts
-    scene = Scene(cameras, parts, seed=config.seed, config=render_config)
+    scene = Scene(cameras, p['parts'], seed=config.seed, config=render_config)
     backgrounds = [scene.background(cam) for cam in cameras]
-    outlines = [capsule_outlines(cam, p['A'], p['B'], subject.radii, scene.light,
+    outlines = [capsule_outlines(cam, p['A'], p['B'], p['radii'], scene.light,
                                  render_config.levels, render_config.samples,
                                  render_config.axis_points) for cam in cameras]
     num_views = p['in_image'].sum(axis=1)                              # (T, C)

@@ -88,6 +88,8 @@ def part_colors(parts, rng):
     base['leg'] = base['hips']
     base['head'] = base['skin']
     base['tail'] = base['torso']
+    # an option (no draw from rng: a seed's colours stay): neutral grey pillars
+    base['occluder'] = np.array([128.0, 124.0, 118.0])
     if 'paw' in parts or 'tail' in parts:          # an animal: one fur colour everywhere
         fur = np.array(PALETTES['torso'][rng.integers(5)], float) * 0.8 + 40
         for name in ('torso', 'head', 'leg', 'tail'):

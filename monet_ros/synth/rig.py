@@ -11,6 +11,7 @@ import numpy as np
 from monet_ros.geometry import Camera
 
 LAYOUTS = ('ring', 'dome')
+GOLDEN_RATIO = (5 ** 0.5 - 1) / 2
 GOLDEN_ANGLE = np.pi * (3.0 - np.sqrt(5.0))
 
 
@@ -27,7 +28,8 @@ def _check(condition, field, message):
 class RigConfig:
     """Rig layout and intrinsics.
 
-    num_cameras: N >= 2. layout: 'ring' (all at camera_height, evenly spread azimuths) or
+    num_cameras: N >= 2. layout: 'ring' (at camera_height, or alternately up to
+    height_spread metres above and below it; evenly spread azimuths) or
     'dome' (a spiral over elevations dome_elevation_deg (min, max), golden-angle azimuths).
     radius: horizontal (ring) or spherical (dome) distance from the rig centre, metres.
     target: (x, y, z) point every camera looks at. image_width / image_height: pixels.
@@ -48,6 +50,7 @@ class RigConfig:
     distortion: tuple = (-0.08, 0.02, 0.0, 0.0, 0.0)
     dome_elevation_deg: tuple = (10.0, 55.0)
     jitter: float = 1.0
+    height_spread: float = 0.0
 
     def __post_init__(self):
         for key in ('num_cameras', 'image_width', 'image_height'):
@@ -82,6 +85,8 @@ class RigConfig:
         _check(distortion_one_to_one(self.distortion5, *half), 'distortion',
                f'{self.distortion} folds over inside the image (the distortion map is not '
                'one-to-one there); use smaller coefficients')
+        _check(np.isfinite(self.height_spread) and 0.0 <= self.height_spread <= 10.0,
+               'height_spread', f'must be in 0..10 metres, got {self.height_spread}')
 
     @property
     def distortion5(self):
@@ -154,6 +159,9 @@ def camera_centers(config, rng):
     if config.layout == 'ring':
         radius = config.radius * (1 + rng.uniform(-1, 1, n) * 0.03 * config.jitter)
         z = config.camera_height + rng.uniform(-1, 1, n) * 0.1 * config.jitter
+        # non-coplanar ring: alternately above and below, 0.5..1 x height_spread (no draw
+        # from rng, so height_spread = 0 keeps every byte of a seed's rig)
+        z = z + config.height_spread * (-1.0) ** k * (0.5 + 0.5 * ((k * GOLDEN_RATIO) % 1))
         return np.stack([radius * np.cos(azimuth), radius * np.sin(azimuth), z], axis=1)
     lo, hi = np.radians(config.dome_elevation_deg)
     # spiral: elevation climbs with k, azimuth advances by the golden angle

@@ -5,8 +5,8 @@ from helpers.blobs import blob_recording
 import numpy as np
 import torch
 
+from monet_ros.crop_rule import recording_boxes
 from monet_ros.evaluation.evaluate import evaluate_detector
-from monet_ros.learning.trainer import crop_boxes
 from monet_ros.models import build_model, decode_heatmaps
 from monet_ros.models.detector import Detector
 
@@ -26,11 +26,12 @@ def test_evaluate_detector_matches_independent_computation():
     rec = blob_recording(num_views=4, T=6, C=3, labelled=(0,))
     model = build_model('small', 3, input_size=[48, 48], width=8)
     detector = Detector(model, {'keypoints': list(rec.keypoints)}, device='cpu')
-    boxes = crop_boxes(rec, 'ground_truth', 1.0, 0.25)
+    boxes = recording_boxes(rec, 'ground_truth', 1.0, 0.25)     # explicit benchmark option
     instants = np.array([3, 4, 5])
-    summary = evaluate_detector(detector, rec, instants, boxes, 'supervised', 'blobs')
+    summary = evaluate_detector(detector, rec, instants, boxes, 'supervised', 'blobs',
+                                crop='boxes')
 
-    distances, errors, gt_errors = [], [], []
+    distances, errors, gt_errors, errors2d = [], [], [], []
     for t in instants:
         heat, heat_cams = detector.predict(rec.images(t), rec.cameras, boxes[t])
         peaks, _ = decode_heatmaps(heat)
@@ -51,6 +52,7 @@ def test_evaluate_detector_matches_independent_computation():
                 gt, _ = cv2.projectPoints(rec.gt3d[t, c][None], cv2.Rodrigues(cam.R)[0], cam.t,
                                           cam.K, cam.dist)
                 errors.append(np.linalg.norm(proj[0, 0] - image_pts[v, c]))
+                errors2d.append(np.linalg.norm(image_pts[v, c] - gt[0, 0]))
                 gt_errors.append(np.linalg.norm(proj[0, 0] - gt[0, 0]))
     d = np.concatenate(distances)
     for alpha in (0.05, 0.1, 0.2):
@@ -58,4 +60,35 @@ def test_evaluate_detector_matches_independent_computation():
     assert abs(summary.reprojection_mean - np.mean(errors)) < 1e-6
     assert abs(summary.reprojection_std - np.std(errors)) < 1e-6
     assert abs(summary.gt_reprojection_mean - np.mean(gt_errors)) < 1e-6
+    assert abs(summary.extra['error2d_mean'] - np.mean(errors2d)) < 1e-6
+    assert abs(summary.extra['error2d_median'] - np.median(errors2d)) < 1e-6
     assert summary.instants == 3 and summary.pck.counts.tolist() == [12, 12, 12]
+
+
+def test_tracked_crops_follow_the_previous_instants_fused_3d():
+    """Evaluation crops with the live rule: instant n is cropped around the 3D fused from
+    instant n - 1 (crop_rule.crop_boxes, the detector node's function; fusion as in `monet
+    process`), the given boxes being the start and the fallback."""
+    from monet_ros.crop_rule import crop_boxes
+    from monet_ros.evaluation.evaluate import detect_instants
+    from monet_ros.fusion import FusionConfig, fuse_heatmaps
+
+    torch.manual_seed(1)
+    rec = blob_recording(num_views=4, T=6, C=3, labelled=(0,))
+    model = build_model('small', 3, input_size=[48, 48], width=8)
+    detector = Detector(model, {'keypoints': list(rec.keypoints)}, device='cpu')
+    start = recording_boxes(rec, 'labels', 1.0, 0.25)
+    instants = np.array([2, 3, 4])
+    det = detect_instants(detector, rec, instants, start, crop='tracked',
+                          fusion_config=FusionConfig(confidence_threshold=0.0))
+    cams = rec.cameras
+    np.testing.assert_array_equal(det['boxes'][0], detector.boxes_for(cams, start[2]))
+    for n in (1, 2):
+        t = instants[n]
+        heat, heat_cams = detector.predict(rec.images(t - 1), cams, det['boxes'][n - 1],
+                                           keep_aspect=False)
+        X = fuse_heatmaps(heat, np.stack([c.K for c in heat_cams]), cams,
+                          FusionConfig(confidence_threshold=0.0)).X
+        assert np.isfinite(X).all(axis=1).sum() >= 3           # the tracked branch is taken
+        want = detector.boxes_for(cams, crop_boxes(cams, X.astype(np.float32), start[t]))
+        np.testing.assert_allclose(det['boxes'][n], want, atol=1e-9)

@@ -215,7 +215,7 @@ def test_divergence_equals_kl_of_rectified_row_maxima_with_same_gradients():
     h_j = torch.rand(2, 3, *SIZE, dtype=torch.float64, requires_grad=True)
     geo = [a.expand(2, *a.shape[1:]) for a in pair_tensors(cams)]
     ours = epipolar_divergence(h_i, h_j, *geo, eps=1e-6)
-    rect = rectify_pair(h_i, h_j, *geo)
+    rect = rectify_pair(h_i, h_j, *geo, overlap=True)     # the rows both windows see
     q_i, q_j = rect.heat_i.amax(-1), rect.heat_j.amax(-1)
     q_i, q_j = q_i / q_i.sum(-1, keepdim=True), q_j / q_j.sum(-1, keepdim=True)
     ref = (q_i * (torch.log(q_i + 1e-6) - torch.log(q_j + 1e-6))).sum(-1)

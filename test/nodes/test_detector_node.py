@@ -12,6 +12,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_msgs.msg import String
 import torch
 
+from monet_ros.crop_rule import crop_boxes
 from monet_ros.geometry import save_rig
 from monet_ros.io import (
     camera_info_from_camera,
@@ -97,6 +98,11 @@ class Stream:
         raise AssertionError(f'no heatmaps for stamp {stamp}\n{node.output()}')
 
 
+def detector_boxes(checkpoint, rig, boxes):
+    model, metadata = load_checkpoint(checkpoint)
+    return Detector(model, metadata, device='cpu').boxes_for(rig, boxes)
+
+
 def reference(checkpoint, images, rig, boxes):
     model, metadata = load_checkpoint(checkpoint)
     return Detector(model, metadata, device='cpu').predict(list(images), rig, boxes,
@@ -140,8 +146,10 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
                                                           'cam0'))
         ros.spin_for(0.5)
 
-        # 3. crop around the projection of /monet/keypoints3d
+        # 3. crop around the projection of /monet/keypoints3d; one wild joint (1.5 m off)
+        # is left out of the box (crop_rule: median/MAD trim)
         X = np.random.default_rng(3).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))
+        X[13, 2] += 1.5
         cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
         ros.wait_for_subscribers(cloud_pub, process=node)
         for _ in range(5):
@@ -149,8 +157,18 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
             ros.spin_for(0.1)
         got = stream.roundtrip(T0 + 2, images, node)
         tracked = []
+        # the very function evaluation and `monet process` crop with (crop_rule), on the
+        # same keypoints at the precision the cloud carries
+        rule = detector_boxes(first, rig, crop_boxes(rig, X.astype(np.float32)))
+        for v, cam in enumerate(rig):
+            np.testing.assert_allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                                       expected_K(cam.K, rule[v], 32, 24), rtol=1e-12)
         for cam in rig:
             uv = cv2_project(cam, X.astype(np.float32))    # the cloud carries float32
+            dev = np.abs(uv - np.median(uv, axis=0))
+            keep = (dev <= 4 * np.maximum(1.4826 * np.median(dev, axis=0), 8.0)).all(axis=1)
+            assert not keep[13] and keep.sum() >= 10
+            uv = uv[keep]
             lo, hi = uv.min(axis=0), uv.max(axis=0)
             pad = 0.3 * (hi - lo)
             tracked.append(expected_box((*(lo - pad + 0.5), *(hi + pad + 0.5)), aspect))
