@@ -95,10 +95,21 @@ def _natural_key(text):
     return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', text)]
 
 
+def _has_bool(value, depth=0):
+    """True when a (nested list of) value(s) holds a bool (YAML true/false)."""
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    if isinstance(value, (list, tuple)) and depth < 4:
+        return any(_has_bool(v, depth + 1) for v in value)
+    return False
+
+
 def _array(path, field, value, shapes):
     """value -> float64 array reshaped to the first matching shape in `shapes`."""
     if value is None:
         raise RigError(path, field, 'missing')
+    if _has_bool(value):
+        raise RigError(path, field, f'holds a boolean, not a number: {str(value)[:60]!r}')
     try:
         array = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):

@@ -229,3 +229,10 @@ def test_seeded_opencv_xml_damage_is_rig_error_or_rig(tmp_path):
             assert str(path) in str(error)
         else:
             assert cams[0].K.shape == (3, 3)
+
+
+def test_booleans_in_matrices_are_refused(tmp_path):
+    path = tmp_path / 'rig.yaml'
+    path.write_text(PROJECT.format(width=160).replace('[1, 0, 0]', '[true, 0, 0]'))
+    with pytest.raises(RigError, match=r'cameras\[0\]\.R.*cam0.*boolean'):
+        load_rig(path)
