@@ -44,6 +44,9 @@ def run(args):
         except (RecordingError, ValueError, OSError) as error:
             print(f'monet eval: {error}', file=sys.stderr)
             return 1
+        for data, recording in zip(args.data, recordings):
+            if recording.read_report.notice(data):
+                print(f'monet eval: {recording.read_report.notice(data)}', file=sys.stderr)
         summaries = []
         for path in args.checkpoints:
             try:

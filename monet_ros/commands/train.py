@@ -73,9 +73,8 @@ def run(args):
     except (RecordingError, ValueError, OSError) as error:
         print(f'monet train: {error}', file=sys.stderr)
         return 1
-    report = getattr(recording, 'read_report', None)
-    if report is not None and not report.ok:
-        print(f'monet train: reading {args.data}: {report.summary()}', file=sys.stderr)
+    if recording.read_report.notice(args.data):
+        print(f'monet train: {recording.read_report.notice(args.data)}', file=sys.stderr)
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
     data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
     out = Path(args.out)

@@ -130,6 +130,11 @@ class ReadReport:
 
     __str__ = summary
 
+    def notice(self, what):
+        """'reading <what>: <summary>' when anything was skipped or damaged, else None
+        (commands print it, so that no loss goes unsaid)."""
+        return None if self.ok else f'reading {what}: {self.summary()}'
+
 
 def _natural_key(path):
     return [int(s) if s.isdigit() else s for s in re.split(r'(\d+)', path.name)]

@@ -45,6 +45,7 @@ def test_reference_bag_reads_whole_and_ok(original, tmp_path):
     reader = open_bag(path)
     assert len(list(reader.messages(decode=False))) == total == 13
     assert reader.report.ok, reader.report.summary()
+    assert reader.report.notice('the bag') is None
 
 
 def test_every_opcode_bit_flip_is_counted_never_silent(original, tmp_path):
@@ -92,6 +93,7 @@ def test_issue_example_tf_static_lost_is_named(original, tmp_path):
     assert report.skipped['/tf_static'] == 1
     text = report.summary()
     assert 'opcode 0x15' in text and '/tf_static' in text
+    assert report.notice('the bag') == f'reading the bag: {text}'   # what commands print
 
 
 @pytest.mark.parametrize('size', [0, 8, 20, 60])
