@@ -63,10 +63,15 @@ class _NoAliasLoader(yaml.SafeLoader):
         return super().compose_node(parent, index)
 
 
+def safe_yaml(text):
+    """yaml.safe_load that refuses aliases (yaml.YAMLError) - for every file a user gives."""
+    return yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 - a SafeLoader subclass
+
+
 def load_yaml_text(path, text):
     """YAML -> Python data without aliases; RigError naming the file otherwise."""
     try:
-        return yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 - a SafeLoader subclass
+        return safe_yaml(text)
     except yaml.YAMLError as exc:
         raise RigError(path, None, f'not valid YAML ({exc})') from None
 
