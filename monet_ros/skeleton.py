@@ -90,8 +90,9 @@ def load_skeleton(path_or_name):
         path = CONFIG_DIR / f'{path_or_name}.yaml'
     if not path.is_file():
         raise SkeletonError(f'{path}: skeleton file not found')
+    from monet_ros.geometry.rig_fields import safe_yaml
     try:
-        data = yaml.safe_load(path.read_text())
+        data = safe_yaml(path.read_text())          # no aliases: no alias bombs
     except yaml.YAMLError as error:
         raise SkeletonError(f'{path}: not valid YAML ({error})') from None
     return skeleton_from_dict(data, source=path)

@@ -78,6 +78,9 @@ def run(args):
                 raise ValueError(f'--data {data}: no ground truth (ground_truth.npz beside '
                                  'the recording); monet eval needs 3D ground truth (or give '
                                  '--reference)')
+        for data, recording in zip(args.data, recordings):
+            if recording.read_report.notice(data):
+                print(f'monet eval: {recording.read_report.notice(data)}', file=sys.stderr)
         summaries = []
         for path in args.checkpoints:
             detector = Detector.from_checkpoint(path, device=device)

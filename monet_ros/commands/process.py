@@ -92,16 +92,14 @@ class RunningMean:
 
 
 def view_problem(image, camera):
-    """Why a decoded view cannot go to the detector (None when it can): the rig's size,
-    8 bits, grey or 3 channels."""
+    """Why a decoded view cannot go to the detector (None when it can): the rig's size and
+    a grey or 3-channel image (any bit depth: io.images.to_rgb8 converts it, as live)."""
     image = np.asarray(image)
-    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] != 3):
+    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3)):
         return f'image shape {image.shape} (expected {camera.height}x{camera.width} grey or rgb)'
     if image.shape[:2] != (camera.height, camera.width):
         return (f'image is {image.shape[1]}x{image.shape[0]}, the rig says '
                 f'{camera.width}x{camera.height}')
-    if image.dtype != np.uint8:
-        return f'{image.dtype} pixels (8-bit images only)'
     return None
 
 
@@ -123,6 +121,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from monet_ros.fusion import fuse_heatmaps
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.io.export_results import ResultsCollector
+    from monet_ros.io.images import to_rgb8
     from monet_ros.io.multiview import image_topics
     from monet_ros.models import Detector
     from monet_ros.nodes.rig import load_node_rig, select_cameras
@@ -171,10 +170,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                     figures['skip_reasons'].setdefault(name, f'{problem} at stamp '
                                                        f'{frame.stamp_ns}')
                     continue
-                image = np.asarray(frame.images[name])
                 present.append(by_name[name])
-                images.append(np.repeat(image[..., None], 3, axis=2) if image.ndim == 2
-                              else image)
+                images.append(to_rgb8(frame.images[name]))    # the detector node's rule
             figures['missing_views'] += len(topics) - len(present)
             if len(present) < fusion_config.min_views:
                 continue

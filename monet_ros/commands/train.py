@@ -91,9 +91,8 @@ def run(args):
                                ground_truth=args.ground_truth, skeleton=args.skeleton,
                                max_instants=options.max_instants or None,
                                label_options=label_options_from_args(args))
-    report = getattr(recording, 'read_report', None)
-    if report is not None and not report.ok:
-        print(f'monet train: reading {args.data}: {report.summary()}', file=sys.stderr)
+    if recording.read_report.notice(args.data):
+        print(f'monet train: {recording.read_report.notice(args.data)}', file=sys.stderr)
     for note in recording.rig_notes:
         print(f'monet train: note: {note}', file=sys.stderr)
     if recording.label_report is not None:

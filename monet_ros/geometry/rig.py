@@ -6,162 +6,31 @@ Every problem raises RigError naming the file and the field. Files are bounded b
 are parsed (MAX_RIG_BYTES), YAML aliases/anchors are refused (a 600-byte alias bomb would
 expand to gigabytes), sizes must be finite positive integers (not booleans).
 """
-import math
 from pathlib import Path
-import re
 import tomllib
 import warnings
 
-import cv2
 import numpy as np
 import yaml
 
-from monet_ros.geometry.camera import Camera, CameraError
-
-DEFAULT_FRAME_ID = 'world'
-MAX_RIG_BYTES = 8 << 20       # text rig files (a 1000-camera rig is ~1 MB)
-MAX_MAT_BYTES = 512 << 20     # DANNCE .mat files (may hold labels too)
-# Distortion coefficient counts accepted per ROS distortion_model (OpenCV order k1 k2 p1 p2
-# k3 k4 k5 k6 s1..s4 tx ty): the SAME rule for rig files, camera_info YAML and recordings.
-DISTORTION_MODELS = {'plumb_bob': (0, 4, 5), 'rational_polynomial': (0, 4, 5, 8, 12, 14),
-                     '': (0,), 'none': (0,)}
-
-
-def opencv_distortion(model, coefficients, where):
-    """Coefficients of a ROS CameraInfo distortion_model as a Camera.dist array.
-
-    plumb_bob: 0, 4 or 5 coefficients; rational_polynomial: 0, 4, 5, 8, 12 or 14 (fewer
-    than 8 = the higher terms are 0; 14 = tilt terms, accepted only when 0); '' / 'none':
-    no coefficients (or all 0). Anything else (equidistant, fisheye...) is refused.
-    Raises ValueError starting with `where` (the file/field or topic)."""
-    model = str(model)
-    d = np.asarray(coefficients, np.float64).reshape(-1)
-    if model not in DISTORTION_MODELS:
-        raise ValueError(f'{where}: unsupported distortion_model {model!r} (OpenCV '
-                         'plumb_bob / rational_polynomial only)')
-    if model in ('', 'none'):
-        if np.any(d != 0):
-            raise ValueError(f'{where}: distortion_model {model!r} with non-zero '
-                             'coefficients')
-        return np.zeros(0)
-    if d.size not in DISTORTION_MODELS[model]:
-        raise ValueError(f'{where}: distortion_model {model!r} with {d.size} coefficients '
-                         f'(expected {" or ".join(map(str, DISTORTION_MODELS[model]))})')
-    if not np.all(np.isfinite(d)):
-        raise ValueError(f'{where}: distortion coefficients contain NaN or infinity')
-    if d.size == 14:
-        if np.any(d[12:] != 0):
-            raise ValueError(f'{where}: tilted-sensor terms (coefficients 13-14) are not '
-                             'supported')
-        d = d[:12]
-    return d
-
-
-class _NoAliasLoader(yaml.SafeLoader):
-    """SafeLoader that refuses aliases: rig files never need them, and nested aliases
-    (a "billion laughs" file) expand exponentially."""
-
-    def compose_node(self, parent, index):
-        if self.check_event(yaml.AliasEvent):
-            event = self.peek_event()
-            raise yaml.composer.ComposerError(
-                None, None, f'YAML alias *{event.anchor} is not allowed in a rig file',
-                event.start_mark)
-        return super().compose_node(parent, index)
-
-
-def load_yaml_text(path, text):
-    """YAML -> Python data without aliases; RigError naming the file otherwise."""
-    try:
-        return yaml.load(text, Loader=_NoAliasLoader)  # noqa: S506 - a SafeLoader subclass
-    except yaml.YAMLError as exc:
-        raise RigError(path, None, f'not valid YAML ({exc})') from None
-
-
-class RigError(ValueError):
-    """A rig file cannot be used; `.path` and `.field` say where."""
-
-    def __init__(self, path, field, message):
-        self.path = str(path)
-        self.field = field
-        self.message = message
-        where = f'{self.path}: field {field!r}: ' if field else f'{self.path}: '
-        super().__init__(where + message)
-
-
-# ----------------------------------------------------------------------------- helpers
-
-def _natural_key(text):
-    return [int(part) if part.isdigit() else part for part in re.split(r'(\d+)', text)]
-
-
-def _array(path, field, value, shapes):
-    """value -> float64 array reshaped to the first matching shape in `shapes`."""
-    if value is None:
-        raise RigError(path, field, 'missing')
-    try:
-        array = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise RigError(path, field, f'not a numeric array: {str(value)[:60]!r}') from None
-    for shape in shapes:
-        if array.shape == shape:
-            return array
-        vector_like = sum(d > 1 for d in array.shape) <= 1
-        if array.size == int(np.prod(shape)) and (vector_like or len(shape) == 1 and
-                                                   array.ndim == 1):
-            return array.reshape(shape)
-    raise RigError(path, field, f'expected shape {" or ".join(map(str, shapes))}, '
-                   f'got {array.shape}')
-
-
-def _require(path, mapping, key, prefix=''):
-    if not isinstance(mapping, dict) or key not in mapping or mapping[key] is None:
-        raise RigError(path, prefix + key, 'missing')
-    return mapping[key]
-
-
-def _size(path, field, value):
-    """A positive integer size (an int, or a float/string with an integer value); booleans,
-    NaN, infinity and sizes above 1e6 pixels are refused."""
-    if isinstance(value, (bool, np.bool_)):
-        raise RigError(path, field, f'must be a positive integer, got the boolean {value!r}')
-    try:
-        number = float(value)
-    except (TypeError, ValueError, OverflowError):
-        raise RigError(path, field, f'not a number: {str(value)[:40]!r}') from None
-    if not math.isfinite(number) or number != int(number) or not 0 < number <= 1e6:
-        raise RigError(path, field, f'must be a positive integer (<= 1000000), got '
-                       f'{str(value)[:40]!r}')
-    return int(number)
-
-
-def _camera(path, prefix, fields=None, **kwargs):
-    """Camera(**kwargs), turning CameraError into RigError naming file and field
-    (`fields` maps Camera field names to the file's names)."""
-    try:
-        return Camera(**kwargs)
-    except CameraError as exc:
-        name = (fields or {}).get(exc.field, exc.field)
-        raise RigError(path, prefix + name, str(exc).split(': ', 2)[-1]) from None
-
-
-def _rotation(path, field, value):
-    """3x3 matrix, or a 3-vector Rodrigues rotation."""
-    array = _array(path, field, value, [(3, 3), (3,)])
-    if array.shape == (3,):
-        array = cv2.Rodrigues(array)[0]
-    return array
-
-
-def _check_unique(path, cameras):
-    names = [c.name for c in cameras]
-    for name in names:
-        if names.count(name) > 1:
-            raise RigError(path, 'name', f'duplicate camera name {name!r}')
-    if not cameras:
-        raise RigError(path, 'cameras', 'no cameras in the file')
-    return cameras
-
+from monet_ros.geometry.rig_fields import (  # noqa: F401 - RigError & co. are public here
+    DEFAULT_FRAME_ID,
+    DISTORTION_MODELS,
+    MAX_MAT_BYTES,
+    MAX_RIG_BYTES,
+    RigError,
+    _array,
+    _camera,
+    _check_file_size,
+    _check_unique,
+    _natural_key,
+    _require,
+    _rotation,
+    _size,
+    load_yaml_text,
+    opencv_distortion,
+)
+from monet_ros.geometry.rig_opencv import _load_opencv
 
 # ----------------------------------------------------------------------------- formats
 
@@ -258,161 +127,6 @@ def _load_toml(path):
             width=_size(path, prefix + 'size[0]', size[0]),
             height=_size(path, prefix + 'size[1]', size[1])))
     return _check_unique(path, cameras), DEFAULT_FRAME_ID
-
-
-# Field names accepted in OpenCV FileStorage files, matched without regard to case (OpenCV's
-# camera_calibration sample writes Camera_Matrix, Distortion_Coefficients, image_Width).
-_OPENCV_KEYS = {
-    'K': ('camera_matrix', 'cameraMatrix', 'K', 'M', 'intrinsic_matrix', 'intrinsics'),
-    'D': ('distortion_coefficients', 'dist_coeffs', 'distCoeffs', 'D', 'distortion'),
-    'R': ('R', 'rotation_matrix', 'rotation', 'rvec'),
-    't': ('T', 't', 'translation', 'tvec'),
-    'width': ('image_width', 'width'),
-    'height': ('image_height', 'height'),
-    'size': ('image_size', 'imageSize'),
-    'name': ('camera_name', 'name'),
-}
-_STEREO_EXTRINSICS = ('extrinsics.yml', 'extrinsics.yaml', 'extrinsics.xml')
-
-
-def _accepted(field):
-    return '/'.join(_OPENCV_KEYS[field])
-
-
-def _open_storage(path):
-    """(cv2.FileStorage opened for reading, {lower-case key: key}); RigError otherwise."""
-    try:
-        fs = cv2.FileStorage(str(path), cv2.FILE_STORAGE_READ)
-    except (cv2.error, SystemError) as exc:
-        raise RigError(path, None, f'not a readable OpenCV FileStorage file '
-                       f'({str(exc).strip()[:200]})') from None
-    if not fs.isOpened():
-        raise RigError(path, None, 'not a readable OpenCV FileStorage file')
-    try:
-        keys = {key.lower(): key for key in fs.root().keys()}
-    except (cv2.error, SystemError) as exc:
-        fs.release()
-        raise RigError(path, None, f'not a readable OpenCV FileStorage file '
-                       f'({str(exc).strip()[:200]})') from None
-    return fs, keys
-
-
-def _read_node(path, fs, key):
-    """A FileStorage entry as an array / str / float; RigError naming the key when its
-    rows/cols do not match its data, or it is truncated."""
-    try:
-        node = fs.getNode(key)
-        if node.isMap() or node.isSeq() or node.type() == cv2.FILE_NODE_NONE:
-            mat = node.mat()
-            if mat is None and node.isSeq():
-                mat = np.array([node.at(i).real() for i in range(node.size())])
-            return mat
-        if node.isString():
-            return node.string()
-        return node.real()
-    except (cv2.error, SystemError) as exc:
-        raise RigError(path, key, 'unreadable matrix (rows/cols do not match the data, or '
-                       f'the file is truncated): {str(exc).strip()[:200]}') from None
-
-
-def _load_opencv(path, image_size=None):
-    """OpenCV FileStorage (YAML/XML) with one camera (camera_matrix, distortion_coefficients,
-    image_width, image_height[, R, T]; OpenCV's camera_calibration sample names too:
-    Camera_Matrix, Distortion_Coefficients, image_Width, image_Height) or a stereo pair
-    (stereo_calib: M1, D1, M2, D2 in intrinsics.yml, R, T in extrinsics.yml, read from
-    beside it when the file itself has no R/T). Files without an image size need
-    image_size=(w, h)."""
-    fs, keys = _open_storage(path)
-    try:
-        def first(field, keys=keys, fs=fs):
-            for key in _OPENCV_KEYS[field]:
-                if key.lower() in keys:
-                    real = keys[key.lower()]
-                    return real, _read_node(path, fs, real)
-            return _OPENCV_KEYS[field][0], None
-
-        def size():
-            wkey, w = first('width')
-            hkey, h = first('height')
-            if w is not None and h is not None:
-                return _size(path, wkey, w), _size(path, hkey, h)
-            skey, s = first('size')
-            if s is not None:
-                s = _array(path, skey, s, [(2,)])
-                return _size(path, skey + '[0]', s[0]), _size(path, skey + '[1]', s[1])
-            if image_size is not None:
-                return (_size(path, 'image_size[0]', image_size[0]),
-                        _size(path, 'image_size[1]', image_size[1]))
-            raise RigError(path, 'image_width', f'missing: the file stores no image size '
-                           f'(accepted: {_accepted("width")} with {_accepted("height")}, or '
-                           f'{_accepted("size")}); give the size (image_size=(w, h))')
-
-        dist_shapes = [(n,) for n in (0, 4, 5, 8, 12)]
-        if 'm1' in keys and 'm2' in keys:  # stereo calibration output
-            width, height = size()
-            R, t = _stereo_extrinsics(path, fs, keys)
-            cams = []
-            for k, (R_k, t_k) in enumerate([(np.eye(3), np.zeros(3)), (R, t)], start=1):
-                M, D = keys[f'm{k}'], keys.get(f'd{k}')
-                cams.append(_camera(
-                    path, '', {'K': M, 'dist': D or f'D{k}', 't': 'T'}, name=f'cam{k}',
-                    K=_array(path, M, _read_node(path, fs, M), [(3, 3)]),
-                    dist=_array(path, D or f'D{k}', _read_node(path, fs, D) if D else [],
-                                dist_shapes),
-                    R=_rotation(path, 'R', R_k), t=_array(path, 'T', t_k, [(3,)]),
-                    width=width, height=height))
-            return cams, DEFAULT_FRAME_ID
-        kkey, K = first('K')
-        if K is None:
-            raise RigError(path, 'camera_matrix', f'missing (accepted names: {_accepted("K")},'
-                           ' or M1/M2 for a stereo pair)')
-        dkey, D = first('D')
-        rkey, R = first('R')
-        tkey, t = first('t')
-        _, name = first('name')
-        width, height = size()
-        camera = _camera(
-            path, '', {'K': kkey, 'dist': dkey, 'R': rkey, 't': tkey},
-            name=str(name) if isinstance(name, str) and name else Path(path).stem,
-            K=_array(path, kkey, K, [(3, 3)]),
-            dist=_array(path, dkey, [] if D is None else D, dist_shapes),
-            R=np.eye(3) if R is None else _rotation(path, rkey, R),
-            t=np.zeros(3) if t is None else _array(path, tkey, t, [(3,)]),
-            width=width, height=height)
-        return [camera], DEFAULT_FRAME_ID
-    finally:
-        fs.release()
-
-
-def _stereo_extrinsics(path, fs, keys):
-    """(R, T) of a stereo pair: from the file, else from stereo_calib's extrinsics.yml
-    beside it; RigError naming both when neither has them."""
-    if 'r' in keys and 't' in keys:
-        return _read_node(path, fs, keys['r']), _read_node(path, fs, keys['t'])
-    for name in _STEREO_EXTRINSICS:
-        other = Path(path).with_name(name)
-        if other.is_file() and other != Path(path):
-            _check_file_size(other, MAX_RIG_BYTES)
-            ofs, okeys = _open_storage(other)
-            try:
-                if 'r' in okeys and 't' in okeys:
-                    return (_read_node(other, ofs, okeys['r']),
-                            _read_node(other, ofs, okeys['t']))
-            finally:
-                ofs.release()
-    raise RigError(path, 'R', 'missing: a stereo pair (M1, M2) needs R and T, in the file or '
-                   f'in {" / ".join(_STEREO_EXTRINSICS)} beside it (as stereo_calib writes '
-                   'them)')
-
-
-def _check_file_size(path, limit):
-    try:
-        size = Path(path).stat().st_size
-    except OSError as exc:
-        raise RigError(path, None, f'cannot read the file ({exc})') from None
-    if size > limit:
-        raise RigError(path, None, f'file is {size} bytes, more than the {limit} a rig file '
-                       'may have')
 
 
 def _load_dannce_mat(path, image_size=None):

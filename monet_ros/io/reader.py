@@ -130,6 +130,11 @@ class ReadReport:
 
     __str__ = summary
 
+    def notice(self, what):
+        """'reading <what>: <summary>' when anything was skipped or damaged, else None
+        (commands print it, so that no loss goes unsaid)."""
+        return None if self.ok else f'reading {what}: {self.summary()}'
+
 
 def _natural_key(path):
     return [int(s) if s.isdigit() else s for s in re.split(r'(\d+)', path.name)]
@@ -265,7 +270,8 @@ class BagReader:
         meta = p / 'metadata.yaml'
         if meta.is_file():
             try:
-                info = yaml.safe_load(meta.read_text())['rosbag2_bagfile_information']
+                from monet_ros.geometry.rig_fields import load_yaml_text  # no aliases
+                info = load_yaml_text(meta, meta.read_text())['rosbag2_bagfile_information']
                 self.metadata = info
                 files = [p / rel for rel in info.get('relative_file_paths') or []]
             except Exception as exc:    # noqa: BLE001 - damaged metadata: fall back to *.mcap

@@ -131,6 +131,7 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     Raises RecordingError (or LabelError, a ValueError) naming the file, line and field.
     """
     from monet_ros.io import iter_multiview_frames, open_bag, rig_from_bag
+    from monet_ros.io.images import to_rgb8
     from monet_ros.io.multiview import image_topics
     from monet_ros.labels import LabelOptions, read_label_rows, resolve_labels
     from monet_ros.skeleton import load_skeleton
@@ -159,10 +160,8 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
             skipped += 1
             continue
         for cam in cameras:
-            image = frame.images[cam.name]
-            if image.ndim == 2:
-                image = np.repeat(image[..., None], 3, axis=2)
-            if image.shape[:2] != (cam.height, cam.width) or image.dtype != np.uint8:
+            image = to_rgb8(frame.images[cam.name])    # grey / 16-bit -> rgb8, as live
+            if image.shape[:2] != (cam.height, cam.width):
                 raise RecordingError(f'{parts["bag"]}: camera {cam.name} image at '
                                      f'{frame.stamp_ns} is {image.shape} {image.dtype}, rig '
                                      f'says {cam.width}x{cam.height} uint8')

@@ -26,7 +26,13 @@ import zipfile
 import torch
 
 from monet_ros.atomic import atomic_write
-from monet_ros.models.registry import MODELS, build_model
+from monet_ros.models.registry import (
+    MAX_INPUT_SIDE,
+    MODELS,
+    OptionError,
+    build_model,
+    check_options,
+)
 
 FORMAT = 'monet_ros.checkpoint/1'
 REQUIRED = ('architecture', 'keypoints', 'input_size', 'heatmap_size')
@@ -38,14 +44,6 @@ class CheckpointError(ValueError):
 
 MAX_FILE_BYTES = 4 << 30          # larger files are refused before reading
 MAX_KEYPOINTS = 1000
-MAX_INPUT_SIDE = 4096             # network input height/width in pixels
-# model_options each architecture takes: name -> (smallest, largest) int; input_size is
-# checked separately (a [H, W] pair equal to metadata.input_size).
-OPTION_RANGES = {
-    'cpm': {'num_stages': (1, 12), 'width': (1, 1024)},
-    'hourglass': {'num_stacks': (1, 8), 'features': (1, 1024), 'depth': (1, 6)},
-    'small': {'width': (1, 1024), 'context_blocks': (0, 64)},
-}
 
 
 def _is_int(value):
@@ -69,10 +67,9 @@ def validate_metadata(path, meta):
         if field not in meta:
             raise CheckpointError(f'{path}: field metadata.{field} is missing')
     architecture = meta['architecture']
-    if not isinstance(architecture, str) or architecture not in OPTION_RANGES \
-            or architecture not in MODELS:
+    if not isinstance(architecture, str) or architecture not in MODELS:
         raise CheckpointError(f'{path}: field metadata.architecture must be one of '
-                              f'{sorted(OPTION_RANGES)}, got {architecture!r}')
+                              f'{sorted(MODELS)}, got {_short(architecture)}')
     keypoints = meta['keypoints']
     if not isinstance(keypoints, list) or not all(isinstance(k, str) for k in keypoints) \
             or not keypoints or len(keypoints) > MAX_KEYPOINTS:
@@ -84,22 +81,15 @@ def validate_metadata(path, meta):
     if not isinstance(options, dict):
         raise CheckpointError(f'{path}: field metadata.model_options must be a dict, got '
                               f'{_short(options)}')
-    ranges = OPTION_RANGES[architecture]
-    for key, value in options.items():
-        if key == 'input_size':
-            if _check_pair(path, 'model_options.input_size', value) != meta['input_size']:
-                raise CheckpointError(f'{path}: field metadata.model_options.input_size '
-                                      f'{value!r} differs from metadata.input_size '
-                                      f'{meta["input_size"]!r}')
-            continue
-        if key not in ranges:
-            raise CheckpointError(f'{path}: field metadata.model_options.{key} is not an '
-                                  f'option of {architecture!r} (expected '
-                                  f'{sorted(ranges) + ["input_size"]})')
-        low, high = ranges[key]
-        if not _is_int(value) or not low <= value <= high:
-            raise CheckpointError(f'{path}: field metadata.model_options.{key} must be an int '
-                                  f'in {low}..{high}, got {_short(value)}')
+    try:
+        check_options(architecture, options)
+    except OptionError as error:
+        raise CheckpointError(f'{path}: field metadata.model_options.{error.option}: '
+                              f'{str(error).split(": ", 1)[1]}') from None
+    if 'input_size' in options and list(options['input_size']) != meta['input_size']:
+        raise CheckpointError(f'{path}: field metadata.model_options.input_size '
+                              f'{options["input_size"]!r} differs from metadata.input_size '
+                              f'{meta["input_size"]!r}')
     step = meta.setdefault('step', 0)
     if not _is_int(step) or step < 0:
         raise CheckpointError(f'{path}: field metadata.step must be an int >= 0, got '

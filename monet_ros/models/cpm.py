@@ -35,6 +35,9 @@ class CPM(nn.Module):
     """images (B, 3, 368, 368) float RGB in [0, 1] -> list of num_stages (B, C, 46, 46)."""
 
     architecture = 'cpm'
+    # int options and their bounds (build_model and checkpoints check them; input_size
+    # is a [H, W] pair, see models.registry.check_options)
+    OPTION_RANGES = {'num_stages': (1, 12), 'width': (1, 1024)}
 
     def __init__(self, num_keypoints, num_stages=5, width=128, input_size=(368, 368)):
         super().__init__()

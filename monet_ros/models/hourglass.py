@@ -32,6 +32,9 @@ class StackedHourglass(nn.Module):
     """images (B, 3, 256, 256) float RGB in [0, 1] -> list of num_stacks (B, C, 64, 64)."""
 
     architecture = 'hourglass'
+    # int options and their bounds (build_model and checkpoints check them; input_size
+    # is a [H, W] pair, see models.registry.check_options)
+    OPTION_RANGES = {'num_stacks': (1, 8), 'features': (1, 1024), 'depth': (1, 6)}
 
     def __init__(self, num_keypoints, num_stacks=2, features=256, depth=4,
                  input_size=(256, 256)):

@@ -15,6 +15,9 @@ class SmallNet(nn.Module):
     """images (B, 3, 256, 256) float RGB in [0, 1] -> [(B, C, 64, 64)]."""
 
     architecture = 'small'
+    # int options and their bounds (build_model and checkpoints check them; input_size
+    # is a [H, W] pair, see models.registry.check_options)
+    OPTION_RANGES = {'width': (1, 1024), 'context_blocks': (0, 64)}
 
     def __init__(self, num_keypoints, width=48, context_blocks=2, input_size=(256, 256)):
         super().__init__()

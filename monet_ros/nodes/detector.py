@@ -40,7 +40,7 @@ from monet_ros.models.crop import crop_images
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
-from monet_ros.nodes.runner import run_node
+from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.timing import StageTimer
 
 
@@ -186,8 +186,7 @@ class DetectorNode(Node):
     def bad_message(self, slot, topic, error):
         slot.bad += 1
         slot.last_bad = f'{topic}: {error}'
-        self.get_logger().warning(f'{topic}: bad message ({error}); {slot.bad} so far',
-                                  throttle_duration_sec=5.0)
+        log_bad_once(self, topic, error, slot.bad)
 
     def on_camera_info(self, slot, msg):
         key = (tuple(msg.k), tuple(msg.d), msg.width, msg.height, msg.distortion_model)

@@ -29,7 +29,7 @@ from monet_ros.io import (
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import HEATMAPS_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
-from monet_ros.nodes.runner import run_node
+from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.nodes.sync import StampSynchronizer
 from monet_ros.skeleton import load_skeleton
 from monet_ros.timing import StageTimer
@@ -170,9 +170,7 @@ class FusionNode(Node):
         stats = self.stats[name]
         stats.bad += 1
         stats.last_bad = str(error)
-        self.get_logger().warning(f'{self.config.heatmap_topic.format(camera=name)}: bad '
-                                  f'message ({error}); {stats.bad} so far',
-                                  throttle_duration_sec=5.0)
+        log_bad_once(self, self.config.heatmap_topic.format(camera=name), error, stats.bad)
 
     def on_poll(self):
         now = time.monotonic()

@@ -13,6 +13,7 @@ from collections import Counter
 from contextlib import contextmanager
 import os
 from pathlib import Path
+import re
 import signal
 import sys
 import time
@@ -147,6 +148,24 @@ class CallbackGuard:
                 values=[KeyValue(key='errors', value=str(count)),
                         KeyValue(key='last_error', value=self.last[source])]))
         self.pub.publish(msg)
+
+
+_NUMBERS = re.compile(r'[-+]?\d+(\.\d*)?([eE][-+]?\d+)?')
+
+
+def log_bad_once(node, source, error, count):
+    """Log a bad message from `source` once per kind (the text with its numbers blanked,
+    so "image is 320x240" and "image is 640x480" are one kind); later ones are only
+    counted (the node's /diagnostics). Returns True when it logged."""
+    seen = node.__dict__.setdefault('_bad_kinds_logged', set())
+    kind = (source, _NUMBERS.sub('#', str(error))[:160])
+    if kind in seen:
+        return False
+    if len(seen) < 1000:
+        seen.add(kind)
+    node.get_logger().warning(f'{source}: bad message ({error}); {count} so far; further '
+                              'messages of this kind are counted in /diagnostics')
+    return True
 
 
 def _raise_interrupt(signum, frame):

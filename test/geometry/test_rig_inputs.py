@@ -229,3 +229,22 @@ def test_seeded_opencv_xml_damage_is_rig_error_or_rig(tmp_path):
             assert str(path) in str(error)
         else:
             assert cams[0].K.shape == (3, 3)
+
+
+def test_booleans_in_matrices_are_refused(tmp_path):
+    path = tmp_path / 'rig.yaml'
+    path.write_text(PROJECT.format(width=160).replace('[1, 0, 0]', '[true, 0, 0]'))
+    with pytest.raises(RigError, match=r'cameras\[0\]\.R.*cam0.*boolean'):
+        load_rig(path)
+
+
+def test_skeleton_yaml_alias_bomb_is_refused(tmp_path):
+    """The same alias-free YAML loader for skeleton files."""
+    from monet_ros.skeleton import SkeletonError, load_skeleton
+    lines = ['a0: &a0 [x, x, x, x, x, x, x, x, x]']
+    lines += [f'a{i}: &a{i} [' + ', '.join([f'*a{i - 1}'] * 9) + ']' for i in range(1, 10)]
+    lines += ['name: bomb', 'keypoints: *a9']
+    path = tmp_path / 'bomb.yaml'
+    path.write_text('\n'.join(lines) + '\n')
+    with pytest.raises(SkeletonError, match=r'bomb\.yaml.*alias'):
+        load_skeleton(path)

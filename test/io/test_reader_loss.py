@@ -45,6 +45,7 @@ def test_reference_bag_reads_whole_and_ok(original, tmp_path):
     reader = open_bag(path)
     assert len(list(reader.messages(decode=False))) == total == 13
     assert reader.report.ok, reader.report.summary()
+    assert reader.report.notice('the bag') is None
 
 
 def test_every_opcode_bit_flip_is_counted_never_silent(original, tmp_path):
@@ -92,6 +93,7 @@ def test_issue_example_tf_static_lost_is_named(original, tmp_path):
     assert report.skipped['/tf_static'] == 1
     text = report.summary()
     assert 'opcode 0x15' in text and '/tf_static' in text
+    assert report.notice('the bag') == f'reading the bag: {text}'   # what commands print
 
 
 @pytest.mark.parametrize('size', [0, 8, 20, 60])
@@ -135,3 +137,17 @@ def test_seeded_damage_never_loses_messages_silently(original, tmp_path):
         if got < total and reader.report.ok:
             silent.append((case, kind, got))
     assert not silent, f'messages lost with report.ok True: {silent}'
+
+
+def test_metadata_yaml_alias_bomb_is_reported_and_the_files_read(original, tmp_path):
+    data, total = original
+    folder = tmp_path / 'bag'
+    folder.mkdir()
+    (folder / 'bag_0.mcap').write_bytes(data)
+    lines = ['a0: &a0 [x, x, x, x, x, x, x, x, x]']
+    lines += [f'a{i}: &a{i} [' + ', '.join([f'*a{i - 1}'] * 9) + ']' for i in range(1, 10)]
+    lines.append('rosbag2_bagfile_information: {relative_file_paths: *a9}')
+    (folder / 'metadata.yaml').write_text('\n'.join(lines) + '\n')
+    reader = open_bag(folder)
+    assert len(list(reader.messages(decode=False))) == total
+    assert not reader.report.ok and 'alias' in reader.report.summary()

@@ -165,3 +165,19 @@ def test_seeded_metadata_mutations_only_ever_give_checkpoint_error(saved):
 
 def json_copy(value):
     return json.loads(json.dumps(value))
+
+
+@pytest.mark.parametrize('name, options, option', [
+    ('small', {'width': 10 ** 6}, 'width'), ('small', {'context_blocks': 10 ** 6},
+                                             'context_blocks'),
+    ('cpm', {'num_stages': 0}, 'num_stages'), ('hourglass', {'width': 64}, 'width'),
+    ('small', {'input_size': (64, 10 ** 6)}, 'input_size'), ('cpm', {'width': 2.5}, 'width'),
+])
+def test_build_model_checks_options_before_allocating(name, options, option):
+    """The same bounds for a fresh model (CLI / node options) as for checkpoints."""
+    from monet_ros.models.registry import OptionError
+    start = time.perf_counter()
+    with pytest.raises(OptionError, match=f'model option {option}') as info:
+        build_model(name, 3, **options)
+    assert info.value.option == option
+    assert time.perf_counter() - start < 1.0

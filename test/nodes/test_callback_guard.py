@@ -47,3 +47,15 @@ def test_exceptions_are_counted_per_topic_and_the_node_goes_on(ros_env):
         assert 'bad2' in reported()['last_error']
         ros.executor.remove_node(node)
         node.destroy_node()
+
+
+def test_bad_messages_are_logged_once_per_kind(ros_env):
+    from monet_ros.nodes.runner import log_bad_once
+    with RosHarness(ros_env) as ros:
+        node = Node('logger', context=ros.context)
+        size = 'image is 320x240 but the camera is 640x480'
+        assert log_bad_once(node, '/cam0/image_raw', ValueError(size), 1)
+        assert not log_bad_once(node, '/cam0/image_raw', ValueError(size.replace('320', '32')), 2)
+        assert log_bad_once(node, '/cam0/image_raw', ValueError('no camera_info yet'), 3)
+        assert log_bad_once(node, '/cam1/image_raw', ValueError(size), 1)   # another source
+        node.destroy_node()
