@@ -62,6 +62,7 @@ MARKERS = {'head': 'Head', 'neck': 'Neck', 'r_shoulder': 'RShoulder', 'r_elbow':
 MODES = ('supervised', 'bootstrap2', 'monet')
 PCK_PX = (5, 10, 20)
 _STATE = {}             # recording and reference, loaded before forking workers
+_PREPARED = {}          # (labels, seed, config of the crops) -> TrainingData, per process
 
 
 def load_reference(root, keypoints):
@@ -187,7 +188,12 @@ def run_job(job):
     rec = labelled_recording(recording, reference2d, instants)
     config = TrainConfig(mode=mode, seed=seed, **overrides)
     probe = build_model(config.architecture, rec.num_keypoints, **config.model_options())
-    data = TrainingData(rec, config, probe.input_size, probe.heatmap_size)
+    key = (count, seed, probe.input_size, probe.heatmap_size, config.box_source,
+           config.box_margin, config.cache_scale, config.eval_fraction)
+    if key not in _PREPARED:                    # crops are the same for every mode
+        _PREPARED.clear()
+        _PREPARED[key] = TrainingData(rec, config, probe.input_size, probe.heatmap_size)
+    data = _PREPARED[key]
     if fixed_steps:
         steps = fixed_steps
     else:
@@ -290,7 +296,7 @@ def plot(rows, path, counts):
                      if r['mode'] == mode and r['median_mm'] is not None)
         if not pts:
             continue
-        style = '--' if mode not in MODES else '-o'
+        style = '--s' if mode not in MODES else '-o'
         axes[0].plot([p[0] for p in pts], [p[1] for p in pts], style, label=mode)
         axes[1].plot([p[0] for p in pts], [100 * p[2] for p in pts], style, label=mode)
     for r in rows:
