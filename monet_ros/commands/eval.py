@@ -53,6 +53,7 @@ def run(args):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
+    out.mkdir(parents=True, exist_ok=True)        # an unwritable place is named at once
     if args.from_json:
         summaries = load_results_json(args.from_json)
     else:
