@@ -69,7 +69,8 @@ def check_new_output(path, owner, field='out'):
         if not path.is_dir():
             raise ConfigError(owner, field, f'{path}: exists and is not a folder')
         if any(path.iterdir()):
-            raise ConfigError(owner, field, f'{path}: output exists; choose a new folder')
+            raise ConfigError(owner, field, f'{path}: output exists and is not empty; not '
+                              'overwriting (choose a new folder)')
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         Path(tempfile.mkdtemp(prefix=f'.{path.name}.', suffix='.probe', dir=path.parent)).rmdir()
