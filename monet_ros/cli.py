@@ -73,16 +73,17 @@ def sigterm_as_interrupt():
         signal.signal(signal.SIGTERM, previous)
 
 
-def error_line(error):
-    """The one line printed for a bad-input error (the message names file/field/option)."""
+def error_line(error, name=''):
+    """The one line printed for a bad-input error (the message names file/field/option);
+    a leading `name: ` (the command, already the line's prefix) is not repeated."""
     from monet_ros.commands.common import os_error_text
 
     if isinstance(error, OSError):
         return os_error_text(error)
     if isinstance(error, MemoryError):
         return 'out of memory (the input or an option asks for too much; see its size)'
-    text = str(error).strip() or type(error).__name__
-    return ' '.join(text.split())                     # one line, whatever the message
+    text = ' '.join((str(error).strip() or type(error).__name__).split())   # one line
+    return text[len(name) + 2:] if name and text.startswith(f'{name}: ') else text
 
 
 def bad_input_errors():
@@ -108,7 +109,8 @@ def main(argv=None):
             except bad_input_errors() as error:
                 if os.environ.get('MONET_TRACEBACK'):
                     raise
-                print(f'{name}: error: {error_line(error)}', file=sys.stderr, flush=True)
+                print(f'{name}: error: {error_line(error, name)}', file=sys.stderr,
+                      flush=True)
                 return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print(f'{name}: stopped', file=sys.stderr, flush=True)

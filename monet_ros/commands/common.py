@@ -61,14 +61,21 @@ def os_error_text(error, path=None):
 
 
 def check_new_output(path, owner, field='out'):
-    """An output folder that must not exist yet (or be an empty folder): ConfigError naming
-    it when it is a file or holds something."""
+    """An output folder that must not exist yet (or be an empty folder) in a place where a
+    folder can be made: ConfigError naming it when it is a file or holds something, OSError
+    naming it when its place is not writable (checked by making a folder there)."""
     path = Path(path)
     if path.exists() or path.is_symlink():
         if not path.is_dir():
             raise ConfigError(owner, field, f'{path}: exists and is not a folder')
         if any(path.iterdir()):
-            raise ConfigError(owner, field, f'{path}: output exists; choose a new folder')
+            raise ConfigError(owner, field, f'{path}: output exists and is not empty; not '
+                              'overwriting (choose a new folder)')
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        Path(tempfile.mkdtemp(prefix=f'.{path.name}.', suffix='.probe', dir=path.parent)).rmdir()
+    except OSError as error:
+        raise OSError(error.errno, error.strerror, str(path)) from None
 
 
 @contextmanager

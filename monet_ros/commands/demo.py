@@ -108,21 +108,20 @@ def run(args):
     trial = root / TRIAL
     if not trial.is_dir():
         if args.data is not None:
-            print(f'monet demo: Pose2Sim demo data not found at {trial}', file=sys.stderr)
-            return 2
+            raise FileNotFoundError(2, 'Pose2Sim demo data not found', str(trial))
         _log(f'Pose2Sim demo data not found at {trial} (use --data DIR): synthetic demo')
         return run_synthetic()
     cameras = load_rig(root / CALIBRATION)
-    _log(f'calibration: {len(cameras)} cameras ({", ".join(c.name for c in cameras)})')
+    # inputs are all read before anything is logged: a bad file is the one line printed
+    notes = [f'calibration: {len(cameras)} cameras ({", ".join(c.name for c in cameras)})']
     folders = sorted((trial / 'pose-associated').glob('cam*_json'))
     if len(folders) != len(cameras):
-        print(f'monet demo: {len(folders)} detection folders for {len(cameras)} cameras',
-              file=sys.stderr)
-        return 2
+        raise ValueError(f'{trial / "pose-associated"}: {len(folders)} detection folders '
+                         f'(cam*_json) for the {len(cameras)} cameras of {CALIBRATION.name}')
     detections = []
     for folder in folders:
         detections.append(read_openpose_folder(folder))
-        _log(f'  read {folder.name}: {len(detections[-1])} frames')
+        notes.append(f'  read {folder.name}: {len(detections[-1])} frames')
     counts = {folder.name: len(d) for folder, d in zip(folders, detections)}
     if len(set(counts.values())) != 1:
         raise ValueError(f'{trial / "pose-associated"}: the cameras have different numbers '
@@ -144,6 +143,8 @@ def run(args):
     likelihood = detections[:, :, ids, 2].reshape(V, F * len(ids))
     weights = np.where(likelihood >= args.likelihood, likelihood, 0.0)
     rig = cameras if args.undistort else [c.without_distortion() for c in cameras]
+    for note in notes:
+        _log(note)
 
     start = time.perf_counter()
     X, inliers = triangulate_robust(points, rig, weights, threshold_px=args.threshold_px,

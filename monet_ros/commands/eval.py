@@ -61,6 +61,7 @@ def run(args):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
+    out.mkdir(parents=True, exist_ok=True)        # an unwritable place is named at once
     if args.reference:
         from monet_ros.commands.eval_reference import run_reference
         return run_reference(args)

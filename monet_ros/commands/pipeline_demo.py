@@ -59,6 +59,7 @@ def prepare_demo(workdir=None):
     from monet_ros.cli import main as monet
 
     root = Path(workdir or os.environ.get('MONET_DEMO_DIR', DEFAULT_WORKDIR)) / CACHE_KEY
+    root.mkdir(parents=True, exist_ok=True)       # OSError naming the folder when it cannot
     data = root / 'synth'
     model = root / 'model.pt'
     if not (data / 'recording' / 'metadata.yaml').is_file():
@@ -66,7 +67,7 @@ def prepare_demo(workdir=None):
         _say(f'generating a synthetic recording in {data} (once) ...')
         shutil.rmtree(data, ignore_errors=True)
         if monet(['synth', '--out', str(data), *SYNTH_ARGS]) != 0:
-            raise RuntimeError('monet synth failed')
+            raise ValueError(f'--workdir {root}: the demo recording could not be made')
         _say(f'recording ready ({time.monotonic() - start:.0f} s)')
     if not model.is_file():
         start = time.monotonic()
@@ -75,7 +76,7 @@ def prepare_demo(workdir=None):
              f'{train_dir} (once, a few minutes) ...')
         shutil.rmtree(train_dir, ignore_errors=True)
         if monet(['train', str(data), '--out', str(train_dir), *TRAIN_ARGS]) != 0:
-            raise RuntimeError('monet train failed')
+            raise ValueError(f'--workdir {root}: the demo model could not be trained')
         shutil.copyfile(train_dir / 'model.pt', root / '.model.pt.tmp')
         os.replace(root / '.model.pt.tmp', model)
         _say(f'model ready ({time.monotonic() - start:.0f} s)')

@@ -1,5 +1,4 @@
 """`monet synth`: render a synthetic calibrated rig + moving subject to a recording folder."""
-import sys
 
 HELP = ('render a synthetic calibrated rig and a moving articulated subject to a rosbag2 '
         'MCAP, with rig file, sparse 2D labels and 3D ground truth')
@@ -84,13 +83,19 @@ def config_from_args(args):
 
 
 def run(args):
-    from monet_ros.synth.recording import SynthError, synthesize
+    """Writes the recording atomically: a run that fails or is stopped leaves no folder."""
+    from dataclasses import replace
+    from pathlib import Path
 
-    try:
-        config = config_from_args(args)
-        result = synthesize(config, args.out, progress=not args.quiet)
-    except SynthError as error:
-        print(f'monet synth: error: {error}', file=sys.stderr)
-        return 2
-    print(result.summary())
+    from monet_ros.commands.common import atomic_output_dir, check_new_output
+    from monet_ros.synth.recording import synthesize
+
+    config = config_from_args(args)
+    out = Path(args.out)
+    check_new_output(out, 'monet synth')
+    with atomic_output_dir(out) as staging:
+        result = synthesize(config, staging, progress=not args.quiet)
+        readme = staging / 'README.md'          # it names the folder: the final one
+        readme.write_text(readme.read_text().replace(str(staging), str(out)))
+    print(replace(result, out=out).summary())
     return 0

@@ -87,6 +87,7 @@ def run(args):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
+    out.mkdir(parents=True, exist_ok=True)        # an unwritable place is named at once
     recording = load_recording(args.data, rig=args.rig, labels=args.labels,
                                ground_truth=args.ground_truth, skeleton=args.skeleton,
                                max_instants=options.max_instants or None,

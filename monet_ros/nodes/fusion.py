@@ -231,6 +231,7 @@ class FusionNode(Node):
                 ('frames', self.frames), ('partial_frames', self.partial_frames),
                 ('dropped_frames', self.sync.stats.dropped), ('late_views', self.sync.stats.late),
                 ('time_resets', self.sync.stats.resets),
+                ('repeated_stamps', dict(self.sync.stats.repeated_by_key)),
                 ('fusion_ms_median', f'{fusion_ms:.3f}'),
                 # mean ms per call since start: receive (per view), decode, undistort,
                 # triangulate, errors, publish (per frame)

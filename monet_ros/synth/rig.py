@@ -82,7 +82,9 @@ class RigConfig:
                f'must be (min, max) with -30 <= min <= max <= 85, got {self.dome_elevation_deg}')
         _check(0.0 <= self.jitter <= 5.0, 'jitter', f'must be in 0..5, got {self.jitter}')
         half = 1.25 * np.array([self.image_width, self.image_height]) / 2.0 / self.focal
-        _check(distortion_one_to_one(self.distortion5, *half), 'distortion',
+        _check(distortion_one_to_one(self.distortion5, *half)
+               and distortion_invertible(self.distortion5, self.image_width,
+                                         self.image_height, self.focal), 'distortion',
                f'{self.distortion} folds over inside the image (the distortion map is not '
                'one-to-one there); use smaller coefficients')
         _check(np.isfinite(self.height_spread) and 0.0 <= self.height_spread <= 10.0,
@@ -122,6 +124,25 @@ def distortion_one_to_one(dist5, x_max, y_max, samples=129):
         det = dxd_dx * dyd_dy - dxd_dy * dyd_dx
         return bool(np.all(np.isfinite(det)) and np.all(det > 0.05)
                     and radial_monotonic(dist5, float(np.hypot(x_max, y_max))))
+
+
+def distortion_invertible(dist5, width, height, focal, samples=33):
+    """True when every pixel of a (width x height) image with this focal length and
+    distortion undistorts (Camera.undistort_points converges) and distorts back to itself
+    within 0.01 px - the renderer casts a viewing ray through every pixel."""
+    K = np.array([[focal, 0, width / 2.0], [0, focal, height / 2.0], [0, 0, 1]])
+    camera = Camera(name='check', K=K, dist=np.asarray(dist5, float), R=np.eye(3),
+                    t=np.zeros(3), width=int(width), height=int(height))
+    u, v = np.meshgrid(np.linspace(-0.5, width - 0.5, samples),
+                       np.linspace(-0.5, height - 0.5, samples))
+    uv = np.stack([u.ravel(), v.ravel()], axis=1)
+    with np.errstate(all='ignore'):
+        ideal = camera.undistort_points(uv)
+        if not np.all(np.isfinite(ideal)):
+            return False
+        rays = np.concatenate([camera.pixels_to_normalized(ideal), np.ones((len(uv), 1))], 1)
+        back = camera.project(rays)
+    return bool(np.all(np.isfinite(back)) and np.abs(back - uv).max() < 0.01)
 
 
 def radial_monotonic(dist5, r_max, samples=512):
