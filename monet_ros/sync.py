@@ -9,7 +9,8 @@ Pure Python (no rclpy; message_filters is not in the pip wheels). The rule:
 - A stream that repeats a stamp it already gave (a driver that leaves every stamp at 0,
   or re-sends a frame) is detected: the repeat is dropped and counted per key
   (`stats.repeated_by_key`), never merged into another instant's group.
-- Groups are released in stamp order, oldest first, when complete (every expected key),
+- Groups are released in stamp order, oldest first, when complete (every expected key and
+  at least `min_keys`),
   or when every missing key's stream has moved past the group's stamp by more than
   `slop_ns + reorder_ns` (its view was lost), or `timeout_s` after the group's first item
   arrived, or when more than `max_pending` groups are open (bounded memory).
@@ -156,7 +157,11 @@ class StampSynchronizer:
         released = []
         while self.pending:
             head = self.pending[0]
-            if (self.expected.issubset(head.items) or self._passed(head)
+            # complete: every expected key (and at least min_keys: right after start, the
+            # expected set may hold only the first streams heard from)
+            complete = (self.expected.issubset(head.items)
+                        and len(head.items) >= self.min_keys)
+            if (complete or self._passed(head)
                     or len(self.pending) > self.max_pending
                     or (math.isfinite(self.timeout_s)
                         and now - head.first_arrival >= self.timeout_s)):

@@ -106,6 +106,7 @@ class FusionNode(Node):
         self.last_result = None
         self.last_stamp_ns = None
         self.listeners = []       # callables(stamp_ns, result) (the pipeline's summary)
+        self.first_heard = None   # monotonic time of the first heatmap (of any camera)
         self.sync = StampSynchronizer(self.names, slop_ns=int(config.slop_ms * 1e6),
                                       timeout_s=config.timeout_s, min_keys=config.min_views)
         self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.names}
@@ -134,6 +135,7 @@ class FusionNode(Node):
         if kind == 0:
             stats.received += 1
             stats.last_seen = time.monotonic()
+            self.first_heard = self.first_heard or stats.last_seen
         if stamp in other:
             partner = other.pop(stamp)
             heat_msg, info_msg = (msg, partner) if kind == 0 else (partner, msg)
@@ -174,8 +176,13 @@ class FusionNode(Node):
 
     def on_poll(self):
         now = time.monotonic()
+        # a camera not heard from yet counts as live until silent_after_s after the first
+        # heatmap of any camera (it may still be starting up): the first frames wait for it
+        starting = self.first_heard is None or now - self.first_heard < \
+            self.config.silent_after_s
         live = [n for n, s in self.stats.items()
-                if s.last_seen is not None and now - s.last_seen < self.config.silent_after_s]
+                if (s.last_seen is None and starting)
+                or (s.last_seen is not None and now - s.last_seen < self.config.silent_after_s)]
         self.sync.set_expected(live)
         for group in self.sync.poll():
             self.fuse(group)

@@ -16,8 +16,12 @@ from monet_ros.sync import StampSynchronizer
 
 
 class Result:
+    """What the summary reads of a fusion result: 2 keypoints, the second not fused."""
+
     def __init__(self, error):
         self.reprojection_error = np.array([error, np.nan])
+        self.X = np.array([[0.0, 0.0, 1.0], [np.nan, np.nan, np.nan]])
+        self.num_views = np.array([2, 0])
 
 
 def test_pipeline_summary_stays_bounded_over_a_long_loop():
