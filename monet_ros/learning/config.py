@@ -55,7 +55,7 @@ class TrainConfig:
                               minimum=0, maximum=MAX_INPUT_SIZE)
     width: int = setting(0, "channel width of the small/cpm nets; 0 = the architecture's",
                          minimum=0, maximum=MAX_WIDTH)
-    steps: int = setting(2000, 'training steps', minimum=1, maximum=100_000_000)
+    steps: int = setting(2000, 'training steps', minimum=1)
     batch_labelled: int = setting(8, 'labelled view crops per step', minimum=1,
                                   maximum=MAX_BATCH)
     batch_pseudo: int = setting(8, 'pseudo-labelled view crops per step', minimum=0,

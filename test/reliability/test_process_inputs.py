@@ -100,15 +100,15 @@ def test_out_of_order_logging_loses_no_frame(tmp_path, model, order):
     15 of 24 fused, '54 missing')."""
     rng = np.random.default_rng(2)
     views = plain_views(24, rng)
-    if order == 'shuffled log order':                  # within +-150 ms, log time follows
-        keys = [log + rng.integers(-150, 150) * 1_000_000 for log, *_ in views]
-        views = [v for _, v in sorted(zip(keys, views), key=lambda p: p[0])]
-    elif order == 'log time not monotonic':            # file order random in windows of 9
+    if order == 'shuffled log order':        # header stamps out of order within 9 messages
         blocks = [views[i:i + 9] for i in range(0, len(views), 9)]
-        views = [m for b in blocks for m in rng.permutation(np.array(b, dtype=object))]
-        views = [tuple(m) for m in views]
-    else:                                              # recorded backwards
-        views = views[::-1]
+        views = [b[j] for b in blocks for j in rng.permutation(len(b))]
+        views = [(T0 + i * 1_000_000, *m[1:]) for i, m in enumerate(views)]
+    elif order == 'log time not monotonic':  # file in stamp order, log times +-300 ms
+        views = [(log + int(rng.integers(-300, 300)) * 1_000_000, *m)
+                 for log, *m in views]
+    else:                                    # stamps decreasing while log time increases
+        views = [(T0 + i * 1_000_000, *m[1:]) for i, m in enumerate(views[::-1])]
     out, stdout, _ = run_process(tmp_path, model, views)
     assert summary(stdout) == (24, 72, 0)
     assert sorted(fused_stamps(out)) == [T0 + k * PERIOD for k in range(24)]
