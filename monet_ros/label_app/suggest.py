@@ -1,0 +1,92 @@
+"""Instants worth labelling, spread over time and pose (no ROS).
+
+With a detector checkpoint: the detector + fusion of `monet process` (Detector.predict,
+fusion.fuse_heatmaps) run on an evenly spaced subsample of instants; the features are the
+root-relative 3D poses (NaN joints filled with the mean pose), and each instant's
+disagreement is the mean reprojection error of its all-view triangulation. Without one:
+the features are the instant's grey thumbnails (16x12 per view, all views concatenated).
+Both append the instant's normalised time so that picks spread over time too; k-means
+(scipy.cluster.vq.kmeans2, seeded) makes `k` clusters and the instant nearest to each
+centre is suggested.
+"""
+import numpy as np
+
+
+def kmeans_picks(features, k, times=None, time_weight=1.0, seed=0):
+    """Indices (sorted, unique) of the rows of `features` (N, D) nearest to the centres of
+    a k-means with min(k, N) clusters. Features are standardised per column; times (N,)
+    (any unit) are scaled to 0..1 and appended with weight time_weight x sqrt(D)."""
+    from scipy.cluster.vq import kmeans2
+
+    F = np.asarray(features, np.float64)
+    N = len(F)
+    if N == 0:
+        return []
+    k = min(int(k), N)
+    std = F.std(axis=0)
+    F = (F - F.mean(axis=0)) / np.where(std > 1e-12, std, 1.0)
+    if times is not None:
+        t = np.asarray(times, np.float64)
+        span = t.max() - t.min()
+        t = (t - t.min()) / span if span > 0 else np.zeros_like(t)
+        F = np.hstack([F, time_weight * np.sqrt(F.shape[1]) * t[:, None]])
+    centres, assign = kmeans2(F, k, minit='++', seed=seed)
+    picks = set()
+    for c in range(k):
+        members = np.flatnonzero(assign == c)
+        if len(members):
+            d = np.linalg.norm(F[members] - centres[c], axis=1)
+            picks.add(int(members[np.argmin(d)]))
+    return sorted(picks)
+
+
+def suggest_from_images(session, k):
+    """Suggested instant indices from image thumbnails (session.thumbnails())."""
+    return kmeans_picks(session.thumbnails(), k, times=session.stamps.astype(np.float64))
+
+
+def run_detector(session, model, device=None, max_instants=200):
+    """Detector + fusion (the functions of `monet process`) on at most max_instants evenly
+    spaced complete instants. Returns {instant index: dict(points2d (V, C, 2) peaks px,
+    confidence (V, C), X (C, 3), error (float mean reprojection px of the all-view
+    triangulation))}. Raises ValueError / CheckpointError naming the model when its
+    keypoints differ from the session's skeleton."""
+    from monet_ros.fusion import FusionConfig, fuse_heatmaps
+    from monet_ros.models import Detector
+
+    detector = Detector.from_checkpoint(model, device=device)
+    if list(detector.keypoints) != list(session.keypoints):
+        raise ValueError(f'--model {model}: keypoints {list(detector.keypoints)} differ from '
+                         f'the skeleton {list(session.keypoints)} (give --skeleton)')
+    complete = np.flatnonzero(session.complete)
+    if len(complete) > max_instants:
+        complete = complete[np.linspace(0, len(complete) - 1, max_instants).round().astype(int)]
+    config = FusionConfig()
+    out = {}
+    for t in complete:
+        images = session.images(int(t))
+        views = [images[name] for name in session.names]
+        boxes = detector.boxes_for(session.cameras, None)
+        heat, heat_cameras = detector.predict(views, session.cameras, boxes, keep_aspect=False)
+        result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cameras]), session.cameras,
+                               config)
+        points = np.where((result.peak_confidence >= config.confidence_threshold)[..., None],
+                          result.points2d, np.nan)
+        finite = np.isfinite(result.reprojection_error)
+        out[int(t)] = {'points2d': points, 'confidence': result.peak_confidence,
+                       'X': result.X, 'error': float(np.mean(result.reprojection_error[finite]))
+                       if finite.any() else float('nan')}
+    return out
+
+
+def suggest_from_predictions(predictions, k):
+    """Suggested instant indices from the detector's 3D poses (run_detector's output)."""
+    index = sorted(predictions)
+    if not index:
+        return []
+    X = np.stack([predictions[t]['X'] for t in index])            # (N, C, 3)
+    X = X - np.nanmean(X, axis=1, keepdims=True)                  # root-relative pose
+    mean = np.nanmean(X, axis=0)
+    X = np.where(np.isfinite(X), X, np.where(np.isfinite(mean), mean, 0.0)[None])
+    picks = kmeans_picks(X.reshape(len(index), -1), k, times=np.array(index, np.float64))
+    return [index[i] for i in picks]
