@@ -98,6 +98,9 @@ def run(args):
     try:
         server.serve_forever()
     finally:
+        session.stopping.set()          # long jobs end at their next instant ...
         server.server_close()
+        if session.work.acquire(timeout=30):   # ... never cut inside a native library
+            session.work.release()
     print('monet label: stopped', file=sys.stderr, flush=True)
     return 0

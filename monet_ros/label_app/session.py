@@ -80,7 +80,9 @@ class LabelSession:
         self.report = None
         self._load(imports)
         self._thumbs = None
-        self.predictions = None        # {stamp: FusionResult-like dict} with --model
+        # set when the server stops: long jobs (thumbnails, detector) end at the next instant
+        self.stopping = threading.Event()
+        self.work = threading.Lock()   # held by those jobs; the server's stop waits for it
 
     # ------------------------------------------------------------------ recording
     def _collect(self, index):
@@ -134,16 +136,22 @@ class LabelSession:
     def thumbnails(self):
         """(T, V * 16 * 12) float32 grey thumbnails of every view of every instant
         (0..1; a missing view is 0.5 grey) - the image embedding of `suggest`. Cached."""
-        if self._thumbs is None:
-            W, H = THUMB_SIZE
-            out = np.full((len(self.stamps), len(self.cameras), H * W), 0.5, np.float32)
-            for t in range(len(self.stamps)):
-                for cam, rgb in self.images(t).items():
-                    grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
-                    small = cv2.resize(grey, (W, H), interpolation=cv2.INTER_AREA)
-                    out[t, self.names.index(cam)] = small.reshape(-1) / 255.0
-            self._thumbs = out.reshape(len(self.stamps), -1)
-        return self._thumbs
+        with self.work:
+            if self._thumbs is None:
+                self._thumbs = self._thumbnails()
+            return self._thumbs
+
+    def _thumbnails(self):
+        W, H = THUMB_SIZE
+        out = np.full((len(self.stamps), len(self.cameras), H * W), 0.5, np.float32)
+        for t in range(len(self.stamps)):
+            if self.stopping.is_set():
+                raise InterruptedError('monet label is stopping')
+            for cam, rgb in self.images(t).items():
+                grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+                small = cv2.resize(grey, (W, H), interpolation=cv2.INTER_AREA)
+                out[t, self.names.index(cam)] = small.reshape(-1) / 255.0
+        return out.reshape(len(self.stamps), -1)
 
     def summary(self):
         """JSON-ready description of the recording and skeleton."""

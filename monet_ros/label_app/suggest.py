@@ -51,7 +51,7 @@ def run_detector(session, model, device=None, max_instants=200):
     confidence (V, C), X (C, 3), error (float mean reprojection px of the all-view
     triangulation))}. Raises ValueError / CheckpointError naming the model when its
     keypoints differ from the session's skeleton."""
-    from monet_ros.fusion import FusionConfig, fuse_heatmaps
+    from monet_ros.fusion import FusionConfig
     from monet_ros.models import Detector
 
     detector = Detector.from_checkpoint(model, device=device)
@@ -63,7 +63,17 @@ def run_detector(session, model, device=None, max_instants=200):
         complete = complete[np.linspace(0, len(complete) - 1, max_instants).round().astype(int)]
     config = FusionConfig()
     out = {}
-    for t in complete:
+    with session.work:
+        _detect(session, detector, complete, config, out)
+    return out
+
+
+def _detect(session, detector, instants, config, out):
+    from monet_ros.fusion import fuse_heatmaps
+
+    for t in instants:
+        if session.stopping.is_set():
+            raise InterruptedError('monet label is stopping')
         images = session.images(int(t))
         views = [images[name] for name in session.names]
         boxes = detector.boxes_for(session.cameras, None)
@@ -76,7 +86,6 @@ def run_detector(session, model, device=None, max_instants=200):
         out[int(t)] = {'points2d': points, 'confidence': result.peak_confidence,
                        'X': result.X, 'error': float(np.mean(result.reprojection_error[finite]))
                        if finite.any() else float('nan')}
-    return out
 
 
 def suggest_from_predictions(predictions, k):

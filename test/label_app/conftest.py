@@ -73,12 +73,12 @@ def browser():
 
     options = webdriver.ChromeOptions()
     for arg in ('--headless=new', '--no-sandbox', '--disable-dev-shm-usage', '--disable-gpu',
-                '--force-device-scale-factor=1', '--window-size=1300,1000'):
+                '--force-device-scale-factor=1', '--window-size=1700,1000'):
         options.add_argument(arg)
     binary = shutil.which('chromium') or shutil.which('chromium-browser')
     options.binary_location = binary
     driver = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=options)
-    driver.set_window_size(1300, 1000)
+    driver.set_window_size(1700, 1000)
     try:
         yield driver
     finally:

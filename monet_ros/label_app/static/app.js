@@ -70,14 +70,37 @@ function buildViews() {
     attachMouse(view);
     return view;
   });
-  window.addEventListener('resize', () => { S.views.forEach(fit); draw(); });
+  layout();
+  window.addEventListener('resize', () => { layout(); draw(); });
+}
+
+// Columns and scale so that every view fits the window at the largest common scale.
+function layout() {
+  const holder = $('views');
+  const W = holder.clientWidth - 16;
+  const H = Math.max(200, window.innerHeight - holder.getBoundingClientRect().top - 16);
+  const n = S.views.length;
+  let best = null;
+  for (let k = 1; k <= n; k += 1) {
+    const rows = Math.ceil(n / k);
+    const cw = (W - 6 * (k - 1)) / k - 4;
+    const ch = (H - 6 * (rows - 1)) / rows - 26;
+    const s = Math.min(...S.views.map((v) => Math.min(cw / v.cam.width, ch / v.cam.height)));
+    if (!best || s > best.s) best = { k, s };
+  }
+  const s = Math.max(best.s, 0.05);
+  holder.style.gridTemplateColumns = `repeat(${best.k}, max-content)`;
+  S.views.forEach((view) => {
+    view.canvas.width = Math.max(1, Math.floor(view.cam.width * s));
+    view.canvas.height = Math.max(1, Math.floor(view.cam.height * s));
+    view.canvas.style.width = view.canvas.width + 'px';
+    view.canvas.style.height = view.canvas.height + 'px';
+    fit(view);
+  });
 }
 
 function fit(view) {
-  const width = view.canvas.clientWidth || 360;
-  view.canvas.width = width;
-  view.canvas.height = Math.round(width * view.cam.height / view.cam.width);
-  view.s = width / view.cam.width;
+  view.s = Math.min(view.canvas.width / view.cam.width, view.canvas.height / view.cam.height);
   view.tx = 0.5 * view.s;
   view.ty = 0.5 * view.s;
   view.fitted = true;
@@ -104,11 +127,13 @@ function eventPoint(view, event) {
 
 function keypointName() { return S.summary.keypoints[S.selected]; }
 
-function hit(view, x, y) {
+function hit(view, x, y, only) {
+  // the labelled keypoint (only: that one) nearest to canvas point (x, y) within HIT_PX
   const points = S.labels[view.cam.name] || {};
   let best = null;
   let bestD = HIT_PX;
   for (const [kp, uv] of Object.entries(points)) {
+    if (only !== undefined && kp !== only) continue;
     const [px, py] = toCanvas(view, uv[0], uv[1]);
     const d = Math.hypot(px - x, py - y);
     if (d <= bestD) { best = kp; bestD = d; }
@@ -133,7 +158,11 @@ function attachMouse(view) {
       drag = { pan: true, x, y, tx: view.tx, ty: view.ty };
       return;
     }
-    const kp = hit(view, x, y);
+    // the selected keypoint's own point is dragged; while it is not placed in this view a
+    // click places it (even beside another point); once placed, another point near the
+    // click is dragged (and selected), else the selected keypoint moves to the click
+    const own = (S.labels[view.cam.name] || {})[keypointName()];
+    const kp = hit(view, x, y, keypointName()) || (own ? hit(view, x, y) : null);
     if (kp !== null) {
       selectKeypoint(S.summary.keypoints.indexOf(kp));
       drag = { kp, moved: false, before: snapshot() };
