@@ -94,6 +94,9 @@ def run(args):
           f'labels -> {session.labels_path}', flush=True)
     for note in session.notes:
         print(f'monet label: note: {note}', flush=True)
+    if args.host not in ('127.0.0.1', 'localhost', '::1'):
+        print(f'monet label: note: bound to {args.host}: anyone who reaches this port can '
+              'read the images and change the labels (no authentication)', flush=True)
     print(f'monet label: serving http://{host}:{port}/ (Ctrl-C to stop)', flush=True)
     try:
         server.serve_forever()

@@ -145,6 +145,29 @@ class LabelPage:
         actions.pointer_action.pointer_up()
         actions.perform()
 
+    def wheel(self, camera, u, v, delta_y):
+        """A mouse-wheel turn over image pixel (u, v) (negative delta_y zooms in)."""
+        from selenium.webdriver.common.action_chains import ActionChains
+        from selenium.webdriver.common.actions.wheel_input import ScrollOrigin
+        canvas = self.driver.find_element('id', f'view-{camera}')
+        x, y = self.client_xy(camera, u, v)
+        rect = canvas.rect
+        origin = ScrollOrigin.from_element(canvas, round(x - rect['x'] - rect['width'] / 2),
+                                           round(y - rect['y'] - rect['height'] / 2))
+        ActionChains(self.driver).scroll_from_origin(origin, 0, int(delta_y)).perform()
+
+    def pan(self, camera, start, end):
+        """A right-button drag from image pixel `start` to `end`."""
+        from selenium.webdriver.common.actions.mouse_button import MouseButton
+        x0, y0 = self.client_xy(camera, *start)
+        x1, y1 = self.client_xy(camera, *end)
+        actions = self._pointer()
+        actions.pointer_action.move_to_location(round(x0), round(y0))
+        actions.pointer_action.pointer_down(MouseButton.RIGHT)
+        actions.pointer_action.move_to_location(round(x1), round(y1))
+        actions.pointer_action.pointer_up(MouseButton.RIGHT)
+        actions.perform()
+
     def hover(self, camera):
         x, y = self.client_xy(camera, 1.0, 1.0)
         actions = self._pointer()

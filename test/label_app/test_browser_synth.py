@@ -39,6 +39,13 @@ def opencv_ghost(cam_a, uv_a, cam_b, uv_b, target):
     return target.project((Xh[:3] / Xh[3])[None])[0]
 
 
+def distance_to_polyline(point, line):
+    a, b = np.array(line[:-1]), np.array(line[1:])
+    ab = b - a
+    s = np.clip(((point - a) * ab).sum(1) / np.maximum((ab * ab).sum(1), 1e-12), 0, 1)
+    return np.linalg.norm(a + s[:, None] * ab - point, axis=1).min()
+
+
 def saved(path, synth_dir, cameras, keypoints):
     """The saved table through the labels loader (read_label_rows + resolve_labels)."""
     from monet_ros.commands.info import recording_index
@@ -64,9 +71,24 @@ def test_click_two_views_ghosts_accept_drag_undo_reload(synth, tmp_path, browser
         page = label_page(browser, url)
         page.open(T)
         assert page.state('summary.keypoints[window.monetLabel.selected]') == KP
-        for name in names[:2]:
-            page.click(name, *truth[name])
-            page.wait_idle()
+        # zoom into cam0 (wheel) and pan it (right drag): clicks still land on the pixel
+        scale = page.state('views[0].s')
+        page.wheel(names[0], *truth[names[0]], -300)
+        assert page.state('views[0].s') > 1.3 * scale
+        shift = page.state('views[0].tx'), page.state('views[0].ty')
+        page.pan(names[0], truth[names[0]], truth[names[0]] + (20.0, -10.0))
+        moved = page.state('views[0].tx') - shift[0], page.state('views[0].ty') - shift[1]
+        scale = page.state('views[0].s')
+        np.testing.assert_allclose(moved, (20.0 * scale, -10.0 * scale), atol=1.5)
+        page.click(names[0], *truth[names[0]])
+        page.wait_idle()
+        # one view clicked: its epipolar curve in the others passes by the true projection
+        curves = page.state('epipolar')
+        for j in (1, 2, 3):
+            lines = curves[names[j]][names[0]]
+            assert min(distance_to_polyline(truth[names[j]], line) for line in lines) < 1.5
+        page.click(names[1], *truth[names[1]])
+        page.wait_idle()
         clicks = page.state('labels')
         assert sorted(clicks) == names[:2]
         for name in names[:2]:   # the click lands where it was aimed (screen pixel rounding)
@@ -105,7 +127,16 @@ def test_click_two_views_ghosts_accept_drag_undo_reload(synth, tmp_path, browser
         # the dragged view now disagrees with the others: its error shows it
         err = page.state(f'assist["{KP}"].views["{names[2]}"].error')
         assert err > 2.0
-
+        assert 'flagged' not in browser.find_element(
+            'css selector', f'.view[data-camera="{names[2]}"]').get_attribute('class')
+        # a drag far off: the view is flagged (error above --flag-px), then undo it too
+        page.drag(names[2], target, target + (30.0, 0.0))
+        page.wait_idle()
+        assert page.state(f'assist["{KP}"].views["{names[2]}"].flagged') is True
+        assert 'flagged' in browser.find_element(
+            'css selector', f'.view[data-camera="{names[2]}"]').get_attribute('class')
+        page.key('z', ctrl=True)
+        page.wait_idle()
         page.key('z', ctrl=True)
         page.wait_idle()
         undone = saved(out, synth, cams, keypoints)[0].points(stamps[T], names)[2, c]
