@@ -86,11 +86,20 @@ def run(args):
                            imports=_imports(args.imports),
                            options=label_options_from_args(args), config=config)
     app = create_app(session, model=args.model, device=device)
+    import logging
+    import socket
+
     from werkzeug.serving import make_server
-    server = make_server(args.host, args.port, app, threaded=True)
+    logging.getLogger('werkzeug').setLevel(logging.WARNING)    # no line per request
+    try:     # our own socket: its error names the address (werkzeug's would exit 1)
+        listener = socket.create_server((args.host, args.port))
+    except OSError as error:
+        raise ConfigError('monet label', 'port', f'cannot listen on {args.host}:{args.port} '
+                          f'({error.strerror or error})') from None
+    server = make_server(args.host, args.port, app, threaded=True, fd=listener.fileno())
     host, port = server.server_address[:2]
     print(f'monet label: {len(session.stamps)} instants x {len(session.cameras)} cameras, '
-          f'{len(session.labelled_instants())} labelled ({session.report.summary()}); '
+          f'{len(session.labelled_instants())} labelled ({session.report}); '
           f'labels -> {session.labels_path}', flush=True)
     for note in session.notes:
         print(f'monet label: note: {note}', flush=True)

@@ -46,8 +46,8 @@ class LabelSession:
     options: LabelOptions (camera / keypoint name maps, skip_bad).
 
     Attributes: cameras (V Camera), stamps (T,) int64 ns, skeleton, keypoints (C names),
-    labels {stamp_ns: (V, C, 2) float64 px, NaN = unlabelled}, report (LabelReport of the
-    loaded labels), notes (what was adapted). Images are kept as the recording's messages
+    labels {stamp_ns: (V, C, 2) float64 px, NaN = unlabelled}, report (one line: rows used /
+    skipped per source), notes (what was adapted). Images are kept as the recording's messages
     (JPEG / PNG bytes of compressed views are served as they are).
     Raises LabelError / RecordingError / ValueError naming the file or field.
     """
@@ -168,32 +168,38 @@ class LabelSession:
             'keypoints': list(self.keypoints),
             'bones': [list(b) for b in self.skeleton.bone_indices],
             'flag_px': self.config.flag_px,
-            'label_report': self.report.summary() if self.report is not None else '',
+            'label_report': self.report,
         }
 
     # ------------------------------------------------------------------ labels
     def _load(self, imports):
-        from monet_ros.labels import read_label_rows, resolve_labels
+        """Labels of the imports, then of the table itself (each through resolve_labels);
+        a point the table has wins over an imported one."""
+        from monet_ros.labels import read_label_rows
         from monet_ros.labels_import import import_labels
 
-        rows = []
+        sources = []
         for fmt, path in imports:
             result = import_labels(fmt, path, cameras=self.names,
                                    camera_map=dict(self.options.camera_map))
-            rows.extend(result.rows)
-        own = read_label_rows(self.labels_path) if self.labels_path.is_file() else []
-        if rows and own:                 # the table's own rows win over imported ones
-            mapped = dict(self.options.keypoint_map)
-            cams = dict(self.options.camera_map)
-            keys = {(r.stamp_ns, r.frame, cams.get(r.camera, r.camera),
-                     mapped.get(r.keypoint, r.keypoint)) for r in own}
-            rows = [r for r in rows if (r.stamp_ns, r.frame, cams.get(r.camera, r.camera),
-                                        mapped.get(r.keypoint, r.keypoint)) not in keys]
-        rows = rows + own
-        labels, self.report = resolve_labels(rows, self.stamps, self.cameras, self.keypoints,
-                                             self.options)
-        for stamp in labels.stamps:
-            self.labels[int(stamp)] = labels.points(stamp, self.names)
+            sources.append((f'{fmt}={path}', result.rows))
+        if self.labels_path.is_file():
+            sources.append((str(self.labels_path), read_label_rows(self.labels_path)))
+        notes = []
+        for name, rows in sources:
+            labels, report = self._resolve(rows)
+            notes.append(f'{name}: {report.summary()}')
+            for stamp in labels.stamps:
+                points = labels.points(stamp, self.names)
+                old = self.labels.get(int(stamp))
+                if old is not None:
+                    points = np.where(np.isfinite(points), points, old)
+                self.labels[int(stamp)] = points
+        self.report = '; '.join(notes) or 'no labels yet'
+
+    def _resolve(self, rows):
+        from monet_ros.labels import resolve_labels
+        return resolve_labels(rows, self.stamps, self.cameras, self.keypoints, self.options)
 
     def instant_labels(self, t):
         """(V, C, 2) labels of instant t (a copy; NaN = unlabelled)."""

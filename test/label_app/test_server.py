@@ -90,6 +90,41 @@ def run_label(*args):
                           capture_output=True, text=True, timeout=120)
 
 
+def test_imported_labels_are_shown_and_saved_in_the_canonical_table(raw_rec, tmp_path):
+    bag, model, rig, stamps = raw_rec
+    frames = tmp_path / 'frames.csv'
+    frames.write_text('frame,camera,keypoint,u,v\n'
+                      f'1,{rig[0].name},neck,12.5,30.25\n4,{rig[2].name},head,80.0,5.5\n')
+    own = tmp_path / 'labels.csv'        # the table's own row for the same point wins
+    own.write_text(f'stamp_ns,camera,keypoint,u,v\n{stamps[1]},{rig[0].name},neck,13.0,31.0\n')
+    with label_server(bag, own, '--import', f'frames={frames}') as url:
+        status, _, body = call(url + '/api/labels/4')
+        assert json.loads(body)['labels'] == {rig[2].name: {'head': [80.0, 5.5]}}
+        status, _, body = call(url + '/api/labels/1')
+        assert json.loads(body)['labels'] == {rig[0].name: {'neck': [13.0, 31.0]}}
+        status, _, body = call(url + '/api/summary')
+        assert json.loads(body)['labelled'] == [1, 4]
+        status, _, body = call(url + '/api/labels/4', 'PUT',
+                               {'labels': {rig[2].name: {'head': [81.0, 6.0]}}})
+        assert status == 200
+    assert own.read_text().splitlines() == [
+        'stamp_ns,camera,keypoint,u,v', f'{stamps[1]},{rig[0].name},neck,13.0,31.0',
+        f'{stamps[4]},{rig[2].name},head,81.0,6.0']
+
+
+def test_a_port_in_use_is_one_line(raw_rec, tmp_path):
+    import socket
+    bag = raw_rec[0]
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        sock.listen(1)
+        port = sock.getsockname()[1]
+        result = run_label(bag, '--labels', tmp_path / 'l.csv', '--port', port)
+    assert result.returncode == 2
+    assert result.stderr.strip().splitlines() == [result.stderr.strip()]
+    assert f'127.0.0.1:{port}' in result.stderr and 'port' in result.stderr
+
+
 @pytest.mark.parametrize('case', ['no_recording', 'bad_import', 'labels_folder', 'bad_port',
                                   'bad_labels', 'bad_model'])
 def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
