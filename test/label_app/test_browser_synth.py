@@ -3,10 +3,14 @@ two views give ghosts at the projections of their triangulation (checked against
 triangulation and Camera.project), 'a' accepts them, the autosaved table round-trips through
 the labels loader, a drag corrects a point, Ctrl+Z undoes it, Delete removes one, and a
 reload finds the labels."""
+import json
 import subprocess
 import sys
+import time
+import urllib.request
 
 import cv2
+from helpers.recordings import noise_recording, small_checkpoint
 import numpy as np
 import pytest
 
@@ -156,3 +160,23 @@ def test_click_two_views_ghosts_accept_drag_undo_reload(synth, tmp_path, browser
         for j in range(3):
             np.testing.assert_allclose(shown[names[j]][KP], after[j], atol=1e-9)
         assert page.state('labelled') == [T]
+
+
+def test_model_prefills_and_says_how_instants_are_suggested(tmp_path, browser, label_page):
+    rig, stamps = noise_recording(tmp_path / 'bag', cameras=3, frames=4, width=96, height=64)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    with label_server(tmp_path / 'bag', tmp_path / 'labels.csv', '--model', model) as url:
+        with urllib.request.urlopen(url + '/api/labels/1', timeout=120) as response:
+            served = json.loads(response.read())
+        page = label_page(browser, url)
+        page.open(1)
+        assert page.state('prefill') is True
+        assert page.state('labels') == served['labels']
+        deadline = time.monotonic() + 60
+        while page.state('suggest') is None:
+            assert time.monotonic() < deadline, 'no suggestions'
+            time.sleep(0.1)
+        text = browser.find_element('id', 'suggest-method').text
+        assert "detector's 3D poses" in text
+        assert 'detector disagreement' in browser.find_element('id', 'disagreement').text
+    assert not (tmp_path / 'labels.csv').exists()        # nothing saved before an edit

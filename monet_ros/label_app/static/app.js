@@ -310,6 +310,7 @@ async function openInstant(t) {
     if (S.t !== t) return;
     S.labels = data.labels;
     S.prefill = data.prefill;
+    renderSuggestions();
     const loads = S.views.map((view) => new Promise((resolve) => {
       const image = new Image();
       image.onload = () => { view.image = image; resolve(); };
@@ -470,6 +471,9 @@ function renderSuggestions() {
   const holder = $('suggestions');
   holder.innerHTML = '';
   if (!S.suggest) return;
+  const here = S.suggest.disagreement[String(S.t)];
+  $('disagreement').textContent = here === undefined || here === null ? ''
+    : `detector disagreement ${here.toFixed(1)} px${S.prefill ? ' (pre-filled)' : ''}`;
   const method = S.suggest.method === 'detector'
     ? 'k-means on the detector\'s 3D poses (and time); disagreement = reprojection error (px) ' +
       'of the all-view triangulation'
