@@ -80,12 +80,16 @@ def run(args):
                          suggestions=args.suggestions)
     device = check_device('monet label', args.device) if args.model else None
     if args.model:
-        from monet_ros.models.checkpoint import load_checkpoint
-        load_checkpoint(args.model)            # validated before the page starts
+        from monet_ros.models.checkpoint import read_checkpoint
+        read_checkpoint(args.model)        # a bad file is named before the recording loads
     session = LabelSession(args.rec, args.labels, rig=args.rig, skeleton=args.skeleton,
                            imports=_imports(args.imports),
                            options=label_options_from_args(args), config=config)
-    app = create_app(session, model=args.model, device=device)
+    predictor = None
+    if args.model:
+        from monet_ros.label_app.suggest import Predictor
+        predictor = Predictor(session, args.model, device=device)
+    app = create_app(session, predictor)
     import logging
     import socket
 

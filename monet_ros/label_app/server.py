@@ -33,25 +33,15 @@ def static_folder():
     return str(resources.files('monet_ros.label_app') / 'static')
 
 
-def create_app(session, model=None, device=None):
-    """Flask app serving `session` (a LabelSession). model: detector checkpoint for
-    suggestions, pre-fill and disagreement (run once, on the first /api/suggest or
-    /api/labels call that needs it)."""
+def create_app(session, predictor=None):
+    """Flask app serving `session` (a LabelSession). predictor: a suggest.Predictor (the
+    detector of --model) for suggestions, pre-fill and disagreement: an unlabelled
+    instant's peaks are computed when it is opened, the subsample of suggestions on the
+    first /api/suggest."""
     app = Flask('monet_label', static_folder=None)
     folder = static_folder()
-    state = {'predictions': None, 'suggest': None}
+    state = {'suggest': None}
     lock = threading.Lock()
-
-    def predictions():
-        if model is None:
-            return None
-        with lock:
-            if state['predictions'] is None:
-                from monet_ros.label_app.suggest import run_detector
-                state['predictions'] = run_detector(
-                    session, model, device=device,
-                    max_instants=session.config.model_instants)
-            return state['predictions']
 
     def body_points():
         body = request.get_json(silent=True)
@@ -80,7 +70,7 @@ def create_app(session, model=None, device=None):
     def summary():
         out = session.summary()
         out['labelled'] = session.labelled_instants()
-        out['model'] = model is not None
+        out['model'] = predictor is not None
         return jsonify(out)
 
     @app.get('/api/image/<int:t>/<camera>')
@@ -93,8 +83,9 @@ def create_app(session, model=None, device=None):
         points = session.instant_labels(t)
         prefill = False
         if not np.isfinite(points).any():
-            pred = predictions()
-            if pred is not None and t in pred:
+            session.instant(t)                             # IndexError: 404
+            pred = {} if predictor is None else predictor.instants([t])
+            if t in pred:
                 points, prefill = pred[t]['points2d'], True
         return jsonify(labels=session.points_to_json(points), prefill=prefill)
 
@@ -133,8 +124,8 @@ def create_app(session, model=None, device=None):
         if cached is not None:
             return jsonify(cached)
         k = session.config.suggestions
-        pred = predictions()
-        if pred is not None:
+        if predictor is not None:
+            pred = predictor.subsample(session.config.model_instants)
             out = {'method': 'detector', 'instants': suggest_from_predictions(pred, k),
                    'disagreement': {str(t): (p['error'] if np.isfinite(p['error']) else None)
                                     for t, p in pred.items()}}

@@ -39,16 +39,16 @@ class LabelSession:
     """A recording opened for labelling.
 
     rec: recording (rosbag2 folder, .mcap or `monet synth` folder); labels_path: the labels
-    CSV edited and autosaved (read first when it exists; default: the synth folder's
-    labels.csv is NOT edited - a new path must be given); rig: rig file (default: the
-    recording's); skeleton: preset name or YAML; imports: (format, path) pairs of existing
-    labels (monet_ros.labels_import formats) merged in (the table's own rows win);
-    options: LabelOptions (camera / keypoint name maps, skip_bad).
+    CSV edited and autosaved (read first when it exists, stamp- or frame-keyed; always
+    written stamp-keyed); rig: rig file (default: the recording's); skeleton: preset name
+    or YAML; imports: (format, path) pairs of existing labels (monet_ros.labels_import
+    formats) merged in (the table's own points win); options: LabelOptions (camera /
+    keypoint name maps, skip_bad); config: LabelConfig.
 
     Attributes: cameras (V Camera), stamps (T,) int64 ns, skeleton, keypoints (C names),
     labels {stamp_ns: (V, C, 2) float64 px, NaN = unlabelled}, report (one line: rows used /
-    skipped per source), notes (what was adapted). Images are kept as the recording's messages
-    (JPEG / PNG bytes of compressed views are served as they are).
+    skipped per source), notes (what was adapted). Images are kept in memory as the
+    recording's messages (JPEG / PNG bytes of compressed views are served as they are).
     Raises LabelError / RecordingError / ValueError naming the file or field.
     """
 

@@ -45,36 +45,59 @@ def suggest_from_images(session, k):
     return kmeans_picks(session.thumbnails(), k, times=session.stamps.astype(np.float64))
 
 
-def run_detector(session, model, device=None, max_instants=200):
-    """Detector + fusion (the functions of `monet process`) on at most max_instants evenly
-    spaced complete instants. Returns {instant index: dict(points2d (V, C, 2) peaks px,
-    confidence (V, C), X (C, 3), error (float mean reprojection px of the all-view
-    triangulation))}. Raises ValueError / CheckpointError naming the model when its
-    keypoints differ from the session's skeleton."""
-    from monet_ros.fusion import FusionConfig
-    from monet_ros.models import Detector
+class Predictor:
+    """The detector + fusion of `monet process` (Detector.predict on full frames,
+    fusion.fuse_heatmaps) on instants of a LabelSession, cached per instant.
 
-    detector = Detector.from_checkpoint(model, device=device)
-    if list(detector.keypoints) != list(session.keypoints):
-        raise ValueError(f'--model {model}: keypoints {list(detector.keypoints)} differ from '
-                         f'the skeleton {list(session.keypoints)} (give --skeleton)')
-    complete = np.flatnonzero(session.complete)
-    if len(complete) > max_instants:
-        complete = complete[np.linspace(0, len(complete) - 1, max_instants).round().astype(int)]
-    config = FusionConfig()
-    out = {}
-    with session.work:
-        _detect(session, detector, complete, config, out)
-    return out
+    Raises ValueError / CheckpointError naming the model when it cannot be loaded or its
+    keypoints differ from the session's skeleton (checked on construction)."""
 
+    def __init__(self, session, model, device=None):
+        from monet_ros.fusion import FusionConfig
+        from monet_ros.models import Detector
 
-def _detect(session, detector, instants, config, out):
-    from monet_ros.fusion import fuse_heatmaps
+        self.session = session
+        self.detector = Detector.from_checkpoint(model, device=device)
+        if list(self.detector.keypoints) != list(session.keypoints):
+            raise ValueError(f'--model {model}: keypoints {list(self.detector.keypoints)} '
+                             f'differ from the skeleton {list(session.keypoints)} (give '
+                             '--skeleton)')
+        self.config = FusionConfig()
+        self.cache = {}
 
-    for t in instants:
-        if session.stopping.is_set():
-            raise InterruptedError('monet label is stopping')
-        images = session.images(int(t))
+    def instants(self, instants):
+        """{instant index: dict(points2d (V, C, 2) peaks px (NaN below the confidence
+        threshold), confidence (V, C), X (C, 3), error (mean reprojection px of the
+        all-view triangulation, NaN when nothing was triangulated))} of the complete ones
+        among `instants`. One instant at a time holds session.work (a stop waits for it
+        only)."""
+        session = self.session
+        out = {}
+        for t in instants:
+            t = int(t)
+            if not session.complete[t]:
+                continue
+            if t not in self.cache:
+                if session.stopping.is_set():
+                    raise InterruptedError('monet label is stopping')
+                with session.work:
+                    self.cache[t] = self._detect(t)
+            out[t] = self.cache[t]
+        return out
+
+    def subsample(self, max_instants):
+        """instants() of at most max_instants evenly spaced complete instants."""
+        complete = np.flatnonzero(self.session.complete)
+        if len(complete) > max_instants:
+            pick = np.linspace(0, len(complete) - 1, max_instants).round().astype(int)
+            complete = complete[pick]
+        return self.instants(complete)
+
+    def _detect(self, t):
+        from monet_ros.fusion import fuse_heatmaps
+
+        session, detector, config = self.session, self.detector, self.config
+        images = session.images(t)
         views = [images[name] for name in session.names]
         boxes = detector.boxes_for(session.cameras, None)
         heat, heat_cameras = detector.predict(views, session.cameras, boxes, keep_aspect=False)
@@ -83,13 +106,14 @@ def _detect(session, detector, instants, config, out):
         points = np.where((result.peak_confidence >= config.confidence_threshold)[..., None],
                           result.points2d, np.nan)
         finite = np.isfinite(result.reprojection_error)
-        out[int(t)] = {'points2d': points, 'confidence': result.peak_confidence,
-                       'X': result.X, 'error': float(np.mean(result.reprojection_error[finite]))
-                       if finite.any() else float('nan')}
+        error = float(np.mean(result.reprojection_error[finite])) if finite.any() \
+            else float('nan')
+        return {'points2d': points, 'confidence': result.peak_confidence, 'X': result.X,
+                'error': error}
 
 
 def suggest_from_predictions(predictions, k):
-    """Suggested instant indices from the detector's 3D poses (run_detector's output)."""
+    """Suggested instant indices from the detector's 3D poses (Predictor.instants' output)."""
     index = sorted(predictions)
     if not index:
         return []

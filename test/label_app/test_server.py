@@ -126,7 +126,7 @@ def test_a_port_in_use_is_one_line(raw_rec, tmp_path):
 
 
 @pytest.mark.parametrize('case', ['no_recording', 'bad_import', 'labels_folder', 'bad_port',
-                                  'bad_labels', 'bad_model'])
+                                  'bad_labels', 'bad_model', 'model_skeleton'])
 def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
     bag, model, rig, stamps = raw_rec
     labels = tmp_path / 'labels.csv'
@@ -137,7 +137,10 @@ def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
         'bad_port': ([bag, '--labels', labels, '--port', '70000'], ['port']),
         'bad_labels': ([bag, '--labels', labels], ['labels.csv', 'cam_9']),
         'bad_model': ([bag, '--labels', labels, '--model', tmp_path / 'm.pt'], ['m.pt']),
+        'model_skeleton': ([bag, '--labels', labels, '--model', model, '--skeleton',
+                            tmp_path / 'sk.yaml'], ['skeleton']),
     }[case]
+    (tmp_path / 'sk.yaml').write_text('keypoints: [a, b]\n')
     if case == 'bad_labels':
         labels.write_text(f'stamp_ns,camera,keypoint,u,v\n{stamps[0]},cam_9,head,1,2\n')
     if case == 'bad_model':
