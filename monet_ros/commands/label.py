@@ -118,5 +118,6 @@ def run(args):
         server.server_close()
         if session.work.acquire(timeout=30):   # ... never cut inside a native library
             session.work.release()
+    # werkzeug's serve_forever returns on Ctrl-C / SIGTERM (it catches KeyboardInterrupt)
     print('monet label: stopped', file=sys.stderr, flush=True)
     return 0

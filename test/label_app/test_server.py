@@ -150,3 +150,29 @@ def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('monet label'), result.stderr
     assert any(n in lines[0] for n in names), lines[0]
+
+
+def test_sigterm_stops_cleanly(raw_rec, tmp_path):
+    import os
+    import signal
+    import time
+
+    from .conftest import free_port
+    bag = raw_rec[0]
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, '-m', 'monet_ros.cli', 'label', str(bag),
+                             '--labels', str(tmp_path / 'l.csv'), '--port', str(port)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=dict(os.environ, PYTHONUNBUFFERED='1'))
+    deadline = time.monotonic() + 90
+    while True:
+        try:
+            call(f'http://127.0.0.1:{port}/api/suggest')       # a long job in flight too
+            break
+        except OSError:
+            assert time.monotonic() < deadline and proc.poll() is None
+            time.sleep(0.2)
+    proc.send_signal(signal.SIGTERM)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert 'Traceback' not in err and err.count('stopped') == 1
