@@ -6,7 +6,7 @@ STAMP := $(VENV)/.monet-installed
 # The ROS wheels re-exec Python with their library path; never inherit another venv's state.
 unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
 
-.PHONY: venv demo test lint bench clean
+.PHONY: venv demo test lint bench clean browser-deps
 
 venv: $(STAMP)
 
@@ -14,14 +14,25 @@ $(STAMP): requirements.txt setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
-	$(PY) -c "import rclpy, torch, cv2, mcap, rosbags, h5py, pandas, pynwb, ndx_pose; print('environment ready: torch', torch.__version__)"
+	$(PY) -c "import rclpy, torch, cv2, mcap, rosbags, h5py, pandas, pynwb, ndx_pose, flask, selenium; print('environment ready: torch', torch.__version__)"
 	touch $(STAMP)
 
 demo: $(STAMP)
 	$(PY) -m monet_ros.cli pipeline
 
-test: $(STAMP)
+test: $(STAMP) browser-deps
 	$(PY) -m pytest
+
+# The browser tests of `monet label` drive Debian's chromium through its chromedriver
+# (never a downloaded driver): installed here when missing and apt-get exists (as root, or
+# with sudo); without them those tests are skipped.
+browser-deps:
+	@if [ ! -x /usr/bin/chromedriver ] && command -v apt-get >/dev/null 2>&1; then \
+	  SUDO=$$([ "$$(id -u)" = 0 ] || echo sudo); \
+	  $$SUDO apt-get update -q && DEBIAN_FRONTEND=noninteractive \
+	    $$SUDO apt-get install -y -q chromium chromium-driver || \
+	  echo 'chromium + chromium-driver not installed: monet label browser tests will skip'; \
+	fi
 
 lint: $(STAMP)
 	$(PY) -m ruff check .

@@ -29,6 +29,8 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=find_packages(exclude=['test', 'test.*', 'bench']),
+    # the `monet label` page: plain HTML / JS / CSS served from the package (no CDN)
+    package_data={'monet_ros.label_app': ['static/*']},
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE]),
         ('share/' + PACKAGE, ['package.xml']),

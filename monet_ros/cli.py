@@ -32,6 +32,7 @@ SUBCOMMANDS = {
     'import': 'import_videos',
     'labels': 'labels',
     'info': 'info',
+    'label': 'label',
 }
 
 

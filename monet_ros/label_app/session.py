@@ -1,0 +1,278 @@
+"""The state behind `monet label`: a recording's cameras, instants and images, the
+skeleton, and the labels table being edited (no ROS, no web framework).
+
+Labels are the canonical table of monet_ros.labels (stamp_ns, camera, keypoint, u, v):
+existing labels are read through read_label_rows / the importers of
+monet_ros.labels_import and checked by the ONE validator resolve_labels; every change is
+written at once with write_labels (a temporary file renamed over the table: atomic).
+"""
+from dataclasses import dataclass
+from pathlib import Path
+import threading
+
+import cv2
+import numpy as np
+
+from monet_ros.config import ConfigError, setting, validate_config
+
+# Thumbnail size (width, height) of each view in the image embedding of `suggest`.
+THUMB_SIZE = (16, 12)
+
+
+@dataclass(frozen=True)
+class LabelConfig:
+    """Settings of `monet label` (validated on construction; CLI options of the same names)."""
+    flag_px: float = setting(10.0, 'reprojection error (px) above which a clicked view is '
+                             'flagged as disagreeing with the triangulation',
+                             minimum=0.0, exclusive_minimum=True)
+    threshold_px: float = setting(15.0, 'outlier threshold (px) of the robust triangulation',
+                                  minimum=0.0, exclusive_minimum=True)
+    suggestions: int = setting(10, 'number of suggested instants', minimum=1)
+    model_instants: int = setting(200, 'most instants the detector runs on for suggestions '
+                                  '(evenly spaced)', minimum=1)
+
+    def __post_init__(self):
+        validate_config(self)
+
+
+class LabelSession:
+    """A recording opened for labelling.
+
+    rec: recording (rosbag2 folder, .mcap or `monet synth` folder); labels_path: the labels
+    CSV edited and autosaved (read first when it exists, stamp- or frame-keyed; always
+    written stamp-keyed); rig: rig file (default: the recording's); skeleton: preset name
+    or YAML; imports: (format, path) pairs of existing labels (monet_ros.labels_import
+    formats) merged in (the table's own points win); options: LabelOptions (camera /
+    keypoint name maps, skip_bad); config: LabelConfig.
+
+    Attributes: cameras (V Camera), stamps (T,) int64 ns, skeleton, keypoints (C names),
+    labels {stamp_ns: (V, C, 2) float64 px, NaN = unlabelled}, report (one line: rows used /
+    skipped per source), notes (what was adapted). Images are kept in memory as the
+    recording's messages (JPEG / PNG bytes of compressed views are served as they are).
+    Raises LabelError / RecordingError / ValueError naming the file or field.
+    """
+
+    def __init__(self, rec, labels_path, rig=None, skeleton='human14', imports=(),
+                 options=None, config=None):
+        from monet_ros.commands.info import recording_index
+        from monet_ros.labels import LabelOptions
+        from monet_ros.skeleton import load_skeleton
+
+        self.config = config or LabelConfig()
+        self.options = options or LabelOptions()
+        self.labels_path = Path(labels_path)
+        if self.labels_path.is_dir():
+            raise ConfigError('monet label', 'labels', f'{self.labels_path}: is a folder, '
+                              'expected a labels CSV file')
+        self.skeleton = load_skeleton(skeleton)
+        self.keypoints = tuple(self.skeleton.keypoints)
+        index = recording_index(rec, rig=rig, camera_map=self.options.camera_map)
+        self.rec = str(rec)
+        self.notes = list(index.notes or ())
+        self.cameras = list(index.cameras)
+        self.names = [c.name for c in self.cameras]
+        self._messages = self._collect(index)
+        self.stamps = np.array(sorted(self._messages), np.int64)
+        self.complete = np.array([len(self._messages[int(s)]) == len(self.cameras)
+                                  for s in self.stamps], bool)
+        self._lock = threading.Lock()
+        self.labels = {}
+        self.report = None
+        self._load(imports)
+        self._thumbs = None
+        # set when the server stops: long jobs (thumbnails, detector) end at the next instant
+        self.stopping = threading.Event()
+        self.work = threading.Lock()   # held by those jobs; the server's stop waits for it
+
+    # ------------------------------------------------------------------ recording
+    def _collect(self, index):
+        from monet_ros.io import iter_multiview_frames
+
+        out = {}
+        for frame in iter_multiview_frames(index.reader, index.topics, decode=False):
+            out[int(frame.stamp_ns)] = {cam: m.msg for cam, m in frame.images.items()}
+        if index.reader.report is not None and not index.reader.report.ok:
+            self.notes.append(f'reading {index.bag}: {index.reader.report.summary()}')
+        return out
+
+    def instant(self, t):
+        """Stamp (int ns) of instant index t; IndexError naming the range."""
+        if not 0 <= int(t) < len(self.stamps):
+            raise IndexError(f'instant {t} out of range 0..{len(self.stamps) - 1}')
+        return int(self.stamps[int(t)])
+
+    def camera_index(self, name):
+        if name not in self.names:
+            raise KeyError(f'camera {name!r} is not one of {", ".join(self.names)}')
+        return self.names.index(name)
+
+    def image_bytes(self, t, camera):
+        """(bytes, mimetype) of a view of instant t: a compressed view's own JPEG / PNG
+        bytes, a raw view encoded as PNG (to_rgb8: any bit depth). KeyError when the view
+        is missing."""
+        from monet_ros.io.images import any_image_to_numpy, to_rgb8
+
+        msg = self._messages[self.instant(t)].get(camera)
+        if msg is None:
+            raise KeyError(f'camera {camera!r} has no image at instant {t}')
+        fmt = str(getattr(msg, 'format', '') or '').lower()
+        if hasattr(msg, 'format') and not hasattr(msg, 'encoding'):
+            if 'jpeg' in fmt or 'jpg' in fmt:
+                return bytes(msg.data), 'image/jpeg'
+            if 'png' in fmt and 'compressedDepth' not in fmt:
+                return bytes(msg.data), 'image/png'
+        rgb = to_rgb8(any_image_to_numpy(msg))
+        ok, data = cv2.imencode('.png', cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+        if not ok:                                       # pragma: no cover - cv2 failure
+            raise ValueError(f'cannot encode the image of {camera} at instant {t}')
+        return data.tobytes(), 'image/png'
+
+    def images(self, t):
+        """{camera: (H, W, 3) uint8 RGB} of instant t (decoded)."""
+        from monet_ros.io.images import any_image_to_numpy, to_rgb8
+        msgs = self._messages[self.instant(t)]
+        return {cam: to_rgb8(any_image_to_numpy(msg)) for cam, msg in msgs.items()}
+
+    def thumbnails(self):
+        """(T, V * 16 * 12) float32 grey thumbnails of every view of every instant
+        (0..1; a missing view is 0.5 grey) - the image embedding of `suggest`. Cached."""
+        with self.work:
+            if self._thumbs is None:
+                self._thumbs = self._thumbnails()
+            return self._thumbs
+
+    def _thumbnails(self):
+        W, H = THUMB_SIZE
+        out = np.full((len(self.stamps), len(self.cameras), H * W), 0.5, np.float32)
+        for t in range(len(self.stamps)):
+            if self.stopping.is_set():
+                raise InterruptedError('monet label is stopping')
+            for cam, rgb in self.images(t).items():
+                grey = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+                small = cv2.resize(grey, (W, H), interpolation=cv2.INTER_AREA)
+                out[t, self.names.index(cam)] = small.reshape(-1) / 255.0
+        return out.reshape(len(self.stamps), -1)
+
+    def summary(self):
+        """JSON-ready description of the recording and skeleton."""
+        return {
+            'recording': self.rec,
+            'labels_path': str(self.labels_path),
+            'notes': self.notes,
+            'cameras': [{'name': c.name, 'width': c.width, 'height': c.height,
+                         'K': c.K.tolist(), 'dist': c.dist.tolist(), 'R': c.R.tolist(),
+                         't': c.t.tolist()} for c in self.cameras],
+            'instants': [{'index': i, 'stamp_ns': str(int(s)), 'complete': bool(c),
+                          'views': sorted(self._messages[int(s)])}
+                         for i, (s, c) in enumerate(zip(self.stamps, self.complete))],
+            'keypoints': list(self.keypoints),
+            'bones': [list(b) for b in self.skeleton.bone_indices],
+            'flag_px': self.config.flag_px,
+            'label_report': self.report,
+        }
+
+    # ------------------------------------------------------------------ labels
+    def _load(self, imports):
+        """Labels of the imports, then of the table itself (each through resolve_labels);
+        a point the table has wins over an imported one."""
+        from monet_ros.labels import read_label_rows
+        from monet_ros.labels_import import import_labels
+
+        sources = []
+        for fmt, path in imports:
+            result = import_labels(fmt, path, cameras=self.names,
+                                   camera_map=dict(self.options.camera_map))
+            sources.append((f'{fmt}={path}', result.rows))
+        if self.labels_path.is_file():
+            sources.append((str(self.labels_path), read_label_rows(self.labels_path)))
+        notes = []
+        for name, rows in sources:
+            labels, report = self._resolve(rows)
+            notes.append(f'{name}: {report.summary()}')
+            for stamp in labels.stamps:
+                points = labels.points(stamp, self.names)
+                old = self.labels.get(int(stamp))
+                if old is not None:
+                    points = np.where(np.isfinite(points), points, old)
+                self.labels[int(stamp)] = points
+        self.report = '; '.join(notes) or 'no labels yet'
+
+    def _resolve(self, rows):
+        from monet_ros.labels import resolve_labels
+        return resolve_labels(rows, self.stamps, self.cameras, self.keypoints, self.options)
+
+    def instant_labels(self, t):
+        """(V, C, 2) labels of instant t (a copy; NaN = unlabelled)."""
+        stamp = self.instant(t)
+        with self._lock:
+            points = self.labels.get(stamp)
+            if points is None:
+                return np.full((len(self.cameras), len(self.keypoints), 2), np.nan)
+            return points.copy()
+
+    def points_from_json(self, views):
+        """{camera: {keypoint: [u, v] | null}} -> (V, C, 2) float64 (NaN = none).
+        ValueError naming the camera / keypoint / value that does not fit."""
+        out = np.full((len(self.cameras), len(self.keypoints), 2), np.nan)
+        if not isinstance(views, dict):
+            raise ValueError('labels must be an object {camera: {keypoint: [u, v]}}')
+        for cam, points in views.items():
+            j = self.camera_index(cam)
+            if not isinstance(points, dict):
+                raise ValueError(f'labels of camera {cam!r} must be an object')
+            for name, uv in points.items():
+                if name not in self.keypoints:
+                    raise KeyError(f'keypoint {name!r} is not in the skeleton')
+                if uv is None:
+                    continue
+                try:
+                    u, v = (float(x) for x in uv)
+                except (TypeError, ValueError):
+                    raise ValueError(f'{cam}/{name}: expected [u, v], got {uv!r}') from None
+                camera = self.cameras[j]
+                if not (np.isfinite(u) and np.isfinite(v) and -0.5 <= u <= camera.width - 0.5
+                        and -0.5 <= v <= camera.height - 0.5):
+                    raise ValueError(f'{cam}/{name}: ({u}, {v}) lies outside the '
+                                     f'{camera.width}x{camera.height} image')
+                out[j, self.keypoints.index(name)] = (u, v)
+        return out
+
+    def points_to_json(self, points):
+        """(V, C, 2) -> {camera: {keypoint: [u, v]}} (labelled points only)."""
+        out = {}
+        for j, cam in enumerate(self.names):
+            got = {self.keypoints[c]: [float(u), float(v)]
+                   for c, (u, v) in enumerate(points[j]) if np.isfinite(u) and np.isfinite(v)}
+            if got:
+                out[cam] = got
+        return out
+
+    def set_instant(self, t, points):
+        """Replace the labels of instant t by (V, C, 2) `points` and save the table at once
+        (atomically). Returns the number of rows written."""
+        stamp = self.instant(t)
+        with self._lock:
+            if np.isfinite(points).any():
+                self.labels[stamp] = np.array(points, np.float64)
+            else:
+                self.labels.pop(stamp, None)
+            return self._save()
+
+    def _save(self):
+        from monet_ros.labels import write_labels
+
+        rows = []
+        for stamp in sorted(self.labels):
+            points = self.labels[stamp]
+            for j, cam in enumerate(self.names):
+                for c, (u, v) in enumerate(points[j]):
+                    if np.isfinite(u) and np.isfinite(v):
+                        rows.append((stamp, cam, self.keypoints[c], u, v))
+        self.labels_path.parent.mkdir(parents=True, exist_ok=True)
+        return write_labels(self.labels_path, rows)
+
+    def labelled_instants(self):
+        """Indices of instants with at least one label."""
+        where = {int(s): i for i, s in enumerate(self.stamps)}
+        with self._lock:
+            return sorted(where[s] for s, p in self.labels.items() if np.isfinite(p).any())
