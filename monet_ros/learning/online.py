@@ -33,7 +33,7 @@ from monet_ros.config import ConfigError, setting
 from monet_ros.learning.config import TrainConfig
 
 PUBLISHED = 'published.json'
-FOREVER = 100_000_000     # TrainConfig.steps (its maximum) of a learner that runs until stopped
+FOREVER = 100_000_000     # TrainConfig.steps of a learner that runs until stopped
 
 
 @dataclass(frozen=True)
