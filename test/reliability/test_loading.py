@@ -66,10 +66,6 @@ def test_rig_yaml_with_damaged_fields(rig_text, tmp_path_factory, camera, field,
     record('load_rig', 'right result')
 
 
-# OpenCV FileStorage raises SystemError on some garbage: the "rig-file tracebacks" kind, fixed
-# on the rob-core branch; this marker comes off when both are merged.
-@pytest.mark.xfail(raises=SystemError, strict=False,
-                   reason='OpenCV rig-file errors: fixed on the rob-core branch')
 @settings(RELIABILITY, max_examples=30)
 @given(text=st.one_of(st.text(max_size=200), st.binary(max_size=200).map(
     lambda b: b.decode('latin-1'))), suffix=st.sampled_from(['.yaml', '.toml', '.xml', '.yml']))
