@@ -32,7 +32,16 @@ def build_parser():
 
 
 def main(argv=None):
-    args = build_parser().parse_args(argv)
+    argv = list(sys.argv[1:] if argv is None else argv)
+    ros_args = []
+    if '--ros-args' in argv:      # ROS arguments for the nodes of `monet pipeline`
+        index = argv.index('--ros-args')
+        argv, ros_args = argv[:index], argv[index:]
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    args.ros_args = ros_args
+    if ros_args and argv[:1] != ['pipeline']:
+        parser.error('--ros-args is only for `monet pipeline` (its ROS nodes)')
     try:
         return int(args.handler(args) or 0)
     except KeyboardInterrupt:

@@ -123,6 +123,7 @@ def image_transport(bag):
 
 def run(args):
     from monet_ros.nodes.runner import (
+        ignore_signals,
         start_error,
         stop_executor,
         until_shutdown,
@@ -151,7 +152,7 @@ def run(args):
     rig = args.rig or args.bag
     cameras = list(args.cameras or [])
     summary = Summary()
-    rclpy.init(args=['--ros-args'])
+    rclpy.init(args=list(getattr(args, 'ros_args', None) or ['--ros-args']))
     nodes = []
     detector = executor = None
     try:
@@ -206,6 +207,7 @@ def run(args):
                     if now - max(ended, summary.last_fused or ended) > 2.0:
                         break
     finally:
+        ignore_signals()
         for node in nodes:
             if isinstance(node, PlayerNode):
                 node.stopping.set()           # no publishing into a closing context

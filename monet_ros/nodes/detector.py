@@ -35,11 +35,22 @@ from monet_ros.io import (
 )
 from monet_ros.models import CheckpointError, Detector, decode_heatmaps
 from monet_ros.models.crop import crop_images
+from monet_ros.nodes.names import (
+    DIAGNOSTICS,
+    HEATMAP_CAMERA_INFO,
+    HEATMAPS,
+    KEYPOINTS3D,
+    MODEL,
+    node_namespace,
+)
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import run_node
 from monet_ros.tracking import crop_boxes
+
+# Parameters that may change while running (`ros2 param set`), effective next frame.
+LIVE = ('track', 'track_margin', 'track_timeout_s', 'min_track_keypoints')
 
 
 @dataclass(frozen=True)
@@ -53,8 +64,11 @@ class DetectorConfig:
                                'camera topic, else /{camera}/image_raw)')
     camera_info_topic: str = setting('', 'camera_info topic template (default: camera_info '
                                      'beside the image topic)')
-    transport: str = setting('raw', 'raw = sensor_msgs/Image; compressed = CompressedImage '
-                             'on <image_topic>/compressed', choices=('raw', 'compressed'))
+    transport: str = setting('auto', 'raw = sensor_msgs/Image; compressed = CompressedImage '
+                             'on <image_topic>/compressed; auto = as the rig says (a recording '
+                             'with only compressed images, or a rig topic ending in '
+                             '/compressed: compressed), else raw',
+                             choices=('auto', 'raw', 'compressed'))
     box: tuple[float, ...] = setting((), 'fixed crop box x0 y0 x1 y1 (pixel edges) when no '
                                      'subject is tracked (default: full frame)', length=(0, 4))
     track: bool = setting(True, 'crop around the projection of the latest /monet/keypoints3d')
@@ -101,8 +115,9 @@ class CameraSlot:
 
 class DetectorNode(Node):
     def __init__(self, overrides=None, node_name='detector', **kwargs):
-        super().__init__(node_name, **kwargs)
-        self.config = config = declare_config(self, DetectorConfig, overrides)
+        super().__init__(node_name, **node_namespace(kwargs))
+        self.config = config = declare_config(self, DetectorConfig, overrides, live=LIVE,
+                                              on_change=self.apply_live)
         if config.threads:
             import torch
             torch.set_num_threads(config.threads)
@@ -125,11 +140,12 @@ class DetectorNode(Node):
         self.detector = self.load_detector(config.model)
         self.model_sha256 = sha256_file(config.model)
         self.slots = []
-        compressed = config.transport == 'compressed'
         for name, rig_camera in zip(names, rig_cameras):
             base = (config.image_topic.format(camera=name) if config.image_topic
                     else (rig_camera.topic if rig_camera is not None and rig_camera.topic
                           else f'/{name}/image_raw'))
+            compressed = (config.transport == 'compressed' or config.transport == 'auto'
+                          and base.endswith('/compressed'))
             base = base[:-len('/compressed')] if base.endswith('/compressed') else base
             image_topic = base + '/compressed' if compressed else base
             info_topic = (config.camera_info_topic.format(camera=name)
@@ -138,7 +154,7 @@ class DetectorNode(Node):
             self.slots.append(CameraSlot(name, rig_camera, image_topic, info_topic))
         self.pubs = {}
         for slot in self.slots:
-            if compressed:
+            if slot.image_topic.endswith('/compressed'):
                 self.create_subscription(CompressedImage, slot.image_topic,
                                          lambda m, s=slot: self.on_image(s, m), IMAGE_IN)
             else:
@@ -147,16 +163,18 @@ class DetectorNode(Node):
             self.create_subscription(CameraInfo, slot.info_topic,
                                      lambda m, s=slot: self.on_camera_info(s, m), STREAM_IN)
             self.pubs[slot.name] = (
-                self.create_publisher(Image, f'/monet/{slot.name}/heatmaps', STREAM_OUT),
-                self.create_publisher(CameraInfo, f'/monet/{slot.name}/camera_info',
+                self.create_publisher(Image, HEATMAPS.format(camera=slot.name), STREAM_OUT),
+                self.create_publisher(CameraInfo, HEATMAP_CAMERA_INFO.format(camera=slot.name),
                                       STREAM_OUT),
                 self.create_publisher(Image, f'/monet/{slot.name}/overlay', STREAM_OUT)
                 if config.overlay else None)
         self.keypoints = None        # (X (N, 3), arrival monotonic)
-        self.create_subscription(PointCloud2, '/monet/keypoints3d', self.on_keypoints,
+        self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
-        self.create_subscription(String, '/monet/model', self.on_model, LATCHED)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', STREAM_OUT)
+        self.create_subscription(String, MODEL, self.on_model, LATCHED)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
+        self.unpublished = set()      # image topics already reported as without publisher
+        self.started = time.monotonic()
         self.create_timer(max(config.batch_wait_ms, 1.0) / 1e3, self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
         self.batches = 0
@@ -167,6 +185,10 @@ class DetectorNode(Node):
             f'{[(s.name, s.image_topic) for s in self.slots]} with '
             f'{self.detector.metadata.get("architecture")} ({len(self.detector.keypoints)} '
             f'keypoints, heatmaps {self.detector.heatmap_size}) on {self.detector.device}')
+
+    def apply_live(self, config):
+        """Use a changed config (a live tracking parameter was set) from the next frame."""
+        self.config = config
 
     def load_detector(self, path):
         if not Path(path).is_file():
@@ -330,6 +352,24 @@ class DetectorNode(Node):
         self.get_logger().error(f'/monet/model rejected, keeping the current weights: {reason}')
 
     # ------------------------------------------------------------------ diagnostics
+    def no_publisher(self, slot):
+        """'' when the slot's image topic has a publisher, else the reason (logged once per
+        topic, with a hint when the other transport has one)."""
+        topic = self.resolve_topic_name(slot.image_topic)
+        if self.count_publishers(topic) or time.monotonic() - self.started < 3.0:
+            self.unpublished.discard(topic)
+            return ''
+        other = topic[:-len('/compressed')] if topic.endswith('/compressed') \
+            else topic + '/compressed'
+        reason = f'no publisher on {topic}'
+        if self.count_publishers(other):
+            reason += (f' (but {other} has one: transport:='
+                       f'{"raw" if topic.endswith("/compressed") else "compressed"})')
+        if topic not in self.unpublished:
+            self.unpublished.add(topic)
+            self.get_logger().warning(reason)
+        return reason
+
     def publish_diagnostics(self):
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
@@ -337,9 +377,13 @@ class DetectorNode(Node):
             else 0.0
         for slot in self.slots:
             level = DiagnosticStatus.OK if slot.processed else DiagnosticStatus.WARN
+            text = f'{slot.processed} frames, {slot.dropped} dropped, {slot.bad} bad'
+            silent = self.no_publisher(slot)
+            if silent:
+                level, text = DiagnosticStatus.WARN, f'{silent}; {text}'
             msg.status.append(DiagnosticStatus(
                 level=level, name=f'monet detector: {slot.name}', hardware_id=slot.name,
-                message=f'{slot.processed} frames, {slot.dropped} dropped, {slot.bad} bad',
+                message=text,
                 values=[KeyValue(key=k, value=str(v)) for k, v in (
                     ('received', slot.received), ('processed', slot.processed),
                     ('dropped_stale', slot.dropped), ('bad_messages', slot.bad),

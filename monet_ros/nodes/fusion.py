@@ -26,6 +26,14 @@ from monet_ros.io import (
     keypoints3d_to_cloud,
     skeleton_marker_array,
 )
+from monet_ros.nodes.names import (
+    DIAGNOSTICS,
+    HEATMAP_CAMERA_INFO,
+    HEATMAPS,
+    KEYPOINTS3D,
+    SKELETON,
+    node_namespace,
+)
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import HEATMAPS_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
@@ -33,6 +41,8 @@ from monet_ros.nodes.runner import run_node
 from monet_ros.nodes.sync import StampSynchronizer
 from monet_ros.skeleton import load_skeleton
 
+# Parameters that may change while running (`ros2 param set`), effective next frame.
+LIVE = ('confidence_threshold', 'threshold_px', 'min_views')
 # Unpaired heatmaps / camera_info kept per camera while waiting for their partner.
 _PAIR_BACKLOG = 30
 
@@ -45,8 +55,9 @@ class FusionNodeConfig(FusionConfig):
     skeleton: str = setting('human14', 'skeleton preset or YAML path: heatmap channel order '
                             'and bones of /monet/skeleton')
     frame_id: str = setting('', 'frame of the outputs (default: the rig frame)')
-    heatmap_topic: str = setting('/monet/{camera}/heatmaps', 'heatmap topic per camera')
-    camera_info_topic: str = setting('/monet/{camera}/camera_info',
+    heatmap_topic: str = setting(HEATMAPS, 'heatmap topic per camera (relative names are in '
+                                  'the node namespace, default /monet)')
+    camera_info_topic: str = setting(HEATMAP_CAMERA_INFO,
                                      'heatmap virtual camera_info topic per camera')
     slop_ms: float = setting(0.0, 'stamp tolerance between cameras (0 = exact)', minimum=0.0)
     timeout_s: float = setting(0.3, 'wait this long for missing cameras of a frame, then '
@@ -79,8 +90,9 @@ class CameraStats:
 
 class FusionNode(Node):
     def __init__(self, overrides=None, node_name='fusion', **kwargs):
-        super().__init__(node_name, **kwargs)
-        self.config = config = declare_config(self, FusionNodeConfig, overrides)
+        super().__init__(node_name, **node_namespace(kwargs))
+        self.config = config = declare_config(self, FusionNodeConfig, overrides, live=LIVE,
+                                              on_change=self.apply_live)
         self.core_config = config_subset(config, FusionConfig)
         if config.threads:
             import torch
@@ -112,14 +124,23 @@ class FusionNode(Node):
             self.create_subscription(
                 CameraInfo, config.camera_info_topic.format(camera=name),
                 lambda msg, n=name: self.on_message(n, 1, msg), HEATMAPS_IN)
-        self.pub_points = self.create_publisher(PointCloud2, '/monet/keypoints3d', STREAM_OUT)
-        self.pub_skeleton = self.create_publisher(MarkerArray, '/monet/skeleton', STREAM_OUT)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', STREAM_OUT)
+        self.pub_points = self.create_publisher(PointCloud2, KEYPOINTS3D, STREAM_OUT)
+        self.pub_skeleton = self.create_publisher(MarkerArray, SKELETON, STREAM_OUT)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
         self.create_timer(0.02, self.on_poll)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
             f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}')
+
+    def apply_live(self, config):
+        """Use a changed config (a live parameter was set) from the next frame on."""
+        if config.min_views > len(self.cameras):
+            raise ConfigError(self.get_name(), 'min_views',
+                              f'{config.min_views} > the {len(self.cameras)} cameras fused')
+        self.core_config = config_subset(config, FusionConfig)
+        self.sync.min_keys = config.min_views
+        self.config = config
 
     # ------------------------------------------------------------------ input
     def on_message(self, name, kind, msg):

@@ -20,6 +20,7 @@ from rosgraph_msgs.msg import Clock
 
 from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.io import open_bag
+from monet_ros.nodes.names import node_namespace
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_OUT, LATCHED, STREAM_OUT
 from monet_ros.nodes.runner import run_node
@@ -44,9 +45,12 @@ class PlayerConfig:
     start_offset_s: float = setting(0.0, 'skip this many seconds from the start of the bag',
                                     minimum=0.0)
     clock: bool = setting(True, 'publish /clock with the bag time')
-    wait_for_subscribers: int = setting(0, 'before playing, wait until every replayed image '
+    wait_for_subscribers: int = setting(1, 'before playing, wait until every replayed image '
                                         'and camera_info topic has this many subscribers '
                                         '(0 = do not wait)', minimum=0)
+    wait_for_subscribers_s: float = setting(30.0, 'give up waiting for subscribers after this '
+                                            'long and play anyway, with a warning (0 = wait '
+                                            'forever)', minimum=0.0)
     start_delay_s: float = setting(0.0, 'wait this long before playing (after the subscribers): '
                                    'lets late discovery finish so no first frame is lost',
                                    minimum=0.0)
@@ -92,7 +96,7 @@ def message_class(msgtype):
 
 class PlayerNode(Node):
     def __init__(self, overrides=None, node_name='player', **kwargs):
-        super().__init__(node_name, **kwargs)
+        super().__init__(node_name, **node_namespace(kwargs))
         self.config = config = declare_config(self, PlayerConfig, overrides)
         if not config.bag:
             raise ConfigError(self.get_name(), 'bag', 'is required (a recording path)')
@@ -144,9 +148,21 @@ class PlayerNode(Node):
     def wait_for_subscribers(self):
         available = self.reader.topics
         topics = [t for t in self.pubs if available[t].msgtype in IMAGE_TYPES + CAMERA_INFO]
+        topics = topics or list(self.pubs)
         wanted = self.config.wait_for_subscribers
+        limit = self.config.wait_for_subscribers_s
+        start = time.monotonic()
         while not self.stopping.is_set():
-            if all(self.pubs[t].get_subscription_count() >= wanted for t in topics or self.pubs):
+            missing = [t for t in topics if self.pubs[t].get_subscription_count() < wanted]
+            if not missing:
+                self.get_logger().info(f'{len(topics)} topics have {wanted} subscriber(s) '
+                                       f'after {time.monotonic() - start:.1f} s: playing')
+                return
+            if limit and time.monotonic() - start >= limit:
+                self.get_logger().warning(
+                    f'playing without waiting longer (wait_for_subscribers_s={limit}): '
+                    f'{len(missing)} topics have fewer than {wanted} subscriber(s), e.g. '
+                    f'{missing[0]}')
                 return
             time.sleep(0.02)
 

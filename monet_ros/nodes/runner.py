@@ -6,12 +6,15 @@ destroys it and shuts rclpy down, exiting 0.
 """
 from contextlib import contextmanager
 import os
-from pathlib import Path
+import signal
 import sys
+import threading
 import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+
+from monet_ros.share import share_path
 
 EXIT_OK = 0
 EXIT_BAD_START = 2
@@ -19,25 +22,15 @@ EXIT_BAD_START = 2
 FASTDDS_PROFILE = 'fastdds_profile.xml'
 
 
-def share_config(name):
-    """Path of a file in the package's config/ (source checkout or installed share/)."""
-    here = Path(__file__).resolve().parents[2] / 'config' / name
-    if here.is_file():
-        return here
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        return Path(get_package_share_directory('monet_ros')) / 'config' / name
-    except Exception:  # noqa: BLE001 (no ament index: pip wheels without the marker)
-        return here
-
-
 def use_large_data_profile():
     """Point Fast DDS at config/fastdds_profile.xml (64 MB shared memory) unless the user
     already chose a profile. Must run before the first rclpy.init of the process."""
     if 'FASTRTPS_DEFAULT_PROFILES_FILE' not in os.environ:
-        profile = share_config(FASTDDS_PROFILE)
-        if profile.is_file():
-            os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
+        try:
+            profile = share_path('config', FASTDDS_PROFILE)
+        except FileNotFoundError:
+            return
+        os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
 
 
 def start_error(name, error):
@@ -64,6 +57,15 @@ def until_shutdown():
     except Exception:
         if not stopped_by_shutdown():
             raise
+
+
+def ignore_signals():
+    """After the first SIGINT / SIGTERM: ignore further ones while the nodes are destroyed
+    (a second Ctrl-C, or a launch file's SIGINT after the terminal's, must not raise
+    KeyboardInterrupt inside destroy_node). Only possible in the main thread."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
 
 
 def stop_executor(executor, timeout_sec=2.0):
@@ -103,6 +105,7 @@ def run_node(factory, name, args=None, large_data=False):
             executor.add_node(node)
             executor.spin()
     finally:
+        ignore_signals()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
