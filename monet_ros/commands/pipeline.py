@@ -41,6 +41,9 @@ def add_arguments(parser):
                         help='stop after this many seconds (0 = at the end of the recording)')
     parser.add_argument('--threshold-px', type=float, default=15.0,
                         help='fusion inlier threshold in image pixels')
+    parser.add_argument('--no-debug-image', dest='debug_image', action='store_false',
+                        help='do not publish <cam>/debug_image (on by default, 2 Hz per camera, '
+                        'only drawn while someone subscribes)')
     parser.add_argument('--device', default='', help="torch device ('' = auto)")
     parser.add_argument('--workdir', help='where the demo recording and model are cached '
                         '(default: ~/.cache/monet_ros/demo)')
@@ -165,7 +168,8 @@ def run(args):
                 nodes.append(fusion)
                 detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
                                                        model=str(args.model), transport=transport,
-                                                       device=args.device))
+                                                       device=args.device,
+                                                       debug_image=args.debug_image))
                 nodes.append(detector)
                 player = PlayerNode(overrides=dict(
                     bag=str(args.bag), rate=0.0 if args.lockstep else args.rate, loop=args.loop,

@@ -15,7 +15,6 @@ from pathlib import Path
 import sys
 import time
 
-import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.node import Node
@@ -33,9 +32,11 @@ from monet_ros.io import (
     image_to_numpy,
     numpy_to_image_msg,
 )
-from monet_ros.models import CheckpointError, Detector, decode_heatmaps
-from monet_ros.models.crop import crop_images
+from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
+from monet_ros.models import CheckpointError, Detector
 from monet_ros.nodes.names import (
+    DEBUG_CAMERA_INFO,
+    DEBUG_IMAGE,
     DIAGNOSTICS,
     HEATMAP_CAMERA_INFO,
     HEATMAPS,
@@ -81,8 +82,13 @@ class DetectorConfig:
     batch_wait_ms: float = setting(15.0, 'with several cameras: wait this long for the other '
                                    "cameras' frames before running a partial batch",
                                    minimum=0.0)
-    overlay: bool = setting(False, 'also publish /monet/<cam>/overlay (rgb8 crop, heatmaps, '
-                            'peaks)')
+    debug_image: bool = setting(False, 'also publish <cam>/debug_image (bgr8: the source image '
+                                'with the crop box, detected peaks and fused keypoints '
+                                'reprojected) and its camera_info, when subscribed')
+    debug_image_rate_hz: float = setting(2.0, 'most debug images per second per camera',
+                                         minimum=0.0, exclusive_minimum=True)
+    debug_image_scale: float = setting(1.0, 'debug image size, fraction of the source image',
+                                       minimum=0.0, exclusive_minimum=True, maximum=1.0)
     device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
     threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0)
 
@@ -110,6 +116,7 @@ class CameraSlot:
         self.info_key = None
         self.camera = None           # Camera from the latest camera_info (rig extrinsics)
         self.received = self.processed = self.dropped = self.bad = 0
+        self.last_debug = -float('inf')   # monotonic time of the last debug image
         self.last_bad = ''
 
 
@@ -166,8 +173,11 @@ class DetectorNode(Node):
                 self.create_publisher(Image, HEATMAPS.format(camera=slot.name), STREAM_OUT),
                 self.create_publisher(CameraInfo, HEATMAP_CAMERA_INFO.format(camera=slot.name),
                                       STREAM_OUT),
-                self.create_publisher(Image, f'/monet/{slot.name}/overlay', STREAM_OUT)
-                if config.overlay else None)
+                (self.create_publisher(Image, DEBUG_IMAGE.format(camera=slot.name),
+                                       STREAM_OUT),
+                 self.create_publisher(CameraInfo, DEBUG_CAMERA_INFO.format(camera=slot.name),
+                                       STREAM_OUT))
+                if config.debug_image else None)
         self.keypoints = None        # (X (N, 3), arrival monotonic)
         self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
@@ -288,33 +298,42 @@ class DetectorNode(Node):
                                                        keep_aspect=False)
         self.forward_seconds = (self.forward_seconds + [time.perf_counter() - start])[-100:]
         self.batches += 1
-        for (slot, msg, image, _), heat, heat_cam, box in zip(work, heatmaps, heat_cameras,
+        for (slot, msg, image, camera), heat, heat_cam, box in zip(work, heatmaps, heat_cameras,
                                                               boxes):
             stamp = header_stamp_ns(msg)
             frame_id = msg.header.frame_id
-            heat_pub, info_pub, overlay_pub = self.pubs[slot.name]
+            heat_pub, info_pub, debug_pubs = self.pubs[slot.name]
             info_pub.publish(camera_info_from_camera(heat_cam, stamp, frame_id))
             heat_pub.publish(heatmaps_to_image_msg(heat, stamp, frame_id))
-            if overlay_pub is not None:
-                overlay_pub.publish(numpy_to_image_msg(self.overlay(image, box, heat), stamp,
-                                                       frame_id))
             slot.processed += 1
+            if debug_pubs is not None:
+                self.publish_debug(slot, debug_pubs, image, camera, box, heat, heat_cam, stamp,
+                                   frame_id)
 
-    def overlay(self, image, box, heat):
-        """rgb8 network-input crop with the channel-max heatmap blended in and the peaks."""
-        h_in, w_in = self.detector.input_size
-        crop = crop_images([image], box[None], (w_in, h_in))[0]
-        peak_map = cv2.resize(heat.max(axis=0), (w_in, h_in), interpolation=cv2.INTER_LINEAR)
-        colour = cv2.applyColorMap(np.clip(peak_map * 255, 0, 255).astype(np.uint8),
-                                   cv2.COLORMAP_JET)[..., ::-1]
-        out = cv2.addWeighted(crop, 0.6, colour, 0.4, 0)
-        peaks, conf = decode_heatmaps(heat[None])
-        h, w = heat.shape[1:]
-        scale = np.array([w_in / w, h_in / h])
-        for (u, v), c in zip((peaks[0] + 0.5) * scale - 0.5, conf[0]):
-            if c > 0.1:
-                cv2.circle(out, (int(round(u)), int(round(v))), 3, (255, 255, 255), -1)
-        return np.ascontiguousarray(out)
+    def publish_debug(self, slot, pubs, image, camera, box, heat, heat_cam, stamp, frame_id):
+        """<cam>/debug_image + its camera_info, at most debug_image_rate_hz, only when
+        someone subscribes (so it costs nothing otherwise)."""
+        now = time.monotonic()
+        if (now - slot.last_debug < 1.0 / self.config.debug_image_rate_hz
+                or not (pubs[0].get_subscription_count() or pubs[1].get_subscription_count())):
+            return
+        slot.last_debug = now
+        peaks, confidence = heatmap_peaks_in_image(heat, heat_cam.K, camera.K)
+        reprojected = None
+        fresh = (self.keypoints is not None and now - self.keypoints[1]
+                 <= self.config.track_timeout_s)
+        if fresh and slot.rig_camera is not None:
+            X = self.keypoints[0]
+            reprojected = np.full((len(X), 2), np.nan)
+            ok = np.isfinite(X).all(axis=1)
+            if ok.any():
+                reprojected[ok] = camera.project(X[ok])
+        scale = self.config.debug_image_scale
+        out = debug_image(image, box, peaks, confidence, reprojected, scale=scale)
+        view = camera if scale == 1.0 else camera.crop(
+            (0.0, 0.0, float(camera.width), float(camera.height)), (out.shape[1], out.shape[0]))
+        pubs[1].publish(camera_info_from_camera(view, stamp, frame_id))
+        pubs[0].publish(numpy_to_image_msg(out, stamp, frame_id, encoding='bgr8'))
 
     # ------------------------------------------------------------------ hot reload
     def on_model(self, msg):
