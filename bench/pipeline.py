@@ -1,6 +1,6 @@
 """Live pipeline figures: end-to-end latency and throughput, detector images/s, fusion time.
 
-    .venv/bin/python bench/pipeline.py [--cameras 4 8] [--seconds 10] [--rate 30]
+    .venv/bin/python bench/pipeline.py [--cameras 4 8] [--seconds 10] [--rate 30] [--viewable]
 
 End to end: this script publishes V camera streams (640x480 rgb8 + camera_info, stamped
 with the wall clock) at `--rate` Hz to a real detector process (one node, all cameras
@@ -8,7 +8,10 @@ batched, small net, CPU) and a real fusion process, and times each /monet/keypoi
 from its image stamp to its arrival here. Micro-benchmarks (in this process, median of
 --runs): Detector.predict of V images in one batch against V single-image calls (the
 baseline: one camera per forward), and fuse_heatmaps per frame against plain DLT without
-outlier rejection (geometry.triangulate). Prints tables; never asserts.
+outlier rejection (geometry.triangulate). --viewable adds a second end-to-end run per
+camera count with the viewable outputs on (detector debug_image at its default rate with a
+subscriber to every camera's, fusion /tf_static, skeleton and camera markers) to show what
+they cost. Prints tables; never asserts.
 """
 import argparse
 import os
@@ -82,7 +85,7 @@ def micro(views, runs, threads):
                 plain=plain, heat=heat.shape)
 
 
-def end_to_end(views, seconds, rate, workdir, threads):
+def end_to_end(views, seconds, rate, workdir, threads, viewable=False):
     """Real detector + fusion processes fed by this process; returns figures."""
     import rclpy
     from rclpy.context import Context
@@ -106,11 +109,13 @@ def end_to_end(views, seconds, rate, workdir, threads):
     env.update(ROS_DOMAIN_ID=str(random.randint(1, 101)), ROS_LOG_DIR=str(workdir / 'log'),
                ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONPATH=str(REPO),
                FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / 'config' / 'fastdds_profile.xml'))
-    params = workdir / f'params{views}.yaml'
+    params = workdir / f'params{views}_{int(viewable)}.yaml'
     params.write_text(yaml.safe_dump({
-        'detector': {'ros__parameters': {'rig': str(rig_path), 'model': str(model_path),
-                                         'device': 'cpu', 'threads': threads}},
-        'fusion': {'ros__parameters': {'rig': str(rig_path)}}}))
+        '/**/detector': {'ros__parameters': {'rig': str(rig_path), 'model': str(model_path),
+                                             'device': 'cpu', 'threads': threads,
+                                             'debug_image': viewable}},
+        '/**/fusion': {'ros__parameters': {'rig': str(rig_path), 'publish_tf': viewable,
+                                           'camera_markers': viewable}}}))
     procs = [subprocess.Popen([sys.executable, '-m', f'monet_ros.nodes.{name}', '--ros-args',
                                '--params-file', str(params)], env=env,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -128,7 +133,12 @@ def end_to_end(views, seconds, rate, workdir, threads):
         lambda m: (latencies.append(time.time_ns() - header_stamp_ns(m)),
                    arrivals.append(time.monotonic())), STREAM_IN)
     heat_count = [0]
+    debug_count = [0]
     for cam in rig:
+        if viewable:
+            node.create_subscription(Image, f'/monet/{cam.name}/debug_image',
+                                     lambda m: debug_count.__setitem__(0, debug_count[0] + 1),
+                                     STREAM_IN)
         node.create_subscription(Image, f'/monet/{cam.name}/heatmaps',
                                  lambda m: heat_count.__setitem__(0, heat_count[0] + 1),
                                  STREAM_IN)
@@ -182,6 +192,7 @@ def end_to_end(views, seconds, rate, workdir, threads):
     lat = np.array(latencies[n0:], float) / 1e6
     return dict(views=views, published=(published - p0) / window,
                 fused=(len(latencies) - n0) / window, heat=(heat_count[0] - h0) / window,
+                debug=debug_count[0] / (end - start),
                 median=float(np.median(lat)) if lat.size else float('nan'),
                 p95=float(np.percentile(lat, 95)) if lat.size else float('nan'))
 
@@ -194,6 +205,8 @@ def main():
     parser.add_argument('--runs', type=int, default=5, help='micro-benchmark repetitions')
     parser.add_argument('--threads', type=int, default=2, help='torch threads')
     parser.add_argument('--skip-live', action='store_true', help='micro-benchmarks only')
+    parser.add_argument('--viewable', action='store_true', help='also run each camera count '
+                        'with debug images (subscribed), TF and markers on')
     args = parser.parse_args()
     print(f'# machine: {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f} at start; '
           f'small net, CPU, torch threads {args.threads}')
@@ -210,14 +223,16 @@ def main():
         return 0
     print(f'\n## End to end at {args.rate:.0f} Hz, {WIDTH}x{HEIGHT} rgb8 (detector and fusion '
           f'processes, {args.seconds:.0f} s measured after 3 s warm-up)')
-    print('| cameras | published frames/s | keypoints3d/s | heatmaps/s (detector images/s) |'
-          ' latency median ms | latency p95 ms |')
-    print('|---|---|---|---|---|---|')
+    print('| cameras | viewable outputs | published frames/s | keypoints3d/s | heatmaps/s '
+          '(detector images/s) | debug images/s | latency median ms | latency p95 ms |')
+    print('|---|---|---|---|---|---|---|---|')
     with tempfile.TemporaryDirectory() as tmp:
         for v in args.cameras:
-            r = end_to_end(v, args.seconds, args.rate, Path(tmp), args.threads)
-            print(f'| {v} | {r["published"]:.1f} | {r["fused"]:.1f} | {r["heat"]:.1f} | '
-                  f'{r["median"]:.0f} | {r["p95"]:.0f} |', flush=True)
+            for viewable in ((False, True) if args.viewable else (False,)):
+                r = end_to_end(v, args.seconds, args.rate, Path(tmp), args.threads, viewable)
+                print(f'| {v} | {"on" if viewable else "off"} | {r["published"]:.1f} | '
+                      f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["debug"]:.1f} | '
+                      f'{r["median"]:.0f} | {r["p95"]:.0f} |', flush=True)
     print(f'# load average {os.getloadavg()[0]:.1f} at the end (a shared machine inflates '
           'every figure)')
     return 0

@@ -124,11 +124,21 @@ def image_transport(bag):
     return 'compressed' if 'sensor_msgs/msg/CompressedImage' in types else 'raw'
 
 
+def tf_topics(bag):
+    """['/tf_static'] when the recording has it (the player replays it, latched, so that
+    viewers see the rig's frames; it says so when tf2_msgs is not installed), else []."""
+    from monet_ros.io import open_bag
+    return [t for t in ('/tf_static',) if t in open_bag(bag).topics]
+
+
 def run(args):
     from monet_ros.nodes.runner import (
         ignore_signals,
+        init_rclpy,
+        say_goodbye,
         start_error,
         stop_executor,
+        stop_requested,
         until_shutdown,
         use_large_data_profile,
     )
@@ -155,7 +165,7 @@ def run(args):
     rig = args.rig or args.bag
     cameras = list(args.cameras or [])
     summary = Summary()
-    rclpy.init(args=list(getattr(args, 'ros_args', None) or ['--ros-args']))
+    init_rclpy(list(getattr(args, 'ros_args', None) or ['--ros-args']))
     nodes = []
     detector = executor = None
     try:
@@ -174,7 +184,8 @@ def run(args):
                 player = PlayerNode(overrides=dict(
                     bag=str(args.bag), rate=0.0 if args.lockstep else args.rate, loop=args.loop,
                     wait_for_subscribers=1, start_delay_s=args.start_delay,
-                    topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]))
+                    topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]
+                    + tf_topics(args.bag)))
                 nodes.append(player)
                 if args.learn:
                     nodes.append(learner_node(args, rig, summary))
@@ -191,7 +202,7 @@ def run(args):
             started = time.monotonic()
             next_line = started + 1.0
             ended = None
-            while rclpy.ok():
+            while rclpy.ok() and not stop_requested():
                 try:
                     executor.spin_once(timeout_sec=0.05)
                 except Exception:  # noqa: BLE001 - a signal shut the context down mid-call
@@ -215,6 +226,7 @@ def run(args):
         for node in nodes:
             if isinstance(node, PlayerNode):
                 node.stopping.set()           # no publishing into a closing context
+        say_goodbye(nodes)
         if executor is not None:
             stop_executor(executor)
         for node in reversed(nodes):

@@ -14,6 +14,7 @@ import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
@@ -26,19 +27,24 @@ from monet_ros.io import (
     keypoints3d_to_cloud,
     skeleton_marker_array,
 )
+from monet_ros.io.convert import delete_all_markers, marker_array
+from monet_ros.io.markers import frustum_marker_specs
 from monet_ros.nodes.names import (
     DIAGNOSTICS,
     HEATMAP_CAMERA_INFO,
     HEATMAPS,
     KEYPOINTS3D,
+    RIG_MARKERS,
     SKELETON,
+    TF_STATIC,
     node_namespace,
 )
 from monet_ros.nodes.params import declare_config
-from monet_ros.nodes.qos import HEATMAPS_IN, STREAM_OUT
+from monet_ros.nodes.qos import HEATMAPS_IN, LATCHED, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import run_node
 from monet_ros.nodes.sync import StampSynchronizer
+from monet_ros.nodes.tf import rig_tf_message, tf_message_class
 from monet_ros.skeleton import load_skeleton
 
 # Parameters that may change while running (`ros2 param set`), effective next frame.
@@ -67,6 +73,15 @@ class FusionNodeConfig(FusionConfig):
                                     exclusive_minimum=True)
     diagnostics_period_s: float = setting(1.0, 'period of /diagnostics', minimum=0.0,
                                           exclusive_minimum=True)
+    marker_lifetime_s: float = setting(0.5, 'skeleton markers vanish this long after the last '
+                                       'fused frame (0 = never)', minimum=0.0)
+    marker_labels: bool = setting(False, 'also label the skeleton joints with their names')
+    camera_markers: bool = setting(True, 'publish the rig cameras as frustums on rig_markers '
+                                   '(latched)')
+    camera_marker_depth: float = setting(0.2, 'frustum depth of the camera markers (m)',
+                                         minimum=0.0, exclusive_minimum=True)
+    publish_tf: bool = setting(True, 'publish the rig on /tf_static (frame_id -> '
+                               '<camera>_optical) when tf2_msgs is installed')
     threads: int = setting(1, 'torch CPU threads for heatmap decoding (0 = leave as is); one '
                            'thread is fastest for these small tensors', minimum=0)
 
@@ -127,6 +142,14 @@ class FusionNode(Node):
         self.pub_points = self.create_publisher(PointCloud2, KEYPOINTS3D, STREAM_OUT)
         self.pub_skeleton = self.create_publisher(MarkerArray, SKELETON, STREAM_OUT)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
+        if config.publish_tf:
+            self.publish_rig_tf()
+        self.marker_ns = f'{self.skeleton.name}/subject0'    # one subject per fusion node
+        if config.camera_markers:
+            self.pub_rig = self.create_publisher(MarkerArray, RIG_MARKERS, LATCHED)
+            self.pub_rig.publish(marker_array(
+                self.get_clock().now().nanoseconds, self.frame_id,
+                frustum_marker_specs(self.cameras, config.camera_marker_depth)))
         self.create_timer(0.02, self.on_poll)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
         self.get_logger().info(
@@ -227,9 +250,29 @@ class FusionNode(Node):
             group.stamp_ns, self.frame_id, result.X, result.confidence,
             result.reprojection_error, result.num_views))
         self.pub_skeleton.publish(skeleton_marker_array(
-            group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices))
+            group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices,
+            ns=self.marker_ns, lifetime_ns=int(self.config.marker_lifetime_s * 1e9),
+            names=self.skeleton.keypoints if self.config.marker_labels else None))
         for listener in self.listeners:
             listener(group.stamp_ns, result)
+
+    def publish_rig_tf(self):
+        """The rig on /tf_static (latched), or one log line saying why not."""
+        TFMessage = tf_message_class()
+        if TFMessage is None:
+            self.get_logger().warning('tf2_msgs is not installed: the rig is not published on '
+                                      '/tf_static')
+            return
+        self.pub_tf = self.create_publisher(TFMessage, TF_STATIC, LATCHED)
+        self.pub_tf.publish(rig_tf_message(self.cameras, self.frame_id,
+                                           self.get_clock().now().to_msg()))
+
+    def on_stop(self):
+        """Before the node goes: clear the viewers' skeleton (DELETEALL), waiting briefly
+        for the subscribers to acknowledge it."""
+        msg = delete_all_markers(self.get_clock().now().nanoseconds, self.frame_id)
+        self.pub_skeleton.publish(msg)
+        self.pub_skeleton.wait_for_all_acked(Duration(seconds=1.0))
 
     # ------------------------------------------------------------------ diagnostics
     def publish_diagnostics(self):

@@ -10,6 +10,7 @@ DEFAULT_NAMESPACE = 'monet'
 
 KEYPOINTS3D = 'keypoints3d'
 SKELETON = 'skeleton'
+RIG_MARKERS = 'rig_markers'
 MODEL = 'model'
 HEATMAPS = '{camera}/heatmaps'
 HEATMAP_CAMERA_INFO = '{camera}/camera_info'

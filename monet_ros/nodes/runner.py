@@ -13,6 +13,7 @@ import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
 
 from monet_ros.share import share_path
 
@@ -84,6 +85,41 @@ def stop_executor(executor, timeout_sec=2.0):
             task.exception()          # marks it retrieved: a stop-time failure, not a bug
 
 
+_STOP = threading.Event()
+
+
+def stop_requested():
+    """True once SIGINT or SIGTERM arrived (see init_rclpy)."""
+    return _STOP.is_set()
+
+
+def init_rclpy(args=None):
+    """rclpy.init without rclpy's signal handlers: SIGINT and SIGTERM only set a flag
+    (stop_requested) that the spin loops check every 0.1 s, instead of closing the context
+    at once or raising inside a callback, so the nodes can still publish their goodbye
+    (on_stop: DELETEALL markers) before they are destroyed. Main thread only."""
+    _STOP.clear()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+
+    def request_stop(signum, frame):
+        _STOP.set()
+    signal.signal(signal.SIGINT, request_stop)
+    signal.signal(signal.SIGTERM, request_stop)
+
+
+def say_goodbye(nodes):
+    """Call each node's on_stop() (when it has one) while the context is still valid; a
+    failure there is reported in one line, never a traceback."""
+    for node in nodes:
+        on_stop = getattr(node, 'on_stop', None)
+        if on_stop is None or not rclpy.ok(context=node.context):
+            continue
+        try:
+            on_stop()
+        except Exception as error:  # noqa: BLE001 - stopping anyway
+            print(f'{node.get_name()}: on stop: {error}', file=sys.stderr, flush=True)
+
+
 def run_node(factory, name, args=None, large_data=False):
     """Run the node built by `factory()` until shutdown; return the process exit code.
 
@@ -92,7 +128,7 @@ def run_node(factory, name, args=None, large_data=False):
     """
     if large_data:
         use_large_data_profile()
-    rclpy.init(args=args)
+    init_rclpy(args)
     node = None
     try:
         with until_shutdown():
@@ -103,10 +139,12 @@ def run_node(factory, name, args=None, large_data=False):
                 return EXIT_BAD_START
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            executor.spin()
+            while rclpy.ok() and not stop_requested():   # wakes up to see a signal
+                executor.spin_once(timeout_sec=0.1)
     finally:
         ignore_signals()
         if node is not None:
+            say_goodbye([node])
             node.destroy_node()
         rclpy.try_shutdown()
     return EXIT_OK
