@@ -87,7 +87,7 @@ class DetectorConfig:
                                 'reprojected) and its camera_info, when subscribed')
     debug_image_rate_hz: float = setting(2.0, 'most debug images per second per camera',
                                          minimum=0.0, exclusive_minimum=True)
-    debug_image_scale: float = setting(1.0, 'debug image size, fraction of the source image',
+    debug_image_scale: float = setting(0.5, 'debug image size, fraction of the source image',
                                        minimum=0.0, exclusive_minimum=True, maximum=1.0)
     device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
     threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0)

@@ -69,7 +69,7 @@ def test_bad_arguments_fail_at_start(ros_env, tmp_path):
 
 def test_ros_args_move_the_rig_with_debug_images_and_tf(ros_env, tmp_path):
     """`--ros-args -r __ns:=/rig1` moves every topic of the pipeline; the debug image of each
-    camera is on by default (bgr8, source size, with its camera_info) and the recording's
+    camera is on by default (bgr8, half the source size, with its camera_info) and the recording's
     /tf_static is replayed (when tf2_msgs is installed)."""
     rig, stamps = noise_recording(tmp_path / 'rec', cameras=2, frames=4)
     model = small_checkpoint(tmp_path / 'model.pt')
@@ -91,7 +91,8 @@ def test_ros_args_move_the_rig_with_debug_images_and_tf(ros_env, tmp_path):
             assert proc.stop() == 0, proc.output()
     assert not default
     image = debug[0]
-    assert (image.encoding, image.width, image.height) == ('bgr8', 320, 240)
-    np.testing.assert_allclose(np.reshape(debug_info[0].k, (3, 3)), rig[0].K)
+    assert (image.encoding, image.width, image.height) == ('bgr8', 160, 120)   # scale 0.5
+    np.testing.assert_allclose(np.reshape(debug_info[0].k, (3, 3)),
+                               rig[0].crop((0, 0, 320, 240), (160, 120)).K)
     if tf is not None:
         assert {t.child_frame_id for t in tf[0].transforms} == {'cam0_optical', 'cam1_optical'}

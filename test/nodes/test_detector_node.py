@@ -107,7 +107,8 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
     rig, rig_path, first, second, images = setup
     aspect = INPUT[1] / INPUT[0]
     params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
-                  track_timeout_s=3600.0, device='cpu', debug_image=True)
+                  track_timeout_s=3600.0, device='cpu', debug_image=True,
+                  debug_image_scale=1.0)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = Stream(ros, rig)
         overlays = ros.collect('/monet/cam1/debug_image', Image, 100)
