@@ -1,10 +1,12 @@
-"""The detector takes its image transport from the recording and says when its image topics
-have no publisher (log and /diagnostics)."""
+"""The detector takes its image transport from the recording, says when its image topics
+have no publisher (log and /diagnostics), and takes tracking settings live."""
 from diagnostic_msgs.msg import DiagnosticArray
 from helpers.recordings import small_checkpoint
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import ring_rig
 import numpy as np
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from monet_ros.io import BagWriter, camera_info_from_camera, compressed_image_msg
@@ -70,3 +72,36 @@ def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(
     output = node.output()
     assert output.count('no publisher on /cam0/image_raw/compressed') == 1, output
     assert 'Traceback' not in output
+
+
+def test_tracking_parameters_are_live_the_rest_read_only(ros_env, tmp_path):
+    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+    rig = [c.replace(width=320, height=240, K=K) for c in ring_rig(2)]
+    compressed_recording(tmp_path / 'rec', rig)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    params = dict(rig=str(tmp_path / 'rec'), model=str(model), device='cpu')
+
+    def double(name, value):
+        return Parameter(name=name, value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=value))
+
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        setter = ros.node.create_client(SetParameters, '/monet/detector/set_parameters')
+        getter = ros.node.create_client(GetParameters, '/monet/detector/get_parameters')
+        assert ros.spin_until(lambda: setter.service_is_ready() and getter.service_is_ready(),
+                              timeout=60, process=node), node.output()
+        results = []
+        for param in (double('track_margin', 0.5), double('track_margin', -1.0),
+                      double('batch_wait_ms', 5.0)):
+            future = setter.call_async(SetParameters.Request(parameters=[param]))
+            assert ros.spin_until(future.done, timeout=30, process=node)
+            results.append(future.result().results[0])
+        future = getter.call_async(GetParameters.Request(names=['track_margin',
+                                                               'batch_wait_ms']))
+        assert ros.spin_until(future.done, timeout=30, process=node)
+        values = [v.double_value for v in future.result().values]
+        assert node.stop() == 0, node.output()
+    assert results[0].successful, results[0].reason
+    assert not results[1].successful                      # out of range (>= 0)
+    assert not results[2].successful                      # read-only
+    assert values == [0.5, 15.0]
