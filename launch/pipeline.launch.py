@@ -7,8 +7,9 @@ and a player when `bag` is given, all in one namespace (default `monet`).
         transport:=compressed debug_image:=true use_sim_time:=true slop_ms:=5.0 rate:=0.5
 
 Parameters come from config/{detector,fusion,player}.yaml, then these arguments. The player
-waits until the detector subscribes to its image topics (player.yaml
-wait_for_subscribers / wait_for_subscribers_s) before it plays. The Fast DDS profile
+waits until the detector subscribes to its image topics and the fusion node to the
+heatmaps (player.yaml wait_for_subscribers / wait_for_subscribers_s, wait_for_topics) before
+it plays. The Fast DDS profile
 (config/fastdds_profile.xml, 64 MB shared memory) carries full-size images.
 """
 import os
@@ -53,6 +54,7 @@ def generate_launch_description():
                  PythonExpression(["'", arg['bag'], "' != ''"])),
              parameters=[os.path.join(config, 'player.yaml'), {
                  'bag': ParameterValue(arg['bag'], value_type=str),
+                 'wait_for_topics': ['{camera}/heatmaps'],      # the fusion node listens
                  'rate': ParameterValue(arg['rate'], value_type=float)}], **common),
         Node(executable='detector', name='detector',
              parameters=[os.path.join(config, 'detector.yaml'), {

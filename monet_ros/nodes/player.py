@@ -19,7 +19,7 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
 from monet_ros.config import ConfigError, setting, validate_config
-from monet_ros.io import open_bag
+from monet_ros.io import camera_name_for_topic, open_bag
 from monet_ros.nodes.names import node_namespace
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_OUT, LATCHED, STREAM_OUT
@@ -48,6 +48,11 @@ class PlayerConfig:
     wait_for_subscribers: int = setting(1, 'before playing, wait until every replayed image '
                                         'and camera_info topic has this many subscribers '
                                         '(0 = do not wait)', minimum=0)
+    wait_for_topics: tuple[str, ...] = setting((), 'also wait until these topics have '
+                                               'wait_for_subscribers subscribers ({camera} = '
+                                               'each camera of the recording; relative names '
+                                               'are in the node namespace), e.g. '
+                                               '{camera}/heatmaps for a fusion node')
     wait_for_subscribers_s: float = setting(30.0, 'give up waiting for subscribers after this '
                                             'long and play anyway, with a warning (0 = wait '
                                             'forever)', minimum=0.0)
@@ -149,11 +154,17 @@ class PlayerNode(Node):
         available = self.reader.topics
         topics = [t for t in self.pubs if available[t].msgtype in IMAGE_TYPES + CAMERA_INFO]
         topics = topics or list(self.pubs)
+        cameras = sorted({camera_name_for_topic(t) for t in self.image_topics})
+        others = [self.resolve_topic_name(t.format(camera=c))
+                  for t in self.config.wait_for_topics for c in cameras]
+        topics = topics + sorted(set(others))
         wanted = self.config.wait_for_subscribers
         limit = self.config.wait_for_subscribers_s
         start = time.monotonic()
         while not self.stopping.is_set():
-            missing = [t for t in topics if self.pubs[t].get_subscription_count() < wanted]
+            missing = [t for t in topics
+                       if (self.pubs[t].get_subscription_count() if t in self.pubs
+                           else self.count_subscribers(t)) < wanted]
             if not missing:
                 self.get_logger().info(f'{len(topics)} topics have {wanted} subscriber(s) '
                                        f'after {time.monotonic() - start:.1f} s: playing')
