@@ -8,7 +8,6 @@ the cameras by stamp (exact or within `slop_ms`), and calls the fusion core
 (fewer views) and reported in /diagnostics; after `silent_after_s` frames no longer wait.
 """
 from collections import OrderedDict
-import copy
 from dataclasses import dataclass
 import sys
 import time
@@ -41,7 +40,7 @@ from monet_ros.nodes.names import (
     node_namespace,
 )
 from monet_ros.nodes.params import declare_config
-from monet_ros.nodes.qos import HEATMAPS_IN, LATCHED, STREAM_OUT, adapted_reliability
+from monet_ros.nodes.qos import HEATMAPS_IN, LATCHED, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import run_node
 from monet_ros.nodes.sync import StampSynchronizer
@@ -133,11 +132,13 @@ class FusionNode(Node):
         self.sync = StampSynchronizer(self.names, slop_ns=int(config.slop_ms * 1e6),
                                       timeout_s=config.timeout_s, min_keys=config.min_views)
         self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.names}
-        self.inputs = {}          # (camera, kind) -> (subscription, reliability)
         for name in self.names:
-            for kind in (0, 1):
-                self.subscribe_input(name, kind, HEATMAPS_IN.reliability)
-        self.create_timer(0.2, self.adapt_inputs)
+            self.create_subscription(
+                Image, config.heatmap_topic.format(camera=name),
+                lambda msg, n=name: self.on_message(n, 0, msg), HEATMAPS_IN)
+            self.create_subscription(
+                CameraInfo, config.camera_info_topic.format(camera=name),
+                lambda msg, n=name: self.on_message(n, 1, msg), HEATMAPS_IN)
         self.pub_points = self.create_publisher(PointCloud2, KEYPOINTS3D, STREAM_OUT)
         self.pub_skeleton = self.create_publisher(MarkerArray, SKELETON, STREAM_OUT)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
@@ -165,31 +166,6 @@ class FusionNode(Node):
         self.config = config
 
     # ------------------------------------------------------------------ input
-    def input_topic(self, name, kind):
-        template = self.config.heatmap_topic if kind == 0 else self.config.camera_info_topic
-        return template.format(camera=name)
-
-    def subscribe_input(self, name, kind, reliability):
-        """(Re)create the heatmap (kind 0) or camera_info (kind 1) subscription of a camera
-        with the given reliability (HEATMAPS_IN otherwise)."""
-        old = self.inputs.get((name, kind))
-        if old is not None:
-            self.destroy_subscription(old[0])
-        qos = copy.copy(HEATMAPS_IN)
-        qos.reliability = reliability
-        sub = self.create_subscription(
-            Image if kind == 0 else CameraInfo, self.input_topic(name, kind),
-            lambda msg, n=name, k=kind: self.on_message(n, k, msg), qos)
-        self.inputs[(name, kind)] = (sub, reliability)
-
-    def adapt_inputs(self):
-        """Best-effort inputs match every publisher; once all publishers of a topic are
-        reliable, subscribe reliably so that lost fragments are sent again (and back)."""
-        for (name, kind), (_, current) in list(self.inputs.items()):
-            wanted = adapted_reliability(self, self.input_topic(name, kind))
-            if wanted is not None and wanted != current:
-                self.subscribe_input(name, kind, wanted)
-
     def on_message(self, name, kind, msg):
         """kind 0 = heatmaps, 1 = camera_info: pair the two by exact stamp, then sync."""
         stats = self.stats[name]

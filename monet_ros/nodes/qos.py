@@ -16,26 +16,11 @@ STREAM_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                        reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)
 # Heatmaps + camera_info into fusion: best-effort so that reliable and best-effort detectors
-# (another host's, anyone's) both match; deep enough to absorb a burst. Fusion switches a
-# topic to reliable once every publisher on it is reliable (adapted_reliability, as rosbag2
-# does), so that a lost fragment of a large heatmap is sent again.
+# (another host's, anyone's) both match (with a reliable publisher on a healthy link nothing
+# is lost in practice); deep enough to absorb a burst.
 HEATMAPS_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=30,
                          reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE)
-
-
-def adapted_reliability(node, topic):
-    """The reliability a subscription to `topic` should have to match every publisher on
-    it with the best delivery: RELIABLE when all are reliable, BEST_EFFORT when any is
-    best-effort, None when there is no publisher (yet)."""
-    infos = node.get_publishers_info_by_topic(node.resolve_topic_name(topic))
-    if not infos:
-        return None
-    if all(i.qos_profile.reliability == ReliabilityPolicy.RELIABLE for i in infos):
-        return ReliabilityPolicy.RELIABLE
-    return ReliabilityPolicy.BEST_EFFORT
-
-
 # Everything we publish per frame.
 STREAM_OUT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                         reliability=ReliabilityPolicy.RELIABLE,
