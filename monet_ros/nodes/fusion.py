@@ -8,6 +8,7 @@ the cameras by stamp (exact or within `slop_ms`), and calls the fusion core
 (fewer views) and reported in /diagnostics; after `silent_after_s` frames no longer wait.
 """
 from collections import OrderedDict
+import copy
 from dataclasses import dataclass
 import sys
 import time
@@ -16,6 +17,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
@@ -65,6 +67,10 @@ class FusionNodeConfig(FusionConfig):
                                   'the node namespace, default /monet)')
     camera_info_topic: str = setting(HEATMAP_CAMERA_INFO,
                                      'heatmap virtual camera_info topic per camera')
+    input_reliability: str = setting('best_effort', 'QoS of the heatmap and camera_info '
+                                     'subscriptions: best_effort matches every publisher; '
+                                     'reliable only reliable ones, but a lost view is sent again',
+                                     choices=('best_effort', 'reliable'))
     slop_ms: float = setting(0.0, 'stamp tolerance between cameras (0 = exact)', minimum=0.0)
     timeout_s: float = setting(0.3, 'wait this long for missing cameras of a frame, then '
                                'fuse the others', minimum=0.0)
@@ -132,13 +138,16 @@ class FusionNode(Node):
         self.sync = StampSynchronizer(self.names, slop_ns=int(config.slop_ms * 1e6),
                                       timeout_s=config.timeout_s, min_keys=config.min_views)
         self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.names}
+        inputs = copy.copy(HEATMAPS_IN)
+        if config.input_reliability == 'reliable':
+            inputs.reliability = ReliabilityPolicy.RELIABLE
         for name in self.names:
             self.create_subscription(
                 Image, config.heatmap_topic.format(camera=name),
-                lambda msg, n=name: self.on_message(n, 0, msg), HEATMAPS_IN)
+                lambda msg, n=name: self.on_message(n, 0, msg), inputs)
             self.create_subscription(
                 CameraInfo, config.camera_info_topic.format(camera=name),
-                lambda msg, n=name: self.on_message(n, 1, msg), HEATMAPS_IN)
+                lambda msg, n=name: self.on_message(n, 1, msg), inputs)
         self.pub_points = self.create_publisher(PointCloud2, KEYPOINTS3D, STREAM_OUT)
         self.pub_skeleton = self.create_publisher(MarkerArray, SKELETON, STREAM_OUT)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)

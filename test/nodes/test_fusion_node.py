@@ -34,7 +34,9 @@ def test_fuses_excludes_the_wrong_view_and_reports_true_errors(ros_env, rig_file
     rng = np.random.default_rng(7)
     X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], size=(14, 3))
     frames = [Frame(rig, X, i, rng, noise=0.0 if i % 2 == 0 else 0.3) for i in range(4)]
-    with RosHarness(ros_env) as ros, start_fusion(ros_env, path, timeout_s=2.0) as node:
+    # reliable inputs: a view lost under load (best-effort) would change the view counts
+    with RosHarness(ros_env) as ros, start_fusion(ros_env, path, timeout_s=2.0,
+                                                  input_reliability='reliable') as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         markers = ros.collect('/monet/skeleton', MarkerArray)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)

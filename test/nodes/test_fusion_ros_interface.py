@@ -123,8 +123,8 @@ def test_parameters_ranges_live_changes_and_dump_round_trip(ros_env, rig_file, t
     rng = np.random.default_rng(5)
     X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], size=(14, 3))
     service = '/monet/fusion'
-    with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env,
-                                                 dict(rig=str(path), timeout_s=2.0)) as node:
+    params = dict(rig=str(path), timeout_s=2.0, input_reliability='reliable')
+    with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         described = call(ros, DescribeParameters, f'{service}/describe_parameters',
                          DescribeParameters.Request(names=['threshold_px', 'min_views',
                                                            'slop_ms']), node).descriptors
