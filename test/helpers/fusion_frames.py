@@ -1,7 +1,5 @@
 """Heatmap + camera_info frames of a known 3D subject for fusion tests (a wrong view
 included), and the publish-until-fused loop."""
-import copy
-
 import numpy as np
 from sensor_msgs.msg import CameraInfo, Image
 
@@ -60,28 +58,9 @@ def fused_frames(diagnostics):
     return 0
 
 
-def warm_up_frame(frame, shift_ns=1_000_000):
-    """A copy of `frame` stamped `shift_ns` earlier (a separate, older group)."""
-    warm = copy.copy(frame)
-    warm.stamp = frame.stamp - shift_ns
-    warm.messages = []
-    for name, heat, info in frame.messages:
-        heat, info = copy.deepcopy(heat), copy.deepcopy(info)
-        for msg in (heat, info):
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(warm.stamp, 10**9)
-        warm.messages.append((name, heat, info))
-    return warm
-
-
-def run_frames(ros, node, pubs, frames, clouds, timeout=30.0, warm_up=True):
-    """Publish each frame until its keypoints3d comes back; returns {stamp: cloud}.
-
-    warm_up: first a copy of the first frame, 1 ms earlier, until its keypoints3d comes
-    back: the node's best-effort subscriptions drop what arrives before they have matched
-    the publisher themselves (the publisher sees them earlier), which would leave the first
-    real frame with missing views."""
+def run_frames(ros, node, pubs, frames, clouds, timeout=30.0):
+    """Publish each frame until its keypoints3d comes back; returns {stamp: cloud}."""
     got = {}
-    frames = ([warm_up_frame(frames[0])] if warm_up and frames else []) + list(frames)
     for frame in frames:
         def arrived(stamp=frame.stamp):
             got.update({header_stamp_ns(c): c for c in clouds})
