@@ -129,6 +129,7 @@ class FusionNode(Node):
         self.skeleton = load_skeleton(config.skeleton)
         self.frame_id = config.frame_id or rig_frame
         self.stats = {name: CameraStats() for name in self.names}
+        self.started = time.monotonic()
         self.frames = 0
         self.partial_frames = 0
         self.fusion_seconds = []
@@ -223,8 +224,11 @@ class FusionNode(Node):
 
     def on_poll(self):
         now = time.monotonic()
+        # a camera not seen yet counts as live for silent_after_s after the start, so that
+        # the first frames wait for it instead of completing without it
         live = [n for n, s in self.stats.items()
-                if s.last_seen is not None and now - s.last_seen < self.config.silent_after_s]
+                if now - (self.started if s.last_seen is None else s.last_seen)
+                < self.config.silent_after_s]
         self.sync.set_expected(live)
         for group in self.sync.poll():
             self.fuse(group)
