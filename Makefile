@@ -6,7 +6,7 @@ STAMP := $(VENV)/.monet-installed
 # The ROS wheels re-exec Python with their library path; never inherit another venv's state.
 unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
 
-.PHONY: venv demo test lint bench clean browser-deps
+.PHONY: venv tf2_msgs demo test lint bench clean browser-deps
 
 venv: $(STAMP)
 
@@ -15,7 +15,14 @@ $(STAMP): requirements.txt setup.py
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
 	$(PY) -c "import rclpy, torch, cv2, mcap, rosbags, h5py, pandas, pynwb, ndx_pose, flask, selenium; print('environment ready: torch', torch.__version__)"
+	@if command -v cmake >/dev/null && command -v c++ >/dev/null; then \
+	    tools/build_tf2_msgs.sh $(VENV) || echo 'note: tf2_msgs not built: TF is off, its tests skip'; \
+	else echo 'note: no cmake / C++ compiler: tf2_msgs not built, TF is off, its tests skip'; fi
 	touch $(STAMP)
+
+# tf2_msgs (no pip wheel) built from its message definition with the wheels' rosidl generators.
+tf2_msgs: $(STAMP)
+	tools/build_tf2_msgs.sh $(VENV)
 
 demo: $(STAMP)
 	$(PY) -m monet_ros.cli pipeline

@@ -3,6 +3,7 @@ detector micro-benchmarks, side by side in one run.
 
     .venv/bin/python bench/pipeline.py                 # the full run (~4 min, quiet machine)
     .venv/bin/python bench/pipeline.py --quick         # every table, tiny sizes (~1-2 min)
+    .venv/bin/python bench/pipeline.py --viewable --layouts in-process --extra  # their cost
 
 End to end (`--cameras`, default 4 and 8 at `--rate` 30 Hz, plus `--extra` 4@60): V
 camera streams (640x480 rgb8 + camera_info, stamped with the wall clock) go through a real
@@ -19,7 +20,10 @@ undistort, triangulate, errors, publish).
 Micro-benchmarks (this process, median of --runs): fuse_heatmaps per frame at 4/8/35 views
 against plain DLT of the same peaks (geometry.triangulate) with the stage split, the
 undistortion's error against cv2.undistortPoints, and Detector.predict images/s with the
-torch and the ONNX Runtime backends. Prints tables and the load average; never asserts.
+torch and the ONNX Runtime backends. --viewable runs every end-to-end case twice, with the
+viewable outputs off and on (the detector's debug_image at its default rate with a subscriber
+to every camera's, the fusion node's /tf_static and camera markers), to show what they cost.
+Prints tables and the load average; never asserts.
 """
 import argparse
 import json
@@ -146,7 +150,7 @@ def run_env(workdir):
     return env
 
 
-def live(layout, views, rate, seconds, warmup, threads, backend, workdir):
+def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewable=False):
     """One end-to-end run in a fresh process (clean DDS state); returns its figures."""
     rig = make_rig(RigConfig(num_cameras=views))
     rig_path = workdir / f'rig{views}.yaml'
@@ -158,7 +162,7 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir):
         save_checkpoint(model_path, build_model('small', 14), {'keypoints': keypoint_names()})
     spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
                 threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
-                workdir=str(workdir))
+                workdir=str(workdir), viewable=viewable)
     proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
                           env=run_env(workdir), capture_output=True, text=True,
                           timeout=300 + seconds + warmup)
@@ -173,7 +177,7 @@ class Feeder:
     """The camera side and the stopwatch: publishes V image streams at `rate` and times
     every /monet/keypoints3d from its image stamp; keeps the nodes' latest /diagnostics."""
 
-    def __init__(self, node, rig):
+    def __init__(self, node, rig, viewable=False):
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
@@ -185,7 +189,12 @@ class Feeder:
         node.create_subscription(
             PointCloud2, '/monet/keypoints3d',
             lambda m: self.latencies.append(time.time_ns() - header_stamp_ns(m)), STREAM_IN)
+        self.debug_count = [0]
         for cam in rig:
+            if viewable:      # a debug image is drawn only while someone subscribes
+                node.create_subscription(Image, f'/monet/{cam.name}/debug_image',
+                                         lambda m: self.debug_count.__setitem__(
+                                             0, self.debug_count[0] + 1), STREAM_IN)
             node.create_subscription(Image, f'/monet/{cam.name}/heatmaps',
                                      lambda m: self.heat_count.__setitem__(
                                          0, self.heat_count[0] + 1), STREAM_IN)
@@ -256,14 +265,16 @@ def worker(spec):
 
     rig = load_rig(spec['rig'])
     detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
-                           threads=spec['threads'], backend=spec['backend'])
-    fusion_params = dict(rig=spec['rig'])
+                           threads=spec['threads'], backend=spec['backend'],
+                           debug_image=spec['viewable'])
+    fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
+                         camera_markers=spec['viewable'])
     procs, nodes = [], []
     if spec['layout'] == 'three-process':
         import yaml
         params = Path(spec['workdir']) / f'params_{os.getpid()}.yaml'
-        params.write_text(yaml.safe_dump({'detector': {'ros__parameters': detector_params},
-                                          'fusion': {'ros__parameters': fusion_params}}))
+        params.write_text(yaml.safe_dump({'/**/detector': {'ros__parameters': detector_params},
+                                          '/**/fusion': {'ros__parameters': fusion_params}}))
         procs = [subprocess.Popen([sys.executable, '-m', f'monet_ros.nodes.{name}',
                                    '--ros-args', '--params-file', str(params)],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -283,7 +294,7 @@ def worker(spec):
         nodes.append(bench)
         for node in nodes:
             executor.add_node(node)
-        feeder = Feeder(bench, rig)
+        feeder = Feeder(bench, rig, spec['viewable'])
         result = feeder.run(lambda t: executor.spin_once(timeout_sec=t), spec['rate'],
                             spec['seconds'], spec['warmup'])
     finally:
@@ -328,6 +339,8 @@ def main():
     parser.add_argument('--architectures', nargs='+', default=['small'],
                         help='networks of the torch / ONNX Runtime comparison')
     parser.add_argument('--skip-live', action='store_true', help='micro-benchmarks only')
+    parser.add_argument('--viewable', action='store_true', help='every end-to-end case with '
+                        'the viewable outputs (debug images, TF, camera markers) off and on')
     parser.add_argument('--quick', action='store_true',
                         help='every table at tiny sizes (2 cameras, 2 s runs, few repeats)')
     parser.add_argument('--worker', help=argparse.SUPPRESS)
@@ -376,25 +389,29 @@ def main():
             runs.append((int(cams), float(hz)))
         print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend}, '
               f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up')
-        print('| cameras @ Hz | layout | published frames/s | keypoints3d/s | detector images/s'
+        print('| cameras @ Hz | layout | viewable | published frames/s | keypoints3d/s | '
+              'detector images/s'
               ' | latency median ms | latency p95 ms | detector ms/batch: convert, crop, '
               'forward, publish | fusion ms: receive (per view), decode, undistort, '
               'triangulate, errors, publish | load |')
-        print('|---|---|---|---|---|---|---|---|---|---|')
-        for views, rate in runs:
-            for layout in args.layouts:
-                r = live(layout, views, rate, args.seconds, args.warmup, args.threads,
-                         args.backend, workdir)
-                load = os.getloadavg()[0]
-                if 'error' in r:
-                    print(f'| {views} @ {rate:.0f} | {layout} | failed: {r["error"]} |||||||'
-                          f' {load:.1f} |', flush=True)
-                    continue
-                d = r['diagnostics']
-                print(f'| {views} @ {rate:.0f} | {layout} | {r["published"]:.1f} | '
-                      f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | '
-                      f'{r["p95"]:.0f} | {stage_text(d, "detector", DETECTOR_STAGES)} | '
-                      f'{stage_text(d, "fusion", FUSION_STAGES)} | {load:.1f} |', flush=True)
+        print('|---|---|---|---|---|---|---|---|---|---|---|')
+        cases = [(views, rate, layout, viewable) for views, rate in runs
+                 for layout in args.layouts
+                 for viewable in ((False, True) if args.viewable else (False,))]
+        for views, rate, layout, viewable in cases:
+            r = live(layout, views, rate, args.seconds, args.warmup, args.threads,
+                     args.backend, workdir, viewable)
+            load = os.getloadavg()[0]
+            shown = 'on' if viewable else 'off'
+            if 'error' in r:
+                print(f'| {views} @ {rate:.0f} | {layout} | {shown} | failed: '
+                      f'{r["error"]} ||||||| {load:.1f} |', flush=True)
+                continue
+            d = r['diagnostics']
+            print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
+                  f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | '
+                  f'{r["p95"]:.0f} | {stage_text(d, "detector", DETECTOR_STAGES)} | '
+                  f'{stage_text(d, "fusion", FUSION_STAGES)} | {load:.1f} |', flush=True)
     print(f'# load average {" ".join(f"{x:.1f}" for x in os.getloadavg())} at the end (a '
           'shared machine inflates every figure)')
     return 0

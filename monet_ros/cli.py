@@ -103,8 +103,17 @@ def main(argv=None):
     name = 'monet'
     try:
         with sigterm_as_interrupt():
-            args = build_parser().parse_args(argv)
+            argv = list(sys.argv[1:] if argv is None else argv)
+            ros_args = []
+            if '--ros-args' in argv:      # ROS arguments for the nodes of `monet pipeline`
+                index = argv.index('--ros-args')
+                argv, ros_args = argv[:index], argv[index:]
+            parser = build_parser()
+            args = parser.parse_args(argv)
+            args.ros_args = ros_args
             name = f'monet {args.command}'
+            if ros_args and args.command != 'pipeline':
+                parser.error('--ros-args is only for `monet pipeline` (its ROS nodes)')
             try:
                 return int(args.handler(args) or 0)
             except bad_input_errors() as error:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import yaml
 
-CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config' / 'skeletons'
+from monet_ros.share import share_path
 
 
 class SkeletonError(ValueError):
@@ -87,7 +87,10 @@ def load_skeleton(path_or_name):
     """A Skeleton from a YAML path, or a preset name under config/skeletons (e.g. 'human14')."""
     path = Path(path_or_name)
     if not path.suffix and not path.exists():
-        path = CONFIG_DIR / f'{path_or_name}.yaml'
+        try:
+            path = share_path('config', 'skeletons', f'{path_or_name}.yaml')
+        except FileNotFoundError as error:
+            raise SkeletonError(f'skeleton preset {path_or_name!r}: {error}') from None
     if not path.is_file():
         raise SkeletonError(f'{path}: skeleton file not found')
     from monet_ros.geometry.rig_fields import safe_yaml

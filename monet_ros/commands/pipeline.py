@@ -48,6 +48,9 @@ def add_arguments(parser):
     parser.add_argument('--confidence-threshold', type=float, default=0.1,
                         help='heatmap peak value below which a view is ignored (as in '
                         '`monet process`)')
+    parser.add_argument('--no-debug-image', dest='debug_image', action='store_false',
+                        help='do not publish <cam>/debug_image (on by default, 2 Hz per camera, '
+                        'only drawn while someone subscribes)')
     parser.add_argument('--device', default='', help="torch device ('' = auto)")
     parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
                         help='detector inference backend (onnxruntime: exported once, cached '
@@ -213,11 +216,22 @@ def check_skeleton(fusion, detector, skeleton, model):
                           f'{model_names}; give --skeleton matching the model')
 
 
+def tf_topics(bag):
+    """['/tf_static'] when the recording has it (the player replays it, latched, so that
+    viewers see the rig's frames; it says so when tf2_msgs is not installed), else []."""
+    from monet_ros.io import open_bag
+    return [t for t in ('/tf_static',) if t in open_bag(bag).topics]
+
+
 def run(args):
     from monet_ros.nodes.runner import (
         CallbackGuard,
+        ignore_signals,
+        init_rclpy,
+        say_goodbye,
         start_error,
         stop_executor,
+        stop_requested,
         until_shutdown,
         use_large_data_profile,
     )
@@ -250,7 +264,7 @@ def run(args):
     rig = args.rig or args.bag
     cameras = list(args.cameras or [])
     summary = Summary()
-    rclpy.init(args=['--ros-args'])
+    init_rclpy(list(getattr(args, 'ros_args', None) or ['--ros-args']))
     nodes = []
     detector = executor = None
     try:
@@ -265,13 +279,15 @@ def run(args):
                 detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
                                                        model=str(args.model), transport=transport,
                                                        device=args.device, backend=args.backend,
-                                                       threads=args.threads))
+                                                       threads=args.threads,
+                                                       debug_image=args.debug_image))
                 nodes.append(detector)
                 check_skeleton(fusion, detector, args.skeleton, args.model)
                 player = PlayerNode(overrides=dict(
                     bag=str(args.bag), rate=0.0 if args.lockstep else options.rate,
                     loop=args.loop, wait_for_subscribers=1, start_delay_s=options.start_delay,
-                    topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]))
+                    topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]
+                    + tf_topics(args.bag)))
                 nodes.append(player)
                 if args.learn:
                     nodes.append(learner_node(args, rig, summary))
@@ -292,7 +308,7 @@ def run(args):
             started = time.monotonic()
             next_line = started + 1.0
             ended = None
-            while rclpy.ok():
+            while rclpy.ok() and not stop_requested():
                 try:
                     executor.spin_once(timeout_sec=0.05)
                 except Exception:  # noqa: BLE001 - a signal shut the context down mid-call
@@ -314,9 +330,11 @@ def run(args):
                     if now - max(ended, summary.last_fused or ended) > 2.0:
                         break
     finally:
+        ignore_signals()
         for node in nodes:
             if isinstance(node, PlayerNode):
                 node.stopping.set()           # no publishing into a closing context
+        say_goodbye(nodes)
         if executor is not None:
             stop_executor(executor)
         for node in reversed(nodes):

@@ -32,7 +32,8 @@ __all__ = [
     'any_image_to_numpy', 'camera_from_camera_info', 'camera_info_from_camera',
     'cloud_to_keypoints3d', 'compressed_image_msg', 'compressed_image_to_numpy',
     'header_stamp_ns', 'heatmaps_to_image_msg', 'image_msg_to_heatmaps', 'image_to_numpy',
-    'keypoints3d_to_cloud', 'numpy_to_image_msg', 'skeleton_marker_array',
+    'delete_all_markers', 'keypoints3d_to_cloud', 'marker_array', 'numpy_to_image_msg',
+    'skeleton_marker_array',
 ]
 
 
@@ -121,9 +122,18 @@ def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error
 
 
 def skeleton_marker_array(stamp, frame_id, X, bone_indices, ns='monet', scale=0.03,
-                          lifetime_ns=0):
+                          lifetime_ns=0, names=None):
     """(N, 3) keypoints + (B, 2) bone index pairs -> visualization_msgs.msg.MarkerArray
-    (a SPHERE_LIST of the finite joints and a LINE_LIST of bones with both ends finite)."""
+    (a SPHERE_LIST of the finite joints and a LINE_LIST of bones with both ends finite;
+    with `names`, a text marker per finite joint). lifetime_ns: how long a viewer shows
+    them without an update (0 = forever)."""
+    return marker_array(stamp, frame_id, skeleton_marker_specs(X, bone_indices, ns=ns,
+                                                               scale=scale, names=names),
+                        lifetime_ns)
+
+
+def marker_array(stamp, frame_id, specs, lifetime_ns=0):
+    """Marker specs (monet_ros.io.markers) -> visualization_msgs.msg.MarkerArray."""
     from builtin_interfaces.msg import Duration
     from geometry_msgs.msg import Point, Pose, Quaternion, Vector3
     from std_msgs.msg import ColorRGBA
@@ -131,15 +141,25 @@ def skeleton_marker_array(stamp, frame_id, X, bone_indices, ns='monet', scale=0.
 
     header = _header(stamp, frame_id)
     markers = []
-    for spec in skeleton_marker_specs(X, bone_indices, ns=ns, scale=scale):
+    for spec in specs:
+        position = spec.get('position', (0.0, 0.0, 0.0))
         m = Marker(header=header, ns=spec['ns'], id=spec['id'], type=spec['type'],
                    action=Marker.ADD,
-                   pose=Pose(orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
+                   pose=Pose(position=Point(x=float(position[0]), y=float(position[1]),
+                                            z=float(position[2])),
+                             orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0)),
                    scale=Vector3(x=spec['scale'][0], y=spec['scale'][1], z=spec['scale'][2]),
                    color=ColorRGBA(r=spec['color'][0], g=spec['color'][1],
                                    b=spec['color'][2], a=spec['color'][3]),
                    lifetime=Duration(sec=int(lifetime_ns) // 1_000_000_000,
-                                     nanosec=int(lifetime_ns) % 1_000_000_000))
+                                     nanosec=int(lifetime_ns) % 1_000_000_000),
+                   text=spec.get('text', ''))
         m.points = [Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in spec['points']]
         markers.append(m)
     return MarkerArray(markers=markers)
+
+
+def delete_all_markers(stamp, frame_id):
+    """A MarkerArray with one DELETEALL marker: viewers drop every marker of the topic."""
+    from visualization_msgs.msg import Marker, MarkerArray
+    return MarkerArray(markers=[Marker(header=_header(stamp, frame_id), action=Marker.DELETEALL)])

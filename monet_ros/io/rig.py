@@ -78,7 +78,13 @@ def _rig_file_sized_by(path, rig_file):
 
 
 def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None):
-    """list[Camera] of a bag, sorted by name.
+    """list[Camera] of a bag, sorted by name (see rig_and_frame_from_bag)."""
+    return rig_and_frame_from_bag(path, rig_file, world_frame, camera_info_topics)[0]
+
+
+def rig_and_frame_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None):
+    """(list[Camera] sorted by name, root frame) of a bag; the root frame is the TF frame
+    the camera poses are expressed in (None with rig_file).
 
     With rig_file: monet_ros.geometry.load_rig(rig_file) (the recording's image size when
     the file stores none, as stereo_calib's intrinsics.yml). Otherwise intrinsics from the
@@ -90,7 +96,7 @@ def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None)
     path: a bag path or a BagReader. Raises RigFromBagError naming what is missing.
     """
     if rig_file is not None:
-        return _rig_file_sized_by(path, rig_file)
+        return _rig_file_sized_by(path, rig_file), None
     reader = path if isinstance(path, BagReader) else open_bag(path)
     info_topics = sorted(camera_info_topics or reader.topics_of_type(CAMERA_INFO))
     if not info_topics:
@@ -149,4 +155,4 @@ def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None)
     if len(set(roots.values())) > 1:
         raise RigFromBagError(f'bag {reader.path}: cameras are in different TF trees '
                               f'{roots}; pass world_frame or a rig file')
-    return sorted(cameras, key=lambda c: c.name)
+    return sorted(cameras, key=lambda c: c.name), next(iter(roots.values()))

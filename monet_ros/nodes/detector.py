@@ -15,7 +15,6 @@ from pathlib import Path
 import sys
 import time
 
-import cv2
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.node import Node
@@ -34,14 +33,27 @@ from monet_ros.io import (
     heatmaps_to_image_msg,
     numpy_to_image_msg,
 )
+from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
 from monet_ros.io.images import image_for_crop, raw_to_rgb8, to_rgb8
-from monet_ros.models import CheckpointError, Detector, decode_heatmaps
-from monet_ros.models.crop import crop_images
+from monet_ros.models import CheckpointError, Detector
+from monet_ros.nodes.names import (
+    DEBUG_CAMERA_INFO,
+    DEBUG_IMAGE,
+    DIAGNOSTICS,
+    HEATMAP_CAMERA_INFO,
+    HEATMAPS,
+    KEYPOINTS3D,
+    MODEL,
+    node_namespace,
+)
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.timing import StageTimer
+
+# Parameters that may change while running (`ros2 param set`), effective next frame.
+LIVE = ('track', 'track_margin', 'track_timeout_s', 'min_track_keypoints')
 
 
 @dataclass(frozen=True)
@@ -56,8 +68,11 @@ class DetectorConfig:
                                template_fields=('camera',))
     camera_info_topic: str = setting('', 'camera_info topic template (default: camera_info '
                                      'beside the image topic)', template_fields=('camera',))
-    transport: str = setting('raw', 'raw = sensor_msgs/Image; compressed = CompressedImage '
-                             'on <image_topic>/compressed', choices=('raw', 'compressed'))
+    transport: str = setting('auto', 'raw = sensor_msgs/Image; compressed = CompressedImage '
+                             'on <image_topic>/compressed; auto = as the rig says (a recording '
+                             'with only compressed images, or a rig topic ending in '
+                             '/compressed: compressed), else raw',
+                             choices=('auto', 'raw', 'compressed'))
     box: tuple[float, ...] = setting((), 'fixed crop box x0 y0 x1 y1 (pixel edges) when no '
                                      'subject is tracked (default: full frame)', length=(0, 4))
     track: bool = setting(True, 'crop around the projection of the latest /monet/keypoints3d')
@@ -75,8 +90,13 @@ class DetectorConfig:
     batch_wait_ms: float = setting(15.0, 'with several cameras: wait this long for the other '
                                    "cameras' frames before running a partial batch",
                                    minimum=0.0)
-    overlay: bool = setting(False, 'also publish /monet/<cam>/overlay (rgb8 crop, heatmaps, '
-                            'peaks)')
+    debug_image: bool = setting(False, 'also publish <cam>/debug_image (bgr8: the source image '
+                                'with the crop box, detected peaks and fused keypoints '
+                                'reprojected) and its camera_info, when subscribed')
+    debug_image_rate_hz: float = setting(2.0, 'most debug images per second per camera',
+                                         minimum=0.0, exclusive_minimum=True)
+    debug_image_scale: float = setting(0.5, 'debug image size, fraction of the source image',
+                                       minimum=0.0, exclusive_minimum=True, maximum=1.0)
     device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
     threads: int = setting(0, 'CPU threads of the network (torch and onnxruntime; 0 = their '
                            'default)', minimum=0)
@@ -100,13 +120,15 @@ class CameraSlot:
         self.info_key = None
         self.camera = None           # Camera from the latest camera_info (rig extrinsics)
         self.received = self.processed = self.dropped = self.bad = 0
+        self.last_debug = -float('inf')   # monotonic time of the last debug image
         self.last_bad = ''
 
 
 class DetectorNode(Node):
     def __init__(self, overrides=None, node_name='detector', **kwargs):
-        super().__init__(node_name, **kwargs)
-        self.config = config = declare_config(self, DetectorConfig, overrides)
+        super().__init__(node_name, **node_namespace(kwargs))
+        self.config = config = declare_config(self, DetectorConfig, overrides, live=LIVE,
+                                              on_change=self.apply_live)
         if config.threads:
             import torch
             torch.set_num_threads(config.threads)
@@ -129,11 +151,12 @@ class DetectorNode(Node):
         self.detector = self.load_detector(config.model)
         self.model_sha256 = sha256_file(config.model)
         self.slots = []
-        compressed = config.transport == 'compressed'
         for name, rig_camera in zip(names, rig_cameras):
             base = (config.image_topic.format(camera=name) if config.image_topic
                     else (rig_camera.topic if rig_camera is not None and rig_camera.topic
                           else f'/{name}/image_raw'))
+            compressed = (config.transport == 'compressed' or config.transport == 'auto'
+                          and base.endswith('/compressed'))
             base = base[:-len('/compressed')] if base.endswith('/compressed') else base
             image_topic = base + '/compressed' if compressed else base
             info_topic = (config.camera_info_topic.format(camera=name)
@@ -142,7 +165,7 @@ class DetectorNode(Node):
             self.slots.append(CameraSlot(name, rig_camera, image_topic, info_topic))
         self.pubs = {}
         for slot in self.slots:
-            if compressed:
+            if slot.image_topic.endswith('/compressed'):
                 self.create_subscription(CompressedImage, slot.image_topic,
                                          lambda m, s=slot: self.on_image(s, m), IMAGE_IN)
             else:
@@ -151,18 +174,21 @@ class DetectorNode(Node):
             self.create_subscription(CameraInfo, slot.info_topic,
                                      lambda m, s=slot: self.on_camera_info(s, m), STREAM_IN)
             self.pubs[slot.name] = (
-                self.create_publisher(Image, f'/monet/{slot.name}/heatmaps', STREAM_OUT),
-                self.create_publisher(CameraInfo, f'/monet/{slot.name}/camera_info',
+                self.create_publisher(Image, HEATMAPS.format(camera=slot.name), STREAM_OUT),
+                self.create_publisher(CameraInfo, HEATMAP_CAMERA_INFO.format(camera=slot.name),
                                       STREAM_OUT),
-                self.create_publisher(Image, f'/monet/{slot.name}/overlay', STREAM_OUT)
-                if config.overlay else None)
-        self.tracker = TrackedCrops(TrackedRule(
-            margin=config.track_margin, min_points=config.min_track_keypoints,
-            trim=config.track_trim, timeout_ns=int(round(config.track_timeout_s * 1e9))))
-        self.create_subscription(PointCloud2, '/monet/keypoints3d', self.on_keypoints,
+                (self.create_publisher(Image, DEBUG_IMAGE.format(camera=slot.name),
+                                       STREAM_OUT),
+                 self.create_publisher(CameraInfo, DEBUG_CAMERA_INFO.format(camera=slot.name),
+                                       STREAM_OUT))
+                if config.debug_image else None)
+        self.tracker = TrackedCrops(self.tracked_rule(config))
+        self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
-        self.create_subscription(String, '/monet/model', self.on_model, LATCHED)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', STREAM_OUT)
+        self.create_subscription(String, MODEL, self.on_model, LATCHED)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
+        self.unpublished = set()      # image topics already reported as without publisher
+        self.started = time.monotonic()
         self.create_timer(max(config.batch_wait_ms, 1.0) / 1e3, self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
         self.batches = 0
@@ -174,6 +200,18 @@ class DetectorNode(Node):
             f'{[(s.name, s.image_topic) for s in self.slots]} with '
             f'{self.detector.metadata.get("architecture")} ({len(self.detector.keypoints)} '
             f'keypoints, heatmaps {self.detector.heatmap_size}) on {self.detector.device}')
+
+    @staticmethod
+    def tracked_rule(config):
+        """The crop rule's settings (monet_ros.crop_rule.TrackedRule) of a DetectorConfig."""
+        return TrackedRule(margin=config.track_margin, min_points=config.min_track_keypoints,
+                           trim=config.track_trim,
+                           timeout_ns=int(round(config.track_timeout_s * 1e9)))
+
+    def apply_live(self, config):
+        """Use a changed config (a live tracking parameter was set) from the next frame."""
+        self.config = config
+        self.tracker.rule = self.tracked_rule(config)
 
     def load_detector(self, path):
         if not Path(path).is_file():
@@ -282,35 +320,43 @@ class DetectorNode(Node):
         self.forward_seconds = (self.forward_seconds + [time.perf_counter() - start])[-100:]
         self.batches += 1
         start = time.perf_counter()
-        for (slot, msg, image, layout, _), heat, heat_cam, box in zip(
+        for (slot, msg, image, layout, camera), heat, heat_cam, box in zip(
                 work, heatmaps, heat_cameras, boxes):
             stamp = header_stamp_ns(msg)
             frame_id = msg.header.frame_id
-            heat_pub, info_pub, overlay_pub = self.pubs[slot.name]
+            heat_pub, info_pub, debug_pubs = self.pubs[slot.name]
             info_pub.publish(camera_info_from_camera(heat_cam, stamp, frame_id))
             heat_pub.publish(heatmaps_to_image_msg(heat, stamp, frame_id))
-            if overlay_pub is not None:
-                overlay_pub.publish(numpy_to_image_msg(self.overlay(image, box, heat, layout),
-                                                       stamp, frame_id))
             slot.processed += 1
+            if debug_pubs is not None:
+                self.publish_debug(slot, debug_pubs, image, layout, camera, box, heat, heat_cam,
+                                   stamp, frame_id)
         self.timer.add('publish', time.perf_counter() - start)
 
-    def overlay(self, image, box, heat, layout='rgb8'):
-        """rgb8 network-input crop with the channel-max heatmap blended in and the peaks."""
-        h_in, w_in = self.detector.input_size
-        crop = np.ascontiguousarray(
-            raw_to_rgb8(crop_images([image], box[None], (w_in, h_in))[0], layout))
-        peak_map = cv2.resize(heat.max(axis=0), (w_in, h_in), interpolation=cv2.INTER_LINEAR)
-        colour = cv2.applyColorMap(np.clip(peak_map * 255, 0, 255).astype(np.uint8),
-                                   cv2.COLORMAP_JET)[..., ::-1]
-        out = cv2.addWeighted(crop, 0.6, colour, 0.4, 0)
-        peaks, conf = decode_heatmaps(heat[None])
-        h, w = heat.shape[1:]
-        scale = np.array([w_in / w, h_in / h])
-        for (u, v), c in zip((peaks[0] + 0.5) * scale - 0.5, conf[0]):
-            if c > 0.1:
-                cv2.circle(out, (int(round(u)), int(round(v))), 3, (255, 255, 255), -1)
-        return np.ascontiguousarray(out)
+    def publish_debug(self, slot, pubs, image, layout, camera, box, heat, heat_cam, stamp,
+                      frame_id):
+        """<cam>/debug_image + its camera_info, at most debug_image_rate_hz, only when
+        someone subscribes (so it costs nothing otherwise)."""
+        now = time.monotonic()
+        if (now - slot.last_debug < 1.0 / self.config.debug_image_rate_hz
+                or not (pubs[0].get_subscription_count() or pubs[1].get_subscription_count())):
+            return
+        slot.last_debug = now
+        peaks, confidence = heatmap_peaks_in_image(heat, heat_cam.K, camera.K)
+        reprojected = None
+        X = self.tracker.current(stamp)          # the fused keypoints the crop follows
+        if X is not None and slot.rig_camera is not None:
+            reprojected = np.full((len(X), 2), np.nan)
+            ok = np.isfinite(X).all(axis=1)
+            if ok.any():
+                reprojected[ok] = camera.project(X[ok])
+        scale = self.config.debug_image_scale
+        out = debug_image(raw_to_rgb8(image, layout), box, peaks, confidence, reprojected,
+                          scale=scale)
+        view = camera if scale == 1.0 else camera.crop(
+            (0.0, 0.0, float(camera.width), float(camera.height)), (out.shape[1], out.shape[0]))
+        pubs[1].publish(camera_info_from_camera(view, stamp, frame_id))
+        pubs[0].publish(numpy_to_image_msg(out, stamp, frame_id, encoding='bgr8'))
 
     # ------------------------------------------------------------------ hot reload
     def on_model(self, msg):
@@ -348,6 +394,24 @@ class DetectorNode(Node):
         self.get_logger().error(f'/monet/model rejected, keeping the current weights: {reason}')
 
     # ------------------------------------------------------------------ diagnostics
+    def no_publisher(self, slot):
+        """'' when the slot's image topic has a publisher, else the reason (logged once per
+        topic, with a hint when the other transport has one)."""
+        topic = self.resolve_topic_name(slot.image_topic)
+        if self.count_publishers(topic) or time.monotonic() - self.started < 3.0:
+            self.unpublished.discard(topic)
+            return ''
+        other = topic[:-len('/compressed')] if topic.endswith('/compressed') \
+            else topic + '/compressed'
+        reason = f'no publisher on {topic}'
+        if self.count_publishers(other):
+            reason += (f' (but {other} has one: transport:='
+                       f'{"raw" if topic.endswith("/compressed") else "compressed"})')
+        if topic not in self.unpublished:
+            self.unpublished.add(topic)
+            self.get_logger().warning(reason)
+        return reason
+
     def publish_diagnostics(self):
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
@@ -357,9 +421,13 @@ class DetectorNode(Node):
         stages = {**self.timer.summary(), **self.detector.timer.summary()}
         for slot in self.slots:
             level = DiagnosticStatus.OK if slot.processed else DiagnosticStatus.WARN
+            text = f'{slot.processed} frames, {slot.dropped} dropped, {slot.bad} bad'
+            silent = self.no_publisher(slot)
+            if silent:
+                level, text = DiagnosticStatus.WARN, f'{silent}; {text}'
             msg.status.append(DiagnosticStatus(
                 level=level, name=f'monet detector: {slot.name}', hardware_id=slot.name,
-                message=f'{slot.processed} frames, {slot.dropped} dropped, {slot.bad} bad',
+                message=text,
                 values=[KeyValue(key=k, value=str(v)) for k, v in (
                     ('received', slot.received), ('processed', slot.processed),
                     ('dropped_stale', slot.dropped), ('bad_messages', slot.bad),

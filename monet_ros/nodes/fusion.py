@@ -8,13 +8,16 @@ the cameras by stamp (exact or within `slop_ms`), and calls the fusion core
 (fewer views) and reported in /diagnostics; after `silent_after_s` frames no longer wait.
 """
 from collections import OrderedDict
+import copy
 from dataclasses import dataclass
 import sys
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
+from rclpy.duration import Duration
 from rclpy.node import Node
+from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
@@ -26,14 +29,29 @@ from monet_ros.io import (
     keypoints3d_to_cloud,
     skeleton_marker_array,
 )
+from monet_ros.io.convert import delete_all_markers, marker_array
+from monet_ros.io.markers import frustum_marker_specs
+from monet_ros.nodes.names import (
+    DIAGNOSTICS,
+    HEATMAP_CAMERA_INFO,
+    HEATMAPS,
+    KEYPOINTS3D,
+    RIG_MARKERS,
+    SKELETON,
+    TF_STATIC,
+    node_namespace,
+)
 from monet_ros.nodes.params import declare_config
-from monet_ros.nodes.qos import HEATMAPS_IN, STREAM_OUT
+from monet_ros.nodes.qos import HEATMAPS_IN, LATCHED, STREAM_OUT
 from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.nodes.sync import StampSynchronizer
+from monet_ros.nodes.tf import rig_tf_message, tf_message_class
 from monet_ros.skeleton import load_skeleton
 from monet_ros.timing import StageTimer
 
+# Parameters that may change while running (`ros2 param set`), effective next frame.
+LIVE = ('confidence_threshold', 'threshold_px', 'min_views')
 # Unpaired heatmaps / camera_info kept per camera while waiting for their partner.
 _PAIR_BACKLOG = 30
 
@@ -46,11 +64,16 @@ class FusionNodeConfig(FusionConfig):
     skeleton: str = setting('human14', 'skeleton preset or YAML path: heatmap channel order '
                             'and bones of /monet/skeleton')
     frame_id: str = setting('', 'frame of the outputs (default: the rig frame)')
-    heatmap_topic: str = setting('/monet/{camera}/heatmaps', 'heatmap topic per camera',
-                                 template_fields=('camera',))
-    camera_info_topic: str = setting('/monet/{camera}/camera_info',
+    heatmap_topic: str = setting(HEATMAPS, 'heatmap topic per camera (relative names are in '
+                                  'the node namespace, default /monet)',
+                                  template_fields=('camera',))
+    camera_info_topic: str = setting(HEATMAP_CAMERA_INFO,
                                      'heatmap virtual camera_info topic per camera',
                                      template_fields=('camera',))
+    input_reliability: str = setting('best_effort', 'QoS of the heatmap and camera_info '
+                                     'subscriptions: best_effort matches every publisher; '
+                                     'reliable only reliable ones, but a lost view is sent again',
+                                     choices=('best_effort', 'reliable'))
     slop_ms: float = setting(0.0, 'stamp tolerance between cameras (0 = exact)', minimum=0.0)
     timeout_s: float = setting(0.3, 'wait this long for missing cameras of a frame, then '
                                'fuse the others', minimum=0.0)
@@ -59,6 +82,15 @@ class FusionNodeConfig(FusionConfig):
                                     exclusive_minimum=True)
     diagnostics_period_s: float = setting(1.0, 'period of /diagnostics', minimum=0.0,
                                           exclusive_minimum=True)
+    marker_lifetime_s: float = setting(0.5, 'skeleton markers vanish this long after the last '
+                                       'fused frame (0 = never)', minimum=0.0)
+    marker_labels: bool = setting(False, 'also label the skeleton joints with their names')
+    camera_markers: bool = setting(True, 'publish the rig cameras as frustums on rig_markers '
+                                   '(latched)')
+    camera_marker_depth: float = setting(0.2, 'frustum depth of the camera markers (m)',
+                                         minimum=0.0, exclusive_minimum=True)
+    publish_tf: bool = setting(True, 'publish the rig on /tf_static (frame_id -> '
+                               '<camera>_optical) when tf2_msgs is installed')
     threads: int = setting(1, 'torch CPU threads for heatmap decoding (0 = leave as is); one '
                            'thread is fastest for these small tensors', minimum=0)
 
@@ -82,8 +114,9 @@ class CameraStats:
 
 class FusionNode(Node):
     def __init__(self, overrides=None, node_name='fusion', **kwargs):
-        super().__init__(node_name, **kwargs)
-        self.config = config = declare_config(self, FusionNodeConfig, overrides)
+        super().__init__(node_name, **node_namespace(kwargs))
+        self.config = config = declare_config(self, FusionNodeConfig, overrides, live=LIVE,
+                                              on_change=self.apply_live)
         self.core_config = config_subset(config, FusionConfig)
         self.timer = StageTimer()  # per-stage wall time, reported in /diagnostics
         if config.threads:
@@ -100,6 +133,7 @@ class FusionNode(Node):
         self.skeleton = load_skeleton(config.skeleton)
         self.frame_id = config.frame_id or rig_frame
         self.stats = {name: CameraStats() for name in self.names}
+        self.started = time.monotonic()
         self.frames = 0
         self.partial_frames = 0
         self.fusion_seconds = []
@@ -110,21 +144,41 @@ class FusionNode(Node):
         self.sync = StampSynchronizer(self.names, slop_ns=int(config.slop_ms * 1e6),
                                       timeout_s=config.timeout_s, min_keys=config.min_views)
         self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.names}
+        inputs = copy.copy(HEATMAPS_IN)
+        if config.input_reliability == 'reliable':
+            inputs.reliability = ReliabilityPolicy.RELIABLE
         for name in self.names:
             self.create_subscription(
                 Image, config.heatmap_topic.format(camera=name),
-                lambda msg, n=name: self.on_message(n, 0, msg), HEATMAPS_IN)
+                lambda msg, n=name: self.on_message(n, 0, msg), inputs)
             self.create_subscription(
                 CameraInfo, config.camera_info_topic.format(camera=name),
-                lambda msg, n=name: self.on_message(n, 1, msg), HEATMAPS_IN)
-        self.pub_points = self.create_publisher(PointCloud2, '/monet/keypoints3d', STREAM_OUT)
-        self.pub_skeleton = self.create_publisher(MarkerArray, '/monet/skeleton', STREAM_OUT)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', STREAM_OUT)
+                lambda msg, n=name: self.on_message(n, 1, msg), inputs)
+        self.pub_points = self.create_publisher(PointCloud2, KEYPOINTS3D, STREAM_OUT)
+        self.pub_skeleton = self.create_publisher(MarkerArray, SKELETON, STREAM_OUT)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
+        if config.publish_tf:
+            self.publish_rig_tf()
+        self.marker_ns = f'{self.skeleton.name}/subject0'    # one subject per fusion node
+        if config.camera_markers:
+            self.pub_rig = self.create_publisher(MarkerArray, RIG_MARKERS, LATCHED)
+            self.pub_rig.publish(marker_array(
+                self.get_clock().now().nanoseconds, self.frame_id,
+                frustum_marker_specs(self.cameras, config.camera_marker_depth)))
         self.create_timer(0.02, self.on_poll)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
             f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}')
+
+    def apply_live(self, config):
+        """Use a changed config (a live parameter was set) from the next frame on."""
+        if config.min_views > len(self.cameras):
+            raise ConfigError(self.get_name(), 'min_views',
+                              f'{config.min_views} > the {len(self.cameras)} cameras fused')
+        self.core_config = config_subset(config, FusionConfig)
+        self.sync.min_keys = config.min_views
+        self.config = config
 
     # ------------------------------------------------------------------ input
     def on_message(self, name, kind, msg):
@@ -220,10 +274,30 @@ class FusionNode(Node):
             group.stamp_ns, self.frame_id, result.X, result.confidence,
             result.reprojection_error, result.num_views))
         self.pub_skeleton.publish(skeleton_marker_array(
-            group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices))
+            group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices,
+            ns=self.marker_ns, lifetime_ns=int(self.config.marker_lifetime_s * 1e9),
+            names=self.skeleton.keypoints if self.config.marker_labels else None))
         self.timer.add('publish', time.perf_counter() - start)
         for listener in self.listeners:
             listener(group.stamp_ns, result)
+
+    def publish_rig_tf(self):
+        """The rig on /tf_static (latched), or one log line saying why not."""
+        TFMessage = tf_message_class()
+        if TFMessage is None:
+            self.get_logger().warning('tf2_msgs is not installed: the rig is not published on '
+                                      '/tf_static')
+            return
+        self.pub_tf = self.create_publisher(TFMessage, TF_STATIC, LATCHED)
+        self.pub_tf.publish(rig_tf_message(self.cameras, self.frame_id,
+                                           self.get_clock().now().to_msg()))
+
+    def on_stop(self):
+        """Before the node goes: clear the viewers' skeleton (DELETEALL), waiting briefly
+        for the subscribers to acknowledge it."""
+        msg = delete_all_markers(self.get_clock().now().nanoseconds, self.frame_id)
+        self.pub_skeleton.publish(msg)
+        self.pub_skeleton.wait_for_all_acked(Duration(seconds=1.0))
 
     # ------------------------------------------------------------------ diagnostics
     def publish_diagnostics(self):

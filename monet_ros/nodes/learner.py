@@ -20,6 +20,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from monet_ros.learning.online import LearnerConfig, OnlineLearner
+from monet_ros.nodes.names import DIAGNOSTICS, MODEL, node_namespace
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import LATCHED, STREAM_OUT
 from monet_ros.nodes.runner import run_node
@@ -27,10 +28,10 @@ from monet_ros.nodes.runner import run_node
 
 class LearnerNode(Node):
     def __init__(self, overrides=None, node_name='learner', start=True, **kwargs):
-        super().__init__(node_name, **kwargs)
+        super().__init__(node_name, **node_namespace(kwargs))
         self.config = declare_config(self, LearnerConfig, overrides)
-        self.pub_model = self.create_publisher(String, '/monet/model', LATCHED)
-        self.pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', STREAM_OUT)
+        self.pub_model = self.create_publisher(String, MODEL, LATCHED)
+        self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
         self.learner = OnlineLearner(self.config, log=self.get_logger().info)
         self.lock = threading.Lock()          # one trainer call at a time
         self.running = threading.Event()      # set = training, clear = paused

@@ -19,7 +19,8 @@ from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 
 from monet_ros.config import ConfigError, setting, validate_config
-from monet_ros.io import open_bag
+from monet_ros.io import camera_name_for_topic, open_bag
+from monet_ros.nodes.names import node_namespace
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_OUT, LATCHED, STREAM_OUT
 from monet_ros.nodes.runner import run_node
@@ -44,9 +45,17 @@ class PlayerConfig:
     start_offset_s: float = setting(0.0, 'skip this many seconds from the start of the bag',
                                     minimum=0.0)
     clock: bool = setting(True, 'publish /clock with the bag time')
-    wait_for_subscribers: int = setting(0, 'before playing, wait until every replayed image '
+    wait_for_subscribers: int = setting(1, 'before playing, wait until every replayed image '
                                         'and camera_info topic has this many subscribers '
                                         '(0 = do not wait)', minimum=0)
+    wait_for_topics: tuple[str, ...] = setting((), 'also wait until these topics have '
+                                               'wait_for_subscribers subscribers ({camera} = '
+                                               'each camera of the recording; relative names '
+                                               'are in the node namespace), e.g. '
+                                               '{camera}/heatmaps for a fusion node')
+    wait_for_subscribers_s: float = setting(30.0, 'give up waiting for subscribers after this '
+                                            'long and play anyway, with a warning (0 = wait '
+                                            'forever)', minimum=0.0)
     start_delay_s: float = setting(0.0, 'wait this long before playing (after the subscribers): '
                                    'lets late discovery finish so no first frame is lost',
                                    minimum=0.0)
@@ -92,7 +101,7 @@ def message_class(msgtype):
 
 class PlayerNode(Node):
     def __init__(self, overrides=None, node_name='player', **kwargs):
-        super().__init__(node_name, **kwargs)
+        super().__init__(node_name, **node_namespace(kwargs))
         self.config = config = declare_config(self, PlayerConfig, overrides)
         if not config.bag:
             raise ConfigError(self.get_name(), 'bag', 'is required (a recording path)')
@@ -144,9 +153,27 @@ class PlayerNode(Node):
     def wait_for_subscribers(self):
         available = self.reader.topics
         topics = [t for t in self.pubs if available[t].msgtype in IMAGE_TYPES + CAMERA_INFO]
+        topics = topics or list(self.pubs)
+        cameras = sorted({camera_name_for_topic(t) for t in self.image_topics})
+        others = [self.resolve_topic_name(t.format(camera=c))
+                  for t in self.config.wait_for_topics for c in cameras]
+        topics = topics + sorted(set(others))
         wanted = self.config.wait_for_subscribers
+        limit = self.config.wait_for_subscribers_s
+        start = time.monotonic()
         while not self.stopping.is_set():
-            if all(self.pubs[t].get_subscription_count() >= wanted for t in topics or self.pubs):
+            missing = [t for t in topics
+                       if (self.pubs[t].get_subscription_count() if t in self.pubs
+                           else self.count_subscribers(t)) < wanted]
+            if not missing:
+                self.get_logger().info(f'{len(topics)} topics have {wanted} subscriber(s) '
+                                       f'after {time.monotonic() - start:.1f} s: playing')
+                return
+            if limit and time.monotonic() - start >= limit:
+                self.get_logger().warning(
+                    f'playing without waiting longer (wait_for_subscribers_s={limit}): '
+                    f'{len(missing)} topics have fewer than {wanted} subscriber(s), e.g. '
+                    f'{missing[0]}')
                 return
             time.sleep(0.02)
 

@@ -15,10 +15,11 @@ IMAGE_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 STREAM_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                        reliability=ReliabilityPolicy.BEST_EFFORT,
                        durability=DurabilityPolicy.VOLATILE)
-# Heatmaps + camera_info into fusion: reliable (a lost view is a lost observation), deep
-# enough to absorb a burst; the detector already drops stale images upstream.
+# Heatmaps + camera_info into fusion: best-effort so that reliable and best-effort detectors
+# (another host's, anyone's) both match (with a reliable publisher on a healthy link nothing
+# is lost in practice); deep enough to absorb a burst.
 HEATMAPS_IN = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=30,
-                         reliability=ReliabilityPolicy.RELIABLE,
+                         reliability=ReliabilityPolicy.BEST_EFFORT,
                          durability=DurabilityPolicy.VOLATILE)
 # Everything we publish per frame.
 STREAM_OUT = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,

@@ -8,13 +8,15 @@ DEFAULT_FRAME = 'world'
 
 def load_node_rig(path):
     """(cameras, frame_id) from a rig file (any format geometry.load_rig reads) or from a
-    recording (rosbag2 folder or .mcap: its camera_info + /tf_static, io.rig_from_bag)."""
+    recording (rosbag2 folder or .mcap: its camera_info + /tf_static, whose root frame is
+    then the frame, io.rig_and_frame_from_bag)."""
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f'rig {path}: no such file or folder')
     if path.is_dir() or path.suffix == '.mcap':
-        from monet_ros.io import rig_from_bag
-        return list(rig_from_bag(path)), DEFAULT_FRAME
+        from monet_ros.io.rig import rig_and_frame_from_bag
+        cameras, root = rig_and_frame_from_bag(path)
+        return list(cameras), root or DEFAULT_FRAME
     from monet_ros.geometry import read_rig
     cameras, frame_id = read_rig(path)
     return list(cameras), frame_id or DEFAULT_FRAME

@@ -12,14 +12,17 @@ and reports the counts in /diagnostics ('monet <node>: callback errors').
 from collections import Counter
 from contextlib import contextmanager
 import os
-from pathlib import Path
 import re
 import signal
 import sys
+import threading
 import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import SignalHandlerOptions
+
+from monet_ros.share import share_path
 
 EXIT_OK = 0
 EXIT_BAD_START = 2
@@ -27,25 +30,15 @@ EXIT_BAD_START = 2
 FASTDDS_PROFILE = 'fastdds_profile.xml'
 
 
-def share_config(name):
-    """Path of a file in the package's config/ (source checkout or installed share/)."""
-    here = Path(__file__).resolve().parents[2] / 'config' / name
-    if here.is_file():
-        return here
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        return Path(get_package_share_directory('monet_ros')) / 'config' / name
-    except Exception:  # noqa: BLE001 (no ament index: pip wheels without the marker)
-        return here
-
-
 def use_large_data_profile():
     """Point Fast DDS at config/fastdds_profile.xml (64 MB shared memory) unless the user
     already chose a profile. Must run before the first rclpy.init of the process."""
     if 'FASTRTPS_DEFAULT_PROFILES_FILE' not in os.environ:
-        profile = share_config(FASTDDS_PROFILE)
-        if profile.is_file():
-            os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
+        try:
+            profile = share_path('config', FASTDDS_PROFILE)
+        except FileNotFoundError:
+            return
+        os.environ['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
 
 
 def start_error(name, error):
@@ -72,6 +65,15 @@ def until_shutdown():
     except Exception:
         if not stopped_by_shutdown():
             raise
+
+
+def ignore_signals():
+    """After the first SIGINT / SIGTERM: ignore further ones while the nodes are destroyed
+    (a second Ctrl-C, or a launch file's SIGINT after the terminal's, must not raise
+    KeyboardInterrupt inside destroy_node). Only possible in the main thread."""
+    if threading.current_thread() is threading.main_thread():
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, signal.SIG_IGN)
 
 
 def stop_executor(executor, timeout_sec=2.0):
@@ -179,6 +181,41 @@ def clean_stop_handlers():
     signal.signal(signal.SIGTERM, _raise_interrupt)
 
 
+_STOP = threading.Event()
+
+
+def stop_requested():
+    """True once SIGINT or SIGTERM arrived (see init_rclpy)."""
+    return _STOP.is_set()
+
+
+def init_rclpy(args=None):
+    """rclpy.init without rclpy's signal handlers: SIGINT and SIGTERM only set a flag
+    (stop_requested) that the spin loops check every 0.1 s, instead of closing the context
+    at once or raising inside a callback, so the nodes can still publish their goodbye
+    (on_stop: DELETEALL markers) before they are destroyed. Main thread only."""
+    _STOP.clear()
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+
+    def request_stop(signum, frame):
+        _STOP.set()
+    signal.signal(signal.SIGINT, request_stop)
+    signal.signal(signal.SIGTERM, request_stop)
+
+
+def say_goodbye(nodes):
+    """Call each node's on_stop() (when it has one) while the context is still valid; a
+    failure there is reported in one line, never a traceback."""
+    for node in nodes:
+        on_stop = getattr(node, 'on_stop', None)
+        if on_stop is None or not rclpy.ok(context=node.context):
+            continue
+        try:
+            on_stop()
+        except Exception as error:  # noqa: BLE001 - stopping anyway
+            print(f'{node.get_name()}: on stop: {error}', file=sys.stderr, flush=True)
+
+
 def run_node(factory, name, args=None, large_data=False):
     """Run the node built by `factory()` until shutdown; return the process exit code.
 
@@ -191,8 +228,8 @@ def run_node(factory, name, args=None, large_data=False):
         use_large_data_profile()
     node = None
     try:
-        clean_stop_handlers()
-        rclpy.init(args=args)
+        clean_stop_handlers()       # a signal before the flag handlers of init_rclpy: exit 0
+        init_rclpy(args)
     except KeyboardInterrupt:
         rclpy.try_shutdown()
         return EXIT_OK
@@ -214,10 +251,13 @@ def run_node(factory, name, args=None, large_data=False):
             node.callback_guard = CallbackGuard(node)
             executor = SingleThreadedExecutor()
             executor.add_node(node)
-            executor.spin()
+            while rclpy.ok() and not stop_requested():   # wakes up to see a signal
+                executor.spin_once(timeout_sec=0.1)
     finally:
+        ignore_signals()
         try:
             if node is not None:
+                say_goodbye([node])
                 node.destroy_node()
             rclpy.try_shutdown()
         except KeyboardInterrupt:

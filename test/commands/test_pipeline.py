@@ -4,10 +4,12 @@ import sys
 
 from helpers.recordings import noise_recording, small_checkpoint
 from helpers.ros import NodeProcess, RosHarness
-from sensor_msgs.msg import PointCloud2
+import numpy as np
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from monet_ros.geometry import save_rig
 from monet_ros.io import cloud_to_keypoints3d, header_stamp_ns
+from monet_ros.nodes.qos import LATCHED
 
 
 def pipeline(env, *args):
@@ -63,3 +65,34 @@ def test_bad_arguments_fail_at_start(ros_env, tmp_path):
         with pipeline(ros_env, *args) as proc:
             assert proc.wait(timeout=90) == 2, proc.output()
             assert message in proc.output()
+
+
+def test_ros_args_move_the_rig_with_debug_images_and_tf(ros_env, tmp_path):
+    """`--ros-args -r __ns:=/rig1` moves every topic of the pipeline; the debug image of each
+    camera is on by default (bgr8, half the source size, with its camera_info) and the recording's
+    /tf_static is replayed (when tf2_msgs is installed)."""
+    rig, stamps = noise_recording(tmp_path / 'rec', cameras=2, frames=4)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    try:
+        from tf2_msgs.msg import TFMessage
+    except ImportError:
+        TFMessage = None
+    with RosHarness(ros_env) as ros:
+        clouds = ros.collect('/rig1/keypoints3d', PointCloud2, 100)
+        default = ros.collect('/monet/keypoints3d', PointCloud2, 100)
+        debug = ros.collect('/rig1/cam0/debug_image', Image, 100)
+        debug_info = ros.collect('/rig1/cam0/debug_image/camera_info', CameraInfo, 100)
+        tf = ros.collect('/tf_static', TFMessage, LATCHED) if TFMessage else None
+        with pipeline(ros_env, '--bag', tmp_path / 'rec', '--model', model, '--loop',
+                      '--rate', 2.0, '--quiet', '--ros-args', '-r', '__ns:=/rig1') as proc:
+            ok = ros.spin_until(lambda: clouds and debug and debug_info and (tf is None or tf),
+                                timeout=120, process=proc)
+            assert ok, proc.output()
+            assert proc.stop() == 0, proc.output()
+    assert not default
+    image = debug[0]
+    assert (image.encoding, image.width, image.height) == ('bgr8', 160, 120)   # scale 0.5
+    np.testing.assert_allclose(np.reshape(debug_info[0].k, (3, 3)),
+                               rig[0].crop((0, 0, 320, 240), (160, 120)).K)
+    if tf is not None:
+        assert {t.child_frame_id for t in tf[0].transforms} == {'cam0_optical', 'cam1_optical'}

@@ -25,9 +25,10 @@ from monet_ros.nodes.qos import STREAM_IN
 
 
 def write_params_file(path, node_name, params):
-    """A --params-file YAML for one node ({name: {ros__parameters: params}})."""
+    """A --params-file YAML for one node in any namespace
+    ({/**/name: {ros__parameters: params}})."""
     clean = {k: list(v) if isinstance(v, tuple) else v for k, v in params.items()}
-    Path(path).write_text(yaml.safe_dump({node_name: {'ros__parameters': clean}}))
+    Path(path).write_text(yaml.safe_dump({f'/**/{node_name}': {'ros__parameters': clean}}))
     return Path(path)
 
 
@@ -38,8 +39,9 @@ class NodeProcess:
     """
 
     def __init__(self, module, env, params=None, node_name=None, extra_args=(), argv=None,
-                 workdir=None):
+                 workdir=None, cwd=None):
         self.env = dict(env)
+        self.cwd = cwd
         self.workdir = Path(workdir or self.env.get('ROS_LOG_DIR', '/tmp')).parent
         self.workdir.mkdir(parents=True, exist_ok=True)
         tag = f'{module}_{time.monotonic_ns()}'
@@ -59,7 +61,8 @@ class NodeProcess:
         self._out = open(self.stdout_path, 'wb')
         self._err = open(self.stderr_path, 'wb')
         self.process = subprocess.Popen(self.argv, env=self.env, stdout=self._out,
-                                        stderr=self._err, stdin=subprocess.DEVNULL)
+                                        stderr=self._err, stdin=subprocess.DEVNULL,
+                                        cwd=self.cwd)
         return self
 
     def __enter__(self):

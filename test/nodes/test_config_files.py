@@ -22,7 +22,8 @@ def test_config_file_declares_and_documents_every_parameter(name, repo_root, ros
     module, cls_name = NODES[name]
     config_cls = getattr(importlib.import_module(module), cls_name)
     path = repo_root / 'config' / f'{name}.yaml'
-    params = yaml.safe_load(path.read_text())[name]['ros__parameters']
+    # '/**/<node>': the node in any namespace (the default is /monet)
+    params = yaml.safe_load(path.read_text())[f'/**/{name}']['ros__parameters']
     assert set(params) == {f.name for f in fields(config_cls)}
     lines = path.read_text().splitlines()
     for key in params:
@@ -31,7 +32,8 @@ def test_config_file_declares_and_documents_every_parameter(name, repo_root, ros
     context = Context()
     rclpy.init(context=context, domain_id=int(ros_env['ROS_DOMAIN_ID']))
     try:
-        node = Node(name, context=context, cli_args=['--ros-args', '--params-file', str(path)])
+        node = Node(name, namespace='monet', context=context,
+                    cli_args=['--ros-args', '--params-file', str(path)])
         config = declare_config(node, config_cls)
         node.destroy_node()
     finally:

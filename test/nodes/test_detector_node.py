@@ -113,10 +113,12 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
     rig, rig_path, first, second, images = setup
     aspect = INPUT[1] / INPUT[0]
     params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
-                  track_timeout_s=3600.0, device='cpu', overlay=True)
+                  track_timeout_s=3600.0, device='cpu', debug_image=True,
+                  debug_image_scale=1.0)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = Stream(ros, rig)
-        overlays = ros.collect('/monet/cam1/overlay', Image, 100)
+        overlays = ros.collect('/monet/cam1/debug_image', Image, 100)
+        overlay_infos = ros.collect('/monet/cam1/debug_image/camera_info', CameraInfo, 100)
         for heat_pub, info_pub in stream.pubs.values():
             ros.wait_for_subscribers(heat_pub, process=node)
             ros.wait_for_subscribers(info_pub, process=node)
@@ -135,7 +137,16 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
             np.testing.assert_allclose(info.d, cam.dist)
         ros.spin_until(lambda: any(header_stamp_ns(m) == T0 for m in overlays), timeout=10)
         overlay = next(m for m in overlays if header_stamp_ns(m) == T0)
-        assert (overlay.encoding, overlay.width, overlay.height) == ('rgb8', 128, 96)
+        assert (overlay.encoding, overlay.width, overlay.height) == ('bgr8', 640, 480)
+        ros.spin_until(lambda: overlay_infos, timeout=10)
+        np.testing.assert_allclose(np.reshape(overlay_infos[0].k, (3, 3)), rig[1].K)
+        # the source image (as bgr) with the crop box drawn in yellow on its right edge
+        pixels = np.frombuffer(overlay.data, np.uint8).reshape(480, 640, 3)
+        x0, y0, x1, y1 = np.round(box).astype(int)
+        assert tuple(pixels[(y0 + y1) // 2, x1 - 1]) == (0, 220, 255)
+        untouched = pixels[y0 + 10:y1 - 10, x1 - 40:x1 - 20]
+        source = images[1][y0 + 10:y1 - 10, x1 - 40:x1 - 20, ::-1]
+        assert np.mean(untouched == source) > 0.8
         want = reference(first, images, rig, np.array([box, box]))
         for v, cam in enumerate(rig):
             np.testing.assert_allclose(image_msg_to_heatmaps(got[cam.name][0]), want[v],

@@ -163,9 +163,9 @@ def test_learner_announces_detector_reloads_between_frames_and_services(scene, r
                        for a in announced)
 
             # services: pause (steps stop), save (a checkpoint of the paused step), resume
-            pause = ros.node.create_client(Trigger, '/learner/pause')
-            resume = ros.node.create_client(Trigger, '/learner/resume')
-            save = ros.node.create_client(Trigger, '/learner/save_checkpoint')
+            pause = ros.node.create_client(Trigger, '/monet/learner/pause')
+            resume = ros.node.create_client(Trigger, '/monet/learner/resume')
+            save = ros.node.create_client(Trigger, '/monet/learner/save_checkpoint')
             for client in (pause, resume, save):
                 assert client.wait_for_service(timeout_sec=30)
             reply = call(ros, pause, learner)

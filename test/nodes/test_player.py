@@ -84,3 +84,50 @@ def test_bad_bag_and_unknown_topic_fail_at_start(ros_env, small_bag, tmp_path):
         assert player.wait(timeout=60) == 2
         assert "parameter 'topics': '/nope' is not in" in player.output()
 
+
+
+def test_waits_for_subscribers_bounded_then_plays(ros_env, small_bag):
+    """No subscriber: the player gives up after wait_for_subscribers_s and plays anyway;
+    with subscribers it starts as soon as every image topic is matched."""
+    params = dict(bag=str(small_bag), rate=0.0, wait_for_subscribers=1,
+                  wait_for_subscribers_s=1.0, shutdown_when_done=True)
+    with NodeProcess('player', ros_env, params) as player:
+        assert player.wait(timeout=60) == 0, player.output()
+    assert 'playing without waiting longer (wait_for_subscribers_s=1.0)' in player.output()
+    assert 'played 32 messages' in player.output()
+    params['wait_for_subscribers_s'] = 0.0      # wait as long as it takes
+    with RosHarness(ros_env) as ros, NodeProcess('player', ros_env, params) as player:
+        ros.spin_for(3.0)
+        assert player.running() and 'played' not in player.output()
+        images, _, _ = collect_all(ros)
+        assert ros.spin_until(lambda: all(len(v) == 8 for v in images.values()), timeout=60,
+                              process=None), player.output()
+        assert player.wait(timeout=60) == 0, player.output()
+
+
+def test_sigint_twice_exits_zero_without_traceback(ros_env, small_bag):
+    params = dict(bag=str(small_bag), rate=1.0, loop=True, wait_for_subscribers=0)
+    with RosHarness(ros_env) as ros, NodeProcess('player', ros_env, params) as player:
+        images, _, _ = collect_all(ros)
+        assert ros.spin_until(lambda: images['cam0'], timeout=60, process=player)
+        player.process.send_signal(signal.SIGINT)
+        assert player.stop(signal.SIGINT) == 0, player.output()
+    assert 'Traceback' not in player.output() and 'KeyboardInterrupt' not in player.output()
+
+
+def test_waits_for_the_fusion_topics_too(ros_env, small_bag):
+    """wait_for_topics: the player also waits for subscribers of `{camera}/heatmaps` (in its
+    namespace: /monet/cam0/heatmaps, /monet/cam1/heatmaps), i.e. for the fusion node."""
+    params = dict(bag=str(small_bag), rate=0.0, wait_for_subscribers=1,
+                  wait_for_subscribers_s=0.0, wait_for_topics=['{camera}/heatmaps'],
+                  shutdown_when_done=True)
+    with RosHarness(ros_env) as ros, NodeProcess('player', ros_env, params) as player:
+        images, _, _ = collect_all(ros)
+        ros.spin_for(4.0)
+        assert player.running() and 'played' not in player.output(), player.output()
+        assert not images['cam0']
+        for cam in ('cam0', 'cam1'):
+            ros.collect(f'/monet/{cam}/heatmaps', Image)
+        assert ros.spin_until(lambda: all(len(v) == 8 for v in images.values()), timeout=60,
+                              process=None), player.output()
+        assert player.wait(timeout=60) == 0, player.output()

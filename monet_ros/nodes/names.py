@@ -1,0 +1,28 @@
+"""Topic and namespace names shared by the nodes.
+
+Outputs and inter-node topics are node-relative (`keypoints3d`, `skeleton`, `model`,
+`<camera>/heatmaps`, `<camera>/camera_info`, `<camera>/debug_image`) and every node starts
+in the namespace `monet`, so the defaults are `/monet/...` while `-r __ns:=/rig1` (or a
+launch file's PushRosNamespace / namespace=) moves a whole rig. Camera driver topics
+(`/<camera>/image_raw`), `/diagnostics`, `/tf_static` and `/clock` stay absolute.
+"""
+DEFAULT_NAMESPACE = 'monet'
+
+KEYPOINTS3D = 'keypoints3d'
+SKELETON = 'skeleton'
+RIG_MARKERS = 'rig_markers'
+MODEL = 'model'
+HEATMAPS = '{camera}/heatmaps'
+HEATMAP_CAMERA_INFO = '{camera}/camera_info'
+DEBUG_IMAGE = '{camera}/debug_image'
+DEBUG_CAMERA_INFO = '{camera}/debug_image/camera_info'
+DIAGNOSTICS = '/diagnostics'
+TF_STATIC = '/tf_static'
+
+
+def node_namespace(kwargs):
+    """`kwargs` of a Node constructor with the default namespace filled in (an explicit
+    namespace=..., or `__ns` on the command line, still wins)."""
+    kwargs = dict(kwargs)
+    kwargs.setdefault('namespace', DEFAULT_NAMESPACE)
+    return kwargs

@@ -1,0 +1,107 @@
+"""The detector takes its image transport from the recording, says when its image topics
+have no publisher (log and /diagnostics), and takes tracking settings live."""
+from diagnostic_msgs.msg import DiagnosticArray
+from helpers.recordings import small_checkpoint
+from helpers.ros import NodeProcess, RosHarness
+from helpers.scenes import ring_rig
+import numpy as np
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import GetParameters, SetParameters
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
+
+from monet_ros.io import BagWriter, camera_info_from_camera, compressed_image_msg
+
+T0 = 1_600_000_000_000_000_000
+
+
+def compressed_recording(path, rig):
+    """A recording whose cameras have only CompressedImage topics (like the real Pose2Sim
+    recording)."""
+    images = np.random.default_rng(1).integers(0, 255, (len(rig), 240, 320, 3), np.uint8)
+    with BagWriter(path) as writer:
+        writer.write_tf_static(T0, rig)
+        for cam, image in zip(rig, images):
+            writer.write_compressed_image(f'/{cam.name}/image_raw/compressed', T0, image,
+                                          f'{cam.name}_optical')
+            writer.write_camera_info(f'/{cam.name}/camera_info', T0, cam, f'{cam.name}_optical')
+    return images
+
+
+def detector_status(diagnostics, name):
+    for msg in reversed(diagnostics):
+        for status in msg.status:
+            if status.name == f'monet detector: {name}':
+                return status
+    return None
+
+
+def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(ros_env,
+                                                                                tmp_path):
+    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+    rig = [c.replace(width=320, height=240, K=K) for c in ring_rig(2)]
+    images = compressed_recording(tmp_path / 'rec', rig)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    params = dict(rig=str(tmp_path / 'rec'), model=str(model), device='cpu')
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        heat = ros.collect('/monet/cam0/heatmaps', Image)
+        # cam1 has a raw publisher only: the report names the transport that would work
+        raw_cam1 = ros.publisher('/cam1/image_raw', Image)
+
+        def reported():
+            status = detector_status(diagnostics, 'cam1')
+            return status is not None and 'no publisher' in status.message
+        assert ros.spin_until(reported, timeout=60, process=node), node.output()
+        cam0 = detector_status(diagnostics, 'cam0').message
+        cam1 = detector_status(diagnostics, 'cam1').message
+        assert 'no publisher on /cam0/image_raw/compressed' in cam0
+        assert ('no publisher on /cam1/image_raw/compressed (but /cam1/image_raw has one: '
+                'transport:=raw)') in cam1
+        assert raw_cam1.get_subscription_count() == 0      # it did not subscribe raw
+        # a compressed publisher: the detector runs on its frames
+        pub = ros.publisher('/cam0/image_raw/compressed', CompressedImage)
+        info = ros.publisher('/cam0/camera_info', CameraInfo)
+        ros.wait_for_subscribers(pub, process=node)
+        for _ in range(60):
+            info.publish(camera_info_from_camera(rig[0], T0, 'cam0_optical'))
+            pub.publish(compressed_image_msg(images[0], T0, 'cam0_optical'))
+            if ros.spin_until(lambda: heat, timeout=1.0, process=node):
+                break
+        assert heat, node.output()
+        assert node.stop() == 0, node.output()
+    output = node.output()
+    assert output.count('no publisher on /cam0/image_raw/compressed') == 1, output
+    assert 'Traceback' not in output
+
+
+def test_tracking_parameters_are_live_the_rest_read_only(ros_env, tmp_path):
+    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
+    rig = [c.replace(width=320, height=240, K=K) for c in ring_rig(2)]
+    compressed_recording(tmp_path / 'rec', rig)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    params = dict(rig=str(tmp_path / 'rec'), model=str(model), device='cpu')
+
+    def double(name, value):
+        return Parameter(name=name, value=ParameterValue(
+            type=ParameterType.PARAMETER_DOUBLE, double_value=value))
+
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        setter = ros.node.create_client(SetParameters, '/monet/detector/set_parameters')
+        getter = ros.node.create_client(GetParameters, '/monet/detector/get_parameters')
+        assert ros.spin_until(lambda: setter.service_is_ready() and getter.service_is_ready(),
+                              timeout=60, process=node), node.output()
+        results = []
+        for param in (double('track_margin', 0.5), double('track_margin', -1.0),
+                      double('batch_wait_ms', 5.0)):
+            future = setter.call_async(SetParameters.Request(parameters=[param]))
+            assert ros.spin_until(future.done, timeout=30, process=node)
+            results.append(future.result().results[0])
+        future = getter.call_async(GetParameters.Request(names=['track_margin',
+                                                               'batch_wait_ms']))
+        assert ros.spin_until(future.done, timeout=30, process=node)
+        values = [v.double_value for v in future.result().values]
+        assert node.stop() == 0, node.output()
+    assert results[0].successful, results[0].reason
+    assert not results[1].successful                      # out of range (>= 0)
+    assert not results[2].successful                      # read-only
+    assert values == [0.5, 15.0]
