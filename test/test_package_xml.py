@@ -16,6 +16,9 @@ JAZZY_PACKAGES = {
 ROSDEP_RULES = {
     'python3-numpy', 'python3-opencv', 'python3-yaml', 'python3-scipy', 'python3-matplotlib',
     'python3-tqdm', 'python3-pytest', 'python3-torch', 'python3-rosbags-pip',
+    # also checked at 8468e88: lab formats, the label app, the reliability and browser tests
+    'python3-h5py', 'python3-pandas', 'python3-tables', 'python3-flask', 'python3-selenium',
+    'python3-hypothesis',
 }
 # Keys the README's rosdep line skips (installed with a pinned pip line instead).
 SKIPPED = {'python3-torch', 'python3-rosbags-pip'}
@@ -23,7 +26,8 @@ SKIPPED = {'python3-torch', 'python3-rosbags-pip'}
 THIRD_PARTY = {'numpy': 'python3-numpy', 'cv2': 'python3-opencv', 'yaml': 'python3-yaml',
                'scipy': 'python3-scipy', 'matplotlib': 'python3-matplotlib',
                'tqdm': 'python3-tqdm', 'torch': 'python3-torch',
-               'rosbags': 'python3-rosbags-pip'}
+               'rosbags': 'python3-rosbags-pip', 'h5py': 'python3-h5py',
+               'pandas': 'python3-pandas', 'flask': 'python3-flask'}
 
 
 def declared(repo_root, tags=('exec_depend', 'depend', 'test_depend')):
