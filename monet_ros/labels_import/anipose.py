@@ -2,8 +2,7 @@
 index = frame number, coords x, y, likelihood; camera = the recording camera whose name
 the file name contains, as anipose's cam_regex does). Points below --min-score are left
 out and counted."""
-from monet_ros.labels_import import ImportResult
-from monet_ros.labels_import.dlc import _files, read_dlc_file
+from monet_ros.labels_import.dlc import _files, import_dlc_files
 
 
 def import_anipose(paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
@@ -12,12 +11,4 @@ def import_anipose(paths, cameras=(), camera=None, min_score=0.0, camera_map=Non
         files += sorted(p.rglob('*.h5')) if p.is_dir() else [p]
     if not files:
         files = _files(paths, ('.h5', '.csv'))
-    rows, keypoints, dropped = [], {}, 0
-    for f in files:
-        r, k, d = read_dlc_file(f, cameras=cameras, camera=camera, min_score=min_score,
-                                camera_map=camera_map)
-        rows += r
-        keypoints.update(dict.fromkeys(k))
-        dropped += d
-    note = f'{dropped} points below --min-score {min_score} left out' if dropped else ''
-    return ImportResult(rows, tuple(keypoints), note)
+    return import_dlc_files(files, cameras, camera, min_score, camera_map)

@@ -186,6 +186,12 @@ def import_dlc(paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
     files = _files(paths, ('.csv', '.h5'))
     csvs = {f.with_suffix('') for f in files if f.suffix == '.csv'}
     files = [f for f in files if not (f.suffix == '.h5' and f.with_suffix('') in csvs)]
+    return import_dlc_files(files, cameras, camera, min_score, camera_map)
+
+
+def import_dlc_files(files, cameras=(), camera=None, min_score=0.0, camera_map=None):
+    """ImportResult of DeepLabCut-layout tables (CSV or H5), one after the other; points
+    below min_score are left out and counted in the note."""
     rows, keypoints, dropped = [], {}, 0
     for f in files:
         r, k, d = read_dlc_file(f, cameras=cameras, camera=camera, min_score=min_score,

@@ -20,7 +20,6 @@ model, validated at start) by more than `publish_tolerance_px`. The last announc
 kept in out/published.json, so a restarted learner resumes with the same reference.
 """
 from dataclasses import dataclass, fields
-import hashlib
 import json
 import math
 from pathlib import Path
@@ -28,7 +27,7 @@ import time
 
 import numpy as np
 
-from monet_ros.atomic import atomic_write
+from monet_ros.atomic import atomic_write, sha256_file
 from monet_ros.config import ConfigError, setting
 from monet_ros.learning.config import TrainConfig
 
@@ -91,14 +90,6 @@ class LearnerConfig(TrainConfig):
         values = {k: v for k, v in self.to_dict().items() if k in names}
         values['steps'] = self.steps or FOREVER
         return TrainConfig(**values)
-
-
-def sha256_file(path):
-    digest = hashlib.sha256()
-    with open(path, 'rb') as stream:
-        for block in iter(lambda: stream.read(1 << 20), b''):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def should_publish(metrics, reference_px, tolerance_px=0.0):
