@@ -22,7 +22,10 @@ against plain DLT of the same peaks (geometry.triangulate) with the stage split,
 undistortion's error against cv2.undistortPoints, and Detector.predict images/s with the
 torch and the ONNX Runtime backends. --viewable runs every end-to-end case twice, with the
 viewable outputs off and on (the detector's debug_image at its default rate with a subscriber
-to every camera's, the fusion node's /tf_static and camera markers), to show what they cost.
+to every camera's, the fusion node's /tf_static and camera markers), to show what they cost:
+throughput and the nodes' CPU time per keypoints3d (/proc/PID/stat of the detector and fusion
+processes; in-process: the whole process, publisher included). --repeat N runs each case N
+times (off/on interleaved) and shows medians: single 10 s runs differ by several percent.
 Prints tables and the load average; never asserts.
 """
 import argparse
@@ -215,7 +218,9 @@ class Feeder:
                 kind = 'detector' if status.name.startswith('monet detector') else 'fusion'
                 self.diagnostics[kind] = {kv.key: kv.value for kv in status.values}
 
-    def run(self, spin_once, rate, seconds, warmup):
+    def run(self, spin_once, rate, seconds, warmup, cpu_seconds=time.process_time):
+        """Publish for warmup + seconds; figures over the measured window. cpu_seconds():
+        CPU time (user + system, s) of the processes that run the nodes."""
         from monet_ros.io import camera_info_from_camera
 
         deadline = time.monotonic() + 120
@@ -237,21 +242,33 @@ class Feeder:
                     self.pubs[v][0].publish(image)
                 published += 1
                 if measured_from is None and now - start >= warmup:
-                    measured_from = (now, len(self.latencies), self.heat_count[0], published)
+                    measured_from = (now, len(self.latencies), self.heat_count[0], published,
+                                     cpu_seconds())
             spin_once(max(0.0, min(0.005, next_tick - time.monotonic())))
-        end = time.monotonic()
+        end, cpu_end, fused_end = time.monotonic(), cpu_seconds(), len(self.latencies)
         settle = time.monotonic() + 1.5  # the frames in flight, and one more /diagnostics
         while time.monotonic() < settle:
             spin_once(0.05)
-        t0, n0, h0, p0 = measured_from
+        t0, n0, h0, p0, c0 = measured_from
         window = end - t0
         lat = np.array(self.latencies[n0:], float) / 1e6
         return dict(published=(published - p0) / window,
+                    cpu_ms=1e3 * (cpu_end - c0) / max(1, fused_end - n0),
                     fused=(len(self.latencies) - n0) / window,
                     heat=(self.heat_count[0] - h0) / window,
                     median=float(np.median(lat)) if lat.size else float('nan'),
                     p95=float(np.percentile(lat, 95)) if lat.size else float('nan'),
                     diagnostics=self.diagnostics)
+
+
+def process_cpu_seconds(pid):
+    """User + system CPU seconds of process `pid` (all its threads), from /proc/PID/stat
+    (proc(5): fields 14 utime and 15 stime, in clock ticks); 0.0 once it has gone."""
+    try:
+        fields = Path(f'/proc/{pid}/stat').read_text().rpartition(')')[2].split()
+    except OSError:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def worker(spec):
@@ -295,8 +312,10 @@ def worker(spec):
         for node in nodes:
             executor.add_node(node)
         feeder = Feeder(bench, rig, spec['viewable'])
+        cpu = (lambda: sum(process_cpu_seconds(p.pid) for p in procs)) if procs \
+            else time.process_time
         result = feeder.run(lambda t: executor.spin_once(timeout_sec=t), spec['rate'],
-                            spec['seconds'], spec['warmup'])
+                            spec['seconds'], spec['warmup'], cpu)
     finally:
         if executor is not None:
             stop_executor(executor)
@@ -309,6 +328,33 @@ def worker(spec):
             proc.wait(timeout=30)
     print(json.dumps(result), flush=True)
     return 0
+
+
+def median_result(results):
+    """One figure per field: the median over repeated runs of a case (the last run's
+    stage profile); the first error if every run failed."""
+    good = [r for r in results if 'error' not in r]
+    if not good:
+        return results[0]
+    keys = ('published', 'fused', 'heat', 'median', 'p95', 'cpu_ms')
+    out = {k: float(np.median([r[k] for r in good])) for k in keys}
+    out['diagnostics'] = good[-1]['diagnostics']
+    out['runs'] = len(good)
+    return out
+
+
+def print_live_row(views, rate, layout, viewable, r):
+    load = os.getloadavg()[0]
+    shown = 'on' if viewable else 'off'
+    if 'error' in r:
+        print(f'| {views} @ {rate:.0f} | {layout} | {shown} | failed: {r["error"]} '
+              f'|||||||| {load:.1f} |', flush=True)
+        return
+    d = r['diagnostics']
+    print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
+          f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | {r["p95"]:.0f} | '
+          f'{r["cpu_ms"]:.1f} | {stage_text(d, "detector", DETECTOR_STAGES)} | '
+          f'{stage_text(d, "fusion", FUSION_STAGES)} | {load:.1f} |', flush=True)
 
 
 def stage_text(diagnostics, kind, stages):
@@ -341,12 +387,17 @@ def main():
     parser.add_argument('--skip-live', action='store_true', help='micro-benchmarks only')
     parser.add_argument('--viewable', action='store_true', help='every end-to-end case with '
                         'the viewable outputs (debug images, TF, camera markers) off and on')
+    parser.add_argument('--repeat', type=int, default=1,
+                        help='runs per end-to-end case (median shown; with --viewable the '
+                        'off/on runs alternate)')
     parser.add_argument('--quick', action='store_true',
                         help='every table at tiny sizes (2 cameras, 2 s runs, few repeats)')
     parser.add_argument('--worker', help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         return worker(json.loads(args.worker))
+    if args.repeat < 1:
+        parser.error(f'--repeat must be >= 1, got {args.repeat}')
     if args.quick:
         args.cameras, args.extra, args.seconds, args.warmup = [2], ['2@60'], 2.0, 2.0
         args.runs, args.fusion_views, args.detector_views = 3, [4, 35], [2]
@@ -388,30 +439,42 @@ def main():
             cams, _, hz = item.partition('@')
             runs.append((int(cams), float(hz)))
         print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend}, '
-              f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up')
+              f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up'
+              + (f', median of {args.repeat} runs (off/on interleaved)'
+                 if args.repeat > 1 else ''))
         print('| cameras @ Hz | layout | viewable | published frames/s | keypoints3d/s | '
               'detector images/s'
-              ' | latency median ms | latency p95 ms | detector ms/batch: convert, crop, '
+              ' | latency median ms | latency p95 ms | node CPU ms per keypoints3d | '
+              'detector ms/batch: convert, crop, '
               'forward, publish | fusion ms: receive (per view), decode, undistort, '
               'triangulate, errors, publish | load |')
-        print('|---|---|---|---|---|---|---|---|---|---|---|')
-        cases = [(views, rate, layout, viewable) for views, rate in runs
-                 for layout in args.layouts
-                 for viewable in ((False, True) if args.viewable else (False,))]
-        for views, rate, layout, viewable in cases:
-            r = live(layout, views, rate, args.seconds, args.warmup, args.threads,
-                     args.backend, workdir, viewable)
-            load = os.getloadavg()[0]
-            shown = 'on' if viewable else 'off'
-            if 'error' in r:
-                print(f'| {views} @ {rate:.0f} | {layout} | {shown} | failed: '
-                      f'{r["error"]} ||||||| {load:.1f} |', flush=True)
-                continue
-            d = r['diagnostics']
-            print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
-                  f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | '
-                  f'{r["p95"]:.0f} | {stage_text(d, "detector", DETECTOR_STAGES)} | '
-                  f'{stage_text(d, "fusion", FUSION_STAGES)} | {load:.1f} |', flush=True)
+        print('|---|---|---|---|---|---|---|---|---|---|---|---|')
+        costs = []
+        for views, rate in runs:
+            for layout in args.layouts:
+                settings = (False, True) if args.viewable else (False,)
+                results = {viewable: [] for viewable in settings}
+                for _ in range(args.repeat):
+                    for viewable in settings:
+                        results[viewable].append(live(layout, views, rate, args.seconds,
+                                                      args.warmup, args.threads,
+                                                      args.backend, workdir, viewable))
+                combined = {viewable: median_result(rs) for viewable, rs in results.items()}
+                for viewable, r in combined.items():
+                    print_live_row(views, rate, layout, viewable, r)
+                if args.viewable and all('error' not in r for r in combined.values()):
+                    costs.append((views, rate, layout, combined[False], combined[True]))
+        if costs:
+            print('\n## What the viewable outputs cost (debug images at their default rate '
+                  'with a subscriber per camera, /tf_static, camera markers; off -> on)')
+            print('| cameras @ Hz | layout | keypoints3d/s off -> on | throughput change | '
+                  'node CPU ms per keypoints3d off -> on | CPU change |')
+            print('|---|---|---|---|---|---|')
+            for views, rate, layout, off, on in costs:
+                print(f'| {views} @ {rate:.0f} | {layout} | {off["fused"]:.1f} -> '
+                      f'{on["fused"]:.1f} | {100 * (on["fused"] / off["fused"] - 1):+.1f}% | '
+                      f'{off["cpu_ms"]:.1f} -> {on["cpu_ms"]:.1f} | '
+                      f'{100 * (on["cpu_ms"] / off["cpu_ms"] - 1):+.1f}% |', flush=True)
     print(f'# load average {" ".join(f"{x:.1f}" for x in os.getloadavg())} at the end (a '
           'shared machine inflates every figure)')
     return 0
