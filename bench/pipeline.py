@@ -118,15 +118,25 @@ def fusion_micro(views, runs):
                 distorted=any(c.has_distortion for c in rig))
 
 
-def detector_micro(views, runs, threads, architecture, workdir):
+def bench_model(workdir, architecture='small', input_size=None):
+    """A randomly initialised checkpoint (weights do not change the speed) of
+    `architecture` at its default input or a square `input_size` (px); cached in workdir."""
+    import torch
+    path = workdir / f'{architecture}{input_size or ""}.pt'
+    if not path.exists():
+        torch.manual_seed(0)
+        options = {} if input_size is None else {'input_size': [input_size, input_size]}
+        save_checkpoint(path, build_model(architecture, 14, **options),
+                        {'keypoints': keypoint_names()})
+    return path
+
+
+def detector_micro(views, runs, threads, architecture, workdir, input_size=None):
     """images/s of Detector.predict (V 640x480 views, one batch) per backend."""
     import torch
     torch.set_num_threads(threads)
     rig = make_rig(RigConfig(num_cameras=views))
-    path = workdir / f'{architecture}.pt'
-    if not path.exists():
-        torch.manual_seed(0)
-        save_checkpoint(path, build_model(architecture, 14), {'keypoints': keypoint_names()})
+    path = bench_model(workdir, architecture, input_size)
     images = np.random.default_rng(0).integers(0, 255, (views, HEIGHT, WIDTH, 3), np.uint8)
     boxes = np.array([[160, 60, 480, 420]] * views, float)
     out = {}
@@ -153,16 +163,13 @@ def run_env(workdir):
     return env
 
 
-def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewable=False):
+def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewable=False,
+         input_size=None):
     """One end-to-end run in a fresh process (clean DDS state); returns its figures."""
     rig = make_rig(RigConfig(num_cameras=views))
     rig_path = workdir / f'rig{views}.yaml'
     save_rig(rig_path, rig)
-    model_path = workdir / 'small.pt'
-    if not model_path.exists():
-        import torch
-        torch.manual_seed(0)
-        save_checkpoint(model_path, build_model('small', 14), {'keypoints': keypoint_names()})
+    model_path = bench_model(workdir, 'small', input_size)
     spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
                 threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
                 workdir=str(workdir), viewable=viewable)
@@ -387,6 +394,9 @@ def main():
     parser.add_argument('--skip-live', action='store_true', help='micro-benchmarks only')
     parser.add_argument('--viewable', action='store_true', help='every end-to-end case with '
                         'the viewable outputs (debug images, TF, camera markers) off and on')
+    parser.add_argument('--input-size', type=int, default=None,
+                        help='network input side in px (multiple of 8) of the small net; '
+                        'default: its own (256)')
     parser.add_argument('--repeat', type=int, default=1,
                         help='runs per end-to-end case (median shown; with --viewable the '
                         'off/on runs alternate)')
@@ -403,7 +413,8 @@ def main():
         args.runs, args.fusion_views, args.detector_views = 3, [4, 35], [2]
     print(f'# machine: {os.cpu_count()} CPUs, load average '
           f'{" ".join(f"{x:.1f}" for x in os.getloadavg())} at start; network threads '
-          f'{args.threads}; small net ({HEIGHT}x{WIDTH} images cropped to 256x256)')
+          f'{args.threads}; small net ({HEIGHT}x{WIDTH} images cropped to '
+          f'{args.input_size or 256}x{args.input_size or 256})')
 
     print('\n## Fusion per frame (fuse_heatmaps of V separate 14x64x64 heatmaps, as the node '
           'holds them, to 3D; torch threads 1 as the fusion node)')
@@ -427,7 +438,8 @@ def main():
         print('|---|---|---|---|---|')
         for arch in args.architectures:
             for views in args.detector_views:
-                r = detector_micro(views, args.runs, args.threads, arch, workdir)
+                r = detector_micro(views, args.runs, args.threads, arch, workdir,
+                                   args.input_size if arch == 'small' else None)
                 ratio = (f'{r["onnxruntime"] / r["torch"]:.2f}x'
                          if all(isinstance(r[b], float) for b in r) else 'n/a')
                 cells = [f'{r[b]:.1f}' if isinstance(r[b], float) else r[b] for b in r]
@@ -458,7 +470,8 @@ def main():
                     for viewable in settings:
                         results[viewable].append(live(layout, views, rate, args.seconds,
                                                       args.warmup, args.threads,
-                                                      args.backend, workdir, viewable))
+                                                      args.backend, workdir, viewable,
+                                                      args.input_size))
                 combined = {viewable: median_result(rs) for viewable, rs in results.items()}
                 for viewable, r in combined.items():
                     print_live_row(views, rate, layout, viewable, r)
