@@ -29,6 +29,7 @@ times (off/on interleaved) and shows medians: single 10 s runs differ by several
 Prints tables and the load average; never asserts.
 """
 import argparse
+import contextlib
 import json
 import os
 from pathlib import Path
@@ -181,6 +182,30 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
             return json.loads(line)
     return dict(error=(proc.stderr or proc.stdout).strip().splitlines()[-1:] or
                 [f'exit {proc.returncode}'])
+
+
+# A second job on the machine: single-threaded dense arithmetic (as another user's training or
+# encoding would be) in N processes, started before and stopped after the end-to-end runs.
+_SECOND_JOB = ('import numpy as np\n'
+               'a = np.random.default_rng(0).random((256, 256))\n'
+               'while True:\n'
+               '    a = np.tanh(a @ a)\n')
+
+
+@contextlib.contextmanager
+def second_job(processes):
+    """Run `processes` CPU-bound processes (one thread each) for the body's duration."""
+    env = dict(os.environ, OMP_NUM_THREADS='1', OPENBLAS_NUM_THREADS='1', MKL_NUM_THREADS='1')
+    procs = [subprocess.Popen([sys.executable, '-c', _SECOND_JOB], env=env,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+             for _ in range(processes)]
+    try:
+        yield
+    finally:
+        for proc in procs:
+            proc.kill()
+        for proc in procs:
+            proc.wait()
 
 
 class Feeder:
@@ -337,6 +362,26 @@ def worker(spec):
     return 0
 
 
+def run_cases(args, runs, workdir, costs):
+    """Every end-to-end case (rows printed as they finish); viewable off/on pairs appended to
+    costs."""
+    for views, rate in runs:
+        for layout in args.layouts:
+            settings = (False, True) if args.viewable else (False,)
+            results = {viewable: [] for viewable in settings}
+            for _ in range(args.repeat):
+                for viewable in settings:
+                    results[viewable].append(live(layout, views, rate, args.seconds,
+                                                  args.warmup, args.threads,
+                                                  args.backend, workdir, viewable,
+                                                  args.input_size))
+            combined = {viewable: median_result(rs) for viewable, rs in results.items()}
+            for viewable, r in combined.items():
+                print_live_row(views, rate, layout, viewable, r)
+            if args.viewable and all('error' not in r for r in combined.values()):
+                costs.append((views, rate, layout, combined[False], combined[True]))
+
+
 def median_result(results):
     """One figure per field: the median over repeated runs of a case (the last run's
     stage profile); the first error if every run failed."""
@@ -397,6 +442,9 @@ def main():
     parser.add_argument('--input-size', type=int, default=None,
                         help='network input side in px (multiple of 8) of the small net; '
                         'default: its own (256)')
+    parser.add_argument('--second-job', type=int, default=0, metavar='N',
+                        help='N CPU-bound processes beside the end-to-end runs (a loaded '
+                        'machine; the load column says how loaded)')
     parser.add_argument('--repeat', type=int, default=1,
                         help='runs per end-to-end case (median shown; with --viewable the '
                         'off/on runs alternate)')
@@ -453,7 +501,9 @@ def main():
         print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend}, '
               f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up'
               + (f', median of {args.repeat} runs (off/on interleaved)'
-                 if args.repeat > 1 else ''))
+                 if args.repeat > 1 else '')
+              + (f', with a second job ({args.second_job} CPU-bound process(es) beside '
+                 'every run)' if args.second_job else ''))
         print('| cameras @ Hz | layout | viewable | published frames/s | keypoints3d/s | '
               'detector images/s'
               ' | latency median ms | latency p95 ms | node CPU ms per keypoints3d | '
@@ -462,21 +512,10 @@ def main():
               'triangulate, errors, publish | load |')
         print('|---|---|---|---|---|---|---|---|---|---|---|---|')
         costs = []
-        for views, rate in runs:
-            for layout in args.layouts:
-                settings = (False, True) if args.viewable else (False,)
-                results = {viewable: [] for viewable in settings}
-                for _ in range(args.repeat):
-                    for viewable in settings:
-                        results[viewable].append(live(layout, views, rate, args.seconds,
-                                                      args.warmup, args.threads,
-                                                      args.backend, workdir, viewable,
-                                                      args.input_size))
-                combined = {viewable: median_result(rs) for viewable, rs in results.items()}
-                for viewable, r in combined.items():
-                    print_live_row(views, rate, layout, viewable, r)
-                if args.viewable and all('error' not in r for r in combined.values()):
-                    costs.append((views, rate, layout, combined[False], combined[True]))
+        with second_job(args.second_job):
+            if args.second_job:
+                time.sleep(5)   # let the load average see it
+            run_cases(args, runs, workdir, costs)
         if costs:
             print('\n## What the viewable outputs cost (debug images at their default rate '
                   'with a subscriber per camera, /tf_static, camera markers; off -> on)')
