@@ -133,7 +133,6 @@ class FusionNode(Node):
         self.skeleton = load_skeleton(config.skeleton)
         self.frame_id = config.frame_id or rig_frame
         self.stats = {name: CameraStats() for name in self.names}
-        self.started = time.monotonic()
         self.frames = 0
         self.partial_frames = 0
         self.fusion_seconds = []
