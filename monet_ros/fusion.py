@@ -13,7 +13,7 @@ import numpy as np
 
 from monet_ros.config import setting, validate_config
 from monet_ros.geometry import reprojection_error, triangulate_robust
-from monet_ros.models import decode_heatmaps
+from monet_ros.models import decode_heatmap_views
 from monet_ros.timing import NO_TIMER
 
 # Largest |S[0, 1]|, |S[1, 0]|, |S[2] - (0, 0, 1)| accepted for a crop/scale S.
@@ -146,14 +146,14 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer
                         seconds=time.perf_counter() - start)
 
 
-def _usable_views(heatmaps, S, bad_K):
-    """{view: reason} for the heatmaps that cannot be decoded: not (C, h, w) with h, w >= 3,
-    a channel count other than the majority's, non-finite values, K not a crop."""
+def _misshapen_views(heatmaps):
+    """({view: reason}, C) for the heatmaps whose shape cannot be decoded: not (C, h, w)
+    with h, w >= 3, or a channel count other than the majority's (C)."""
     skipped = {}
     shapes = [np.shape(h) for h in heatmaps]
     counts = Counter(shape[0] for shape in shapes if len(shape) == 3)
     channels = counts.most_common(1)[0][0] if counts else None
-    for v, (heat, shape) in enumerate(zip(heatmaps, shapes)):
+    for v, shape in enumerate(shapes):
         if len(shape) != 3:
             skipped[v] = f'view {v}: heatmaps must be (C, h, w), got {shape}'
         elif shape[1] < 3 or shape[2] < 3:
@@ -161,18 +161,14 @@ def _usable_views(heatmaps, S, bad_K):
         elif shape[0] != channels:
             skipped[v] = f'view {v}: {shape[0]} heatmap channels, the other views have ' \
                 f'{channels}'
-        elif not np.isfinite(heat).all():
-            skipped[v] = f'view {v}: heatmaps hold non-finite values'
-        elif bad_K[v]:
-            skipped[v] = (f'view {v}: heatmap K is not a crop/scale of the source K '
-                          f'(S = K_heat K^-1 = {np.round(S[v], 6).tolist()})')
     return skipped, channels
 
 
 def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig(), timer=None):
     """Heatmaps of V views -> FusionResult.
 
-    heatmaps: (V, C, h, w) array, or a list of V (C, h_v, w_v) arrays when grids differ;
+    heatmaps: (V, C, h, w) array, or a list of V (C, h_v, w_v) arrays (grids may differ;
+    the arrays are decoded where they lie, with models.decode_heatmap_views);
     K_heat (V, 3, 3): intrinsics of each heatmap's virtual camera (its camera_info);
     cameras: V source cameras (rig: K, dist, R, t of the full image).
     A view that cannot be used (grid smaller than 3x3, other channel count, non-finite
@@ -186,19 +182,24 @@ def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig(), timer=None):
         raise ValueError(f'{len(heatmaps)} heatmaps for {len(cameras)} cameras')
     S, bad_K = crop_scales(K_heat, np.stack([cam.K for cam in cameras]))
     heatmaps = [np.asarray(h) for h in heatmaps]
-    skipped, channels = _usable_views(heatmaps, S, bad_K)
-    good = [v for v in range(len(cameras)) if v not in skipped]
-    if not good:
+    skipped, channels = _misshapen_views(heatmaps)
+    shaped = [v for v in range(len(cameras)) if v not in skipped]
+    peaks = np.full((len(cameras), channels or 0, 2), np.nan)
+    conf = np.zeros((len(cameras), channels or 0))
+    if shaped:
+        p, c, finite = decode_heatmap_views([heatmaps[v] for v in shaped])
+        for i, v in enumerate(shaped):
+            if not finite[i]:
+                skipped[v] = f'view {v}: heatmaps hold non-finite values'
+            elif bad_K[v]:
+                skipped[v] = (f'view {v}: heatmap K is not a crop/scale of the source K '
+                              f'(S = K_heat K^-1 = {np.round(S[v], 6).tolist()})')
+        usable = finite & ~bad_K[shaped]
+        good = np.asarray(shaped)[usable]
+        peaks[good], conf[good] = p[usable], c[usable]
+    if len(skipped) == len(cameras):
         raise ValueError(skipped[0])
-    peaks = np.full((len(cameras), channels, 2), np.nan)
-    conf = np.zeros((len(cameras), channels))
-    if len({heatmaps[v].shape for v in good}) == 1:
-        p, c = decode_heatmaps(np.stack([heatmaps[v] for v in good]))
-        peaks[good], conf[good] = p, c
-    else:  # views with different grids: decode each view (V is small)
-        for v in good:
-            p, c = decode_heatmaps(heatmaps[v][None])
-            peaks[v], conf[v] = p[0], c[0]
+    skipped = dict(sorted(skipped.items()))
     points = heat_to_source_points(peaks, S)
     (timer or NO_TIMER).add('decode', time.perf_counter() - start)
     result = fuse_points(points, conf, cameras, config, timer)
