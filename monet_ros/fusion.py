@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from monet_ros.config import setting, validate_config
-from monet_ros.geometry import reprojection_error, triangulate_robust
+from monet_ros.geometry import triangulate_robust
 from monet_ros.models import decode_heatmap_views
 from monet_ros.timing import NO_TIMER
 
@@ -125,14 +125,12 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer
     weak = ~(conf >= config.confidence_threshold) | ~np.isfinite(points2d).all(axis=-1)
     points2d[weak] = np.nan
     weights = np.where(weak, 0.0, conf)
-    X, inliers = triangulate_robust(points2d, cameras, weights=weights,
-                                    threshold_px=config.threshold_px,
-                                    min_views=config.min_views, method=config.method,
-                                    timer=timer)
+    X, inliers, errors = triangulate_robust(points2d, cameras, weights=weights,
+                                            threshold_px=config.threshold_px,
+                                            min_views=config.min_views,
+                                            method=config.method, timer=timer, errors=True)
     X = np.asarray(X, np.float64)
     inliers = np.asarray(inliers, bool) & ~weak & np.isfinite(X).all(axis=1)[None, :]
-    with (timer or NO_TIMER)('errors'):
-        errors = np.asarray(reprojection_error(X, points2d, cameras), np.float64)
     view_errors = np.where(inliers, errors, np.nan)
     num_views = inliers.sum(axis=0)
     with np.errstate(invalid='ignore', divide='ignore'):

@@ -136,6 +136,7 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
     n_avail = avail.sum(axis=0)
     X = np.full((N, 3), np.nan)
     inliers = np.zeros((V, N), dtype=bool)
+    errors = np.full((V, N), np.nan)  # of the accepted subsets' views
     current = avail.copy()  # best view subset found so far, per keypoint (V, N)
     current_err = np.zeros((V, N))  # its per-view reprojection errors
     todo = np.arange(N)
@@ -166,8 +167,9 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         inliers[:, todo[ok]] = best_used[:, ok]
         current[:, todo] = best_used
         current_err[:, todo] = err[best, :, cols].T
+        errors[:, todo[ok]] = current_err[:, todo[ok]]
         todo = todo[~ok]
-    return X, inliers
+    return X, np.where(inliers, errors, np.nan), inliers
 
 
 def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
@@ -177,7 +179,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     inliers = np.zeros((V, N), dtype=bool)
     todo = np.flatnonzero(avail.sum(axis=0) >= max(2, min_views))
     if todo.size == 0:
-        return X, inliers
+        return X, inliers, None
     n = todo.size
     cols = np.arange(n)
     if comb(V, 2) <= max_hypotheses:  # every view pair
@@ -222,12 +224,12 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     ok &= ~_behind(rig, Xr, best_inl).any(axis=0)
     X[todo[ok]] = Xr[ok]
     inliers[:, todo[ok]] = best_inl[:, ok]
-    return X, inliers
+    return X, None, inliers
 
 
 def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_views=2,
                        method='exclusion', max_subsets=20, max_hypotheses=20, seed=0,
-                       timer=None):
+                       timer=None, errors=False):
     """Outlier-robust triangulation, batched over keypoints.
 
     method='exclusion' (Pose2Sim's rule): triangulate with all available views; while the
@@ -243,8 +245,11 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     reprojection error < threshold_px; the hypothesis with most inliers (then lowest mean
     inlier error) wins and is refined by weighted DLT on its inliers; NaN with fewer than
     min_views inliers.
-    timer: a monet_ros.timing.StageTimer to account 'undistort' and 'triangulate' to.
-    Returns (X (N, 3), inlier_mask (V, N) bool of the views used)."""
+    timer: a monet_ros.timing.StageTimer to account 'undistort', 'triangulate' and
+    'errors' to.
+    Returns (X (N, 3), inlier_mask (V, N) bool of the views used), and with errors=True
+    also view_errors (V, N): the reprojection errors (pixels, reprojection_error's) of the
+    inlier views, NaN elsewhere (the exclusion search has them already)."""
     if min_views < 2:
         raise ValueError(f'min_views must be >= 2, got {min_views}')
     if not threshold_px > 0:
@@ -252,14 +257,21 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     timer = timer or NO_TIMER
     with timer('undistort'):
         obs, ideal, w = _prepare(points2d, cameras, weights)
-    with timer('triangulate'):
-        return _robust(obs, ideal, w, cameras, threshold_px, min_views, method, max_subsets,
-                       max_hypotheses, seed)
-
-
-def _robust(obs, ideal, w, cameras, threshold_px, min_views, method, max_subsets,
-            max_hypotheses, seed):
     rig = stack_cameras(cameras)
+    with timer('triangulate'):
+        X, view_errors, inliers = _robust(obs, ideal, w, rig, threshold_px, min_views,
+                                          method, max_subsets, max_hypotheses, seed)
+    if not errors:
+        return X, inliers
+    with timer('errors'):
+        if view_errors is None:
+            view_errors = np.where(inliers, _view_errors(rig, X, obs), np.nan)
+    return X, inliers, view_errors
+
+
+def _robust(obs, ideal, w, rig, threshold_px, min_views, method, max_subsets,
+            max_hypotheses, seed):
+    """(X, view errors of the inliers or None where not at hand, inliers)."""
     B = dlt_rows(ideal, rig['P'])
     if method == 'exclusion':
         return _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets)
