@@ -12,12 +12,14 @@ import time
 import numpy as np
 
 from monet_ros.config import setting, validate_config
-from monet_ros.geometry import triangulate_robust
+from monet_ros.geometry import stack_cameras, triangulate_robust
 from monet_ros.models import decode_heatmap_views
 from monet_ros.timing import NO_TIMER
 
 # Largest |S[0, 1]|, |S[1, 0]|, |S[2] - (0, 0, 1)| accepted for a crop/scale S.
 _CROP_TOL = 1e-6
+_OFF = [1, 3, 6, 7, 8]
+_OFF_TARGET = np.array([0.0, 0.0, 0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -68,21 +70,23 @@ class FusionResult:
             return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
 
 
-def crop_scales(K_heat, K_source):
+def crop_scales(K_heat, K_source, K_source_inv=None):
     """(S (V, 3, 3) with K_heat = S K_source, bad (V,) bool): bad where S is not a crop/scale
-    (rotation/shear, non-positive or non-finite scales). K_* (V, 3, 3)."""
+    (rotation/shear, non-positive or non-finite scales). K_* (V, 3, 3); K_source_inv: its
+    inverse when at hand (stack_cameras' K_inv)."""
     K_heat = np.asarray(K_heat, np.float64).reshape(-1, 3, 3)
-    K_source = np.asarray(K_source, np.float64).reshape(-1, 3, 3)
+    if K_source_inv is None:
+        K_source_inv = np.linalg.inv(np.asarray(K_source, np.float64).reshape(-1, 3, 3))
     with np.errstate(all='ignore'):
-        S = K_heat @ np.linalg.inv(K_source)
-        off = np.abs(np.stack([S[:, 0, 1], S[:, 1, 0], S[:, 2, 0], S[:, 2, 1],
-                               S[:, 2, 2] - 1], axis=1))
-        scale = np.maximum(np.abs(S[:, 0, 0]), 1.0)
-        good = (off.max(axis=1) <= _CROP_TOL * scale) & (S[:, 0, 0] > 0) & (S[:, 1, 1] > 0)
-    good &= np.isfinite(S).all(axis=(1, 2))
-    with np.errstate(invalid='ignore'):   # absurd scales (e.g. K = 1e300): not a crop
-        good &= (np.minimum(S[:, 0, 0], S[:, 1, 1]) > 1e-6) \
-            & (np.maximum(S[:, 0, 0], S[:, 1, 1]) < 1e6)
+        S = K_heat @ K_source_inv
+        flat = S.reshape(-1, 9)
+        # S[0, 1], S[1, 0], S[2, 0], S[2, 1] must be 0 and S[2, 2] 1
+        off = np.abs(flat[:, _OFF] - _OFF_TARGET).max(axis=1)
+        sx, sy = flat[:, 0], flat[:, 4]
+        # (absurd scales, e.g. K = 1e300: not a crop)
+        good = (off <= _CROP_TOL * np.maximum(np.abs(sx), 1.0)) \
+            & (np.minimum(sx, sy) > 1e-6) & (np.maximum(sx, sy) < 1e6)
+    good &= np.isfinite(flat).all(axis=1)
     return S, ~good
 
 
@@ -101,9 +105,7 @@ def heat_to_source_points(peaks, S):
     """Heatmap pixels (V, C, 2) -> source-image pixels (V, C, 2) through S^-1 (V, 3, 3)."""
     peaks = np.asarray(peaks, np.float64)
     # S is a per-axis scale + offset: u = (u' - S[0, 2]) / S[0, 0], v likewise.
-    scale = np.stack([S[:, 0, 0], S[:, 1, 1]], axis=-1)[:, None, :]
-    offset = np.stack([S[:, 0, 2], S[:, 1, 2]], axis=-1)[:, None, :]
-    return (peaks - offset) / scale
+    return (peaks - S[:, None, :2, 2]) / np.diagonal(S, axis1=1, axis2=2)[:, None, :2]
 
 
 def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer=None):
@@ -178,7 +180,8 @@ def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig(), timer=None):
     start = time.perf_counter()
     if len(heatmaps) != len(cameras):
         raise ValueError(f'{len(heatmaps)} heatmaps for {len(cameras)} cameras')
-    S, bad_K = crop_scales(K_heat, np.stack([cam.K for cam in cameras]))
+    rig = stack_cameras(cameras)
+    S, bad_K = crop_scales(K_heat, rig['K'], rig['K_inv'])
     heatmaps = [np.asarray(h) for h in heatmaps]
     skipped, channels = _misshapen_views(heatmaps)
     shaped = [v for v in range(len(cameras)) if v not in skipped]

@@ -326,8 +326,8 @@ _STACK_CACHE = {}  # id-tuple -> (cameras tuple, stacked dict); cameras are immu
 
 def stack_cameras(cameras):
     """Stacked parameters of a rig: dict of K (V, 3, 3), R (V, 3, 3), t (V, 3), P (V, 3, 4),
-    Rt (V, 3, 4) = [R | t], d12 (V, 12) (distortion padded to 12 coefficients), model
-    (d12 as _model_terms gives it).
+    Rt (V, 3, 4) = [R | t], K_inv (V, 3, 3), d12 (V, 12) (distortion padded to 12
+    coefficients), model (d12 as _model_terms gives it).
     The last few rigs are cached (Cameras are immutable): do not modify the arrays."""
     cameras = tuple(cameras)
     key = tuple(id(c) for c in cameras)
@@ -338,6 +338,7 @@ def stack_cameras(cameras):
                't': np.stack([c.t for c in cameras]), 'P': np.stack([c.P for c in cameras]),
                'd12': np.stack([c._d12 for c in cameras])}
     stacked['Rt'] = np.concatenate([stacked['R'], stacked['t'][:, :, None]], axis=-1)
+    stacked['K_inv'] = np.linalg.inv(stacked['K'])
     for array in stacked.values():
         array.setflags(write=False)
     stacked['model'] = _model_terms(stacked['d12'])  # (coefficients, flags) of _distort
