@@ -20,8 +20,9 @@ from monet_ros.geometry.camera import project_views, stack_cameras, undistort_vi
 from monet_ros.timing import NO_TIMER
 
 
-def _prepare(points2d, cameras, weights):
-    """Validate shapes; -> (observed (V,N,2), ideal (V,N,2) with 0 at missing, w (V,N))."""
+def _prepare(points2d, cameras, weights, rig=None):
+    """Validate shapes; -> (observed (V,N,2), ideal (V,N,2) with 0 at missing, w (V,N)).
+    rig: stack_cameras(cameras) when at hand."""
     obs = np.asarray(points2d, dtype=np.float64)
     V = len(cameras)
     if obs.ndim != 3 or obs.shape[0] != V or obs.shape[2] != 2:
@@ -34,7 +35,7 @@ def _prepare(points2d, cameras, weights):
             raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
         if np.any(w < 0):
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
-    ideal = undistort_views(stack_cameras(cameras), obs)
+    ideal = undistort_views(rig or stack_cameras(cameras), obs)
     # missing: NaN input, zero/NaN weight, or a point the distortion model cannot invert
     missing = ~np.all(np.isfinite(ideal), axis=2) | ~np.isfinite(w) | (w <= 0)
     w = np.where(missing, 0.0, w)
@@ -255,9 +256,9 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     if not threshold_px > 0:
         raise ValueError(f'threshold_px must be > 0, got {threshold_px}')
     timer = timer or NO_TIMER
-    with timer('undistort'):
-        obs, ideal, w = _prepare(points2d, cameras, weights)
     rig = stack_cameras(cameras)
+    with timer('undistort'):
+        obs, ideal, w = _prepare(points2d, cameras, weights, rig)
     with timer('triangulate'):
         X, view_errors, inliers = _robust(obs, ideal, w, rig, threshold_px, min_views,
                                           method, max_subsets, max_hypotheses, seed)

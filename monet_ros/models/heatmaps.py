@@ -56,7 +56,7 @@ def _vertex_offset(left, centre, right):
     curvature = left - 2 * centre + right
     ok = curvature < 0
     offset = 0.5 * (left - right) / np.where(ok, curvature, 1)
-    return np.where(ok, offset, 0).astype(left.dtype)
+    return np.where(ok, offset, 0).astype(left.dtype, copy=False)
 
 
 _STEPS = np.array([-1, 0, 1])
@@ -71,7 +71,7 @@ def _window_index(index, wh):
     w = wh[..., :1]
     row, col = np.divmod(index[:, None], w)
     cr = np.concatenate([col, row], axis=1)
-    cr_c = np.clip(cr, 1, wh - 2)
+    cr_c = np.minimum(np.maximum(cr, 1), wh - 2)
     idx = np.empty((len(index), 7), np.intp)
     idx[:, 0] = index
     idx[:, 1:4] = row * w + cr_c[:, :1] + _STEPS
