@@ -162,7 +162,7 @@ def decode_heatmap_views(views, eps=1e-10):
     checked = np.ones(count, bool)
     flats = []
     for v, view in enumerate(views):
-        flat = view.reshape(channels, -1)
+        flat = view.reshape(channels, view.shape[1] * view.shape[2])
         if view.dtype != np.float32 and view.dtype != np.float64:
             other[v] = True
             checked[v] = np.isfinite(view).all()

@@ -120,6 +120,9 @@ def test_decode_views_equals_the_stacked_decode_exactly(dtype):
         np.testing.assert_array_equal(got_confidence[v], alone_confidence[0])
     with pytest.raises(ValueError, match='view 1 must be'):
         decode_heatmap_views([heat[0], heat[1][:2]])
+    # no channels: nothing to decode, as decode_heatmaps
+    got_peaks, got_confidence, finite = decode_heatmap_views([heat[0][:0]] * 2)
+    assert got_peaks.shape == (2, 0, 2) and got_confidence.shape == (2, 0) and finite.all()
 
 
 def test_decode_finds_border_peaks_and_empty_maps_give_the_argmax():
