@@ -149,11 +149,13 @@ def decode_heatmap_views(views, eps=1e-10):
     views = [np.asarray(view) for view in views]
     if not views:
         raise ValueError('decode_heatmap_views: no views')
-    channels = views[0].shape[0] if views[0].ndim == 3 else None
+    grid = views[0].shape
+    channels = grid[0] if len(grid) == 3 else None
     for v, view in enumerate(views):
-        if view.ndim != 3 or view.shape[0] != channels or min(view.shape[1:]) < 3:
+        shape = view.shape
+        if len(shape) != 3 or shape[0] != channels or shape[1] < 3 or shape[2] < 3:
             raise ValueError(f'decode_heatmap_views: view {v} must be ({channels}, h, w) '
-                             f'with h, w >= 3, got {view.shape}')
+                             f'with h, w >= 3, got {shape}')
     dtype = _decode_dtype(np.result_type(*views))
     count = len(views)
     index = np.empty((count, channels), np.intp)
@@ -170,17 +172,24 @@ def decode_heatmap_views(views, eps=1e-10):
             low[v] = flat.min()
         if flat.dtype != dtype:
             flat = flat.astype(dtype)
-        index[v] = flat.argmax(axis=1)  # at the first NaN if any: its value shows it
+        flat.argmax(axis=1, out=index[v])  # at the first NaN if any: its value shows it
         flats.append(flat)
-    wh = np.array([view.shape[:0:-1] for view in views])                # (V, 2) (w, h)
-    idx, cr, cr_c = _window_index(index.reshape(-1), np.repeat(wh, channels, axis=0))
+    if all(view.shape == grid for view in views):
+        wh = np.array(grid[:0:-1])                                         # (w, h)
+        offset = np.arange(channels)[:, None] * (grid[1] * grid[2])        # (C, 1)
+    else:
+        wh = np.array([view.shape[:0:-1] for view in views])               # (V, 2)
+        offset = np.arange(channels)[:, None] * wh.prod(axis=1)[:, None, None]
+        wh = np.repeat(wh, channels, axis=0)
+    idx, cr, cr_c = _window_index(index.reshape(-1), wh)
     # positions in each view's (C * h * w) buffer: the channel's offset + the map's
-    idx = idx.reshape(count, channels, 7) \
-        + np.arange(channels)[:, None] * wh.prod(axis=1)[:, None, None]
+    idx = idx.reshape(count, channels, 7) + offset
     values = np.empty((count, channels, 7), dtype)
     for v, flat in enumerate(flats):
-        values[v] = flat.take(idx[v])
+        flat.take(idx[v], out=values[v], mode='clip')  # (in range: no buffering)
     peaks, confidence = _refine_peaks(values.reshape(-1, 7), cr, cr_c, dtype, eps)
-    finite = checked & np.isfinite(low) \
-        & (np.isfinite(confidence.reshape(count, -1)).all(axis=1) | other)
+    finite = np.isfinite(confidence.reshape(count, -1)).all(axis=1)
+    if other.any():
+        finite |= other
+    finite &= checked & np.isfinite(low)
     return peaks.reshape(count, channels, 2), confidence.reshape(count, channels), finite
