@@ -180,7 +180,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     inliers = np.zeros((V, N), dtype=bool)
     todo = np.flatnonzero(avail.sum(axis=0) >= max(2, min_views))
     if todo.size == 0:
-        return X, inliers, None
+        return X, None, inliers
     n = todo.size
     cols = np.arange(n)
     if comb(V, 2) <= max_hypotheses:  # every view pair

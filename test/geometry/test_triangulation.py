@@ -200,6 +200,11 @@ def test_robust_view_errors_are_the_inliers_reprojection_errors(method):
         ref = cv2.projectPoints(out[kept], cv2.Rodrigues(cam.R)[0], cam.t, cam.K, cam.dist)[0]
         np.testing.assert_allclose(errors[v, kept],
                                    np.linalg.norm(ref[:, 0] - obs[v, kept], axis=1), atol=1e-6)
+    # nothing to triangulate (one view per keypoint): NaN points, no inliers, no errors
+    obs[1:] = np.nan
+    out, inl, errors = triangulate_robust(obs, cams, method=method, errors=True)
+    assert np.isnan(out).all() and inl.shape == (8, 14) and not inl.any()
+    assert errors.shape == (8, 14) and np.isnan(errors).all()
 
 
 def test_robust_min_views_and_nan():
