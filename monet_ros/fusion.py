@@ -135,11 +135,11 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer
     inliers = np.asarray(inliers, bool) & ~weak & np.isfinite(X).all(axis=1)[None, :]
     view_errors = np.where(inliers, errors, np.nan)
     num_views = inliers.sum(axis=0)
+    count = np.maximum(num_views, 1)
+    seen = num_views > 0
     with np.errstate(invalid='ignore', divide='ignore'):
-        mean_error = np.where(num_views > 0, np.nansum(view_errors, axis=0)
-                              / np.maximum(num_views, 1), np.nan)
-        confidence = np.where(num_views > 0, (conf * inliers).sum(axis=0)
-                              / np.maximum(num_views, 1), 0.0)
+        mean_error = np.where(seen, np.where(inliers, errors, 0.0).sum(axis=0) / count, np.nan)
+        confidence = np.where(seen, (conf * inliers).sum(axis=0) / count, 0.0)
     return FusionResult(X=X, confidence=confidence, reprojection_error=mean_error,
                         num_views=num_views.astype(np.uint32), inliers=inliers,
                         view_errors=view_errors, points2d=points2d, peak_confidence=conf,
