@@ -185,21 +185,23 @@ def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig(), timer=None):
     heatmaps = [np.asarray(h) for h in heatmaps]
     skipped, channels = _misshapen_views(heatmaps)
     shaped = [v for v in range(len(cameras)) if v not in skipped]
-    peaks = np.full((len(cameras), channels or 0, 2), np.nan)
-    conf = np.zeros((len(cameras), channels or 0))
     if shaped:
         p, c, finite = decode_heatmap_views([heatmaps[v] for v in shaped])
-        for i, v in enumerate(shaped):
-            if not finite[i]:
-                skipped[v] = f'view {v}: heatmaps hold non-finite values'
-            elif bad_K[v]:
-                skipped[v] = (f'view {v}: heatmap K is not a crop/scale of the source K '
-                              f'(S = K_heat K^-1 = {np.round(S[v], 6).tolist()})')
         usable = finite & ~bad_K[shaped]
-        good = np.asarray(shaped)[usable]
-        peaks[good], conf[good] = p[usable], c[usable]
+        for i in np.flatnonzero(~usable):
+            v = shaped[i]
+            skipped[v] = (f'view {v}: heatmaps hold non-finite values' if not finite[i] else
+                          f'view {v}: heatmap K is not a crop/scale of the source K '
+                          f'(S = K_heat K^-1 = {np.round(S[v], 6).tolist()})')
     if len(skipped) == len(cameras):
         raise ValueError(skipped[0])
+    if skipped:  # the skipped views are missing: NaN peaks, confidence 0
+        peaks = np.full((len(cameras), channels, 2), np.nan)
+        conf = np.zeros((len(cameras), channels))
+        good = np.asarray(shaped)[usable]
+        peaks[good], conf[good] = p[usable], c[usable]
+    else:
+        peaks, conf = p, c
     skipped = dict(sorted(skipped.items()))
     points = heat_to_source_points(peaks, S)
     (timer or NO_TIMER).add('decode', time.perf_counter() - start)
