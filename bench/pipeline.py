@@ -433,7 +433,8 @@ def main():
     parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
                         help='detector backend of the end-to-end runs')
     parser.add_argument('--fusion-views', type=int, nargs='+', default=[4, 8, 35])
-    parser.add_argument('--detector-views', type=int, nargs='+', default=[4, 8])
+    parser.add_argument('--detector-views', type=int, nargs='*', default=[4, 8],
+                        help='views of the detector table (none: no detector table)')
     parser.add_argument('--architectures', nargs='+', default=['small'],
                         help='networks of the torch / ONNX Runtime comparison')
     parser.add_argument('--skip-live', action='store_true', help='micro-benchmarks only')
@@ -477,13 +478,16 @@ def main():
               f' / {s["triangulate"]:.2f} / {s["errors"]:.2f} | {1e3 * r["plain"]:.2f} | '
               f'{1e3 * r["undist"]:.3f} | {r["err_conv"]:.1e} / {r["err_default"]:.1e}'
               f'{"" if r["distorted"] else " (no distortion)"} |', flush=True)
+    print('(errors: reprojection errors of the inlier views; the exclusion search has them '
+          'already, so they cost ~0 beyond triangulate)')
 
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
-        print(f'\n## Detector images/s (Detector.predict of V 640x480 views in one batch, '
-              f'{args.threads} thread(s))')
-        print('| network | views | torch | onnxruntime | onnxruntime / torch |')
-        print('|---|---|---|---|---|')
+        if args.detector_views:
+            print(f'\n## Detector images/s (Detector.predict of V 640x480 views in one '
+                  f'batch, {args.threads} thread(s))')
+            print('| network | views | torch | onnxruntime | onnxruntime / torch |')
+            print('|---|---|---|---|---|')
         for arch in args.architectures:
             for views in args.detector_views:
                 r = detector_micro(views, args.runs, args.threads, arch, workdir,

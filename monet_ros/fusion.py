@@ -12,12 +12,14 @@ import time
 import numpy as np
 
 from monet_ros.config import setting, validate_config
-from monet_ros.geometry import reprojection_error, triangulate_robust
-from monet_ros.models import decode_heatmaps
+from monet_ros.geometry import stack_cameras, triangulate_robust
+from monet_ros.models import decode_heatmap_views
 from monet_ros.timing import NO_TIMER
 
 # Largest |S[0, 1]|, |S[1, 0]|, |S[2] - (0, 0, 1)| accepted for a crop/scale S.
 _CROP_TOL = 1e-6
+_OFF = [1, 3, 6, 7, 8]
+_OFF_TARGET = np.array([0.0, 0.0, 0.0, 0.0, 1.0])
 
 
 @dataclass(frozen=True)
@@ -68,21 +70,23 @@ class FusionResult:
             return np.where(counts > 0, sums / np.maximum(counts, 1), np.nan)
 
 
-def crop_scales(K_heat, K_source):
+def crop_scales(K_heat, K_source, K_source_inv=None):
     """(S (V, 3, 3) with K_heat = S K_source, bad (V,) bool): bad where S is not a crop/scale
-    (rotation/shear, non-positive or non-finite scales). K_* (V, 3, 3)."""
+    (rotation/shear, non-positive or non-finite scales). K_* (V, 3, 3); K_source_inv: its
+    inverse when at hand (stack_cameras' K_inv)."""
     K_heat = np.asarray(K_heat, np.float64).reshape(-1, 3, 3)
-    K_source = np.asarray(K_source, np.float64).reshape(-1, 3, 3)
+    if K_source_inv is None:
+        K_source_inv = np.linalg.inv(np.asarray(K_source, np.float64).reshape(-1, 3, 3))
     with np.errstate(all='ignore'):
-        S = K_heat @ np.linalg.inv(K_source)
-        off = np.abs(np.stack([S[:, 0, 1], S[:, 1, 0], S[:, 2, 0], S[:, 2, 1],
-                               S[:, 2, 2] - 1], axis=1))
-        scale = np.maximum(np.abs(S[:, 0, 0]), 1.0)
-        good = (off.max(axis=1) <= _CROP_TOL * scale) & (S[:, 0, 0] > 0) & (S[:, 1, 1] > 0)
-    good &= np.isfinite(S).all(axis=(1, 2))
-    with np.errstate(invalid='ignore'):   # absurd scales (e.g. K = 1e300): not a crop
-        good &= (np.minimum(S[:, 0, 0], S[:, 1, 1]) > 1e-6) \
-            & (np.maximum(S[:, 0, 0], S[:, 1, 1]) < 1e6)
+        S = K_heat @ K_source_inv
+        flat = S.reshape(-1, 9)
+        # S[0, 1], S[1, 0], S[2, 0], S[2, 1] must be 0 and S[2, 2] 1
+        off = np.abs(flat[:, _OFF] - _OFF_TARGET).max(axis=1)
+        sx, sy = flat[:, 0], flat[:, 4]
+        # (absurd scales, e.g. K = 1e300: not a crop)
+        good = (off <= _CROP_TOL * np.maximum(np.abs(sx), 1.0)) \
+            & (np.minimum(sx, sy) > 1e-6) & (np.maximum(sx, sy) < 1e6)
+    good &= np.isfinite(flat).all(axis=1)
     return S, ~good
 
 
@@ -101,9 +105,7 @@ def heat_to_source_points(peaks, S):
     """Heatmap pixels (V, C, 2) -> source-image pixels (V, C, 2) through S^-1 (V, 3, 3)."""
     peaks = np.asarray(peaks, np.float64)
     # S is a per-axis scale + offset: u = (u' - S[0, 2]) / S[0, 0], v likewise.
-    scale = np.stack([S[:, 0, 0], S[:, 1, 1]], axis=-1)[:, None, :]
-    offset = np.stack([S[:, 0, 2], S[:, 1, 2]], axis=-1)[:, None, :]
-    return (peaks - offset) / scale
+    return (peaks - S[:, None, :2, 2]) / np.diagonal(S, axis1=1, axis2=2)[:, None, :2]
 
 
 def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer=None):
@@ -125,35 +127,33 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer
     weak = ~(conf >= config.confidence_threshold) | ~np.isfinite(points2d).all(axis=-1)
     points2d[weak] = np.nan
     weights = np.where(weak, 0.0, conf)
-    X, inliers = triangulate_robust(points2d, cameras, weights=weights,
-                                    threshold_px=config.threshold_px,
-                                    min_views=config.min_views, method=config.method,
-                                    timer=timer)
+    X, inliers, errors = triangulate_robust(points2d, cameras, weights=weights,
+                                            threshold_px=config.threshold_px,
+                                            min_views=config.min_views,
+                                            method=config.method, timer=timer, errors=True)
     X = np.asarray(X, np.float64)
     inliers = np.asarray(inliers, bool) & ~weak & np.isfinite(X).all(axis=1)[None, :]
-    with (timer or NO_TIMER)('errors'):
-        errors = np.asarray(reprojection_error(X, points2d, cameras), np.float64)
     view_errors = np.where(inliers, errors, np.nan)
     num_views = inliers.sum(axis=0)
+    count = np.maximum(num_views, 1)
+    seen = num_views > 0
     with np.errstate(invalid='ignore', divide='ignore'):
-        mean_error = np.where(num_views > 0, np.nansum(view_errors, axis=0)
-                              / np.maximum(num_views, 1), np.nan)
-        confidence = np.where(num_views > 0, (conf * inliers).sum(axis=0)
-                              / np.maximum(num_views, 1), 0.0)
+        mean_error = np.where(seen, np.where(inliers, errors, 0.0).sum(axis=0) / count, np.nan)
+        confidence = np.where(seen, (conf * inliers).sum(axis=0) / count, 0.0)
     return FusionResult(X=X, confidence=confidence, reprojection_error=mean_error,
                         num_views=num_views.astype(np.uint32), inliers=inliers,
                         view_errors=view_errors, points2d=points2d, peak_confidence=conf,
                         seconds=time.perf_counter() - start)
 
 
-def _usable_views(heatmaps, S, bad_K):
-    """{view: reason} for the heatmaps that cannot be decoded: not (C, h, w) with h, w >= 3,
-    a channel count other than the majority's, non-finite values, K not a crop."""
+def _misshapen_views(heatmaps):
+    """({view: reason}, C) for the heatmaps whose shape cannot be decoded: not (C, h, w)
+    with h, w >= 3, or a channel count other than the majority's (C)."""
     skipped = {}
     shapes = [np.shape(h) for h in heatmaps]
     counts = Counter(shape[0] for shape in shapes if len(shape) == 3)
     channels = counts.most_common(1)[0][0] if counts else None
-    for v, (heat, shape) in enumerate(zip(heatmaps, shapes)):
+    for v, shape in enumerate(shapes):
         if len(shape) != 3:
             skipped[v] = f'view {v}: heatmaps must be (C, h, w), got {shape}'
         elif shape[1] < 3 or shape[2] < 3:
@@ -161,18 +161,14 @@ def _usable_views(heatmaps, S, bad_K):
         elif shape[0] != channels:
             skipped[v] = f'view {v}: {shape[0]} heatmap channels, the other views have ' \
                 f'{channels}'
-        elif not np.isfinite(heat).all():
-            skipped[v] = f'view {v}: heatmaps hold non-finite values'
-        elif bad_K[v]:
-            skipped[v] = (f'view {v}: heatmap K is not a crop/scale of the source K '
-                          f'(S = K_heat K^-1 = {np.round(S[v], 6).tolist()})')
     return skipped, channels
 
 
 def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig(), timer=None):
     """Heatmaps of V views -> FusionResult.
 
-    heatmaps: (V, C, h, w) array, or a list of V (C, h_v, w_v) arrays when grids differ;
+    heatmaps: (V, C, h, w) array, or a list of V (C, h_v, w_v) arrays (grids may differ;
+    the arrays are decoded where they lie, with models.decode_heatmap_views);
     K_heat (V, 3, 3): intrinsics of each heatmap's virtual camera (its camera_info);
     cameras: V source cameras (rig: K, dist, R, t of the full image).
     A view that cannot be used (grid smaller than 3x3, other channel count, non-finite
@@ -184,21 +180,29 @@ def fuse_heatmaps(heatmaps, K_heat, cameras, config=FusionConfig(), timer=None):
     start = time.perf_counter()
     if len(heatmaps) != len(cameras):
         raise ValueError(f'{len(heatmaps)} heatmaps for {len(cameras)} cameras')
-    S, bad_K = crop_scales(K_heat, np.stack([cam.K for cam in cameras]))
+    rig = stack_cameras(cameras)
+    S, bad_K = crop_scales(K_heat, rig['K'], rig['K_inv'])
     heatmaps = [np.asarray(h) for h in heatmaps]
-    skipped, channels = _usable_views(heatmaps, S, bad_K)
-    good = [v for v in range(len(cameras)) if v not in skipped]
-    if not good:
+    skipped, channels = _misshapen_views(heatmaps)
+    shaped = [v for v in range(len(cameras)) if v not in skipped]
+    if shaped:
+        p, c, finite = decode_heatmap_views([heatmaps[v] for v in shaped])
+        usable = finite & ~bad_K[shaped]
+        for i in np.flatnonzero(~usable):
+            v = shaped[i]
+            skipped[v] = (f'view {v}: heatmaps hold non-finite values' if not finite[i] else
+                          f'view {v}: heatmap K is not a crop/scale of the source K '
+                          f'(S = K_heat K^-1 = {np.round(S[v], 6).tolist()})')
+    if len(skipped) == len(cameras):
         raise ValueError(skipped[0])
-    peaks = np.full((len(cameras), channels, 2), np.nan)
-    conf = np.zeros((len(cameras), channels))
-    if len({heatmaps[v].shape for v in good}) == 1:
-        p, c = decode_heatmaps(np.stack([heatmaps[v] for v in good]))
-        peaks[good], conf[good] = p, c
-    else:  # views with different grids: decode each view (V is small)
-        for v in good:
-            p, c = decode_heatmaps(heatmaps[v][None])
-            peaks[v], conf[v] = p[0], c[0]
+    if skipped:  # the skipped views are missing: NaN peaks, confidence 0
+        peaks = np.full((len(cameras), channels, 2), np.nan)
+        conf = np.zeros((len(cameras), channels))
+        good = np.asarray(shaped)[usable]
+        peaks[good], conf[good] = p[usable], c[usable]
+    else:
+        peaks, conf = p, c
+    skipped = dict(sorted(skipped.items()))
     points = heat_to_source_points(peaks, S)
     (timer or NO_TIMER).add('decode', time.perf_counter() - start)
     result = fuse_points(points, conf, cameras, config, timer)

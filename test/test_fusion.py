@@ -123,3 +123,21 @@ def _scene_for_skips():
     rig, X = scene(np.random.default_rng(5))
     heat, K_heat, _ = render(rig, X, noise=0.2, rng=np.random.default_rng(6))
     return rig, X, heat.astype(np.float32), K_heat
+
+
+@pytest.mark.parametrize('bad', [np.nan, np.inf, -np.inf])
+def test_a_view_with_a_non_finite_value_is_skipped_the_others_fused(bad):
+    """One NaN / +inf / -inf anywhere in a view's heatmaps: that view is left out with its
+    reason, the other views give the answer of fusing them alone."""
+    rig, X, heat, K_heat = _scene_for_skips()
+    views = list(heat)
+    views[2] = heat[2].copy()
+    views[2][5, 40, 3] = bad
+    got = fuse_heatmaps(views, K_heat, rig, FusionConfig())
+    assert got.skipped_views == {2: 'view 2: heatmaps hold non-finite values'}
+    keep = [0, 1, 3]
+    ref = fuse_heatmaps(heat[keep], K_heat[keep], [rig[i] for i in keep], FusionConfig())
+    np.testing.assert_allclose(got.X, ref.X, atol=1e-9)
+    np.testing.assert_array_equal(got.inliers[keep], ref.inliers)
+    assert not got.inliers[2].any() and np.isnan(got.points2d[2]).all()
+    assert np.abs(got.X - X).max() < 0.03  # noise of 0.2 heatmap px, 3 views

@@ -62,56 +62,75 @@ def crop_transform(box, out_size):
 
 
 def _model_terms(d12):
-    """(12 coefficients broadcastable against points, rational?, thin prism?) of distortion
-    vectors d12 (..., 12): the rational and prism terms are skipped when all zero."""
+    """(12 coefficients broadcastable against points, rational?, thin prism?, tangential?)
+    of distortion vectors d12 (..., 12): the rational, prism and tangential terms are skipped
+    when all zero (stack_cameras keeps a rig's under 'model')."""
     d12 = np.asarray(d12, np.float64)
     coeffs = tuple(np.moveaxis(d12, -1, 0)[..., None]) if d12.ndim > 1 else tuple(d12)
-    return coeffs, bool(d12[..., 5:8].any()), bool(d12[..., 8:].any())
+    return (coeffs, bool(d12[..., 5:8].any()), bool(d12[..., 8:].any()),
+            bool(d12[..., 2:4].any()))
 
 
-def _distortion_terms(d, x, y, rational, prism):
-    """Radial factor and tangential/prism offsets of the OpenCV model at ideal (x, y)."""
-    k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4 = d
+def _distort(terms, x, y):
+    """Distorted normalised (x_d, y_d) of ideal (x, y) by the OpenCV model; terms from
+    _model_terms."""
+    (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4), rational, prism, tangential = terms
     r2 = x * x + y * y
     r4 = r2 * r2
     r6 = r4 * r2
     radial = 1 + k1 * r2 + k2 * r4 + k3 * r6
     if rational:
         radial = radial / (1 + k4 * r2 + k5 * r4 + k6 * r6)
-    xy2 = 2 * x * y
-    dx = p1 * xy2 + p2 * (r2 + 2 * x * x)
-    dy = p1 * (r2 + 2 * y * y) + p2 * xy2
+    xd = x * radial
+    yd = y * radial
+    if tangential:
+        xy2 = 2 * x * y
+        xd = xd + (p1 * xy2 + p2 * (r2 + 2 * x * x))
+        yd = yd + (p1 * (r2 + 2 * y * y) + p2 * xy2)
     if prism:
-        dx = dx + s1 * r2 + s2 * r4
-        dy = dy + s3 * r2 + s4 * r4
-    return radial, dx, dy
+        xd = xd + (s1 * r2 + s2 * r4)
+        yd = yd + (s3 * r2 + s4 * r4)
+    return xd, yd
 
 
-def _undistort_newton(d12, x0, y0, iterations, tol):
+def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
     """Ideal normalised (x, y) with distort(x, y) = (x0, y0): Newton's method on the OpenCV
     model with its analytic 2x2 Jacobian, all points at once (d12: (12,) or, for V
-    cameras, (V, 12) against x0, y0 (V, N)). Stops after `iterations` (>= 1) or when every
-    finite step is <= tol; NaN where the last iterate before the final step misses
-    (x0, y0) by more than 1e-9 (relative) or lies past a fold of the model (Jacobian
-    determinant <= 0): no unique inverse there."""
-    (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4), rational, prism = _model_terms(d12)
+    cameras, (V, 12) against x0, y0 (V, N); terms: _model_terms(d12) when known). Stops
+    after `iterations` (>= 1) or when every finite step is <= tol; NaN where the last
+    iterate before the final step misses (x0, y0) by more than 1e-9 (relative) or lies
+    past a fold of the model (Jacobian determinant <= 0): no unique inverse there."""
+    terms = terms or _model_terms(d12)
+    (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4), rational, prism, tangential = terms
+    # twice the derivatives of the radial polynomials by r2
+    dk1, dk2, dk3 = 2 * k1, 4 * k2, 6 * k3
+    if rational:
+        dk4, dk5, dk6 = 2 * k4, 4 * k5, 6 * k6
 
     def model(x, y):
         """Residual of distort(x, y) - (x0, y0) and the Jacobian (xx, xy, yx, yy)."""
-        r2 = x * x + y * y
+        xx, yy, xy = x * x, y * y, x * y
+        r2 = xx + yy
         radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        slope = k1 + r2 * (2 * k2 + 3 * k3 * r2)  # d radial / d r2
+        slope = dk1 + r2 * (dk2 + r2 * dk3)  # 2 d radial / d r2
         if rational:
             den = 1 + r2 * (k4 + r2 * (k5 + r2 * k6))
-            slope = (slope - radial * (k4 + r2 * (2 * k5 + 3 * k6 * r2)) / den) / den
+            slope = (slope - radial * (dk4 + r2 * (dk5 + r2 * dk6)) / den) / den
             radial = radial / den
-        xy2 = 2 * x * y
-        fx = x * radial + p1 * xy2 + p2 * (r2 + 2 * x * x) - x0
-        fy = y * radial + p1 * (r2 + 2 * y * y) + p2 * xy2 - y0
-        cross = xy2 * slope + 2 * (p1 * x + p2 * y)
-        jxx = radial + 2 * x * x * slope + 2 * p1 * y + 6 * p2 * x
-        jyy = radial + 2 * y * y * slope + 6 * p1 * y + 2 * p2 * x
-        jxy = jyx = cross
+        jxx = radial + xx * slope
+        jyy = radial + yy * slope
+        jxy = xy * slope
+        if tangential:
+            xy2 = 2 * xy
+            fx = x * radial + p1 * xy2 + p2 * (r2 + 2 * xx) - x0
+            fy = y * radial + p1 * (r2 + 2 * yy) + p2 * xy2 - y0
+            jxx = jxx + (2 * p1 * y + 6 * p2 * x)
+            jyy = jyy + (6 * p1 * y + 2 * p2 * x)
+            jxy = jxy + 2 * (p1 * x + p2 * y)
+        else:
+            fx = x * radial - x0
+            fy = y * radial - y0
+        jyx = jxy
         if prism:
             fx = fx + r2 * (s1 + s2 * r2)
             fy = fy + r2 * (s3 + s4 * r2)
@@ -245,10 +264,7 @@ class Camera:
         xy = np.asarray(xy, dtype=np.float64)
         if not self.has_distortion:
             return xy.copy()
-        x, y = xy[..., 0], xy[..., 1]
-        d, rational, prism = _model_terms(self._d12)
-        radial, dx, dy = _distortion_terms(d, x, y, rational, prism)
-        return np.stack([x * radial + dx, y * radial + dy], axis=-1)
+        return np.stack(_distort(_model_terms(self._d12), xy[..., 0], xy[..., 1]), axis=-1)
 
     def normalized_to_pixels(self, xy):
         """Normalised image coordinates (..., 2) -> pixels through K (honours skew)."""
@@ -310,7 +326,8 @@ _STACK_CACHE = {}  # id-tuple -> (cameras tuple, stacked dict); cameras are immu
 
 def stack_cameras(cameras):
     """Stacked parameters of a rig: dict of K (V, 3, 3), R (V, 3, 3), t (V, 3), P (V, 3, 4),
-    Rt (V, 3, 4) = [R | t], d12 (V, 12) (distortion padded to 12 coefficients).
+    Rt (V, 3, 4) = [R | t], K_inv (V, 3, 3), d12 (V, 12) (distortion padded to 12
+    coefficients), model (d12 as _model_terms gives it).
     The last few rigs are cached (Cameras are immutable): do not modify the arrays."""
     cameras = tuple(cameras)
     key = tuple(id(c) for c in cameras)
@@ -321,8 +338,10 @@ def stack_cameras(cameras):
                't': np.stack([c.t for c in cameras]), 'P': np.stack([c.P for c in cameras]),
                'd12': np.stack([c._d12 for c in cameras])}
     stacked['Rt'] = np.concatenate([stacked['R'], stacked['t'][:, :, None]], axis=-1)
+    stacked['K_inv'] = np.linalg.inv(stacked['K'])
     for array in stacked.values():
         array.setflags(write=False)
+    stacked['model'] = _model_terms(stacked['d12'])  # (coefficients, flags) of _distort
     if len(_STACK_CACHE) >= 16:
         _STACK_CACHE.pop(next(iter(_STACK_CACHE)))
     _STACK_CACHE[key] = (cameras, stacked)
@@ -355,10 +374,8 @@ def project_views(cameras, X):
     Xc = _apply_views(Rt, X)
     x = Xc[..., 0] / Xc[..., 2]
     y = Xc[..., 1] / Xc[..., 2]
-    d, rational, prism = _model_terms(p['d12'])  # 12 arrays (V, 1), over (..., V, N)
-    radial, dx, dy = _distortion_terms(d, x, y, rational, prism)
-    xd = x * radial + dx
-    yd = y * radial + dy
+    # 12 coefficient arrays (V, 1), over (..., V, N)
+    xd, yd = _distort(p['model'] if 'model' in p else _model_terms(p['d12']), x, y)
     K = p['K'][:, None]  # (V, 1, 3, 3)
     u = K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2]
     v = K[..., 1, 1] * yd + K[..., 1, 2]
@@ -382,6 +399,6 @@ def undistort_views(cameras, uv):
     K = p['K'][:, None]  # (V, 1, 3, 3)
     y0 = (uv[..., 1] - K[..., 1, 2]) / K[..., 1, 1]
     x0 = (uv[..., 0] - K[..., 0, 2] - K[..., 0, 1] * y0) / K[..., 0, 0]
-    x, y = _undistort_newton(p['d12'], x0, y0, 20, 1e-15)
+    x, y = _undistort_newton(p['d12'], x0, y0, 20, 1e-15, p.get('model'))
     return np.stack([K[..., 0, 0] * x + K[..., 0, 1] * y + K[..., 0, 2],
                      K[..., 1, 1] * y + K[..., 1, 2]], axis=-1)

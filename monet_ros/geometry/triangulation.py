@@ -20,8 +20,9 @@ from monet_ros.geometry.camera import project_views, stack_cameras, undistort_vi
 from monet_ros.timing import NO_TIMER
 
 
-def _prepare(points2d, cameras, weights):
-    """Validate shapes; -> (observed (V,N,2), ideal (V,N,2) with 0 at missing, w (V,N))."""
+def _prepare(points2d, cameras, weights, rig=None):
+    """Validate shapes; -> (observed (V,N,2), ideal (V,N,2) with 0 at missing, w (V,N)).
+    rig: stack_cameras(cameras) when at hand."""
     obs = np.asarray(points2d, dtype=np.float64)
     V = len(cameras)
     if obs.ndim != 3 or obs.shape[0] != V or obs.shape[2] != 2:
@@ -34,7 +35,7 @@ def _prepare(points2d, cameras, weights):
             raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
         if np.any(w < 0):
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
-    ideal = undistort_views(stack_cameras(cameras), obs)
+    ideal = undistort_views(rig or stack_cameras(cameras), obs)
     # missing: NaN input, zero/NaN weight, or a point the distortion model cannot invert
     missing = ~np.all(np.isfinite(ideal), axis=2) | ~np.isfinite(w) | (w <= 0)
     w = np.where(missing, 0.0, w)
@@ -136,6 +137,7 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
     n_avail = avail.sum(axis=0)
     X = np.full((N, 3), np.nan)
     inliers = np.zeros((V, N), dtype=bool)
+    errors = np.full((V, N), np.nan)  # of the accepted subsets' views
     current = avail.copy()  # best view subset found so far, per keypoint (V, N)
     current_err = np.zeros((V, N))  # its per-view reprojection errors
     todo = np.arange(N)
@@ -166,8 +168,9 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         inliers[:, todo[ok]] = best_used[:, ok]
         current[:, todo] = best_used
         current_err[:, todo] = err[best, :, cols].T
+        errors[:, todo[ok]] = current_err[:, todo[ok]]
         todo = todo[~ok]
-    return X, inliers
+    return X, np.where(inliers, errors, np.nan), inliers
 
 
 def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
@@ -177,7 +180,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     inliers = np.zeros((V, N), dtype=bool)
     todo = np.flatnonzero(avail.sum(axis=0) >= max(2, min_views))
     if todo.size == 0:
-        return X, inliers
+        return X, None, inliers
     n = todo.size
     cols = np.arange(n)
     if comb(V, 2) <= max_hypotheses:  # every view pair
@@ -222,12 +225,12 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     ok &= ~_behind(rig, Xr, best_inl).any(axis=0)
     X[todo[ok]] = Xr[ok]
     inliers[:, todo[ok]] = best_inl[:, ok]
-    return X, inliers
+    return X, None, inliers
 
 
 def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_views=2,
                        method='exclusion', max_subsets=20, max_hypotheses=20, seed=0,
-                       timer=None):
+                       timer=None, errors=False):
     """Outlier-robust triangulation, batched over keypoints.
 
     method='exclusion' (Pose2Sim's rule): triangulate with all available views; while the
@@ -243,23 +246,33 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     reprojection error < threshold_px; the hypothesis with most inliers (then lowest mean
     inlier error) wins and is refined by weighted DLT on its inliers; NaN with fewer than
     min_views inliers.
-    timer: a monet_ros.timing.StageTimer to account 'undistort' and 'triangulate' to.
-    Returns (X (N, 3), inlier_mask (V, N) bool of the views used)."""
+    timer: a monet_ros.timing.StageTimer to account 'undistort', 'triangulate' and
+    'errors' to.
+    Returns (X (N, 3), inlier_mask (V, N) bool of the views used), and with errors=True
+    also view_errors (V, N): the reprojection errors (pixels, reprojection_error's) of the
+    inlier views, NaN elsewhere (the exclusion search has them already)."""
     if min_views < 2:
         raise ValueError(f'min_views must be >= 2, got {min_views}')
     if not threshold_px > 0:
         raise ValueError(f'threshold_px must be > 0, got {threshold_px}')
     timer = timer or NO_TIMER
-    with timer('undistort'):
-        obs, ideal, w = _prepare(points2d, cameras, weights)
-    with timer('triangulate'):
-        return _robust(obs, ideal, w, cameras, threshold_px, min_views, method, max_subsets,
-                       max_hypotheses, seed)
-
-
-def _robust(obs, ideal, w, cameras, threshold_px, min_views, method, max_subsets,
-            max_hypotheses, seed):
     rig = stack_cameras(cameras)
+    with timer('undistort'):
+        obs, ideal, w = _prepare(points2d, cameras, weights, rig)
+    with timer('triangulate'):
+        X, view_errors, inliers = _robust(obs, ideal, w, rig, threshold_px, min_views,
+                                          method, max_subsets, max_hypotheses, seed)
+    if not errors:
+        return X, inliers
+    with timer('errors'):
+        if view_errors is None:
+            view_errors = np.where(inliers, _view_errors(rig, X, obs), np.nan)
+    return X, inliers, view_errors
+
+
+def _robust(obs, ideal, w, rig, threshold_px, min_views, method, max_subsets,
+            max_hypotheses, seed):
+    """(X, view errors of the inliers or None where not at hand, inliers)."""
     B = dlt_rows(ideal, rig['P'])
     if method == 'exclusion':
         return _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets)

@@ -56,7 +56,46 @@ def _vertex_offset(left, centre, right):
     curvature = left - 2 * centre + right
     ok = curvature < 0
     offset = 0.5 * (left - right) / np.where(ok, curvature, 1)
-    return np.where(ok, offset, 0).astype(left.dtype)
+    return np.where(ok, offset, 0).astype(left.dtype, copy=False)
+
+
+_STEPS = np.array([-1, 0, 1])
+
+
+def _window_index(index, wh):
+    """Where the refinement reads each map: index (N,) flat argmax positions in maps of
+    (w, h) = wh ((2,) for all maps or (N, 2) per map).
+    -> idx (N, 7) flat positions of the argmax, of its 3-point window along u, then along v
+    (each moved inside the map at the border); cr (N, 2) the argmax (col, row); cr_c (N, 2)
+    the window centres."""
+    w = wh[..., :1]
+    row, col = np.divmod(index[:, None], w)
+    cr = np.concatenate([col, row], axis=1)
+    cr_c = np.minimum(np.maximum(cr, 1), wh - 2)
+    idx = np.empty((len(index), 7), np.intp)
+    idx[:, 0] = index
+    idx[:, 1:4] = row * w + cr_c[:, :1] + _STEPS
+    idx[:, 4:] = (cr_c[:, 1:] + _STEPS) * w + col
+    return idx, cr, cr_c
+
+
+def _refine_peaks(values, cr, cr_c, dtype, eps):
+    """The sub-pixel step of decode_heatmaps. values (N, 7) of dtype: the maps at
+    _window_index's idx; cr, cr_c (N, 2) from _window_index.
+    -> peaks (N, 2) (u, v), confidence (N,) (the value at the argmax)."""
+    confidence = np.ascontiguousarray(values[:, 0])
+    floor = np.maximum(np.abs(confidence) * dtype(eps), dtype(eps))[:, None, None]
+    # log of the 6 window values only (not of the whole map)
+    with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
+        logs = np.log(np.maximum(values[:, 1:].reshape(-1, 2, 3), floor))
+        peaks = cr_c.astype(dtype) + _vertex_offset(logs[..., 0], logs[..., 1], logs[..., 2])
+    crf = cr.astype(dtype)
+    peaks = np.minimum(np.maximum(peaks, crf - 1), crf + 1)
+    return np.where((confidence <= 0)[:, None], crf, peaks), confidence
+
+
+def _decode_dtype(dtype):
+    return np.float64 if dtype == np.float64 else np.float32
 
 
 def decode_heatmaps(heatmaps, eps=1e-10):
@@ -71,6 +110,7 @@ def decode_heatmaps(heatmaps, eps=1e-10):
     Computed with numpy on the host (a torch tensor is read there and the results are
     returned as tensors on its device; no gradient): numpy's argmax and the few small
     per-peak operations cost a fraction of torch's per-call overhead in the fusion loop.
+    decode_heatmap_views decodes separate arrays the same way without stacking them.
     """
     is_torch = isinstance(heatmaps, torch.Tensor)
     heat = heatmaps.detach().cpu().numpy() if is_torch else np.asarray(heatmaps)
@@ -80,33 +120,76 @@ def decode_heatmaps(heatmaps, eps=1e-10):
     b, c, h, w = heat.shape
     if h < 3 or w < 3:
         raise ValueError(f'decode_heatmaps: heatmaps must be at least 3x3, got {h}x{w}')
-    dtype = np.float64 if heat.dtype == np.float64 else np.float32
+    dtype = _decode_dtype(heat.dtype)
     flat = heat.reshape(b * c, h * w).astype(dtype, copy=False)
     index = np.argmax(flat, axis=1)                                  # (BC,)
-    confidence = np.take_along_axis(flat, index[:, None], axis=1)[:, 0]
-    row, col = np.divmod(index, w)
-    # 3-point windows centred at the argmax, moved inside the map at the border.
-    col_c = np.clip(col, 1, w - 2)
-    row_c = np.clip(row, 1, h - 2)
-    floor = np.maximum(np.abs(confidence) * dtype(eps), dtype(eps))[:, None]
-    steps = np.array([-1, 0, 1])
-    u_idx = (row * w + col_c)[:, None] + steps                       # (BC, 3) along the row
-    v_idx = (row_c[:, None] + steps) * w + col[:, None]              # (BC, 3) along the column
-    # log of the 6 window values only (not of the whole map)
-    with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
-        lu = np.log(np.maximum(np.take_along_axis(flat, u_idx, axis=1), floor))
-        lv = np.log(np.maximum(np.take_along_axis(flat, v_idx, axis=1), floor))
-        u = col_c.astype(dtype) + _vertex_offset(lu[:, 0], lu[:, 1], lu[:, 2])
-        v = row_c.astype(dtype) + _vertex_offset(lv[:, 0], lv[:, 1], lv[:, 2])
-    colf, rowf = col.astype(dtype), row.astype(dtype)
-    u = np.minimum(np.maximum(u, colf - 1), colf + 1)
-    v = np.minimum(np.maximum(v, rowf - 1), rowf + 1)
-    empty = confidence <= 0
-    u = np.where(empty, colf, u)
-    v = np.where(empty, rowf, v)
-    peaks = np.stack([u, v], axis=-1).reshape(b, c, 2)
+    idx, cr, cr_c = _window_index(index, np.array([w, h]))
+    peaks, confidence = _refine_peaks(np.take_along_axis(flat, idx, axis=1), cr, cr_c,
+                                      dtype, eps)
+    peaks = peaks.reshape(b, c, 2)
     confidence = confidence.reshape(b, c)
     if is_torch:
         return (torch.from_numpy(peaks).to(heatmaps.device),
-                torch.from_numpy(np.ascontiguousarray(confidence)).to(heatmaps.device))
+                torch.from_numpy(confidence).to(heatmaps.device))
     return peaks, confidence
+
+
+def decode_heatmap_views(views, eps=1e-10):
+    """decode_heatmaps of V separate numpy arrays (C, h_v, w_v), without stacking them.
+
+    views: V arrays with the same C (grids may differ, h_v, w_v >= 3); the maps are not
+    copied (only cast, when neither float32 nor float64). One argmax per view, then one
+    batched refinement over every view, the same as decode_heatmaps': with equal grids the
+    results equal decode_heatmaps(np.stack(views)) exactly (computed in float64 when
+    np.result_type of the views is float64, otherwise in float32).
+    -> peaks (V, C, 2) (u, v) heatmap pixels, confidence (V, C), finite (V,) bool: False
+    where a view holds a NaN or an infinite value (its peaks then mean nothing).
+    Raises ValueError naming the view whose shape does not fit.
+    """
+    views = [np.asarray(view) for view in views]
+    if not views:
+        raise ValueError('decode_heatmap_views: no views')
+    grid = views[0].shape
+    channels = grid[0] if len(grid) == 3 else None
+    for v, view in enumerate(views):
+        shape = view.shape
+        if len(shape) != 3 or shape[0] != channels or shape[1] < 3 or shape[2] < 3:
+            raise ValueError(f'decode_heatmap_views: view {v} must be ({channels}, h, w) '
+                             f'with h, w >= 3, got {shape}')
+    dtype = _decode_dtype(np.result_type(*views))
+    count = len(views)
+    index = np.empty((count, channels), np.intp)
+    low = np.zeros(count)           # smallest value of each view: NaN or -inf shows there
+    other = np.zeros(count, bool)   # neither float32 nor float64: checked as it is
+    checked = np.ones(count, bool)
+    flats = []
+    for v, view in enumerate(views):
+        flat = view.reshape(channels, view.shape[1] * view.shape[2])
+        if view.dtype != np.float32 and view.dtype != np.float64:
+            other[v] = True
+            checked[v] = np.isfinite(view).all()
+        elif view.size:
+            low[v] = flat.min()
+        if flat.dtype != dtype:
+            flat = flat.astype(dtype)
+        flat.argmax(axis=1, out=index[v])  # at the first NaN if any: its value shows it
+        flats.append(flat)
+    if all(view.shape == grid for view in views):
+        wh = np.array(grid[:0:-1])                                         # (w, h)
+        offset = np.arange(channels)[:, None] * (grid[1] * grid[2])        # (C, 1)
+    else:
+        wh = np.array([view.shape[:0:-1] for view in views])               # (V, 2)
+        offset = np.arange(channels)[:, None] * wh.prod(axis=1)[:, None, None]
+        wh = np.repeat(wh, channels, axis=0)
+    idx, cr, cr_c = _window_index(index.reshape(-1), wh)
+    # positions in each view's (C * h * w) buffer: the channel's offset + the map's
+    idx = idx.reshape(count, channels, 7) + offset
+    values = np.empty((count, channels, 7), dtype)
+    for v, flat in enumerate(flats):
+        flat.take(idx[v], out=values[v], mode='clip')  # (in range: no buffering)
+    peaks, confidence = _refine_peaks(values.reshape(-1, 7), cr, cr_c, dtype, eps)
+    finite = np.isfinite(confidence.reshape(count, -1)).all(axis=1)
+    if other.any():
+        finite |= other
+    finite &= checked & np.isfinite(low)
+    return peaks.reshape(count, channels, 2), confidence.reshape(count, channels), finite

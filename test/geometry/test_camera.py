@@ -4,7 +4,14 @@ from helpers.rigs import random_camera, random_points
 import numpy as np
 import pytest
 
-from monet_ros.geometry import Camera, CameraError, crop_transform, load_rig, undistort_views
+from monet_ros.geometry import (
+    Camera,
+    CameraError,
+    crop_transform,
+    load_rig,
+    project_views,
+    undistort_views,
+)
 
 
 @pytest.mark.parametrize('dist_len', [0, 4, 5, 8, 12])
@@ -17,6 +24,27 @@ def test_project_matches_cv2_project_points(dist_len):
         rvec = cv2.Rodrigues(cam.R)[0]
         ref = cv2.projectPoints(X, rvec, cam.t, cam.K, cam.dist if dist_len else None)[0]
         np.testing.assert_allclose(ours, ref[:, 0], atol=1e-7)
+
+
+# the model's terms that are zero in every camera are skipped: each combination of them
+WITHOUT_TERMS = {'radial only': [-0.08, 0.02, 0, 0, 0.003],
+                 'rational, no tangential': [-0.2, 0.05, 0, 0, 0.01, 0.02, -0.01, 0.005],
+                 'prism, no tangential': [-0.2, 0.05, 0, 0, 0.01, 0, 0, 0, 1e-3, -5e-4, 8e-4,
+                                          2e-4],
+                 'tangential only': [0, 0, 0.002, -0.001]}
+
+
+@pytest.mark.parametrize('name', WITHOUT_TERMS)
+def test_project_views_without_some_terms_matches_cv2(name):
+    rng = np.random.default_rng(len(name))
+    rig = [random_camera(rng, name=f'c{i}').replace(dist=np.array(WITHOUT_TERMS[name]))
+           for i in range(3)]
+    X = random_points(rng, 100)
+    ours = project_views(rig, X)
+    for v, cam in enumerate(rig):
+        ref = cv2.projectPoints(X, cv2.Rodrigues(cam.R)[0], cam.t, cam.K, cam.dist)[0]
+        np.testing.assert_allclose(ours[v], ref[:, 0], atol=1e-7)
+        np.testing.assert_allclose(cam.project(X), ref[:, 0], atol=1e-7)
 
 
 def test_p_and_center():
@@ -84,6 +112,9 @@ def _distorted_rigs(shared_data):
             for n in (4, 5, 8, 12)}
     strong = np.array([-0.35, 0.12, 0.001, -0.002, -0.02])  # wide-angle barrel
     rigs['strong barrel'] = [random_camera(rng).replace(dist=strong)]
+    for name, dist in WITHOUT_TERMS.items():
+        rigs[name] = [random_camera(rng, name=f'c{i}').replace(dist=np.array(dist))
+                      for i in range(2)]
     rigs['pose2sim'] = load_rig(
         shared_data / 'pose2sim_demo_balancing/S00_Calibration/Calib_qualisys.toml')
     return rigs

@@ -179,6 +179,34 @@ def test_robust_rejects_gross_outliers(method, V):
     assert (inl | bad).mean() > 0.95
 
 
+@pytest.mark.parametrize('method', ['exclusion', 'ransac'])
+def test_robust_view_errors_are_the_inliers_reprojection_errors(method):
+    """errors=True: the inlier views' errors, equal to cv2.projectPoints of the answer
+    against the observations; NaN at outliers, missing views and untriangulated points."""
+    rng = np.random.default_rng(21)
+    cams, X, obs, bad = _outlier_data(rng, 8, 14, rate=0.15)
+    obs[3, 2] = np.nan
+    obs[2:, 5] = np.nan  # 2 views left: fewer than min_views
+    out, inl, errors = triangulate_robust(obs, cams, threshold_px=2.0, min_views=3,
+                                          method=method, errors=True)
+    same, same_inl = triangulate_robust(obs, cams, threshold_px=2.0, min_views=3,
+                                        method=method)
+    np.testing.assert_array_equal(out, same)
+    np.testing.assert_array_equal(inl, same_inl)
+    assert inl.sum() > 80 and np.isnan(out[5]).all() and not inl[3, 2]
+    np.testing.assert_array_equal(np.isnan(errors), ~inl)
+    for v, cam in enumerate(cams):
+        kept = np.flatnonzero(inl[v])
+        ref = cv2.projectPoints(out[kept], cv2.Rodrigues(cam.R)[0], cam.t, cam.K, cam.dist)[0]
+        np.testing.assert_allclose(errors[v, kept],
+                                   np.linalg.norm(ref[:, 0] - obs[v, kept], axis=1), atol=1e-6)
+    # nothing to triangulate (one view per keypoint): NaN points, no inliers, no errors
+    obs[1:] = np.nan
+    out, inl, errors = triangulate_robust(obs, cams, method=method, errors=True)
+    assert np.isnan(out).all() and inl.shape == (8, 14) and not inl.any()
+    assert errors.shape == (8, 14) and np.isnan(errors).all()
+
+
 def test_robust_min_views_and_nan():
     rng = np.random.default_rng(9)
     cams, X, obs, bad = _outlier_data(rng, 4, 10, rate=0.0)

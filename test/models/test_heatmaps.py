@@ -75,3 +75,64 @@ def test_decode_picks_the_higher_of_two_peaks_and_handles_empty_maps():
     np.testing.assert_allclose(peaks[0, 0], [25.0, 20.6], atol=0.05)
     assert confidence[0, 0] == pytest.approx(heat[0, 0].max())
     assert confidence[0, 1] == 0.0 and np.isfinite(peaks[0, 1]).all()
+
+
+def _awkward_views(rng, dtype):
+    """5 views of 3 channels 20x24: Gaussian peaks inside and on every border and corner,
+    an empty map, a map of negative values, NaN, +inf and -inf views."""
+    points = np.array([[[10.3, 7.6], [0.0, 0.0], [23.0, 19.0]],
+                       [[0.2, 12.5], [23.0, 4.4], [11.0, 0.0]],
+                       [[5.5, 19.0], [14.7, 9.1], [2.2, 3.3]],
+                       [[12.0, 10.0], [0.0, 19.0], [23.0, 0.0]],
+                       [[7.1, 8.8], [16.0, 2.0], [20.0, 18.5]]])
+    heat = render_heatmaps(points, (20, 24), sigma=1.5).astype(dtype)
+    heat += rng.uniform(0, 1e-3, heat.shape).astype(dtype)
+    heat[0, 1] = 0                      # empty map: the plain argmax
+    heat[2, 2] = -rng.uniform(1, 2, (20, 24))
+    heat[1, 0, 3, 4] = np.nan
+    heat[3, 2, 19, 23] = np.inf
+    heat[4, 1, 0, 0] = -np.inf
+    return heat
+
+
+@pytest.mark.parametrize('dtype', [np.float32, np.float64])
+def test_decode_views_equals_the_stacked_decode_exactly(dtype):
+    """decode_heatmap_views of separate arrays (what the fusion node holds) gives exactly
+    decode_heatmaps of their stack, flags the non-finite views, and decodes views of other
+    grids as decode_heatmaps decodes each alone."""
+    from monet_ros.models import decode_heatmap_views
+    heat = _awkward_views(np.random.default_rng(7), dtype)
+    with np.errstate(invalid='ignore'):
+        peaks, confidence = decode_heatmaps(heat)
+    got_peaks, got_confidence, finite = decode_heatmap_views(list(heat))
+    assert got_peaks.dtype == peaks.dtype == dtype
+    np.testing.assert_array_equal(got_peaks, peaks)
+    np.testing.assert_array_equal(got_confidence, confidence)
+    np.testing.assert_array_equal(finite, [True, False, True, False, False])
+    np.testing.assert_array_equal(finite, np.isfinite(heat).all(axis=(1, 2, 3)))
+    # views with different grids, one of them not contiguous: each as decoded alone
+    views = [heat[0], np.ascontiguousarray(heat[2][:, 2:17, 3:]), heat[2][:, ::2, ::3]]
+    got_peaks, got_confidence, finite = decode_heatmap_views(views)
+    assert finite.all()
+    for v, view in enumerate(views):
+        alone_peaks, alone_confidence = decode_heatmaps(view[None])
+        np.testing.assert_array_equal(got_peaks[v], alone_peaks[0])
+        np.testing.assert_array_equal(got_confidence[v], alone_confidence[0])
+    with pytest.raises(ValueError, match='view 1 must be'):
+        decode_heatmap_views([heat[0], heat[1][:2]])
+    # no channels: nothing to decode, as decode_heatmaps
+    got_peaks, got_confidence, finite = decode_heatmap_views([heat[0][:0]] * 2)
+    assert got_peaks.shape == (2, 0, 2) and got_confidence.shape == (2, 0) and finite.all()
+
+
+def test_decode_finds_border_peaks_and_empty_maps_give_the_argmax():
+    heat = _awkward_views(np.random.default_rng(8), np.float64)
+    peaks, confidence = decode_heatmaps(heat[[0, 2]])
+    truth = np.array([[[10.3, 7.6], [0.0, 0.0], [23.0, 19.0]],
+                      [[5.5, 19.0], [14.7, 9.1], [2.2, 3.3]]])
+    finite = np.array([[True, False, True], [True, True, False]])  # empty / negative maps
+    np.testing.assert_allclose(peaks[finite], truth[finite], atol=0.02)
+    assert confidence[0, 1] <= 1e-3 and confidence[1, 2] < 0
+    flat = heat[[0, 2]].reshape(2, 3, -1).argmax(-1)
+    np.testing.assert_array_equal(peaks[0, 1], [flat[0, 1] % 24, flat[0, 1] // 24])
+    np.testing.assert_array_equal(peaks[1, 2], [flat[1, 2] % 24, flat[1, 2] // 24])
