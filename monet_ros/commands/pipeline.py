@@ -236,6 +236,7 @@ def tf_topics(bag):
 
 
 def run(args):
+    from monet_ros.nodes import passive_openmp
     from monet_ros.nodes.runner import (
         CallbackGuard,
         ignore_signals,
@@ -247,7 +248,7 @@ def run(args):
         until_shutdown,
         use_large_data_profile,
     )
-
+    passive_openmp()               # before torch loads (the fusion's and learner's threads)
     score = None
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo

@@ -6,8 +6,8 @@ console scripts), SIGINT and SIGTERM are made to exit 0 at once: a node stopped 
 still imports torch or rclpy has nothing to clean up, and must not print a
 KeyboardInterrupt traceback or die with -15. run_node replaces these handlers with the
 clean-shutdown ones before rclpy starts (see monet_ros.nodes.runner).
-A node executable's OpenMP (torch) threads wait passively (OMP_WAIT_POLICY=PASSIVE unless
-set): by default a process with as many torch threads as cores spins them between
+A node executable's OpenMP (torch) threads wait passively (passive_openmp; `monet pipeline`
+does the same): by default a process with as many torch threads as cores spins them between
 operations, and once another process wants a core the spinning stalls every forward pass
 (the detector's batch on 2 cores beside busy processes: 530 ms spinning, 25 ms passive,
 23 ms with one thread). Live nodes always share the machine with other processes.
@@ -40,6 +40,12 @@ def install_early_stop():
         signal.signal(sig, _exit_now)
 
 
+def passive_openmp():
+    """OMP_WAIT_POLICY=PASSIVE unless the user set it (see the module doc); effective only
+    before torch is imported (OpenMP reads it when it loads)."""
+    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')
+
+
 PARENT_PID = 'MONET_PARENT_PID'
 _PR_SET_PDEATHSIG = 1
 
@@ -61,5 +67,5 @@ def die_with_parent(environ=None):
 
 if launched_as_node():
     install_early_stop()
-    os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')   # before torch loads its OpenMP
+    passive_openmp()
     die_with_parent()
