@@ -1,7 +1,7 @@
-"""Live pipeline figures: both process layouts end to end, per-stage profile, fusion and
+"""Live pipeline figures: the three process layouts end to end, per-stage profile, fusion and
 detector micro-benchmarks, side by side in one run.
 
-    .venv/bin/python bench/pipeline.py                 # the full run (~4 min, quiet machine)
+    .venv/bin/python bench/pipeline.py                 # the full run (~6 min, quiet machine)
     .venv/bin/python bench/pipeline.py --quick         # every table, tiny sizes (~1-2 min)
     .venv/bin/python bench/pipeline.py --viewable --layouts in-process --extra  # their cost
 
