@@ -128,19 +128,23 @@ def alive(pid):
 def test_detector_runs_in_a_child_process_that_ends_with_the_pipeline(ros_env, tmp_path):
     """The detector is the pipeline's child process (its own interpreter lock: see
     monet_ros.nodes.child); SIGTERM to the pipeline alone stops both (exit 0), and a killed
-    pipeline leaves no detector behind."""
+    pipeline leaves no detector behind. Its OpenMP threads wait passively (unless the user
+    chose a policy): monet_ros.nodes.passive_openmp."""
     noise_recording(tmp_path / 'rec', cameras=2, frames=3)
     model = small_checkpoint(tmp_path / 'model.pt')
+    env = {k: v for k, v in ros_env.items() if k != 'OMP_WAIT_POLICY'}
     for how in ('sigterm', 'kill'):
-        with RosHarness(ros_env) as ros:
+        with RosHarness(env) as ros:
             clouds = ros.collect('/monet/keypoints3d', PointCloud2, 100)
-            with pipeline(ros_env, '--bag', tmp_path / 'rec', '--model', model,
+            with pipeline(env, '--bag', tmp_path / 'rec', '--model', model,
                           '--loop', '--rate', 2.0, '--quiet') as proc:
                 assert ros.spin_until(lambda c=clouds: c, timeout=120, process=proc), \
                     proc.output()
                 detectors = [pid for pid, cmd in children(proc.process.pid).items()
                              if 'monet_ros.nodes.detector' in cmd]
                 assert len(detectors) == 1, (children(proc.process.pid), proc.output())
+                environ = Path(f'/proc/{detectors[0]}/environ').read_bytes().split(b'\0')
+                assert b'OMP_WAIT_POLICY=PASSIVE' in environ
                 if how == 'sigterm':
                     assert proc.stop(signal.SIGTERM) == 0, proc.output()
                     assert not alive(detectors[0]), proc.output()
