@@ -1,19 +1,22 @@
-"""Live pipeline figures: both process layouts end to end, per-stage profile, fusion and
+"""Live pipeline figures: the three process layouts end to end, per-stage profile, fusion and
 detector micro-benchmarks, side by side in one run.
 
-    .venv/bin/python bench/pipeline.py                 # the full run (~4 min, quiet machine)
+    .venv/bin/python bench/pipeline.py                 # the full run (~6 min, quiet machine)
     .venv/bin/python bench/pipeline.py --quick         # every table, tiny sizes (~1-2 min)
     .venv/bin/python bench/pipeline.py --viewable --layouts in-process --extra  # their cost
 
 End to end (`--cameras`, default 4 and 8 at `--rate` 30 Hz, plus `--extra` 4@60): V
 camera streams (640x480 rgb8 + camera_info, stamped with the wall clock) go through a real
 detector node (all cameras batched, small net, CPU) and a real fusion node, timed from each
-image stamp to the arrival of its /monet/keypoints3d, in two layouts:
+image stamp to the arrival of its /monet/keypoints3d, in three layouts:
   three-process: the camera publisher (this bench, as the player or a camera driver would),
       the detector and the fusion each in their own process, over DDS with the Fast DDS
       shared-memory profile (config/fastdds_profile.xml) given to every publisher;
-  in-process: publisher, detector and fusion nodes in ONE process and executor (as
-      `monet pipeline`).
+  pipeline: as `monet pipeline`: publisher and fusion nodes in one process and executor,
+      the detector its child process (monet_ros.nodes.child);
+  in-process: publisher, detector and fusion nodes in ONE process and executor (what
+      `monet pipeline` was: the detector's GIL-free calls wait behind the other nodes'
+      Python, 3-4x slower on a quiet 2-core machine).
 Each run also prints the per-stage profile the nodes report in /diagnostics (mean ms per
 batch / frame: detector convert, crop, forward, publish; fusion receive per view, decode,
 undistort, triangulate, errors, publish).
@@ -318,7 +321,10 @@ def worker(spec):
                            debug_image=spec['viewable'])
     fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
                          camera_markers=spec['viewable'])
-    procs, nodes = [], []
+    procs, nodes, child = [], [], None
+    if spec['layout'] == 'pipeline':
+        from monet_ros.nodes.child import ChildNode
+        child = ChildNode('detector', detector_params)
     if spec['layout'] == 'three-process':
         import yaml
         params = Path(spec['workdir']) / f'params_{os.getpid()}.yaml'
@@ -331,11 +337,12 @@ def worker(spec):
     rclpy.init()
     executor = None
     try:
-        if spec['layout'] == 'in-process':
+        if spec['layout'] in ('in-process', 'pipeline'):
             from monet_ros.nodes.detector import DetectorNode
             from monet_ros.nodes.fusion import FusionNode
-            nodes = [FusionNode(overrides=fusion_params),
-                     DetectorNode(overrides=detector_params)]
+            nodes = [FusionNode(overrides=fusion_params)]
+            if child is None:
+                nodes.append(DetectorNode(overrides=detector_params))
             executor = MultiThreadedExecutor(num_threads=4)
         else:
             executor = SingleThreadedExecutor()
@@ -354,6 +361,8 @@ def worker(spec):
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
+        if child is not None:
+            child.stop()
         for proc in procs:
             proc.terminate()
         for proc in procs:
@@ -424,8 +433,9 @@ def main():
     parser.add_argument('--rate', type=float, default=30.0, help='camera rate (Hz)')
     parser.add_argument('--extra', nargs='*', default=['4@60'],
                         help='more end-to-end runs as CAMERAS@HZ (default 4@60)')
-    parser.add_argument('--layouts', nargs='+', default=['in-process', 'three-process'],
-                        choices=['in-process', 'three-process'])
+    parser.add_argument('--layouts', nargs='+',
+                        default=['in-process', 'pipeline', 'three-process'],
+                        choices=['in-process', 'pipeline', 'three-process'])
     parser.add_argument('--seconds', type=float, default=10.0, help='measured seconds per run')
     parser.add_argument('--warmup', type=float, default=3.0, help='seconds before measuring')
     parser.add_argument('--runs', type=int, default=20, help='micro-benchmark repetitions')

@@ -1,14 +1,18 @@
-"""`monet pipeline`: player + detector + fusion as ROS nodes in one process.
+"""`monet pipeline`: player + detector + fusion as ROS nodes, the detector in a child process.
 
     monet pipeline                           # demo: synthetic recording + a model for it
     monet pipeline --bag REC --model CKPT [--rig RIG] [--rate 0.5] [--loop] [--lockstep]
     monet pipeline --bag REC --model CKPT --loop --learn    # + online learner (hot reload)
 
-One MultiThreadedExecutor runs the player (replaying REC), one detector node for every
-camera (batched forward) and the fusion node; other processes see the usual topics
-(/monet/keypoints3d, /monet/skeleton, /diagnostics, ...). A summary line is printed every
-second: frames fused, fps, latency (player publish -> 3D keypoints, median / p95) and the
-mean reprojection error; a final summary when the recording ends (or Ctrl-C, or --duration).
+One MultiThreadedExecutor runs the player (replaying REC) and the fusion node (and the
+learner); one detector node for every camera (batched forward) runs in a child process
+(monet_ros.nodes.child: with its own interpreter lock it is as fast as the detector
+executable; in this process its short GIL-free calls waited behind the other nodes' Python,
+3-4x slower), started with this command's --ros-args and stopped with it. Other processes
+see the usual topics (/monet/keypoints3d, /monet/skeleton, /diagnostics, ...). A summary
+line is printed every second: frames fused, fps, latency (player publish -> 3D keypoints,
+median / p95) and the mean reprojection error; a final summary when the recording ends
+(or Ctrl-C, or --duration).
 """
 from collections import deque
 from dataclasses import dataclass
@@ -22,7 +26,7 @@ import numpy as np
 from monet_ros.commands.pipeline_learn import add_learn_arguments, learner_node
 from monet_ros.config import ConfigError, setting, validate_config
 
-HELP = 'live all-in-one: player + detector + fusion as ROS nodes in one process'
+HELP = 'live all-in-one: player + detector + fusion as ROS nodes (the detector in a child process)'
 
 
 def add_arguments(parser):
@@ -206,14 +210,22 @@ def image_transport(bag, cameras):
     return transport_of(image_topics(open_bag(bag), cameras, bag))
 
 
-def check_skeleton(fusion, detector, skeleton, model):
+def check_skeleton(fusion, model_names, skeleton, model):
     """ConfigError naming both when the skeleton's keypoints are not the model's."""
     names = list(fusion.skeleton.keypoints)
-    model_names = list(detector.detector.keypoints)
+    model_names = list(model_names)
     if names != model_names:
         raise ConfigError('monet pipeline', 'skeleton',
                           f'{skeleton} has keypoints {names}, the model {model} has '
                           f'{model_names}; give --skeleton matching the model')
+
+
+def detector_connected(fusion):
+    """True once the detector process is discovered: something publishes every heatmap and
+    camera_info topic that `fusion` subscribes to, and subscribes to its keypoints3d (so
+    the first frames are not lost to discovery)."""
+    return (fusion.pub_points.get_subscription_count() > 0
+            and all(fusion.count_publishers(sub.topic_name) for sub in fusion.subscriptions))
 
 
 def tf_topics(bag):
@@ -224,6 +236,7 @@ def tf_topics(bag):
 
 
 def run(args):
+    from monet_ros.nodes import passive_openmp
     from monet_ros.nodes.runner import (
         CallbackGuard,
         ignore_signals,
@@ -235,7 +248,7 @@ def run(args):
         until_shutdown,
         use_large_data_profile,
     )
-
+    passive_openmp()               # before torch loads (the fusion's and learner's threads)
     score = None
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo
@@ -257,16 +270,20 @@ def run(args):
     import rclpy
     from rclpy.executors import MultiThreadedExecutor
 
-    from monet_ros.nodes.detector import DetectorNode
+    from monet_ros.models import read_checkpoint
+    from monet_ros.nodes.child import ChildNode
+    from monet_ros.nodes.detector import DetectorConfig, camera_slots
     from monet_ros.nodes.fusion import FusionNode
     from monet_ros.nodes.player import PlayerNode
 
     rig = args.rig or args.bag
     cameras = list(args.cameras or [])
     summary = Summary()
-    init_rclpy(list(getattr(args, 'ros_args', None) or ['--ros-args']))
+    ros_args = list(getattr(args, 'ros_args', None) or ['--ros-args'])
+    init_rclpy(ros_args)
     nodes = []
     detector = executor = None
+    failed = False
     try:
         with until_shutdown():
             try:
@@ -275,20 +292,22 @@ def run(args):
                                                    threshold_px=args.threshold_px,
                                                    confidence_threshold=args.confidence_threshold))
                 nodes.append(fusion)
-                transport = image_transport(args.bag, fusion.cameras)
-                detector = DetectorNode(overrides=dict(rig=str(rig), cameras=cameras,
-                                                       model=str(args.model), transport=transport,
-                                                       device=args.device, backend=args.backend,
-                                                       threads=args.threads,
-                                                       debug_image=args.debug_image))
-                nodes.append(detector)
-                check_skeleton(fusion, detector, args.skeleton, args.model)
-                player = PlayerNode(overrides=dict(
+                # the detector's parameters, checked here (one line, exit 2) before its
+                # process starts; with lockstep it waits for the previous frame's 3D itself
+                detector_params = dict(rig=str(rig), cameras=tuple(cameras),
+                                       model=str(args.model),
+                                       transport=image_transport(args.bag, fusion.cameras),
+                                       device=args.device, backend=args.backend,
+                                       threads=args.threads, debug_image=args.debug_image,
+                                       lockstep=args.lockstep)
+                slots = camera_slots(DetectorConfig(**detector_params))
+                check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],
+                               args.skeleton, args.model)
+                player_params = dict(
                     bag=str(args.bag), rate=0.0 if args.lockstep else options.rate,
                     loop=args.loop, wait_for_subscribers=1, start_delay_s=options.start_delay,
-                    topics=[t for s in detector.slots for t in (s.image_topic, s.info_topic)]
-                    + tf_topics(args.bag)))
-                nodes.append(player)
+                    topics=[t for s in slots for t in (s.image_topic, s.info_topic)]
+                    + tf_topics(args.bag))
                 if args.learn:
                     nodes.append(learner_node(args, rig, summary))
             except (ValueError, OSError) as error:
@@ -298,16 +317,12 @@ def run(args):
             if score is not None:
                 fusion.listeners.append(score.on_fused)
             summary.names = list(fusion.skeleton.keypoints)
-            player.listeners.append(summary.on_image)
-            if args.lockstep:
-                player.gate = summary.gate(tracked=lambda: detector.tracker.stamp_ns)
+            detector = ChildNode('detector', detector_params, ros_args)
             executor = MultiThreadedExecutor(num_threads=4)
             for node in nodes:
                 node.callback_guard = CallbackGuard(node)  # a bad message costs only itself
                 executor.add_node(node)
-            started = time.monotonic()
-            next_line = started + 1.0
-            ended = None
+            player = started = ended = None
             while rclpy.ok() and not stop_requested():
                 try:
                     executor.spin_once(timeout_sec=0.05)
@@ -316,6 +331,30 @@ def run(args):
                         raise
                     break
                 now = time.monotonic()
+                code = detector.exit_code()
+                if code is not None:       # 0: it got the terminal's Ctrl-C first
+                    if code != 0:
+                        start_error('monet pipeline', f'the detector process exited with '
+                                    f'code {code}')
+                        failed = True
+                    break
+                if player is None:
+                    if not detector_connected(fusion):
+                        continue           # the detector process is still starting
+                    try:                   # the first frame reaches a connected detector
+                        player = PlayerNode(overrides=player_params)
+                    except (ValueError, OSError) as error:
+                        start_error('monet pipeline', error)
+                        failed = True
+                        break
+                    nodes.append(player)
+                    player.listeners.append(summary.on_image)
+                    if args.lockstep:
+                        player.gate = summary.gate()
+                    player.callback_guard = CallbackGuard(player)
+                    executor.add_node(player)
+                    started = now
+                    next_line = started + 1.0
                 if now >= next_line:
                     next_line += 1.0
                     if not args.quiet:
@@ -335,12 +374,16 @@ def run(args):
             if isinstance(node, PlayerNode):
                 node.stopping.set()           # no publishing into a closing context
         say_goodbye(nodes)
+        if detector is not None:
+            detector.stop()
         if executor is not None:
             stop_executor(executor)
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
-    if len(nodes) > 1 and nodes[0].last_result is not None:
+    if failed:
+        return 2
+    if nodes and nodes[0].last_result is not None:
         print(keypoint_table(nodes[0]), flush=True)
     if score is not None:
         print(score.table(), flush=True)

@@ -97,6 +97,13 @@ class DetectorConfig:
                                          minimum=0.0, exclusive_minimum=True)
     debug_image_scale: float = setting(0.5, 'debug image size, fraction of the source image',
                                        minimum=0.0, exclusive_minimum=True, maximum=1.0)
+    lockstep: bool = setting(False, 'process a frame only once the /monet/keypoints3d of the '
+                             'previous processed frame arrived (at most lockstep_timeout_s), so '
+                             "that every crop follows the previous frame's 3D whatever order "
+                             'the messages arrive in (`monet pipeline --lockstep`)')
+    lockstep_timeout_s: float = setting(2.0, 'lockstep: longest wait for the previous '
+                                        "frame's keypoints3d (then counted in /diagnostics)",
+                                        minimum=0.0)
     device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
     threads: int = setting(0, 'CPU threads of the network (torch and onnxruntime; 0 = their '
                            'default)', minimum=0)
@@ -124,6 +131,33 @@ class CameraSlot:
         self.last_bad = ''
 
 
+def camera_slots(config, owner='detector'):
+    """The CameraSlot of every camera of a DetectorConfig (names, rig cameras, image and
+    camera_info topics; no network is loaded), as the detector node subscribes them.
+    Raises ConfigError (no rig and no cameras, unknown camera) or OSError (rig file)."""
+    if config.rig:
+        rig, _ = load_node_rig(config.rig)
+        rig_cameras = select_cameras(owner, rig, config.cameras)
+        names = [c.name for c in rig_cameras]
+    elif not config.cameras:
+        raise ConfigError(owner, 'cameras', 'is required when no rig is given')
+    else:
+        names, rig_cameras = list(config.cameras), [None] * len(config.cameras)
+    slots = []
+    for name, rig_camera in zip(names, rig_cameras):
+        base = (config.image_topic.format(camera=name) if config.image_topic
+                else (rig_camera.topic if rig_camera is not None and rig_camera.topic
+                      else f'/{name}/image_raw'))
+        compressed = (config.transport == 'compressed' or config.transport == 'auto'
+                      and base.endswith('/compressed'))
+        base = base[:-len('/compressed')] if base.endswith('/compressed') else base
+        image_topic = base + '/compressed' if compressed else base
+        info_topic = (config.camera_info_topic.format(camera=name) if config.camera_info_topic
+                      else base.rsplit('/', 1)[0] + '/camera_info')
+        slots.append(CameraSlot(name, rig_camera, image_topic, info_topic))
+    return slots
+
+
 class DetectorNode(Node):
     def __init__(self, overrides=None, node_name='detector', **kwargs):
         super().__init__(node_name, **node_namespace(kwargs))
@@ -139,30 +173,9 @@ class DetectorNode(Node):
             if not (x1 > x0 and y1 > y0):
                 raise ConfigError(self.get_name(), 'box', f'needs x1 > x0 and y1 > y0, got '
                                   f'{list(config.box)}')
-        rig = []
-        if config.rig:
-            rig, _ = load_node_rig(config.rig)
-            rig_cameras = select_cameras(self.get_name(), rig, config.cameras)
-        elif not config.cameras:
-            raise ConfigError(self.get_name(), 'cameras', 'is required when no rig is given')
-        else:
-            rig_cameras = [None] * len(config.cameras)
-        names = [c.name for c in rig_cameras] if config.rig else list(config.cameras)
+        self.slots = camera_slots(config, self.get_name())
         self.detector = self.load_detector(config.model)
         self.model_sha256 = sha256_file(config.model)
-        self.slots = []
-        for name, rig_camera in zip(names, rig_cameras):
-            base = (config.image_topic.format(camera=name) if config.image_topic
-                    else (rig_camera.topic if rig_camera is not None and rig_camera.topic
-                          else f'/{name}/image_raw'))
-            compressed = (config.transport == 'compressed' or config.transport == 'auto'
-                          and base.endswith('/compressed'))
-            base = base[:-len('/compressed')] if base.endswith('/compressed') else base
-            image_topic = base + '/compressed' if compressed else base
-            info_topic = (config.camera_info_topic.format(camera=name)
-                          if config.camera_info_topic
-                          else base.rsplit('/', 1)[0] + '/camera_info')
-            self.slots.append(CameraSlot(name, rig_camera, image_topic, info_topic))
         self.pubs = {}
         for slot in self.slots:
             if slot.image_topic.endswith('/compressed'):
@@ -192,6 +205,8 @@ class DetectorNode(Node):
         self.create_timer(max(config.batch_wait_ms, 1.0) / 1e3, self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
         self.batches = 0
+        self.awaiting_keypoints = None    # lockstep: stamp of the frame whose 3D is awaited
+        self.lockstep_timeouts = 0
         self.forward_seconds = []
         self.timer = StageTimer()  # convert, publish (crop, forward: self.detector.timer)
         self.model_reloads = self.model_rejects = 0
@@ -248,16 +263,35 @@ class DetectorNode(Node):
 
     def on_keypoints(self, msg):
         try:
-            self.tracker.update(cloud_to_keypoints3d(msg)['X'], header_stamp_ns(msg))
+            stamp = header_stamp_ns(msg)
+            self.tracker.update(cloud_to_keypoints3d(msg)['X'], stamp)
         except ValueError as error:
             self.get_logger().warning(f'/monet/keypoints3d: bad message ({error})',
                                       throttle_duration_sec=5.0)
+            return
+        if self.awaiting_keypoints is not None and stamp >= self.awaiting_keypoints:
+            self.awaiting_keypoints = None
+            if all(s.pending is not None for s in self.slots):
+                self.process()        # the next frame arrived first and waited for this
 
     def flush(self):
         """Run a partial batch when a frame waited longer than batch_wait_ms."""
         oldest = min((s.pending[1] for s in self.slots if s.pending is not None), default=None)
         if oldest is not None and time.monotonic() - oldest >= self.config.batch_wait_ms / 1e3:
             self.process()
+
+    def waiting_for_keypoints(self):
+        """Lockstep: True while the 3D of the last processed frame has not arrived and the
+        oldest pending frame waited less than lockstep_timeout_s (a longer wait is counted
+        in /diagnostics as lockstep_timeouts, and the frame goes on without it)."""
+        if not self.config.lockstep or self.awaiting_keypoints is None:
+            return False
+        oldest = min((s.pending[1] for s in self.slots if s.pending is not None), default=None)
+        if oldest is not None and time.monotonic() - oldest > self.config.lockstep_timeout_s:
+            self.awaiting_keypoints = None
+            self.lockstep_timeouts += 1
+            return False
+        return True
 
     # ------------------------------------------------------------------ detection
     def decode(self, slot, msg):
@@ -298,6 +332,8 @@ class DetectorNode(Node):
         return self.tracker.boxes(cameras, stamp_ns, self.config.box or None)
 
     def process(self):
+        if self.waiting_for_keypoints():
+            return
         work = []
         with self.timer('convert'):
             for slot in self.slots:
@@ -312,6 +348,8 @@ class DetectorNode(Node):
             return
         cameras = [w[4] for w in work]
         stamp = max(header_stamp_ns(w[1]) for w in work)
+        if self.config.lockstep:
+            self.awaiting_keypoints = stamp
         boxes = self.detector.boxes_for(cameras, self.crop_boxes(cameras, stamp))
         start = time.perf_counter()
         heatmaps, heat_cameras = self.detector.predict([w[2] for w in work], cameras, boxes,
@@ -434,7 +472,8 @@ class DetectorNode(Node):
                     ('forward_ms_median', f'{forward_ms:.2f}'),
                     ('model_sha256', self.model_sha256), ('model_reloads', self.model_reloads),
                     ('model_rejects', self.model_rejects), ('last_bad_message', slot.last_bad),
-                    ('backend', self.detector.backend), *stages.items())]))
+                    ('backend', self.detector.backend),
+                    ('lockstep_timeouts', self.lockstep_timeouts), *stages.items())]))
         self.pub_diag.publish(msg)
 
 

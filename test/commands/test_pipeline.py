@@ -1,6 +1,10 @@
-"""`monet pipeline` as a user runs it: one process, every frame fused, clean exits."""
+"""`monet pipeline` as a user runs it: every frame fused, clean exits, the detector in a
+child process that never outlives the command."""
+import os
+from pathlib import Path
 import signal
 import sys
+import time
 
 from helpers.recordings import noise_recording, small_checkpoint
 from helpers.ros import NodeProcess, RosHarness
@@ -96,3 +100,58 @@ def test_ros_args_move_the_rig_with_debug_images_and_tf(ros_env, tmp_path):
                                rig[0].crop((0, 0, 320, 240), (160, 120)).K)
     if tf is not None:
         assert {t.child_frame_id for t in tf[0].transforms} == {'cam0_optical', 'cam1_optical'}
+
+
+def children(pid):
+    """{pid: command line} of the live (not zombie) child processes of `pid`."""
+    found = {}
+    for task in Path(f'/proc/{pid}/task').glob('*'):
+        for child in (task / 'children').read_text().split():
+            try:
+                state = Path(f'/proc/{child}/stat').read_text().rsplit(')', 1)[1].split()[0]
+                cmdline = Path(f'/proc/{child}/cmdline').read_bytes().replace(b'\0', b' ')
+            except OSError:
+                continue
+            if state != 'Z':
+                found[int(child)] = cmdline.decode()
+    return found
+
+
+def alive(pid):
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != 'Z'
+
+
+def test_detector_runs_in_a_child_process_that_ends_with_the_pipeline(ros_env, tmp_path):
+    """The detector is the pipeline's child process (its own interpreter lock: see
+    monet_ros.nodes.child); SIGTERM to the pipeline alone stops both (exit 0), and a killed
+    pipeline leaves no detector behind. Its OpenMP threads wait passively (unless the user
+    chose a policy): monet_ros.nodes.passive_openmp."""
+    noise_recording(tmp_path / 'rec', cameras=2, frames=3)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    env = {k: v for k, v in ros_env.items() if k != 'OMP_WAIT_POLICY'}
+    for how in ('sigterm', 'kill'):
+        with RosHarness(env) as ros:
+            clouds = ros.collect('/monet/keypoints3d', PointCloud2, 100)
+            with pipeline(env, '--bag', tmp_path / 'rec', '--model', model,
+                          '--loop', '--rate', 2.0, '--quiet') as proc:
+                assert ros.spin_until(lambda c=clouds: c, timeout=120, process=proc), \
+                    proc.output()
+                detectors = [pid for pid, cmd in children(proc.process.pid).items()
+                             if 'monet_ros.nodes.detector' in cmd]
+                assert len(detectors) == 1, (children(proc.process.pid), proc.output())
+                environ = Path(f'/proc/{detectors[0]}/environ').read_bytes().split(b'\0')
+                assert b'OMP_WAIT_POLICY=PASSIVE' in environ
+                if how == 'sigterm':
+                    assert proc.stop(signal.SIGTERM) == 0, proc.output()
+                    assert not alive(detectors[0]), proc.output()
+                else:
+                    os.kill(proc.process.pid, signal.SIGKILL)
+                    proc.process.wait()
+                    deadline = time.monotonic() + 60
+                    while alive(detectors[0]) and time.monotonic() < deadline:
+                        time.sleep(0.1)
+                    assert not alive(detectors[0]), proc.output()

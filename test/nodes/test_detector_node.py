@@ -3,6 +3,7 @@ stamps, tracked crops, bad messages and checkpoint hot reload."""
 import hashlib
 import json
 import signal
+import time
 
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import cv2_project, ring_rig
@@ -287,3 +288,49 @@ def test_onnxruntime_backend_gives_the_torch_frame_and_reports_stages(ros_env, s
         for stage in ('convert', 'crop', 'forward', 'publish'):
             assert float(values[f'{stage}_ms_mean']) > 0, values
             assert int(values[f'{stage}_calls']) >= 1
+
+
+def test_lockstep_waits_for_the_previous_frames_keypoints3d(ros_env, setup):
+    """lockstep: a frame that arrives before the 3D of the previous processed frame waits
+    for it, then is cropped around it (whatever order the messages arrive in); after
+    lockstep_timeout_s it goes on without it, counted in /diagnostics."""
+    from diagnostic_msgs.msg import DiagnosticArray
+
+    rig, rig_path, first, _, images = setup
+    params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
+                  track_timeout_s=3600.0, device='cpu', lockstep=True, lockstep_timeout_s=6.0)
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = Stream(ros, rig)
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
+        for heat_pub, info_pub in stream.pubs.values():
+            ros.wait_for_subscribers(heat_pub, timeout=120, process=node)
+            ros.wait_for_subscribers(info_pub, process=node)
+        ros.wait_for_subscribers(cloud_pub, process=node)
+        stream.roundtrip(T0, images, node)          # the first frame waits for nothing
+
+        def done(stamp):
+            return all(stream.result(c.name, stamp) for c in rig)
+        # frame 2 before the 3D of frame 1: held back (a second is hundreds of forwards)
+        stream.send(T0 + 1, images)
+        assert not ros.spin_until(lambda: done(T0 + 1), timeout=1.0, process=node)
+        X = np.random.default_rng(4).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))
+        cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))
+        assert ros.spin_until(lambda: done(T0 + 1), timeout=30, process=node), node.output()
+        rule = detector_boxes(first, rig, crop_boxes(rig, X.astype(np.float32)))
+        for v, cam in enumerate(rig):       # cropped around the 3D it waited for
+            info = stream.result(cam.name, T0 + 1)[1]
+            np.testing.assert_allclose(np.reshape(info.k, (3, 3)),
+                                       expected_K(cam.K, rule[v], 32, 24), rtol=1e-12)
+        # frame 3 whose previous 3D never comes: processed after lockstep_timeout_s
+        start = time.monotonic()
+        stream.send(T0 + 2, images)
+        assert ros.spin_until(lambda: done(T0 + 2), timeout=60, process=node), node.output()
+        assert time.monotonic() - start >= 5.0
+
+        def timeouts():
+            counts = [int(kv.value) for msg in diagnostics for status in msg.status
+                      for kv in status.values if kv.key == 'lockstep_timeouts']
+            return max(counts, default=0)
+        assert ros.spin_until(lambda: timeouts() == 1, timeout=30, process=node), node.output()
+        assert node.stop(signal.SIGINT) == 0, node.output()
