@@ -351,8 +351,13 @@ def worker(spec):
         for node in nodes:
             executor.add_node(node)
         feeder = Feeder(bench, rig, spec['viewable'])
-        cpu = (lambda: sum(process_cpu_seconds(p.pid) for p in procs)) if procs \
-            else time.process_time
+        if procs:     # three-process: the node processes only (not this publisher)
+            def cpu():
+                return sum(process_cpu_seconds(p.pid) for p in procs)
+        else:         # this whole process (publisher included), plus the detector child
+            def cpu():
+                return time.process_time() + (
+                    process_cpu_seconds(child.process.pid) if child is not None else 0.0)
         result = feeder.run(lambda t: executor.spin_once(timeout_sec=t), spec['rate'],
                             spec['seconds'], spec['warmup'], cpu)
     finally:
