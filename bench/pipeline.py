@@ -27,8 +27,10 @@ torch and the ONNX Runtime backends. --viewable runs every end-to-end case twice
 viewable outputs off and on (the detector's debug_image at its default rate with a subscriber
 to every camera's, the fusion node's /tf_static and camera markers), to show what they cost:
 throughput and the nodes' CPU time per keypoints3d (/proc/PID/stat of the detector and fusion
-processes; in-process: the whole process, publisher included). --repeat N runs each case N
-times (off/on interleaved) and shows medians: single 10 s runs differ by several percent.
+processes; in-process and pipeline: this process, publisher included, plus the detector child).
+--repeat N runs each case N times (off/on interleaved) and shows medians: single 10 s runs
+differ by several percent. --second-job N runs N CPU-bound processes beside the end-to-end
+runs (the loaded-machine figures); --input-size the small net at another input side.
 Prints tables and the load average; never asserts.
 """
 import argparse
