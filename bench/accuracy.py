@@ -88,6 +88,7 @@ COLUMNS = (('error2d_mean', '2D err. (px)', '.2f', True),
            ('pck@0.05', 'PCK@0.05', '.3f', False), ('pck@0.1', 'PCK@0.1', '.3f', False),
            ('pck@0.2', 'PCK@0.2', '.3f', False),
            ('error3d_mm', '3D err. (mm)', '.0f', True),
+           ('error3d_median_mm', '3D med. (mm)', '.0f', True),
            ('reprojection', 'reproj. (px)', '.2f', True))
 
 _DATA = {}          # rig -> TrainingData inputs, filled before forking
@@ -177,9 +178,17 @@ def value(summary, key):
         return summary.pck.at(float(key[4:]))
     if key == 'error3d_mm':
         return 1000 * summary.extra['error3d_mean']
+    if key == 'error3d_median_mm':
+        return 1000 * summary.extra['error3d_median']
     if key == 'reprojection':
         return summary.reprojection_mean
     return summary.extra[key]
+
+
+def shown(v, fmt):
+    """A cell: the value, or '> 1e4' for an absurd one (an image-blind detector's mean
+    reprojection error is dominated by a few points triangulated next to a camera centre)."""
+    return '> 1e4' if abs(v) > 1e4 else f'{v:{fmt}}'
 
 
 def beats(a, b, lower):
@@ -201,7 +210,7 @@ def result_table(summaries):
             if s.dataset in null and s is not null[s.dataset] and not beats(
                     v, value(null[s.dataset], key), lower):
                 mark = ' †'
-            cells.append(f'{v:{fmt}}{mark}')
+            cells.append(f'{shown(v, fmt)}{mark}')
         e = s.extra
         lines.append(f'| {s.dataset} | {MODE_TITLES.get(s.mode, s.mode)} | '
                      + ' | '.join(cells)
@@ -254,7 +263,7 @@ def across_seeds(summaries, rigs, seeds):
                 v = np.array([value(cell[(m, n)], key) for n in complete])
                 mark = (' †' if 'null' in means and m != 'null'
                         and not beats(v.mean(), means['null'][key], lower) else '')
-                cells.append(f'{v.mean():{fmt}} ± {v.std():{fmt}}{mark}')
+                cells.append(f'{shown(v.mean(), fmt)} ± {shown(v.std(), fmt)}{mark}')
             lines.append(f'| {MODE_TITLES.get(m, m)} | ' + ' | '.join(cells) + ' |')
         lines.append('')
         if 'monet' in modes:
@@ -277,6 +286,28 @@ def across_seeds(summaries, rigs, seeds):
                 lines.append(f'| {MODE_TITLES.get(m, m)} | ' + ' | '.join(cells) + ' |')
             lines.append('')
     return '\n'.join(lines)
+
+
+def report_only(out):
+    """Tables of an earlier run from OUT/results.json and OUT/bench_meta.json."""
+    from monet_ros.evaluation import load_summaries
+
+    try:
+        summaries = load_summaries(out / 'results.json')
+        meta = json.loads((out / 'bench_meta.json').read_text())
+    except (OSError, ValueError) as error:
+        print(f'accuracy: {out}: no earlier run to report ({error})', file=sys.stderr)
+        return 2
+    paths = write_report(out, summaries, name='results')
+    print(f'## Held-out figures of `{meta["command"]}` (eval crops: {meta["eval_crop"]})\n')
+    print(result_table(summaries))
+    seeds = meta['seeds']
+    if len(seeds) > 1:
+        aggregate = across_seeds(summaries, meta['preset']['rigs'], seeds)
+        (out / 'across_seeds.md').write_text(aggregate)
+        print('\n' + aggregate)
+    print(f'\nwritten {", ".join(str(p) for p in paths.values())}')
+    return 0
 
 
 def main(argv=None):
@@ -315,7 +346,12 @@ def main(argv=None):
                         'with --merge')
     parser.add_argument('--merge', action='store_true',
                         help='keep the (mode, dataset) results of OUT/results.json not rerun now')
+    parser.add_argument('--report', action='store_true',
+                        help='train nothing: the tables again from OUT/results.json (and the '
+                        'rigs and seeds of OUT/bench_meta.json)')
     args = parser.parse_args(argv)
+    if args.report:
+        return report_only(Path(args.out))
     preset = dict(FULL if args.full else QUICK if args.quick else REDUCED)
     for key in ('steps', 'frames', 'label_fraction', 'input_size', 'sigma', 'rigs', 'modes'):
         if getattr(args, key):

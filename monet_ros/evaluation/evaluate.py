@@ -100,6 +100,7 @@ def evaluate_detector(detector, recording, instants, boxes, mode='model', datase
     cons, gt_err = reproj.consistency_stats, reproj.gt_stats
     e3d = reproj.error3d_stats
     extra = {'error3d_mean': e3d.mean, 'error3d_std': e3d.std, 'error3d_median': e3d.median,
+             'reprojection_median': cons.median,
              'error2d_mean': float(error2d.mean()) if error2d.size else float('nan'),
              'error2d_median': float(np.median(error2d)) if error2d.size else float('nan'),
              'mean_confidence': float(np.mean(det['confidence'])),
