@@ -92,6 +92,7 @@ COLUMNS = (('error2d_mean', '2D err. (px)', '.2f', True),
            ('reprojection', 'reproj. (px)', '.2f', True))
 
 _DATA = {}          # rig -> TrainingData inputs, filled before forking
+EVAL_FRACTION = 0.2  # the held-out tail of every recording (evaluation only, never trained)
 
 
 def synthesise(out, name, rig, frames, label_fraction, seed):
@@ -364,9 +365,10 @@ def main(argv=None):
     from monet_ros.learning.recording import load_recording
     from monet_ros.learning.trainer import split_instants
 
-    eval_fraction = TrainConfig().eval_fraction
     overrides = parse_overrides(args.overrides)
-    eval_fraction = overrides.get('eval_fraction', eval_fraction)
+    # the held-out tail every mode is evaluated on (base below): labelled instants in it are
+    # not trained, and the counts printed here are those trained
+    eval_fraction = overrides.get('eval_fraction', EVAL_FRACTION)
     setup = {}
     for seed in seeds:
         for rig in preset['rigs']:
@@ -392,7 +394,7 @@ def main(argv=None):
                   'not trained', file=sys.stderr)
     base = dict(architecture='small', input_size=preset['input_size'], width=args.width,
                 steps=preset['steps'], checkpoint_every=preset['steps'], lr=args.lr,
-                device=args.device, sigma=preset['sigma'], eval_fraction=0.2)
+                device=args.device, sigma=preset['sigma'], eval_fraction=EVAL_FRACTION)
     base.update(overrides)
     jobs = [(name, mode, TrainConfig(mode='supervised' if mode == 'null' else mode,
                                      **dict(base, seed=setup[name]['seed'])).to_dict(),
