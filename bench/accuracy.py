@@ -282,7 +282,7 @@ def across_seeds(summaries, rigs, seeds):
                     theirs = np.array([value(cell[(m, n)], key) for n in complete])
                     ratio = theirs / ours if lower else ours / theirs
                     wins = int(sum(beats(o, t, lower) for o, t in zip(ours, theirs)))
-                    cells.append(' '.join(f'{r:.2f}' for r in ratio)
+                    cells.append(' '.join(shown(r, '.2f') for r in ratio)
                                  + f' ({wins}/{len(complete)})')
                 lines.append(f'| {MODE_TITLES.get(m, m)} | ' + ' | '.join(cells) + ' |')
             lines.append('')
