@@ -16,7 +16,7 @@ def plot_pck_curves(summaries, path, title='PCK'):
     for s in sorted(summaries, key=lambda s: order.get(s.mode, len(order))):
         axes.plot(s.pck.thresholds, s.pck.overall, marker='o', markersize=3,
                   label=MODE_TITLES.get(s.mode, s.mode))
-    axes.set_xlabel('normalised distance (fraction of heatmap window)')
+    axes.set_xlabel('normalised distance (fraction of the ground-truth subject box side)')
     axes.set_ylabel('PCK')
     axes.set_ylim(0.0, 1.0)
     axes.set_xlim(0.0, 0.21)
