@@ -35,7 +35,8 @@ def debug_image(image_rgb, box=None, peaks=None, confidence=None, reprojected=No
 
     box: crop x0 y0 x1 y1 (pixel edges) or None; peaks (C, 2) source pixels with confidence
     (C,); reprojected (N, 2) source pixels of the fused keypoints (NaN = not fused) or None;
-    bone_indices (B, 2) keypoint index pairs drawn between reprojections. Raises ValueError
+    bone_indices (B, 2) keypoint index pairs drawn between reprojections (reprojections
+    more than one image size outside the image are left out). Raises ValueError
     for an image that is not (H, W, 3) uint8 or a non-positive scale."""
     image = np.asarray(image_rgb)
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
@@ -57,7 +58,12 @@ def debug_image(image_rgb, box=None, peaks=None, confidence=None, reprojected=No
         cv2.rectangle(out, (x0, y0), (x1 - 1, y1 - 1), BOX, thick)
     if reprojected is not None:
         rep = np.asarray(reprojected, np.float64).reshape(-1, 2)
-        ok = np.isfinite(rep).all(axis=1)
+        # points far outside the image (a wild triangulation) are not drawn: OpenCV takes
+        # 32-bit coordinates, and a mark there would not be seen anyway
+        size = np.array([image.shape[1], image.shape[0]], np.float64)
+        with np.errstate(invalid='ignore'):
+            ok = (np.isfinite(rep).all(axis=1) & (rep > -size).all(axis=1)
+                  & (rep < 2 * size).all(axis=1))
         pts = px(np.where(ok[:, None], rep, 0))
         for a, b in np.asarray(bone_indices, int).reshape(-1, 2):
             if ok[a] and ok[b]:

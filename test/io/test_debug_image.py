@@ -1,4 +1,5 @@
 """Debug image drawing: peaks mapped back to source pixels, box, size and colours."""
+import cv2
 from helpers.scenes import gaussian_heatmaps, ring_rig, to_crop
 import numpy as np
 import pytest
@@ -34,3 +35,20 @@ def test_drawing_size_and_marks():
     assert np.array_equal(image, np.full((240, 320, 3), 30, np.uint8))   # input untouched
     with pytest.raises(ValueError, match='uint8'):
         debug_image(image.astype(np.float32))
+
+
+def test_wild_reprojections_are_left_out():
+    """A wild triangulation reprojects to ~1e12 px: it is not drawn (OpenCV takes 32-bit
+    coordinates) and the bones to it are left out; the rest is drawn."""
+    image = np.full((240, 320, 3), 30, np.uint8)
+    fused = np.array([[60.0, 200.0], [1e12, -3e11], [-400.0, 100.0], [250.0, 40.0]])
+    out = debug_image(image, None, None, None, fused, bone_indices=[(0, 1), (1, 3), (0, 3)])
+    assert tuple(out[200, 60]) == FUSED and tuple(out[40, 250]) == FUSED
+    # only the bone 0-3 is drawn: the pixels on its line are red, and nothing else is
+    expected = np.full_like(image, 30)
+    cv2.line(expected, (60, 200), (250, 40), FUSED, 2, cv2.LINE_AA)
+    drawn = (out != 30).any(axis=2)
+    line = (expected != 30).any(axis=2)
+    assert drawn[line].mean() > 0.95
+    far = ~cv2.dilate(line.astype(np.uint8), np.ones((15, 15), np.uint8)).astype(bool)
+    assert not drawn[far].any()
