@@ -226,6 +226,7 @@ class Feeder:
 
         self.node, self.rig = node, rig
         self.latencies, self.heat_count, self.diagnostics = [], [0], {}
+        self.callback_errors = {}    # source -> 'count x last error'
         node.create_subscription(
             PointCloud2, '/monet/keypoints3d',
             lambda m: self.latencies.append(time.time_ns() - header_stamp_ns(m)), STREAM_IN)
@@ -251,7 +252,11 @@ class Feeder:
 
     def on_diagnostics(self, msg):
         for status in msg.status:
-            if status.name.startswith('monet detector') or status.name == 'monet fusion':
+            if ': callback errors: ' in status.name:    # a node's CallbackGuard counts
+                values = {kv.key: kv.value for kv in status.values}
+                self.callback_errors[status.name.split(': callback errors: ')[-1]] = \
+                    f'{values.get("errors")} x {values.get("last_error")}'
+            elif status.name.startswith('monet detector') or status.name == 'monet fusion':
                 kind = 'detector' if status.name.startswith('monet detector') else 'fusion'
                 self.diagnostics[kind] = {kv.key: kv.value for kv in status.values}
 
@@ -295,7 +300,7 @@ class Feeder:
                     heat=(self.heat_count[0] - h0) / window,
                     median=float(np.median(lat)) if lat.size else float('nan'),
                     p95=float(np.percentile(lat, 95)) if lat.size else float('nan'),
-                    diagnostics=self.diagnostics)
+                    diagnostics=self.diagnostics, callback_errors=self.callback_errors)
 
 
 def process_cpu_seconds(pid):
@@ -407,6 +412,7 @@ def median_result(results):
     keys = ('published', 'fused', 'heat', 'median', 'p95', 'cpu_ms')
     out = {k: float(np.median([r[k] for r in good])) for k in keys}
     out['diagnostics'] = good[-1]['diagnostics']
+    out['callback_errors'] = {k: v for r in good for k, v in r['callback_errors'].items()}
     out['runs'] = len(good)
     return out
 
@@ -416,13 +422,15 @@ def print_live_row(views, rate, layout, viewable, r):
     shown = 'on' if viewable else 'off'
     if 'error' in r:
         print(f'| {views} @ {rate:.0f} | {layout} | {shown} | failed: {r["error"]} '
-              f'|||||||| {load:.1f} |', flush=True)
+              f'||||||||| {load:.1f} |', flush=True)
         return
     d = r['diagnostics']
     print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
           f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | {r["p95"]:.0f} | '
           f'{r["cpu_ms"]:.1f} | {stage_text(d, "detector", DETECTOR_STAGES)} | '
-          f'{stage_text(d, "fusion", FUSION_STAGES)} | {load:.1f} |', flush=True)
+          f'{stage_text(d, "fusion", FUSION_STAGES)} | '
+          f'{"; ".join(f"{k}: {v}" for k, v in r["callback_errors"].items()) or "none"} | '
+          f'{load:.1f} |', flush=True)
 
 
 def stage_text(diagnostics, kind, stages):
@@ -530,8 +538,8 @@ def main():
               ' | latency median ms | latency p95 ms | node CPU ms per keypoints3d | '
               'detector ms/batch: convert, crop, '
               'forward, publish | fusion ms: receive (per view), decode, undistort, '
-              'triangulate, errors, publish | load |')
-        print('|---|---|---|---|---|---|---|---|---|---|---|---|')
+              'triangulate, errors, publish | node callback errors | load |')
+        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
         costs = []
         with second_job(args.second_job):
             if args.second_job:
