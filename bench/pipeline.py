@@ -414,6 +414,7 @@ def median_result(results):
     out['diagnostics'] = good[-1]['diagnostics']
     out['callback_errors'] = {k: v for r in good for k, v in r['callback_errors'].items()}
     out['runs'] = len(good)
+    out['fused_runs'] = [r['fused'] for r in good]
     return out
 
 
@@ -552,8 +553,12 @@ def main():
                   'node CPU ms per keypoints3d off -> on | CPU change |')
             print('|---|---|---|---|---|---|')
             for views, rate, layout, off, on in costs:
+                runs = (f' (runs {"/".join(f"{x:.1f}" for x in off["fused_runs"])} -> '
+                        f'{"/".join(f"{x:.1f}" for x in on["fused_runs"])})'
+                        if len(off['fused_runs']) > 1 else '')
                 print(f'| {views} @ {rate:.0f} | {layout} | {off["fused"]:.1f} -> '
-                      f'{on["fused"]:.1f} | {100 * (on["fused"] / off["fused"] - 1):+.1f}% | '
+                      f'{on["fused"]:.1f}{runs} | '
+                      f'{100 * (on["fused"] / off["fused"] - 1):+.1f}% | '
                       f'{off["cpu_ms"]:.1f} -> {on["cpu_ms"]:.1f} | '
                       f'{100 * (on["cpu_ms"] / off["cpu_ms"] - 1):+.1f}% |', flush=True)
     print(f'# load average {" ".join(f"{x:.1f}" for x in os.getloadavg())} at the end (a '

@@ -43,10 +43,11 @@ def debug_image(image_rgb, box=None, peaks=None, confidence=None, reprojected=No
         raise ValueError(f'need an (H, W, 3) uint8 image, got {image.dtype} {image.shape}')
     if not scale > 0:
         raise ValueError(f'scale must be > 0, got {scale}')
-    out = np.array(image)
-    if scale != 1.0:
+    if scale != 1.0:   # scaled straight from the source (no full-size copy to draw on)
         size = (max(1, round(image.shape[1] * scale)), max(1, round(image.shape[0] * scale)))
-        out = cv2.resize(out, size, interpolation=cv2.INTER_AREA)
+        out = cv2.resize(np.ascontiguousarray(image), size, interpolation=cv2.INTER_AREA)
+    else:
+        out = np.array(image)
     thick = max(1, round(2 * scale))
 
     def px(points):
