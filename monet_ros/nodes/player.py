@@ -56,7 +56,7 @@ class PlayerConfig:
     wait_for_subscribers_s: float = setting(30.0, 'give up waiting for subscribers after this '
                                             'long and play anyway, with a warning (0 = wait '
                                             'forever)', minimum=0.0)
-    start_delay_s: float = setting(0.0, 'wait this long before playing (after the subscribers): '
+    start_delay_s: float = setting(1.0, 'wait this long before playing (after the subscribers): '
                                    'lets late discovery finish so no first frame is lost',
                                    minimum=0.0)
     shutdown_when_done: bool = setting(False, 'exit when the bag has been played (no loop)')

@@ -88,7 +88,9 @@ def test_bad_bag_and_unknown_topic_fail_at_start(ros_env, small_bag, tmp_path):
 
 def test_waits_for_subscribers_bounded_then_plays(ros_env, small_bag):
     """No subscriber: the player gives up after wait_for_subscribers_s and plays anyway;
-    with subscribers it starts as soon as every image topic is matched."""
+    with subscribers it starts once every image topic is matched (and start_delay_s, by
+    default 1 s, has passed: a best-effort subscriber matches the player a moment after the
+    player matches it, and would lose the first frames)."""
     params = dict(bag=str(small_bag), rate=0.0, wait_for_subscribers=1,
                   wait_for_subscribers_s=1.0, shutdown_when_done=True)
     with NodeProcess('player', ros_env, params) as player:
