@@ -226,7 +226,7 @@ def run_node(factory, name, args=None, large_data=False):
     """
     if large_data:
         use_large_data_profile()
-    node = None
+    node = executor = None
     try:
         clean_stop_handlers()       # a signal before the flag handlers of init_rclpy: exit 0
         init_rclpy(args)
@@ -258,6 +258,9 @@ def run_node(factory, name, args=None, large_data=False):
         try:
             if node is not None:
                 say_goodbye([node])
+            if executor is not None:   # now, not in its __del__ at interpreter exit (which
+                stop_executor(executor, timeout_sec=0.5)   # printed a traceback at times)
+            if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
         except KeyboardInterrupt:

@@ -91,7 +91,9 @@ def test_waits_for_subscribers_bounded_then_plays(ros_env, small_bag):
     with subscribers it starts once every image topic is matched (and start_delay_s, by
     default 1 s, has passed: a best-effort subscriber matches the player a moment after the
     player matches it, and would lose the first frames)."""
-    params = dict(bag=str(small_bag), rate=0.0, wait_for_subscribers=1,
+    # rate 1 (not 0, a burst): the point is the waiting; a burst of 8 frames may overrun
+    # the publishers' 5-deep history before a reliable reader has acknowledged
+    params = dict(bag=str(small_bag), rate=1.0, wait_for_subscribers=1,
                   wait_for_subscribers_s=1.0, shutdown_when_done=True)
     with NodeProcess('player', ros_env, params) as player:
         assert player.wait(timeout=60) == 0, player.output()
@@ -120,7 +122,7 @@ def test_sigint_twice_exits_zero_without_traceback(ros_env, small_bag):
 def test_waits_for_the_fusion_topics_too(ros_env, small_bag):
     """wait_for_topics: the player also waits for subscribers of `{camera}/heatmaps` (in its
     namespace: /monet/cam0/heatmaps, /monet/cam1/heatmaps), i.e. for the fusion node."""
-    params = dict(bag=str(small_bag), rate=0.0, wait_for_subscribers=1,
+    params = dict(bag=str(small_bag), rate=1.0, wait_for_subscribers=1,
                   wait_for_subscribers_s=0.0, wait_for_topics=['{camera}/heatmaps'],
                   shutdown_when_done=True)
     with RosHarness(ros_env) as ros, NodeProcess('player', ros_env, params) as player:
