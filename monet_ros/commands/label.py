@@ -18,6 +18,7 @@ instant's disagreement), else on image thumbnails.
 Binds 127.0.0.1 by default: on a remote machine, forward the port over SSH
 (ssh -L 8080:localhost:8080 host) and open http://localhost:8080.
 """
+import os
 import sys
 
 HELP = 'label keypoints in a browser: click two views, the others are filled in by geometry'
@@ -120,4 +121,10 @@ def run(args):
             session.work.release()
     # werkzeug's serve_forever returns on Ctrl-C / SIGTERM (it catches KeyboardInterrupt)
     print('monet label: stopped', file=sys.stderr, flush=True)
+    if 'torch' in sys.modules:
+        # with a model loaded, a native thread pool destroyed at interpreter exit aborted
+        # now and then ("terminate called without an active exception", exit -6); every
+        # label is saved and the streams are flushed, so leave without the C++ teardown
+        sys.stdout.flush()
+        os._exit(0)
     return 0
