@@ -57,6 +57,7 @@ from monet_ros.synth.rig import RigConfig, make_rig  # noqa: E402
 from monet_ros.timing import StageTimer  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480
+EXTRA_SPEC = {}
 DETECTOR_STAGES = ('convert', 'crop', 'forward', 'publish')
 FUSION_STAGES = ('receive', 'decode', 'undistort', 'triangulate', 'errors', 'publish')
 
@@ -179,6 +180,7 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
     spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
                 threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
                 workdir=str(workdir), viewable=viewable)
+    spec.update(EXTRA_SPEC)
     proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
                           env=run_env(workdir), capture_output=True, text=True,
                           timeout=300 + seconds + warmup)
@@ -221,24 +223,30 @@ class Feeder:
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
-        from monet_ros.io import header_stamp_ns, numpy_to_image_msg
+        from monet_ros.io import numpy_to_image_msg
+        from monet_ros.io.fast_cdr import decode_header
+        from monet_ros.io.fields import stamp_to_ns
         from monet_ros.nodes.qos import IMAGE_OUT, STREAM_IN
 
         self.node, self.rig = node, rig
         self.latencies, self.heat_count, self.diagnostics = [], [0], {}
         self.callback_errors = {}    # source -> 'count x last error'
+        # serialized subscriptions (raw=True): this bench shares the CPUs with the nodes it
+        # times, so it neither converts images to Python messages nor decodes more than the
+        # stamp it needs
         node.create_subscription(
             PointCloud2, '/monet/keypoints3d',
-            lambda m: self.latencies.append(time.time_ns() - header_stamp_ns(m)), STREAM_IN)
+            lambda m: self.latencies.append(time.time_ns() - stamp_to_ns(decode_header(m).stamp)),
+            STREAM_IN, raw=True)
         self.debug_count = [0]
         for cam in rig:
             if viewable:      # a debug image is drawn only while someone subscribes
                 node.create_subscription(Image, f'/monet/{cam.name}/debug_image',
                                          lambda m: self.debug_count.__setitem__(
-                                             0, self.debug_count[0] + 1), STREAM_IN)
+                                             0, self.debug_count[0] + 1), STREAM_IN, raw=True)
             node.create_subscription(Image, f'/monet/{cam.name}/heatmaps',
                                      lambda m: self.heat_count.__setitem__(
-                                         0, self.heat_count[0] + 1), STREAM_IN)
+                                         0, self.heat_count[0] + 1), STREAM_IN, raw=True)
         node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diagnostics,
                                  STREAM_IN)
         self.pubs = [(node.create_publisher(Image, cam.topic, IMAGE_OUT),
@@ -325,9 +333,9 @@ def worker(spec):
     rig = load_rig(spec['rig'])
     detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
                            threads=spec['threads'], backend=spec['backend'],
-                           debug_image=spec['viewable'])
-    fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
-                         camera_markers=spec['viewable'])
+                           debug_image=spec.get('debug_image', spec['viewable']))
+    fusion_params = dict(rig=spec['rig'], publish_tf=spec.get('tf', spec['viewable']),
+                         camera_markers=spec.get('tf', spec['viewable']))
     procs, nodes, child = [], [], None
     if spec['layout'] == 'pipeline':
         from monet_ros.nodes.child import ChildNode
@@ -357,7 +365,7 @@ def worker(spec):
         nodes.append(bench)
         for node in nodes:
             executor.add_node(node)
-        feeder = Feeder(bench, rig, spec['viewable'])
+        feeder = Feeder(bench, rig, spec.get('subscriber', spec['viewable']))
         if procs:     # three-process: the node processes only (not this publisher)
             def cpu():
                 return sum(process_cpu_seconds(p.pid) for p in procs)
