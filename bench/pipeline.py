@@ -57,7 +57,6 @@ from monet_ros.synth.rig import RigConfig, make_rig  # noqa: E402
 from monet_ros.timing import StageTimer  # noqa: E402
 
 WIDTH, HEIGHT = 640, 480
-EXTRA_SPEC = {}
 DETECTOR_STAGES = ('convert', 'crop', 'forward', 'publish')
 FUSION_STAGES = ('receive', 'decode', 'undistort', 'triangulate', 'errors', 'publish')
 
@@ -180,7 +179,6 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
     spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
                 threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
                 workdir=str(workdir), viewable=viewable)
-    spec.update(EXTRA_SPEC)
     proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
                           env=run_env(workdir), capture_output=True, text=True,
                           timeout=300 + seconds + warmup)
@@ -333,9 +331,9 @@ def worker(spec):
     rig = load_rig(spec['rig'])
     detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
                            threads=spec['threads'], backend=spec['backend'],
-                           debug_image=spec.get('debug_image', spec['viewable']))
-    fusion_params = dict(rig=spec['rig'], publish_tf=spec.get('tf', spec['viewable']),
-                         camera_markers=spec.get('tf', spec['viewable']))
+                           debug_image=spec['viewable'])
+    fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
+                         camera_markers=spec['viewable'])
     procs, nodes, child = [], [], None
     if spec['layout'] == 'pipeline':
         from monet_ros.nodes.child import ChildNode
@@ -365,7 +363,7 @@ def worker(spec):
         nodes.append(bench)
         for node in nodes:
             executor.add_node(node)
-        feeder = Feeder(bench, rig, spec.get('subscriber', spec['viewable']))
+        feeder = Feeder(bench, rig, spec['viewable'])
         if procs:     # three-process: the node processes only (not this publisher)
             def cpu():
                 return sum(process_cpu_seconds(p.pid) for p in procs)
