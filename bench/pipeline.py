@@ -23,7 +23,10 @@ undistort, triangulate, errors, publish).
 Micro-benchmarks (this process, median of --runs): fuse_heatmaps per frame at 4/8/35 views
 against plain DLT of the same peaks (geometry.triangulate) with the stage split, the
 undistortion's error against cv2.undistortPoints, and Detector.predict images/s with the
-torch and the ONNX Runtime backends. --viewable runs every end-to-end case twice, with the
+torch and the ONNX Runtime backends; the receive table (--receive RUNS, two processes):
+a subscriber's CPU per 640x480 image taken as an rclpy message with glibc's default
+allocator settings (baseline), with large buffers from the heap (as every node), or
+serialized and decoded in place. --viewable runs every end-to-end case twice, with the
 viewable outputs off and on (the detector's debug_image at its default rate with a subscriber
 to every camera's, the fusion node's /tf_static and camera markers), to show what they cost:
 throughput and the nodes' CPU time per keypoints3d (/proc/PID/stat of the detector and fusion
@@ -189,6 +192,99 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
                 [f'exit {proc.returncode}'])
 
 
+# ----------------------------------------------------------------------------- receive
+def receive_micro(views, rate, seconds, repeat, workdir):
+    """CPU ms a subscriber spends per received 640x480 rgb8 image: taken as an rclpy message
+    with glibc's default allocator settings (the baseline: every buffer over 128 KB mapped
+    and unmapped per message), the same with large buffers from the heap
+    (monet_ros.nodes.heap_for_large_buffers, what every node does: the detector's way), and
+    serialized and decoded in place (monet_ros.io.fast_cdr, the bag reader's decoder; no
+    faster than the message once the heap serves the buffers, so the nodes take messages).
+    The pixels
+    reach a numpy array every way (image_for_crop). A publisher process sends `views`
+    streams at `rate`; the subscriber process times itself.
+    -> {(mode, heap): the `repeat` runs' values}."""
+    out = {('message', False): [], ('message', True): [], ('serialized', True): []}
+    for _ in range(repeat):
+        for mode, heap in out:
+            env = run_env(workdir)
+            spec = dict(views=views, rate=rate, seconds=seconds, mode=mode, heap=heap)
+            sub = subprocess.Popen([sys.executable, __file__, '--receive-worker',
+                                    json.dumps(dict(spec, role='subscriber'))], env=env,
+                                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+            subprocess.run([sys.executable, __file__, '--receive-worker',
+                            json.dumps(dict(spec, role='publisher'))], env=env,
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                           timeout=120 + seconds)
+            lines = [line for line in sub.communicate(timeout=60)[0].splitlines()
+                     if line.startswith('{')]
+            result = json.loads(lines[-1]) if lines else {}
+            out[mode, heap].append(result.get('cpu_ms', float('nan')))
+    return out
+
+
+def receive_worker(spec):
+    """One side of receive_micro (its own process)."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from sensor_msgs.msg import Image
+
+    from monet_ros.io import numpy_to_image_msg
+    from monet_ros.io.fast_cdr import decode_image
+    from monet_ros.io.images import image_for_crop
+    from monet_ros.nodes import heap_for_large_buffers
+    from monet_ros.nodes.qos import IMAGE_IN, IMAGE_OUT
+
+    if spec.get('heap', True):
+        heap_for_large_buffers()
+    rclpy.init()
+    node = Node(spec['role'])
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    topics = [f'/bench_receive/cam{v}' for v in range(spec['views'])]
+    warmup = 2.0
+    if spec['role'] == 'publisher':
+        pubs = [node.create_publisher(Image, topic, IMAGE_OUT) for topic in topics]
+        pixels = np.random.default_rng(0).integers(0, 255, (HEIGHT, WIDTH, 3), np.uint8)
+        msg = numpy_to_image_msg(pixels, 0, 'cam')
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not all(p.get_subscription_count() for p in pubs):
+            executor.spin_once(timeout_sec=0.05)
+        start, k = time.monotonic(), 0
+        while time.monotonic() - start < warmup + spec['seconds'] + 1.0:
+            for pub in pubs:
+                pub.publish(msg)
+            k += 1
+            time.sleep(max(0.0, start + k / spec['rate'] - time.monotonic()))
+    else:
+        raw = spec['mode'] == 'serialized'
+        count, marks = [0], {}
+
+        def on_image(data):
+            image, _ = image_for_crop(decode_image(data) if raw else data)
+            count[0] += image.shape[0] > 0
+            if count[0] == 1:
+                marks['first'] = time.monotonic()
+            elif 'from' not in marks and time.monotonic() - marks['first'] >= warmup:
+                marks['from'] = (count[0], time.process_time())
+
+        for topic in topics:
+            node.create_subscription(Image, topic, on_image, IMAGE_IN, raw=raw)
+        deadline = time.monotonic() + 60 + spec['seconds']
+        while time.monotonic() < deadline and not (
+                'first' in marks and time.monotonic() - marks['first'] > warmup
+                + spec['seconds']):
+            executor.spin_once(timeout_sec=0.1)
+        n0, c0 = marks.get('from', (count[0], time.process_time()))
+        received = count[0] - n0
+        print(json.dumps(dict(received=received, cpu_ms=1e3 * (time.process_time() - c0) /
+                              received if received else float('nan'))), flush=True)
+    node.destroy_node()
+    rclpy.try_shutdown()
+    return 0
+
+
 # A second job on the machine: single-threaded dense arithmetic (as another user's training or
 # encoding would be) in N processes, started before and stopped after the end-to-end runs.
 _SECOND_JOB = ('import numpy as np\n'
@@ -326,6 +422,7 @@ def worker(spec):
     from rclpy.node import Node
 
     from monet_ros.geometry import load_rig
+    from monet_ros.nodes import heap_for_large_buffers
     from monet_ros.nodes.runner import stop_executor
 
     rig = load_rig(spec['rig'])
@@ -347,6 +444,7 @@ def worker(spec):
                                    '--ros-args', '--params-file', str(params)],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                  for name in ('fusion', 'detector')]
+    heap_for_large_buffers()      # as `monet pipeline`, the player and every node do
     rclpy.init()
     executor = None
     try:
@@ -483,15 +581,21 @@ def main():
                         'off/on runs alternate)')
     parser.add_argument('--quick', action='store_true',
                         help='every table at tiny sizes (2 cameras, 2 s runs, few repeats)')
+    parser.add_argument('--receive', type=int, default=3, metavar='RUNS',
+                        help='runs of the image-receive table (0: none)')
     parser.add_argument('--worker', help=argparse.SUPPRESS)
+    parser.add_argument('--receive-worker', help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.worker:
         return worker(json.loads(args.worker))
+    if args.receive_worker:
+        return receive_worker(json.loads(args.receive_worker))
     if args.repeat < 1:
         parser.error(f'--repeat must be >= 1, got {args.repeat}')
     if args.quick:
         args.cameras, args.extra, args.seconds, args.warmup = [2], ['2@60'], 2.0, 2.0
         args.runs, args.fusion_views, args.detector_views = 3, [4, 35], [2]
+        args.receive = min(args.receive, 1)
     print(f'# machine: {os.cpu_count()} CPUs, load average '
           f'{" ".join(f"{x:.1f}" for x in os.getloadavg())} at start; network threads '
           f'{args.threads}; small net ({HEIGHT}x{WIDTH} images cropped to '
@@ -528,6 +632,23 @@ def main():
                          if all(isinstance(r[b], float) for b in r) else 'n/a')
                 cells = [f'{r[b]:.1f}' if isinstance(r[b], float) else r[b] for b in r]
                 print(f'| {arch} | {views} | {cells[0]} | {cells[1]} | {ratio} |', flush=True)
+        if args.receive:
+            views, rate = (2, 30.0) if args.quick else (8, 30.0)
+            r = receive_micro(views, rate, 3.0 if args.quick else 8.0, args.receive, workdir)
+            print(f'\n## Receiving images ({views} streams of {WIDTH}x{HEIGHT} rgb8 at '
+                  f'{rate:.0f} Hz from another process; subscriber CPU per image, median of '
+                  f'{args.receive} runs)')
+            print('| taken as | CPU ms per image | runs | vs rclpy message |')
+            print('|---|---|---|---|')
+            base = np.median(r['message', False])
+            for mode, text in (
+                    (('message', False), 'rclpy message, glibc default (baseline)'),
+                    (('message', True), 'rclpy message, large buffers from the heap (the '
+                     'nodes)'),
+                    (('serialized', True), 'serialized, decoded in place, heap')):
+                print(f'| {text} | {np.median(r[mode]):.2f} | '
+                      f'{"/".join(f"{x:.2f}" for x in r[mode])} | '
+                      f'{np.median(r[mode]) / base:.2f}x |', flush=True)
         if args.skip_live:
             return 0
         runs = [(v, args.rate) for v in args.cameras]

@@ -236,7 +236,7 @@ def tf_topics(bag):
 
 
 def run(args):
-    from monet_ros.nodes import passive_openmp
+    from monet_ros.nodes import heap_for_large_buffers, passive_openmp
     from monet_ros.nodes.runner import (
         CallbackGuard,
         ignore_signals,
@@ -249,6 +249,7 @@ def run(args):
         use_large_data_profile,
     )
     passive_openmp()               # before torch loads (the fusion's and learner's threads)
+    heap_for_large_buffers()       # image and heatmap buffers reused, not mapped per message
     score = None
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo

@@ -4,10 +4,9 @@ memoryview into the chunk (mcap_ros2's generic decoder copies it twice). Used on
 bag's schema has exactly the standard fields; anything else goes to mcap_ros2.
 Little-endian CDR only (what ROS 2 writes on every common platform).
 
-The live nodes use the same decoders on raw subscriptions (`create_subscription(...,
-raw=True)` hands over the serialized bytes): rclpy's own conversion copies a 640x480 rgb8
-image into an array.array (~1 ms of CPU per message); decode_image takes ~0.01 ms and
-leaves the pixels where they arrived. Malformed bytes raise ValueError.
+decode_header reads only the header of a raw subscription's bytes (`create_subscription(...,
+raw=True)`: bench/pipeline.py times keypoints3d that way without decoding them).
+Malformed bytes raise ValueError.
 (CDR: OMG DDS-XTYPES 1.3, 7.4.3 "Extended CDR", encoding version 1, as ROS 2 writes it.)"""
 import functools
 import re

@@ -8,8 +8,6 @@ The outputs keep the source stamp; the camera_info is the heatmap's virtual came
 (K_heat = S K). A frame replaced before it was processed is counted as dropped; a bad
 message is counted and logged, never fatal.
 The checkpoint is hot-reloaded from /monet/model (std_msgs/String JSON {path, sha256}).
-Images are taken as their serialized bytes and decoded only when processed, pixels left in
-place (monet_ros.io.fast_cdr): a frame replaced before it was processed costs no decoding.
 """
 from dataclasses import dataclass
 import json
@@ -36,7 +34,6 @@ from monet_ros.io import (
     numpy_to_image_msg,
 )
 from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
-from monet_ros.io.fast_cdr import decode_compressed_image, decode_image
 from monet_ros.io.images import image_for_crop, raw_to_rgb8, to_rgb8
 from monet_ros.models import CheckpointError, Detector
 from monet_ros.nodes.names import (
@@ -126,8 +123,7 @@ class CameraSlot:
         self.rig_camera = rig_camera
         self.image_topic = image_topic
         self.info_topic = info_topic
-        self.pending = None          # (serialized message bytes, arrival monotonic)
-        self.compressed = image_topic.endswith('/compressed')
+        self.pending = None          # (msg, arrival monotonic)
         self.info_key = None
         self.camera = None           # Camera from the latest camera_info (rig extrinsics)
         self.received = self.processed = self.dropped = self.bad = 0
@@ -182,9 +178,12 @@ class DetectorNode(Node):
         self.model_sha256 = sha256_file(config.model)
         self.pubs = {}
         for slot in self.slots:
-            self.create_subscription(CompressedImage if slot.compressed else Image,
-                                     slot.image_topic, lambda m, s=slot: self.on_image(s, m),
-                                     IMAGE_IN, raw=True)
+            if slot.image_topic.endswith('/compressed'):
+                self.create_subscription(CompressedImage, slot.image_topic,
+                                         lambda m, s=slot: self.on_image(s, m), IMAGE_IN)
+            else:
+                self.create_subscription(Image, slot.image_topic,
+                                         lambda m, s=slot: self.on_image(s, m), IMAGE_IN)
             self.create_subscription(CameraInfo, slot.info_topic,
                                      lambda m, s=slot: self.on_camera_info(s, m), STREAM_IN)
             self.pubs[slot.name] = (
@@ -295,17 +294,15 @@ class DetectorNode(Node):
         return True
 
     # ------------------------------------------------------------------ detection
-    def decode(self, slot, data):
-        """(message, image (H, W, ch) uint8, its layout, Camera) of a serialized message, or
-        None (counted as bad). Raw rgb8/bgr8/rgba8/bgra8/mono8 images stay the message
-        buffer (no copy): the detector converts only the crop (raw_to_rgb8)."""
+    def decode(self, slot, msg):
+        """(image (H, W, ch) uint8, its layout, Camera) of a message, or None (counted as
+        bad). Raw rgb8/bgr8/rgba8/bgra8/mono8 images stay the message buffer (no copy): the
+        detector converts only the crop (raw_to_rgb8)."""
         topic = slot.image_topic
         try:
-            if slot.compressed:
-                msg = decode_compressed_image(data)
+            if isinstance(msg, CompressedImage):
                 image, layout = to_rgb8(compressed_image_to_numpy(msg)), 'rgb8'
             else:
-                msg = decode_image(data)
                 image, layout = image_for_crop(msg)
                 if layout == 'rgb8' and (image.dtype != np.uint8 or image.ndim != 3):
                     image = to_rgb8(image)        # grey / 16-bit / float -> the network's rgb8
@@ -324,7 +321,7 @@ class DetectorNode(Node):
         except ValueError as error:
             self.bad_message(slot, topic, error)
             return None
-        return msg, image, layout, camera
+        return image, layout, camera
 
     def crop_boxes(self, cameras, stamp_ns):
         """(V, 4) boxes of images stamped stamp_ns: the tracked rule (fresh keypoints3d and
@@ -342,11 +339,11 @@ class DetectorNode(Node):
             for slot in self.slots:
                 if slot.pending is None:
                     continue
-                data, _ = slot.pending
+                msg, _ = slot.pending
                 slot.pending = None
-                decoded = self.decode(slot, data)
+                decoded = self.decode(slot, msg)
                 if decoded is not None:
-                    work.append((slot, *decoded))
+                    work.append((slot, msg, *decoded))
         if not work:
             return
         cameras = [w[4] for w in work]

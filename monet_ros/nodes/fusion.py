@@ -30,7 +30,6 @@ from monet_ros.io import (
     skeleton_marker_array,
 )
 from monet_ros.io.convert import delete_all_markers, marker_array
-from monet_ros.io.fast_cdr import decode_image
 from monet_ros.io.markers import frustum_marker_specs
 from monet_ros.nodes.names import (
     DIAGNOSTICS,
@@ -148,9 +147,9 @@ class FusionNode(Node):
         if config.input_reliability == 'reliable':
             inputs.reliability = ReliabilityPolicy.RELIABLE
         for name in self.names:
-            self.create_subscription(       # serialized: decoded in place (io.fast_cdr)
+            self.create_subscription(
                 Image, config.heatmap_topic.format(camera=name),
-                lambda data, n=name: self.on_heatmaps(n, data), inputs, raw=True)
+                lambda msg, n=name: self.on_message(n, 0, msg), inputs)
             self.create_subscription(
                 CameraInfo, config.camera_info_topic.format(camera=name),
                 lambda msg, n=name: self.on_message(n, 1, msg), inputs)
@@ -181,16 +180,6 @@ class FusionNode(Node):
         self.config = config
 
     # ------------------------------------------------------------------ input
-    def on_heatmaps(self, name, data):
-        """Serialized heatmaps: decoded without a copy of the pixels, then paired."""
-        try:
-            msg = decode_image(data)
-        except ValueError as error:
-            self.stats[name].received += 1
-            self.bad_message(name, error)
-            return
-        self.on_message(name, 0, msg)
-
     def on_message(self, name, kind, msg):
         """kind 0 = heatmaps, 1 = camera_info: pair the two by exact stamp, then sync."""
         stats = self.stats[name]

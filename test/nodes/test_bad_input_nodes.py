@@ -8,8 +8,6 @@
   and a detector started while it is still latched runs too (no crash loop);
 - a camera_info with K = 1e300 is counted as bad; 16-bit mono images are detected;
 - 2x2 heatmaps from one camera: that view is skipped and counted, the others are fused;
-- malformed serialized bytes on an image or heatmap topic (the nodes take them raw and
-  decode them themselves): counted as bad for that camera, the node runs on;
 - SIGINT / SIGTERM in the first fraction of a second of a node: exit 0, no traceback.
 """
 import hashlib
@@ -22,7 +20,6 @@ from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import cv2_project, gaussian_heatmaps, ring_rig, subject_box, to_crop
 import numpy as np
 import pytest
-from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from std_msgs.msg import String
 import torch
@@ -123,22 +120,13 @@ def test_detector_survives_bad_stamps_models_intrinsics_and_takes_16bit(ros_env,
                 ros.spin_for(0.2)
             assert ros.spin_until(lambda: int((diag_values(diagnostics, 'monet detector: cam0')
                                                or {}).get('bad_messages', 0)) >= 1, 20, node)
-            # 5. bytes that are not a CDR Image (a truncated message): counted, runs on
-            bad_before = int(diag_values(diagnostics, 'monet detector: cam0')['bad_messages'])
-            good = serialize_message(numpy_to_image_msg(image, T0 + 2, 'cam0'))
-            pubs['cam0'][0].publish(good[:40])
-            assert ros.spin_until(lambda: int((diag_values(diagnostics, 'monet detector: cam0')
-                                               or {}).get('bad_messages', 0)) > bad_before,
-                                  20, node), node.output()
-            roundtrip(node, T0 + 3, lambda s, n: numpy_to_image_msg(image, s, n))
             assert node.running()
             assert node.stop(signal.SIGINT) == 0, node.output()
         output = node.output()
         assert 'rejected, keeping the current weights' in output
         assert 'metadata.input_size' in output and 'Traceback' not in output
-        assert 'malformed CDR' in output
 
-        # 6. a detector started while the bad announcement is still latched runs too
+        # 5. a detector started while the bad announcement is still latched runs too
         with NodeProcess('detector', ros_env, params) as again:
             for image_pub, _ in pubs.values():
                 ros.wait_for_subscribers(image_pub, process=again)
@@ -204,13 +192,8 @@ def test_fusion_keeps_pre_1970_stamps_and_skips_a_2x2_view(ros_env, tmp_path):
         assert ros.spin_until(lambda: int((diag_values(diagnostics, 'monet fusion: cam2')
                                            or {}).get('bad_messages', 0)) >= 1, 20, node)
         assert (diag_values(diagnostics, 'monet fusion: cam0') or {}).get('bad_messages') == '0'
-        # bytes that are not a CDR Image on cam1's heatmaps: counted for cam1, fusion runs on
-        pubs['cam1'][0].publish(b'\x00\x01\x00\x00garbage')
-        assert ros.spin_until(lambda: int((diag_values(diagnostics, 'monet fusion: cam1')
-                                           or {}).get('bad_messages', 0)) >= 1, 20, node)
-        np.testing.assert_allclose(cloud_to_keypoints3d(fused(T0 + 1))['X'], X, atol=0.01)
         assert node.stop(signal.SIGINT) == 0, node.output()
-    assert 'smaller than 3x3' in node.output() and 'malformed CDR' in node.output()
+    assert 'smaller than 3x3' in node.output()
 
 
 # ------------------------------------------------------------------------------ signals
