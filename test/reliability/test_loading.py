@@ -55,6 +55,12 @@ def test_rig_yaml_with_damaged_fields(rig_text, tmp_path_factory, camera, field,
         data['cameras'][camera][field] = value
     path = tmp_path_factory.mktemp('rig') / 'rig.yaml'
     path.write_text(yaml.safe_dump(data))
+    check_rig_file(path)
+
+
+def check_rig_file(path):
+    """load_rig of `path`: an error naming the file, or cameras that pass assert_camera_sane
+    (recorded as the one or the other)."""
     try:
         cameras = load_rig(path)
     except ValueError as error:
@@ -72,15 +78,7 @@ def test_rig_yaml_with_damaged_fields(rig_text, tmp_path_factory, camera, field,
 def test_rig_files_of_garbage(tmp_path_factory, text, suffix):
     path = tmp_path_factory.mktemp('rig') / f'calibration{suffix}'
     path.write_text(text, encoding='utf-8', errors='replace')
-    try:
-        cameras = load_rig(path)
-    except ValueError as error:
-        assert str(path) in str(error), error
-        record('load_rig', 'clear error')
-        return
-    for cam in cameras:
-        assert_camera_sane(cam)
-    record('load_rig', 'right result')
+    check_rig_file(path)
 
 
 # ------------------------------------------------------------------ checkpoints
