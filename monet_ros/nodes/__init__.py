@@ -12,10 +12,11 @@ operations, and once another process wants a core the spinning stalls every forw
 (the detector's batch on 2 cores beside busy processes: 530 ms spinning, 25 ms passive,
 23 ms with one thread). Live nodes always share the machine with other processes.
 Large message buffers come from the heap (heap_for_large_buffers; `monet pipeline` too): by
-default glibc maps every allocation over 128 KB (one 640x480 rgb8 frame is 900 KB, one
-heatmap message 230 KB) fresh from the kernel and unmaps it when freed, so each message
-costs its pages' faults: a subscriber took 2.2 ms of CPU per received frame, 1.6 ms of it
-in the kernel, against 1.0 ms with the buffers reused.
+default glibc maps an allocation over 128 KB (one 640x480 rgb8 frame is 900 KB, one
+heatmap message 230 KB) fresh from the kernel or gives freed heap back to it (its
+thresholds adapt, but not to a node's traffic), so a message can cost all its pages'
+faults: a subscriber took 2.2 ms of CPU per received frame, most of it in the kernel,
+against 1.0 ms with the buffers reused (bench/pipeline.py --receive).
 A node started by a command as its child (monet_ros.nodes.child, with MONET_PARENT_PID in
 its environment) also gets SIGTERM when that command dies, so it is never left behind.
 """
