@@ -18,7 +18,10 @@ thresholds adapt, but not to a node's traffic), so a message can cost all its pa
 faults: a subscriber took 2.2 ms of CPU per received frame, most of it in the kernel,
 against 1.0 ms with the buffers reused (bench/pipeline.py --receive).
 A node started by a command as its child (monet_ros.nodes.child, with MONET_PARENT_PID in
-its environment) also gets SIGTERM when that command dies, so it is never left behind.
+its environment) is killed (SIGKILL) when that command dies, so it is never left behind: with
+the command gone there is nothing to stop cleanly, and a clean stop could wait forever on the
+dead process (e.g. a shared-memory transport lock it held; a SIGTERM'd child outlived its
+killed command by over a minute, once in a full test run).
 """
 import os
 import signal
@@ -79,14 +82,15 @@ _PR_SET_PDEATHSIG = 1
 
 
 def die_with_parent(environ=None):
-    """With MONET_PARENT_PID set: SIGTERM to this process when its parent dies (Linux
-    prctl PR_SET_PDEATHSIG), and exit 0 now if that parent is already gone."""
+    """With MONET_PARENT_PID set: SIGKILL to this process when its parent dies (Linux
+    prctl PR_SET_PDEATHSIG; see the module doc), and exit 0 now if that parent is already
+    gone. The parent's own stop() still ends the child with SIGTERM, cleanly."""
     parent = (os.environ if environ is None else environ).get(PARENT_PID)
     if not parent:
         return
     try:
         import ctypes
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGTERM)
+        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
     except (OSError, AttributeError):      # not Linux: the parent's stop() still ends it
         pass
     if os.getppid() != int(parent):

@@ -9,7 +9,7 @@ layout 3-4x slower than separate processes on a quiet 2-core machine (detector c
 `ChildNode(module, params, ros_args)` starts `python -m monet_ros.nodes.<module>` with the
 command's own --ros-args (remappings, namespace) and the parameters (`-p name:=value`),
 in the command's environment (ROS_DOMAIN_ID, the Fast DDS profile); it shares the terminal
-(its log lines are the command's), gets SIGTERM if the command dies (MONET_PARENT_PID:
+(its log lines are the command's), is killed if the command dies (MONET_PARENT_PID:
 monet_ros.nodes.die_with_parent), and `stop()` ends it cleanly (SIGTERM: the node
 executables exit 0 on it).
 """
