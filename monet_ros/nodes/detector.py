@@ -358,22 +358,21 @@ class DetectorNode(Node):
         self.forward_seconds = (self.forward_seconds + [time.perf_counter() - start])[-100:]
         self.batches += 1
         start = time.perf_counter()
-        outputs = list(zip(work, heatmaps, heat_cameras, boxes))
-        for (slot, msg, *_), heat, heat_cam, _ in outputs:
+        outputs = [(w, header_stamp_ns(w[1]), w[1].header.frame_id, heat, heat_cam, box)
+                   for w, heat, heat_cam, box in zip(work, heatmaps, heat_cameras, boxes)]
+        for (slot, *_), stamp, frame_id, heat, heat_cam, _ in outputs:
             heat_pub, info_pub, _ = self.pubs[slot.name]
-            info_pub.publish(camera_info_from_camera(heat_cam, header_stamp_ns(msg),
-                                                     msg.header.frame_id))
-            heat_pub.publish(heatmaps_to_image_msg(heat, header_stamp_ns(msg),
-                                                   msg.header.frame_id))
+            info_pub.publish(camera_info_from_camera(heat_cam, stamp, frame_id))
+            heat_pub.publish(heatmaps_to_image_msg(heat, stamp, frame_id))
             slot.processed += 1
         # debug images after every heatmap: a failing drawing never costs fusion its input
-        for (slot, msg, image, layout, camera), heat, heat_cam, box in outputs:
+        for (slot, _, image, layout, camera), stamp, frame_id, heat, heat_cam, box in outputs:
             debug_pubs = self.pubs[slot.name][2]
             if debug_pubs is None:
                 continue
             try:
                 self.publish_debug(slot, debug_pubs, image, layout, camera, box, heat,
-                                   heat_cam, header_stamp_ns(msg), msg.header.frame_id)
+                                   heat_cam, stamp, frame_id)
             except Exception as error:  # noqa: BLE001 - counted and logged once per kind
                 guard = getattr(self, 'callback_guard', None)
                 if guard is None:
