@@ -141,23 +141,43 @@ def bench_model(workdir, architecture='small', input_size=None):
 
 
 def detector_micro(views, runs, threads, architecture, workdir, input_size=None):
-    """images/s of Detector.predict (V 640x480 views, one batch) per backend."""
+    """images/s of Detector.predict (V 640x480 views, one batch) per backend and precision,
+    and the baseline: the same crops through the fused network in contiguous NCHW float32
+    (the layout before channels-last)."""
     import torch
+
+    from monet_ros.models.crop import crop_images
+    from monet_ros.models.detector import bfloat16_native, images_to_tensor
     torch.set_num_threads(threads)
     rig = make_rig(RigConfig(num_cameras=views))
     path = bench_model(workdir, architecture, input_size)
     images = np.random.default_rng(0).integers(0, 255, (views, HEIGHT, WIDTH, 3), np.uint8)
     boxes = np.array([[160, 60, 480, 420]] * views, float)
     out = {}
-    for backend in ('torch', 'onnxruntime'):
+    detector = Detector.from_checkpoint(path, device='cpu')
+    h, w = detector.input_size
+    nchw = detector.model.to(memory_format=torch.contiguous_format)
+
+    def baseline():
+        crops = crop_images(images, detector.boxes_for(rig, boxes), (w, h))
+        with torch.inference_mode():
+            return nchw(images_to_tensor(crops))[-1].numpy()
+
+    out['baseline'] = views / median_time(baseline, runs)
+    for key, backend, precision in (('float32', 'torch', 'float32'),
+                                    ('bfloat16', 'torch', 'bfloat16'),
+                                    ('onnxruntime', 'onnxruntime', 'float32')):
+        if precision == 'bfloat16' and not bfloat16_native('cpu'):
+            out[key] = 'no native bfloat16'
+            continue
         try:
             detector = Detector.from_checkpoint(path, device='cpu', backend=backend,
-                                                threads=threads)
+                                                threads=threads, precision=precision)
         except ValueError as error:  # e.g. onnxruntime not installed
-            out[backend] = str(error)
+            out[key] = str(error)
             continue
         seconds = median_time(lambda d=detector: d.predict(images, rig, boxes), runs)
-        out[backend] = views / seconds
+        out[key] = views / seconds
     return out
 
 
@@ -173,7 +193,7 @@ def run_env(workdir):
 
 
 def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewable=False,
-         input_size=None):
+         input_size=None, precision='float32'):
     """One end-to-end run in a fresh process (clean DDS state); returns its figures."""
     rig = make_rig(RigConfig(num_cameras=views))
     rig_path = workdir / f'rig{views}.yaml'
@@ -181,7 +201,7 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
     model_path = bench_model(workdir, 'small', input_size)
     spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
                 threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
-                workdir=str(workdir), viewable=viewable)
+                workdir=str(workdir), viewable=viewable, precision=precision)
     proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
                           env=run_env(workdir), capture_output=True, text=True,
                           timeout=300 + seconds + warmup)
@@ -428,7 +448,7 @@ def worker(spec):
     rig = load_rig(spec['rig'])
     detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
                            threads=spec['threads'], backend=spec['backend'],
-                           debug_image=spec['viewable'])
+                           precision=spec['precision'], debug_image=spec['viewable'])
     fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
                          camera_markers=spec['viewable'])
     procs, nodes, child = [], [], None
@@ -499,7 +519,7 @@ def run_cases(args, runs, workdir, costs):
                     results[viewable].append(live(layout, views, rate, args.seconds,
                                                   args.warmup, args.threads,
                                                   args.backend, workdir, viewable,
-                                                  args.input_size))
+                                                  args.input_size, args.precision))
             combined = {viewable: median_result(rs) for viewable, rs in results.items()}
             for viewable, r in combined.items():
                 print_live_row(views, rate, layout, viewable, r)
@@ -562,6 +582,8 @@ def main():
     parser.add_argument('--threads', type=int, default=2, help='network CPU threads')
     parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
                         help='detector backend of the end-to-end runs')
+    parser.add_argument('--precision', choices=('float32', 'bfloat16'), default='float32',
+                        help='detector precision of the end-to-end runs')
     parser.add_argument('--fusion-views', type=int, nargs='+', default=[4, 8, 35])
     parser.add_argument('--detector-views', type=int, nargs='*', default=[4, 8],
                         help='views of the detector table (none: no detector table)')
@@ -599,7 +621,8 @@ def main():
     print(f'# machine: {os.cpu_count()} CPUs, load average '
           f'{" ".join(f"{x:.1f}" for x in os.getloadavg())} at start; network threads '
           f'{args.threads}; small net ({HEIGHT}x{WIDTH} images cropped to '
-          f'{args.input_size or 256}x{args.input_size or 256})')
+          f'{args.input_size or 256}x{args.input_size or 256}); end-to-end precision '
+          f'{args.precision}')
 
     print('\n## Fusion per frame (fuse_heatmaps of V separate 14x64x64 heatmaps, as the node '
           'holds them, to 3D; torch threads 1 as the fusion node)')
@@ -622,16 +645,18 @@ def main():
         if args.detector_views:
             print(f'\n## Detector images/s (Detector.predict of V 640x480 views in one '
                   f'batch, {args.threads} thread(s))')
-            print('| network | views | torch | onnxruntime | onnxruntime / torch |')
-            print('|---|---|---|---|---|')
+            print('| network | views | baseline: torch NCHW float32 | torch float32 '
+                  '(channels-last) | torch bfloat16 | onnxruntime | float32 / bfloat16 / '
+                  'onnxruntime vs baseline |')
+            print('|---|---|---|---|---|---|---|')
         for arch in args.architectures:
             for views in args.detector_views:
                 r = detector_micro(views, args.runs, args.threads, arch, workdir,
                                    args.input_size if arch == 'small' else None)
-                ratio = (f'{r["onnxruntime"] / r["torch"]:.2f}x'
-                         if all(isinstance(r[b], float) for b in r) else 'n/a')
-                cells = [f'{r[b]:.1f}' if isinstance(r[b], float) else r[b] for b in r]
-                print(f'| {arch} | {views} | {cells[0]} | {cells[1]} | {ratio} |', flush=True)
+                cells = [f'{r[k]:.1f}' if isinstance(r[k], float) else r[k] for k in r]
+                ratios = ' / '.join(f'{r[k] / r["baseline"]:.2f}x' if isinstance(r[k], float)
+                                    else 'n/a' for k in ('float32', 'bfloat16', 'onnxruntime'))
+                print(f'| {arch} | {views} | {" | ".join(cells)} | {ratios} |', flush=True)
         if args.receive:
             views, rate = (2, 30.0) if args.quick else (8, 30.0)
             r = receive_micro(views, rate, 3.0 if args.quick else 8.0, args.receive, workdir)
@@ -655,7 +680,8 @@ def main():
         for item in args.extra:
             cams, _, hz = item.partition('@')
             runs.append((int(cams), float(hz)))
-        print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend}, '
+        print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend} '
+              f'{args.precision}, '
               f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up'
               + (f', median of {args.repeat} runs (off/on interleaved)'
                  if args.repeat > 1 else '')

@@ -36,8 +36,9 @@ def crop_images(images, boxes, out_size, antialias=True):
 
     images: (N, H, W, 3) array or a sequence of (H_i, W_i, 3) arrays (cameras may differ);
     boxes: (N, 4) edge coordinates. antialias: when a box is shrunk by 2x or more, the box
-    region is first block-averaged by integer factors (cv2.resize INTER_AREA) and the warp is
-    re-expressed in that region's pixels, so the geometry S is unchanged.
+    region is first block-averaged by power-of-two factors (2x2 means, cv2.resize INTER_AREA)
+    so that the warp shrinks by less than 2x, and the warp is re-expressed in that region's
+    pixels, so the geometry S is unchanged.
     cv2.warpAffine with bilinear interpolation, constant 0 border.
     """
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
@@ -65,16 +66,16 @@ def _integer_span(lo, hi, factor, limit):
 
 
 def _area_shrunk_region(image, box, S):
-    """The box region of `image` (1-pixel margin) box-filtered down by integer factors
-    (cv2.resize INTER_AREA with an integer ratio: each output pixel is the mean of a
-    factor x factor block, the fast path), and S re-expressed in that region's pixels; the
-    warp then shrinks by less than 2x. Unchanged when the crop shrinks by less than 2x.
+    """The box region of `image` (1-pixel margin) box-filtered down by a power-of-two factor
+    p (repeated cv2.resize INTER_AREA halvings: each output pixel is the rounded mean of a
+    2x2 block, OpenCV's fast path, 4-5x cheaper than one INTER_AREA by 4 or 5), and S
+    re-expressed in that region's pixels; p is the largest power of two with the warp then
+    shrinking by less than 2x. Unchanged when the crop shrinks by less than 2x.
     A region that needs a few more columns/rows than the image has is padded by replication
     (under one shrunk pixel at the image border)."""
-    fx, fy = int(1.0 / S[0, 0]), int(1.0 / S[1, 1])
+    fx, fy = _power_of_two_at_most(1.0 / S[0, 0]), _power_of_two_at_most(1.0 / S[1, 1])
     if fx < 2 and fy < 2:
         return image, S
-    fx, fy = max(fx, 1), max(fy, 1)
     h, w = image.shape[:2]
     if box[2] <= 0 or box[3] <= 0 or box[0] >= w or box[1] >= h:
         return image, S  # the box lies outside the image: the crop is black anyway
@@ -84,10 +85,17 @@ def _area_shrunk_region(image, box, S):
     pad_y, pad_x = ny * fy - region.shape[0], nx * fx - region.shape[1]
     if pad_x or pad_y:
         region = cv2.copyMakeBorder(region, 0, pad_y, 0, pad_x, cv2.BORDER_REPLICATE)
-    region = cv2.resize(region, (nx, ny), interpolation=cv2.INTER_AREA)
+    while region.shape[1] > nx or region.shape[0] > ny:
+        half = (max(nx, region.shape[1] // 2), max(ny, region.shape[0] // 2))
+        region = cv2.resize(region, half, interpolation=cv2.INTER_AREA)
     # original pixels -> shrunk-region pixels, same edge convention as the crop itself
     D = crop_transform((x0, y0, x0 + nx * fx, y0 + ny * fy), (nx, ny))
     return region, S @ np.linalg.inv(D)
+
+
+def _power_of_two_at_most(x):
+    """The largest power of two <= x (1 for x < 2)."""
+    return 1 << max(0, int(np.floor(np.log2(max(x, 1.0)))))
 
 
 def crop_to_original(points, boxes, out_size):

@@ -64,6 +64,8 @@ def test_bad_arguments_fail_at_start(ros_env, tmp_path):
          "parameter 'cameras': needs at least 2 cameras"),
         (('--bag', tmp_path / 'rec', '--model', model, '--cameras', 'cam0', 'cam5'),
          "unknown camera 'cam5'"),
+        (('--bag', tmp_path / 'rec', '--model', model, '--backend', 'onnxruntime',
+          '--precision', 'bfloat16'), 'precision bfloat16 needs backend torch'),
     ]
     for args, message in cases:
         with pipeline(ros_env, *args) as proc:

@@ -43,6 +43,9 @@ def test_bad_inputs_are_clear_errors(tmp_path, capsys):
     assert 'nope.pt: checkpoint file not found' in capsys.readouterr().err
     assert monet(args + ['--model', str(model), '--cameras', 'cam0', 'cam9']) == 2
     assert "unknown camera 'cam9'" in capsys.readouterr().err
+    assert monet(args + ['--model', str(model), '--backend', 'onnxruntime',
+                         '--precision', 'bfloat16']) == 2
+    assert 'precision bfloat16 needs backend torch' in capsys.readouterr().err
     (tmp_path / 'out').mkdir()
     (tmp_path / 'out' / 'something').write_text('')
     assert monet(args + ['--model', str(model)]) == 2

@@ -23,6 +23,7 @@ from monet_ros.io import (
     numpy_to_image_msg,
 )
 from monet_ros.models import Detector, build_model, load_checkpoint, save_checkpoint
+from monet_ros.models.detector import bfloat16_native
 from monet_ros.nodes.qos import LATCHED
 from monet_ros.skeleton import load_skeleton
 
@@ -104,10 +105,10 @@ def detector_boxes(checkpoint, rig, boxes):
     return Detector(model, metadata, device='cpu').boxes_for(rig, boxes)
 
 
-def reference(checkpoint, images, rig, boxes):
+def reference(checkpoint, images, rig, boxes, precision='float32'):
     model, metadata = load_checkpoint(checkpoint)
-    return Detector(model, metadata, device='cpu').predict(list(images), rig, boxes,
-                                                           keep_aspect=False)[0]
+    return Detector(model, metadata, device='cpu', precision=precision).predict(
+        list(images), rig, boxes, keep_aspect=False)[0]
 
 
 def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
@@ -239,10 +240,16 @@ def test_bad_parameters_fail_at_start(ros_env, setup, change, message):
         assert message in node.output()
 
 
-def test_onnxruntime_backend_gives_the_torch_frame_and_reports_stages(ros_env, setup):
+@pytest.mark.parametrize('backend, precision', [
+    ('onnxruntime', 'float32'),
+    pytest.param('torch', 'bfloat16', marks=pytest.mark.skipif(
+        not bfloat16_native('cpu'), reason='no native bfloat16 on this CPU'))])
+def test_backend_and_precision_give_the_core_frame_and_report_stages(ros_env, setup, backend,
+                                                                     precision):
     """backend onnxruntime: the same heatmaps as torch (1e-4) for a bgr8 frame (cropped in
-    its own layout), the export cached beside the checkpoint, per-stage timers in
-    /diagnostics."""
+    its own layout), the export cached beside the checkpoint; precision bfloat16: the core
+    Detector's bfloat16 heatmaps (1e-4), within 3% of the peak of float32's; per-stage
+    timers, backend and precision in /diagnostics."""
     from diagnostic_msgs.msg import DiagnosticArray
 
     from monet_ros.atomic import sha256_file
@@ -251,7 +258,7 @@ def test_onnxruntime_backend_gives_the_torch_frame_and_reports_stages(ros_env, s
     rig, rig_path, first, _, images = setup
     box = [100.0, 50.0, 400.0, 450.0]
     params = dict(rig=str(rig_path), model=str(first), box=box, track=False, device='cpu',
-                  backend='onnxruntime', threads=1)
+                  backend=backend, threads=1, precision=precision)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = Stream(ros, rig)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
@@ -270,17 +277,22 @@ def test_onnxruntime_backend_gives_the_torch_frame_and_reports_stages(ros_env, s
         assert all(got.values()), node.output()
         aspect = INPUT[1] / INPUT[0]
         boxes = np.array([expected_box(box, aspect)] * len(rig))
-        expected = reference(first, images, rig, boxes)  # the torch backend, rgb frames
+        # the torch backend at this precision, rgb frames
+        expected = reference(first, images, rig, boxes, precision)
+        float32 = reference(first, images, rig, boxes)
         for v, cam in enumerate(rig):
             heat = image_msg_to_heatmaps(got[cam.name][0])
             np.testing.assert_allclose(heat, expected[v], atol=1e-4, rtol=0)
-        assert onnx_path_for(first, sha256_file(first)).is_file()
+            peak = np.abs(float32[v]).max()
+            np.testing.assert_allclose(heat, float32[v], atol=0.03 * peak, rtol=0)
+        assert onnx_path_for(first, sha256_file(first)).is_file() == (backend == 'onnxruntime')
 
         def stage_report():
             for msg in diagnostics:
                 for status in msg.status:
                     values = {kv.key: kv.value for kv in status.values}
-                    if values.get('backend') == 'onnxruntime' and 'forward_calls' in values:
+                    if (values.get('backend') == backend and 'forward_calls' in values
+                            and values.get('precision') == precision):
                         return values
             return None
         assert ros.spin_until(lambda: stage_report() is not None, timeout=30, process=node)
