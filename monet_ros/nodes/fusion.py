@@ -272,10 +272,13 @@ class FusionNode(Node):
         self.pub_points.publish(keypoints3d_to_cloud(
             group.stamp_ns, self.frame_id, result.X, result.confidence,
             result.reprojection_error, result.num_views))
-        self.pub_skeleton.publish(skeleton_marker_array(
-            group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices,
-            ns=self.marker_ns, lifetime_ns=int(self.config.marker_lifetime_s * 1e9),
-            names=self.skeleton.keypoints if self.config.marker_labels else None))
+        # the skeleton markers (~2 ms a frame to build and serialize) only while someone
+        # (RViz, a recorder) subscribes
+        if self.pub_skeleton.get_subscription_count():
+            self.pub_skeleton.publish(skeleton_marker_array(
+                group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices,
+                ns=self.marker_ns, lifetime_ns=int(self.config.marker_lifetime_s * 1e9),
+                names=self.skeleton.keypoints if self.config.marker_labels else None))
         self.timer.add('publish', time.perf_counter() - start)
         for listener in self.listeners:
             listener(group.stamp_ns, result)
