@@ -121,7 +121,7 @@ def main():
     views = 2 if args.tiny else 8
     print(f'\n## The live detector path: Detector.predict of {views} 640x480 camera images '
           '(crop + one batched forward + heatmaps back to the host)')
-    print('| network | backend | images/s |')
+    print('| network | backend, precision | images/s |')
     print('|---|---|---|')
     rig = make_rig(RigConfig(num_cameras=views))
     images = np.random.default_rng(0).integers(0, 255, (views, 480, 640, 3), np.uint8)
@@ -131,15 +131,18 @@ def main():
             path = Path(tmp) / f'{arch}.pt'
             save_checkpoint(path, build_model(arch, 14, **options.get(arch, {})),
                             {'keypoints': [f'k{i}' for i in range(14)]})
-            for backend in ('torch', 'onnxruntime'):
+            for backend, precision in (('torch', 'float32'), ('torch', 'bfloat16'),
+                                       ('onnxruntime', 'float32')):
+                name = f'{backend} {precision}'
                 try:
-                    detector = Detector.from_checkpoint(path, device=device, backend=backend)
-                except ValueError as error:  # no onnxruntime (or no CUDA provider)
-                    print(f'| {arch} | {backend} | n/a: {error} |', flush=True)
+                    detector = Detector.from_checkpoint(path, device=device, backend=backend,
+                                                        precision=precision)
+                except ValueError as error:  # no onnxruntime / CUDA provider / bfloat16
+                    print(f'| {arch} | {name} | n/a: {error} |', flush=True)
                     continue
                 fps = views * rate(lambda d=detector: d.predict(images, rig), device,
                                    args.seconds)
-                print(f'| {arch} | {backend} | {fps:.0f} |', flush=True)
+                print(f'| {arch} | {name} | {fps:.0f} |', flush=True)
     return 0
 
 
