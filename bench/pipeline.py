@@ -512,19 +512,21 @@ def run_cases(args, runs, workdir, costs):
     costs."""
     for views, rate in runs:
         for layout in args.layouts:
-            settings = (False, True) if args.viewable else (False,)
-            results = {viewable: [] for viewable in settings}
-            for _ in range(args.repeat):
-                for viewable in settings:
-                    results[viewable].append(live(layout, views, rate, args.seconds,
-                                                  args.warmup, args.threads,
-                                                  args.backend, workdir, viewable,
-                                                  args.input_size, args.precision))
-            combined = {viewable: median_result(rs) for viewable, rs in results.items()}
-            for viewable, r in combined.items():
-                print_live_row(views, rate, layout, viewable, r)
-            if args.viewable and all('error' not in r for r in combined.values()):
-                costs.append((views, rate, layout, combined[False], combined[True]))
+            for precision in args.precision:
+                label = layout if len(args.precision) == 1 else f'{layout}, {precision}'
+                settings = (False, True) if args.viewable else (False,)
+                results = {viewable: [] for viewable in settings}
+                for _ in range(args.repeat):
+                    for viewable in settings:
+                        results[viewable].append(live(layout, views, rate, args.seconds,
+                                                      args.warmup, args.threads,
+                                                      args.backend, workdir, viewable,
+                                                      args.input_size, precision))
+                combined = {viewable: median_result(rs) for viewable, rs in results.items()}
+                for viewable, r in combined.items():
+                    print_live_row(views, rate, label, viewable, r)
+                if args.viewable and all('error' not in r for r in combined.values()):
+                    costs.append((views, rate, label, combined[False], combined[True]))
 
 
 def median_result(results):
@@ -582,8 +584,9 @@ def main():
     parser.add_argument('--threads', type=int, default=2, help='network CPU threads')
     parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
                         help='detector backend of the end-to-end runs')
-    parser.add_argument('--precision', choices=('float32', 'bfloat16'), default='float32',
-                        help='detector precision of the end-to-end runs')
+    parser.add_argument('--precision', choices=('float32', 'bfloat16'), nargs='+',
+                        default=['float32'], help='detector precision(s) of the end-to-end '
+                        'runs (several: each case with each, side by side)')
     parser.add_argument('--fusion-views', type=int, nargs='+', default=[4, 8, 35])
     parser.add_argument('--detector-views', type=int, nargs='*', default=[4, 8],
                         help='views of the detector table (none: no detector table)')
@@ -622,7 +625,7 @@ def main():
           f'{" ".join(f"{x:.1f}" for x in os.getloadavg())} at start; network threads '
           f'{args.threads}; small net ({HEIGHT}x{WIDTH} images cropped to '
           f'{args.input_size or 256}x{args.input_size or 256}); end-to-end precision '
-          f'{args.precision}')
+          f'{" and ".join(args.precision)}')
 
     print('\n## Fusion per frame (fuse_heatmaps of V separate 14x64x64 heatmaps, as the node '
           'holds them, to 3D; torch threads 1 as the fusion node)')
@@ -681,7 +684,7 @@ def main():
             cams, _, hz = item.partition('@')
             runs.append((int(cams), float(hz)))
         print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend} '
-              f'{args.precision}, '
+              f'{" / ".join(args.precision)}, '
               f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up'
               + (f', median of {args.repeat} runs (off/on interleaved)'
                  if args.repeat > 1 else '')
