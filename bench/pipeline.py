@@ -23,7 +23,9 @@ undistort, triangulate, errors, publish).
 Micro-benchmarks (this process, median of --runs): fuse_heatmaps per frame at 4/8/35 views
 against plain DLT of the same peaks (geometry.triangulate) with the stage split, the
 undistortion's error against cv2.undistortPoints, and Detector.predict images/s with the
-torch and the ONNX Runtime backends; the receive table (--receive RUNS, two processes):
+torch backend in float32 (channels-last) and bfloat16 (where the CPU has it natively) and
+with ONNX Runtime, beside the baseline of the same crops through the network in contiguous
+NCHW float32; the receive table (--receive RUNS, two processes):
 a subscriber's CPU per 640x480 image taken as an rclpy message with glibc's default
 allocator settings (baseline), with large buffers from the heap (as every node), or
 serialized and decoded in place. --viewable runs every end-to-end case twice, with the
@@ -33,7 +35,8 @@ throughput and the nodes' CPU time per keypoints3d (/proc/PID/stat of the detect
 processes; in-process and pipeline: this process, publisher included, plus the detector child).
 --repeat N runs each case N times (off/on interleaved) and shows medians: single 10 s runs
 differ by several percent. --second-job N runs N CPU-bound processes beside the end-to-end
-runs (the loaded-machine figures); --input-size the small net at another input side.
+runs (the loaded-machine figures); --input-size the small net at another input side;
+--precision float32 bfloat16 runs every end-to-end case with each detector precision.
 Prints tables and the load average; never asserts.
 """
 import argparse
@@ -686,8 +689,9 @@ def main():
         print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend} '
               f'{" / ".join(args.precision)}, '
               f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up'
-              + (f', median of {args.repeat} runs (off/on interleaved)'
-                 if args.repeat > 1 else '')
+              + (f', median of {args.repeat} runs'
+                 + (' (off/on interleaved)' if args.viewable else '') if args.repeat > 1
+                 else '')
               + (f', with a second job ({args.second_job} CPU-bound process(es) beside '
                  'every run)' if args.second_job else ''))
         print('| cameras @ Hz | layout | viewable | published frames/s | keypoints3d/s | '

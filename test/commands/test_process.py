@@ -1,11 +1,13 @@
 """`monet process`: detector + fusion over a recording, offline, into an MCAP."""
 from helpers.recordings import noise_recording, small_checkpoint
 import numpy as np
+import pytest
 
 from monet_ros.cli import main as monet
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
 from monet_ros.io import cloud_to_keypoints3d, open_bag
 from monet_ros.models import Detector
+from monet_ros.models.detector import bfloat16_native
 
 
 def test_every_frame_is_written_and_equals_the_core_functions(tmp_path, capsys):
@@ -70,3 +72,28 @@ def test_onnxruntime_backend_writes_the_torch_heatmaps(tmp_path, capsys):
     for (_, _, a), (_, _, b) in zip(heat['torch'], heat['onnxruntime']):
         np.testing.assert_allclose(b, a, atol=1e-4, rtol=0)
     assert list(tmp_path.glob('model.*.onnx'))  # the export, cached beside the checkpoint
+
+
+@pytest.mark.skipif(not bfloat16_native('cpu'), reason='no native bfloat16 on this CPU')
+def test_bfloat16_precision_writes_the_core_bfloat16_heatmaps(tmp_path, capsys):
+    """--precision bfloat16 reaches the network: the heatmaps are the core Detector's at
+    bfloat16 (not float32's, which differ by ~1e-3 of the peak or more)."""
+    from monet_ros.io import image_msg_to_heatmaps
+
+    rig, _ = noise_recording(tmp_path / 'rec', cameras=2, frames=1)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    out = tmp_path / 'out'
+    assert monet(['process', str(tmp_path / 'rec'), '--model', str(model), '--out', str(out),
+                  '--no-track', '--heatmaps', '--quiet', '--precision', 'bfloat16']) == 0
+    got = {m.topic.split('/')[-2]: image_msg_to_heatmaps(m.msg)
+           for m in open_bag(out).messages() if m.topic.endswith('/heatmaps')}
+    images = {m.topic: m.msg for m in open_bag(tmp_path / 'rec').messages()
+              if m.topic.endswith('image_raw')}
+    frames = [np.frombuffer(images[f'/{c.name}/image_raw'].data, np.uint8)
+              .reshape(c.height, c.width, 3) for c in rig]
+    expected = {precision: Detector.from_checkpoint(model, device='cpu', precision=precision)
+                .predict(frames, rig)[0] for precision in ('float32', 'bfloat16')}
+    for v, camera in enumerate(rig):
+        np.testing.assert_allclose(got[camera.name], expected['bfloat16'][v], atol=1e-4,
+                                   rtol=0)
+        assert np.abs(got[camera.name] - expected['float32'][v]).max() > 1e-4
