@@ -35,6 +35,10 @@ ARGUMENTS = {
     'use_sim_time': ('false', 'nodes follow /clock (the player publishes the bag time)'),
     'slop_ms': ('0.0', 'fusion: stamp tolerance between cameras (ms)'),
     'rate': ('1.0', 'player: playback speed (0 = as fast as possible)'),
+    'precision': ('float32', 'detector: network arithmetic, float32 or bfloat16 (CPUs with '
+                  'AVX512-BF16 / AMX, CUDA)'),
+    'backend': ('torch', 'detector: inference backend, torch or onnxruntime'),
+    'device': ('', "detector: torch device ('' = CUDA when available, else CPU)"),
 }
 
 
@@ -62,6 +66,9 @@ def generate_launch_description():
                  'model': ParameterValue(arg['model'], value_type=str),
                  'transport': ParameterValue(arg['transport'], value_type=str),
                  'debug_image': ParameterValue(arg['debug_image'], value_type=bool),
+                 'precision': ParameterValue(arg['precision'], value_type=str),
+                 'backend': ParameterValue(arg['backend'], value_type=str),
+                 'device': ParameterValue(arg['device'], value_type=str),
                  'use_sim_time': sim_time}], **common),
         Node(executable='fusion', name='fusion',
              parameters=[os.path.join(config, 'fusion.yaml'), {

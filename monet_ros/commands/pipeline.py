@@ -62,7 +62,7 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--precision', choices=('float32', 'bfloat16'), default='float32',
-                        help='network arithmetic (bfloat16: torch backend, 2-4x faster on '
+                        help='network arithmetic (bfloat16: torch backend, 2-3x faster on '
                         'CPUs with AVX512-BF16 / AMX and on CUDA)')
     parser.add_argument('--workdir', help='where the demo recording and model are cached '
                         '(default: ~/.cache/monet_ros/demo)')
@@ -269,14 +269,20 @@ def run(args):
     from monet_ros.commands.common import check_device
     options = PipelineOptions(rate=args.rate, duration=args.duration,
                               start_delay=args.start_delay)
-    check_device('monet pipeline', args.device)
+    device = check_device('monet pipeline', args.device)
+    import torch
+
+    from monet_ros.models.detector import check_precision
+    try:                  # from the arguments alone, before any node logs a line
+        check_precision(args.precision, args.backend,
+                        device or ('cuda' if torch.cuda.is_available() else 'cpu'))
+    except ValueError as error:
+        raise ConfigError('monet pipeline', 'precision', str(error)) from None
     use_large_data_profile()
     import rclpy
     from rclpy.executors import MultiThreadedExecutor
-    import torch
 
     from monet_ros.models import read_checkpoint
-    from monet_ros.models.detector import check_precision
     from monet_ros.nodes.child import ChildNode
     from monet_ros.nodes.detector import DetectorConfig, camera_slots
     from monet_ros.nodes.fusion import FusionNode
@@ -307,8 +313,6 @@ def run(args):
                                        threads=args.threads, debug_image=args.debug_image,
                                        lockstep=args.lockstep, precision=args.precision)
                 slots = camera_slots(DetectorConfig(**detector_params))
-                check_precision(args.precision, args.backend, args.device or (
-                    'cuda' if torch.cuda.is_available() else 'cpu'))
                 check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],
                                args.skeleton, args.model)
                 player_params = dict(

@@ -59,7 +59,7 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--precision', choices=('float32', 'bfloat16'), default='float32',
-                        help='network arithmetic (bfloat16: torch backend, 2-4x faster on '
+                        help='network arithmetic (bfloat16: torch backend, 2-3x faster on '
                         'CPUs with AVX512-BF16 / AMX and on CUDA)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--export', default='csv,trc,nwb,npz',

@@ -37,15 +37,14 @@ def check_precision(precision, backend, device):
     """Raises ValueError (naming precision) unless `precision` is one of PRECISIONS that
     `backend` runs well on `device` (bfloat16: torch backend, bfloat16_native device)."""
     if precision not in PRECISIONS:
-        raise ValueError(f'Detector: precision must be one of {PRECISIONS}, got {precision!r}')
+        raise ValueError(f'precision must be one of {PRECISIONS}, got {precision!r}')
     if precision == 'bfloat16':
         if backend != 'torch':
-            raise ValueError(f'Detector: precision bfloat16 needs backend torch, got '
-                             f'{backend!r}')
+            raise ValueError(f'precision bfloat16 needs backend torch, got {backend!r}')
         if not bfloat16_native(device):
-            raise ValueError(f'Detector: precision bfloat16 needs a CPU with AVX512-BF16 or '
-                             f'AMX, or a CUDA GPU with bfloat16; {torch.device(device)} has '
-                             f'neither (it would be slower than float32)')
+            raise ValueError(f'precision bfloat16 needs a CPU with AVX512-BF16 or AMX, or a '
+                             f'CUDA GPU with bfloat16; {torch.device(device)} has neither (it '
+                             f'would be slower than float32)')
 
 
 def images_to_tensor(images, device='cpu'):
@@ -73,7 +72,7 @@ class Detector:
     checkpoint by from_checkpoint). threads: CPU threads of the onnxruntime session
     (0 = its default; torch's are process-wide: torch.set_num_threads).
     precision: 'float32', or 'bfloat16' (torch backend only: the network runs under
-    torch.autocast in bfloat16, 2-4x faster on CPUs with AVX512-BF16 / AMX; heatmaps are
+    torch.autocast in bfloat16, 2-3x faster on CPUs with AVX512-BF16 / AMX; heatmaps are
     returned as float32 and differ from float32 inference by ~1e-2 of their peak).
     The torch backend keeps the network and its input channels-last (NHWC), the layout
     oneDNN's fast convolutions take (1.2-1.6x on CPU; float32 results equal to ~1e-6).

@@ -71,6 +71,10 @@ def test_bad_arguments_fail_at_start(ros_env, tmp_path):
         with pipeline(ros_env, *args) as proc:
             assert proc.wait(timeout=90) == 2, proc.output()
             assert message in proc.output()
+            if '--precision' in args:   # checked from the arguments: no node said a word
+                out, err = proc.output().split('--- stderr')
+                assert out.strip() == '--- stdout' and len(err.strip().splitlines()) == 1, \
+                    proc.output()
 
 
 def test_ros_args_move_the_rig_with_debug_images_and_tf(ros_env, tmp_path):

@@ -231,6 +231,11 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
 @pytest.mark.parametrize('change, message', [
     ({'model': '/nonexistent/model.pt'}, '/nonexistent/model.pt: checkpoint file not found'),
     ({'cameras': ['cam0', 'cam7']}, "parameter 'cameras': unknown camera 'cam7'"),
+    ({'precision': 'bfloat16', 'backend': 'onnxruntime'},
+     "precision bfloat16 needs backend torch, got 'onnxruntime'"),
+    pytest.param({'device': 'cuda', 'precision': 'bfloat16'},
+                 "parameter 'device': 'cuda': CUDA is not available",
+                 marks=pytest.mark.skipif(torch.cuda.is_available(), reason='CUDA is here')),
 ])
 def test_bad_parameters_fail_at_start(ros_env, setup, change, message):
     _, rig_path, first, _, _ = setup
