@@ -650,7 +650,8 @@ def main():
         workdir = Path(tmp)
         if args.detector_views:
             print(f'\n## Detector images/s (Detector.predict of V 640x480 views in one '
-                  f'batch, {args.threads} thread(s))')
+                  f'batch, {args.threads} thread(s), median of {args.runs} calls; another '
+                  f'job on the machine swings these several-fold)')
             print('| network | views | baseline: torch NCHW float32 | torch float32 '
                   '(channels-last) | torch bfloat16 | onnxruntime | float32 / bfloat16 / '
                   'onnxruntime vs baseline |')
