@@ -445,7 +445,7 @@ def worker(spec):
     from rclpy.node import Node
 
     from monet_ros.geometry import load_rig
-    from monet_ros.nodes import heap_for_large_buffers
+    from monet_ros.nodes import heap_for_large_buffers, short_gil_switch
     from monet_ros.nodes.runner import stop_executor
 
     rig = load_rig(spec['rig'])
@@ -468,6 +468,8 @@ def worker(spec):
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                  for name in ('fusion', 'detector')]
     heap_for_large_buffers()      # as `monet pipeline`, the player and every node do
+    if spec['layout'] in ('in-process', 'pipeline'):
+        short_gil_switch()        # as `monet pipeline` (several busy threads, one GIL)
     rclpy.init()
     executor = None
     try:

@@ -239,7 +239,7 @@ def tf_topics(bag):
 
 
 def run(args):
-    from monet_ros.nodes import heap_for_large_buffers, passive_openmp
+    from monet_ros.nodes import heap_for_large_buffers, passive_openmp, short_gil_switch
     from monet_ros.nodes.runner import (
         CallbackGuard,
         ignore_signals,
@@ -253,6 +253,7 @@ def run(args):
     )
     passive_openmp()               # before torch loads (the fusion's and learner's threads)
     heap_for_large_buffers()       # image and heatmap buffers reused, not mapped per message
+    short_gil_switch()             # the player's thread and fusion's callbacks share a GIL
     score = None
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo
