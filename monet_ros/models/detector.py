@@ -75,7 +75,8 @@ class Detector:
     torch.autocast in bfloat16, 2-3x faster on CPUs with AVX512-BF16 / AMX; heatmaps are
     returned as float32 and differ from float32 inference by ~1e-2 of their peak).
     The torch backend keeps the network and its input channels-last (NHWC), the layout
-    oneDNN's fast convolutions take (1.2-1.6x on CPU; float32 results equal to ~1e-6).
+    oneDNN's bfloat16 convolutions take (for float32 within noise of NCHW on CPU, results
+    equal to ~1e-6).
     Raises ValueError (naming backend / precision) for a value it cannot run.
     """
 

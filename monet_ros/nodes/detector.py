@@ -37,6 +37,7 @@ from monet_ros.io import (
 from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
 from monet_ros.io.images import image_for_crop, raw_to_rgb8, to_rgb8
 from monet_ros.models import CheckpointError, Detector
+from monet_ros.models.detector import PRECISIONS
 from monet_ros.nodes.names import (
     DEBUG_CAMERA_INFO,
     DEBUG_IMAGE,
@@ -114,7 +115,7 @@ class DetectorConfig:
     precision: str = setting('float32', 'network arithmetic: float32, or bfloat16 (torch '
                              'backend, 2-3x faster on CPUs with AVX512-BF16 / AMX and on '
                              "CUDA; peaks ~0.05 input px (median) from float32's)",
-                             choices=('float32', 'bfloat16'))
+                             choices=PRECISIONS)
 
     def __post_init__(self):
         validate_config(self)
