@@ -1,7 +1,7 @@
 """`monet label REC --labels labels.csv`: label keypoints in a browser, with geometry assist.
 
     monet label REC --labels labels.csv [--rig RIG] [--skeleton human14] [--model CKPT]
-        [--import FORMAT=PATH] [--port 8080] [--host 127.0.0.1]
+        [--import FORMAT=PATH] [--port 8080] [--host 127.0.0.1] [--allow-host NAME]
 
 Serves a local web page (monet_ros.label_app; every asset ships in the package, no CDN)
 showing every camera of one instant side by side. Click a keypoint in two views: it is
@@ -16,7 +16,10 @@ Suggested instants are spread over time and pose: k-means on the detector's 3D o
 instant's disagreement), else on image thumbnails.
 
 Binds 127.0.0.1 by default: on a remote machine, forward the port over SSH
-(ssh -L 8080:localhost:8080 host) and open http://localhost:8080.
+(ssh -L 8080:localhost:8080 host) and open http://localhost:8080. Only the names
+localhost, 127.0.0.1, [::1], the --host address and --allow-host names are served (other
+Host headers get 421: DNS rebinding); changes need the page's per-run token
+(monet_ros.label_app.guard).
 """
 import os
 import sys
@@ -45,6 +48,10 @@ def add_arguments(parser):
     parser.add_argument('--port', type=int, default=8080, help='TCP port (default 8080)')
     parser.add_argument('--host', default='127.0.0.1', help='address to bind (default '
                         '127.0.0.1: this machine only; use SSH port forwarding)')
+    parser.add_argument('--allow-host', action='append', default=[], metavar='NAME',
+                        help='another host name the page may be opened by (e.g. this '
+                        "machine's name with --host 0.0.0.0; repeatable). Besides it only "
+                        'localhost, 127.0.0.1, [::1] and --host are served')
     parser.add_argument('--flag-px', type=float, default=d['flag_px'].default,
                         help=d['flag_px'].metadata['description'])
     parser.add_argument('--threshold-px', type=float, default=d['threshold_px'].default,
@@ -72,6 +79,7 @@ def run(args):
     from monet_ros.commands.common import check_device
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.config import ConfigError
+    from monet_ros.label_app.guard import allowed_hosts
     from monet_ros.label_app.server import create_app
     from monet_ros.label_app.session import LabelConfig, LabelSession
 
@@ -90,7 +98,10 @@ def run(args):
     if args.model:
         from monet_ros.label_app.suggest import Predictor
         predictor = Predictor(session, args.model, device=device)
-    app = create_app(session, predictor)
+    for name in args.allow_host:
+        if not name or any(ch in name for ch in '/@?# '):
+            raise ConfigError('monet label', 'allow_host', f'{name!r}: expected a host name '
+                              'or address (no scheme, port or path)')
     import logging
     import socket
 
@@ -101,6 +112,8 @@ def run(args):
     except OSError as error:
         raise ConfigError('monet label', 'port', f'cannot listen on {args.host}:{args.port} '
                           f'({error.strerror or error})') from None
+    port = listener.getsockname()[1]                   # --port 0: the one given
+    app = create_app(session, allowed_hosts(args.host, port, args.allow_host), predictor)
     server = make_server(args.host, args.port, app, threaded=True, fd=listener.fileno())
     host, port = server.server_address[:2]
     print(f'monet label: {len(session.stamps)} instants x {len(session.cameras)} cameras, '
@@ -110,7 +123,8 @@ def run(args):
         print(f'monet label: note: {note}', flush=True)
     if args.host not in ('127.0.0.1', 'localhost', '::1'):
         print(f'monet label: note: bound to {args.host}: anyone who reaches this port can '
-              'read the images and change the labels (no authentication)', flush=True)
+              'read the images and change the labels (no authentication); host names '
+              f'served: {", ".join(sorted(app.config["MONET_HOSTS"]))}', flush=True)
     print(f'monet label: serving http://{host}:{port}/ (Ctrl-C to stop)', flush=True)
     try:
         server.serve_forever()

@@ -1,13 +1,18 @@
 """The web app of `monet label` (Flask): the page in static/ and a JSON API.
 
-    GET  /                         the page (static/index.html; every asset ships here)
+    GET  /                         the page (static/index.html with the run's token in a
+                                   <meta name="monet-token">; every asset ships here)
     GET  /api/summary              cameras (name, width, height, K, dist, R, t), instants
                                    (index, stamp_ns as a string, complete, views),
                                    keypoints, bones, labels path, flag_px
     GET  /api/image/<t>/<camera>   the view's image (JPEG / PNG)
-    GET  /api/labels/<t>           {labels: {camera: {keypoint: [u, v]}}, prefill: bool}
-    PUT  /api/labels/<t>           body {labels: ...}: replaces the instant's labels and
-                                   saves the table (atomic); -> {rows, labelled}
+    GET  /api/labels/<t>           {labels: {camera: {keypoint: [u, v]}}, prefill: bool,
+                                   version: the instant's version (opaque string)}
+    PUT  /api/labels/<t>           body {labels: ..., version}: replaces the instant's labels
+                                   and saves the table (atomic) when `version` is still the
+                                   instant's -> {rows, labelled, version}; else 409
+                                   {error, version, labels: the saved labels}, nothing
+                                   changed (a stale tab never overwrites another's save)
     POST /api/triangulate          body {labels: ...}: -> {keypoint: {X, robust, views:
                                    {camera: {ghost [u, v], error px, flagged}}}}
     POST /api/epipolar             body {camera, keypoint, labels}: -> {camera: [polyline,
@@ -16,16 +21,26 @@
     GET  /api/suggest              {method: 'detector' | 'images', instants: [t, ...],
                                    disagreement: {t: px} (detector only)}
 
-Errors are JSON {error: message} with status 400 (bad request) or 404 (no such instant,
-camera or keypoint).
+Every request passes guard.refusal first: a Host that is not this server's gets 421, a
+foreign Origin 403, a PUT / POST without the run's X-Monet-Token header 403. Bodies are
+JSON (Content-Type application/json) of at most guard.request_limit bytes (else 413).
+Every response carries guard.CSP. Errors are JSON {error: message} with status 400 (bad
+request), 404 (no such instant, camera or keypoint), 409 (version conflict), 413, 421, 403.
 """
 from importlib import resources
+import secrets
 import threading
 
 from flask import Flask, Response, jsonify, request, send_from_directory
 import numpy as np
+from werkzeug.exceptions import HTTPException, RequestEntityTooLarge
 
+from monet_ros.label_app import guard
 from monet_ros.label_app.assist import assist_instant, assist_to_json, epipolar_polyline
+from monet_ros.label_app.session import NAME_CHARS, VersionConflict, short
+
+# The page's placeholder for the run's token (static/index.html).
+TOKEN_MARK = '__MONET_TOKEN__'
 
 
 def static_folder():
@@ -33,21 +48,76 @@ def static_folder():
     return str(resources.files('monet_ros.label_app') / 'static')
 
 
-def create_app(session, predictor=None):
-    """Flask app serving `session` (a LabelSession). predictor: a suggest.Predictor (the
-    detector of --model) for suggestions, pre-fill and disagreement: an unlabelled
+def create_app(session, hosts, predictor=None, token=None):
+    """Flask app serving `session` (a LabelSession). hosts: the Host header values served
+    (guard.allowed_hosts of the bound address and port). predictor: a suggest.Predictor
+    (the detector of --model) for suggestions, pre-fill and disagreement: an unlabelled
     instant's peaks are computed when it is opened, the subsample of suggestions on the
-    first /api/suggest."""
+    first /api/suggest. token: the run's token of state-changing requests (default: a new
+    random one; app.config['MONET_TOKEN'])."""
     app = Flask('monet_label', static_folder=None)
+    token = token or secrets.token_urlsafe(32)
+    hosts = frozenset(hosts)
+    limit = guard.request_limit(session.names, session.keypoints)
+    app.config.update(MONET_TOKEN=token, MONET_HOSTS=hosts, MAX_CONTENT_LENGTH=limit)
     folder = static_folder()
     state = {'suggest': None}
     lock = threading.Lock()
 
+    def json_body():
+        if not request.is_json:
+            raise ValueError('expected a JSON body (Content-Type: application/json)')
+        body = request.get_json()                 # 413 beyond the limit, 400 if not JSON
+        if not isinstance(body, dict):
+            raise ValueError(f'expected a JSON object, got {type(body).__name__}')
+        return body
+
     def body_points():
-        body = request.get_json(silent=True)
-        if not isinstance(body, dict) or 'labels' not in body:
+        body = json_body()
+        if 'labels' not in body:
             raise ValueError('expected a JSON body {"labels": {camera: {keypoint: [u, v]}}}')
         return body, session.points_from_json(body['labels'])
+
+    def name_field(body, field):
+        value = body.get(field)
+        if not isinstance(value, str) or len(value) > NAME_CHARS:
+            raise ValueError(f'{field}: expected a name (a string of at most {NAME_CHARS} '
+                             f'characters), got {short(value)}')
+        return value
+
+    @app.before_request
+    def check_request():
+        refused = guard.refusal(request.method, request.headers.get('Host'),
+                                request.headers.get('Origin'),
+                                request.headers.get(guard.TOKEN_HEADER), hosts, token)
+        if refused is not None:
+            return jsonify(error=refused[1]), refused[0]
+        if request.content_length is not None and request.content_length > limit:
+            raise RequestEntityTooLarge()        # refused before a byte of it is read
+        return None
+
+    @app.after_request
+    def headers(response):
+        response.headers['Content-Security-Policy'] = guard.CSP
+        response.headers['X-Content-Type-Options'] = 'nosniff'
+        response.headers['Referrer-Policy'] = 'no-referrer'
+        return response
+
+    @app.errorhandler(RequestEntityTooLarge)
+    def too_large(error):
+        size = request.content_length
+        got = f'{size} bytes' if size is not None else 'a body'
+        return jsonify(error=f'request too large: {got}, the limit is {limit} bytes (twice '
+                       'the labels of a full instant of this rig and skeleton)'), 413
+
+    @app.errorhandler(HTTPException)
+    def http_error(error):
+        return jsonify(error=f'{error.name}: {error.description}'), error.code
+
+    @app.errorhandler(VersionConflict)
+    def conflict(error):
+        return jsonify(error=str(error), version=error.version,
+                       labels=session.points_to_json(error.labels)), 409
 
     @app.errorhandler(ValueError)
     def bad_request(error):
@@ -58,9 +128,14 @@ def create_app(session, predictor=None):
     def not_found(error):
         return jsonify(error=str(error.args[0] if error.args else error)), 404
 
+    page = (resources.files('monet_ros.label_app') / 'static' / 'index.html').read_text()
+    if TOKEN_MARK not in page:                        # pragma: no cover - packaging fault
+        raise RuntimeError('monet_ros/label_app/static/index.html has no token placeholder')
+    page = page.replace(TOKEN_MARK, token)
+
     @app.get('/')
     def index():
-        return send_from_directory(folder, 'index.html')
+        return Response(page, mimetype='text/html', headers={'Cache-Control': 'no-store'})
 
     @app.get('/static/<path:name>')
     def assets(name):
@@ -80,20 +155,21 @@ def create_app(session, predictor=None):
 
     @app.get('/api/labels/<int:t>')
     def get_labels(t):
-        points = session.instant_labels(t)
+        points, version = session.instant_state(t)          # IndexError: 404
         prefill = False
         if not np.isfinite(points).any():
-            session.instant(t)                             # IndexError: 404
             pred = {} if predictor is None else predictor.instants([t])
             if t in pred:
                 points, prefill = pred[t]['points2d'], True
-        return jsonify(labels=session.points_to_json(points), prefill=prefill)
+        return jsonify(labels=session.points_to_json(points), prefill=prefill,
+                       version=version)
 
     @app.put('/api/labels/<int:t>')
     def put_labels(t):
-        _, points = body_points()
-        rows = session.set_instant(t, points)
-        return jsonify(rows=rows, labelled=session.labelled_instants())
+        body, points = body_points()
+        version = name_field(body, 'version')
+        rows, version = session.set_instant(t, points, version)
+        return jsonify(rows=rows, labelled=session.labelled_instants(), version=version)
 
     @app.post('/api/triangulate')
     def triangulate():
@@ -105,10 +181,10 @@ def create_app(session, predictor=None):
     @app.post('/api/epipolar')
     def epipolar():
         body, points = body_points()
-        target = session.cameras[session.camera_index(str(body.get('camera')))]
-        keypoint = body.get('keypoint')
+        target = session.cameras[session.camera_index(name_field(body, 'camera'))]
+        keypoint = name_field(body, 'keypoint')
         if keypoint not in session.keypoints:
-            raise KeyError(f'keypoint {keypoint!r} is not in the skeleton')
+            raise KeyError(f'keypoint {short(keypoint)} is not in the skeleton')
         c = session.keypoints.index(keypoint)
         out = {}
         for j, cam in enumerate(session.cameras):

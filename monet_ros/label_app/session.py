@@ -8,6 +8,7 @@ written at once with write_labels (a temporary file renamed over the table: atom
 """
 from dataclasses import dataclass
 from pathlib import Path
+import secrets
 import threading
 
 import cv2
@@ -17,6 +18,34 @@ from monet_ros.config import ConfigError, setting, validate_config
 
 # Thumbnail size (width, height) of each view in the image embedding of `suggest`.
 THUMB_SIZE = (16, 12)
+# Longest camera / keypoint name a request may carry (rig and skeleton names are shorter).
+NAME_CHARS = 256
+
+
+class VersionConflict(Exception):
+    """A save carried a version of the instant older than the server's: another tab or
+    client saved it since. Attributes: t, version (the server's), labels (its (V, C, 2))."""
+
+    def __init__(self, t, sent, version, labels):
+        super().__init__(f'instant {t} was saved by another tab or client since this page '
+                         f'loaded it (version {sent!r}, now {version!r}); nothing was '
+                         'overwritten: merge with or reload the saved labels')
+        self.t, self.version, self.labels = t, version, labels
+
+
+def short(value, chars=60):
+    """repr of a request value for an error message, cut to `chars` characters."""
+    text = repr(value)
+    return text if len(text) <= chars else text[:chars] + '...'
+
+
+def coordinate(value, where):
+    """A JSON number (int or float, not a bool or string) as float; ValueError naming
+    `where` otherwise (finiteness is checked by the caller, with the image bounds)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ValueError(f'{where} must be a number, got {short(value)} '
+                         f'({type(value).__name__})')
+    return float(value)
 
 
 @dataclass(frozen=True)
@@ -77,6 +106,10 @@ class LabelSession:
                                   for s in self.stamps], bool)
         self._lock = threading.Lock()
         self.labels = {}
+        # per instant: saves since start; a version is '<run>.<saves>' so that a page
+        # loaded before a restart never matches (the run part is new at each start)
+        self._saves = {}
+        self._run = secrets.token_hex(4)
         self.report = None
         self._load(imports)
         self._thumbs = None
@@ -103,7 +136,7 @@ class LabelSession:
 
     def camera_index(self, name):
         if name not in self.names:
-            raise KeyError(f'camera {name!r} is not one of {", ".join(self.names)}')
+            raise KeyError(f'camera {short(name)} is not one of {", ".join(self.names)}')
         return self.names.index(name)
 
     def image_bytes(self, t, camera):
@@ -203,36 +236,54 @@ class LabelSession:
 
     def instant_labels(self, t):
         """(V, C, 2) labels of instant t (a copy; NaN = unlabelled)."""
+        return self.instant_state(t)[0]
+
+    def instant_state(self, t):
+        """((V, C, 2) labels, version) of instant t, read together. The version (an
+        opaque string) changes at every save of the instant; set_instant needs it."""
         stamp = self.instant(t)
         with self._lock:
-            points = self.labels.get(stamp)
-            if points is None:
-                return np.full((len(self.cameras), len(self.keypoints), 2), np.nan)
-            return points.copy()
+            return self._points(stamp), self._version(stamp)
+
+    def _points(self, stamp):
+        points = self.labels.get(stamp)
+        if points is None:
+            return np.full((len(self.cameras), len(self.keypoints), 2), np.nan)
+        return points.copy()
+
+    def _version(self, stamp):
+        return f'{self._run}.{self._saves.get(stamp, 0)}'
 
     def points_from_json(self, views):
         """{camera: {keypoint: [u, v] | null}} -> (V, C, 2) float64 (NaN = none).
-        ValueError naming the camera / keypoint / value that does not fit."""
+        u and v must be JSON numbers (not strings or booleans), finite, inside the image;
+        at most V cameras and C keypoints each. ValueError naming the camera / keypoint /
+        field that does not fit (KeyError for an unknown camera or keypoint)."""
         out = np.full((len(self.cameras), len(self.keypoints), 2), np.nan)
         if not isinstance(views, dict):
             raise ValueError('labels must be an object {camera: {keypoint: [u, v]}}')
+        if len(views) > len(self.cameras):
+            raise ValueError(f'labels: {len(views)} cameras, the rig has {len(self.cameras)}')
         for cam, points in views.items():
             j = self.camera_index(cam)
             if not isinstance(points, dict):
                 raise ValueError(f'labels of camera {cam!r} must be an object')
+            if len(points) > len(self.keypoints):
+                raise ValueError(f'labels of camera {cam!r}: {len(points)} keypoints, the '
+                                 f'skeleton has {len(self.keypoints)}')
             for name, uv in points.items():
                 if name not in self.keypoints:
-                    raise KeyError(f'keypoint {name!r} is not in the skeleton')
+                    raise KeyError(f'keypoint {short(name)} is not in the skeleton')
                 if uv is None:
                     continue
-                try:
-                    u, v = (float(x) for x in uv)
-                except (TypeError, ValueError):
-                    raise ValueError(f'{cam}/{name}: expected [u, v], got {uv!r}') from None
+                if not isinstance(uv, list) or len(uv) != 2:
+                    raise ValueError(f'labels {cam}/{name}: expected [u, v], got {short(uv)}')
+                u = coordinate(uv[0], f'labels {cam}/{name}: u')
+                v = coordinate(uv[1], f'labels {cam}/{name}: v')
                 camera = self.cameras[j]
                 if not (np.isfinite(u) and np.isfinite(v) and -0.5 <= u <= camera.width - 0.5
                         and -0.5 <= v <= camera.height - 0.5):
-                    raise ValueError(f'{cam}/{name}: ({u}, {v}) lies outside the '
+                    raise ValueError(f'labels {cam}/{name}: ({u}, {v}) lies outside the '
                                      f'{camera.width}x{camera.height} image')
                 out[j, self.keypoints.index(name)] = (u, v)
         return out
@@ -247,16 +298,22 @@ class LabelSession:
                 out[cam] = got
         return out
 
-    def set_instant(self, t, points):
+    def set_instant(self, t, points, version):
         """Replace the labels of instant t by (V, C, 2) `points` and save the table at once
-        (atomically). Returns the number of rows written."""
+        (atomically), if `version` is the instant's version (instant_state): a save built
+        on an older reading raises VersionConflict and changes nothing (compare and set
+        under one lock). Returns (rows written, the instant's new version)."""
         stamp = self.instant(t)
         with self._lock:
+            current = self._version(stamp)
+            if version != current:
+                raise VersionConflict(t, version, current, self._points(stamp))
             if np.isfinite(points).any():
                 self.labels[stamp] = np.array(points, np.float64)
             else:
                 self.labels.pop(stamp, None)
-            return self._save()
+            self._saves[stamp] = self._saves.get(stamp, 0) + 1
+            return self._save(), self._version(stamp)
 
     def _save(self):
         from monet_ros.labels import write_labels

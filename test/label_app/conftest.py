@@ -1,64 +1,16 @@
-"""Fixtures of the `monet label` tests: a real server process and a real headless Chromium
-(Debian's chromium + chromium-driver, driven by Selenium through /usr/bin/chromedriver;
-`make test` installs them with apt-get when missing)."""
-from contextlib import contextmanager
+"""Fixtures of the `monet label` tests: a real server process (helpers.label_app) and a
+real headless Chromium (Debian's chromium + chromium-driver, driven by Selenium through
+/usr/bin/chromedriver; `make test` installs them with apt-get when missing)."""
 import os
-from pathlib import Path
 import shutil
-import socket
-import subprocess
-import sys
 import time
-import urllib.request
 
+from helpers.label_app import free_port, label_server  # noqa: F401 (the tests' import)
 import pytest
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
 CHROMEDRIVER = '/usr/bin/chromedriver'
-
-
-def free_port():
-    with socket.socket() as sock:
-        sock.bind(('127.0.0.1', 0))
-        return sock.getsockname()[1]
-
-
-@contextmanager
-def label_server(rec, labels, *args, timeout=90.0):
-    """`monet label REC --labels LABELS ARGS` in a subprocess on a free port; yields its URL
-    once /api/summary answers; stops it with SIGINT (and checks it exits 0)."""
-    port = free_port()
-    env = dict(os.environ, PYTHONUNBUFFERED='1')
-    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(REPO_ROOT), env.get('PYTHONPATH')]))
-    log = open(Path(labels).with_suffix('.server.log'), 'w+')
-    proc = subprocess.Popen([sys.executable, '-m', 'monet_ros.cli', 'label', str(rec),
-                             '--labels', str(labels), '--port', str(port), *map(str, args)],
-                            stdout=log, stderr=subprocess.STDOUT, env=env, cwd=REPO_ROOT)
-    url = f'http://127.0.0.1:{port}'
-    try:
-        deadline = time.monotonic() + timeout
-        while True:
-            if proc.poll() is not None:
-                log.seek(0)
-                raise AssertionError(f'monet label exited {proc.returncode}: {log.read()}')
-            try:
-                with urllib.request.urlopen(url + '/api/summary', timeout=5):
-                    break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise AssertionError('monet label did not answer in time') from None
-                time.sleep(0.2)
-        yield url
-    finally:
-        if proc.poll() is None:
-            proc.send_signal(2)
-            try:
-                code = proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                code = proc.wait()
-            assert code == 0, f'monet label exited {code} on SIGINT'
-        log.close()
+# Names Chromium resolves to 127.0.0.1 (a DNS rebinding: another site's name, this server).
+REBOUND_HOST = 'rebound.example'
 
 
 @pytest.fixture(scope='module')
@@ -73,7 +25,8 @@ def browser():
 
     options = webdriver.ChromeOptions()
     for arg in ('--headless=new', '--no-sandbox', '--disable-dev-shm-usage', '--disable-gpu',
-                '--force-device-scale-factor=1', '--window-size=1700,1000'):
+                '--force-device-scale-factor=1', '--window-size=1700,1000',
+                f'--host-resolver-rules=MAP {REBOUND_HOST} 127.0.0.1'):
         options.add_argument(arg)
     binary = shutil.which('chromium') or shutil.which('chromium-browser')
     options.binary_location = binary

@@ -8,6 +8,7 @@ import urllib.error
 import urllib.request
 
 import cv2
+from helpers.label_app import TOKEN_HEADER, page_token
 from helpers.recordings import noise_recording, small_checkpoint
 import numpy as np
 import pytest
@@ -16,9 +17,12 @@ from .conftest import label_server
 
 
 def call(url, method='GET', body=None):
+    """A request as the page sends it (a change carries the page's token)."""
     data = None if body is None else json.dumps(body).encode()
-    request = urllib.request.Request(url, data=data, method=method,
-                                     headers={'Content-Type': 'application/json'})
+    headers = {'Content-Type': 'application/json'}
+    if method != 'GET':
+        headers[TOKEN_HEADER] = page_token(url.split('/api/')[0])
+    request = urllib.request.Request(url, data=data, method=method, headers=headers)
     try:
         with urllib.request.urlopen(request, timeout=120) as response:
             return response.status, response.headers['Content-Type'], response.read()
@@ -78,8 +82,10 @@ def test_model_suggestions_prefill_and_raw_images(raw_rec, tmp_path):
         assert status == 400 and 'outside' in json.loads(body)['error']
         status, _, body = call(url + '/api/labels/99')
         assert status == 404 and 'out of range' in json.loads(body)['error']
+        version = json.loads(call(url + '/api/labels/2')[2])['version']
         status, _, _ = call(url + '/api/labels/2', 'PUT',
-                            {'labels': {rig[0].name: {'head': [10.25, 20.5]}}})
+                            {'labels': {rig[0].name: {'head': [10.25, 20.5]}},
+                             'version': version})
         assert status == 200
     assert labels.read_text().splitlines() == [
         'stamp_ns,camera,keypoint,u,v', f'{stamps[2]},{rig[0].name},head,10.25,20.5']
@@ -104,8 +110,10 @@ def test_imported_labels_are_shown_and_saved_in_the_canonical_table(raw_rec, tmp
         assert json.loads(body)['labels'] == {rig[0].name: {'neck': [13.0, 31.0]}}
         status, _, body = call(url + '/api/summary')
         assert json.loads(body)['labelled'] == [1, 4]
+        version = json.loads(call(url + '/api/labels/4')[2])['version']
         status, _, body = call(url + '/api/labels/4', 'PUT',
-                               {'labels': {rig[2].name: {'head': [81.0, 6.0]}}})
+                               {'labels': {rig[2].name: {'head': [81.0, 6.0]}},
+                                'version': version})
         assert status == 200
     assert own.read_text().splitlines() == [
         'stamp_ns,camera,keypoint,u,v', f'{stamps[1]},{rig[0].name},neck,13.0,31.0',

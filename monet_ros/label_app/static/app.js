@@ -1,6 +1,8 @@
 // monet label: the page. Plain JavaScript, no build step, no external asset.
 // Image pixel coordinates: pixel centres on integers (the labels table's convention);
 // a view's transform maps them to canvas pixels: x = u * s + tx, y = v * s + ty.
+// Names (cameras, keypoints) come from rig and skeleton files: they are put in the page as
+// text only (textContent / text nodes), never parsed as HTML.
 'use strict';
 
 const COLORS = ['#e6194b', '#3cb44b', '#ffe119', '#4363d8', '#f58231', '#911eb4', '#46f0f0',
@@ -11,22 +13,40 @@ const HIT_PX = 8;
 const S = {
   summary: null, t: 0, labels: {}, assist: {}, epipolar: {}, selected: 0, history: [],
   views: [], busy: 0, ready: false, prefill: false, suggest: null, labelled: [],
-  hoverView: null, error: null, generation: 0, saves: Promise.resolve(),
+  hoverView: null, error: null, generation: 0, saves: Promise.resolve(), loaded: false,
+  sync: {}, notice: null,
 };
 window.monetLabel = S;
 
 const $ = (id) => document.getElementById(id);
+// the server's per-run token: every request that changes something carries it
+const TOKEN = document.querySelector('meta[name="monet-token"]').content;
 
 async function api(method, url, body) {
   const options = { method, headers: {} };
+  if (method !== 'GET') options.headers['X-Monet-Token'] = TOKEN;
   if (body !== undefined) {
     options.headers['Content-Type'] = 'application/json';
     options.body = JSON.stringify(body);
   }
   const response = await fetch(url, options);
-  const data = await response.json();
-  if (!response.ok) throw new Error(data.error || response.statusText);
+  let data = {};
+  try { data = await response.json(); } catch (error) { data = {}; }
+  if (!response.ok) {
+    const error = new Error(data.error || `${response.status} ${response.statusText}`);
+    error.status = response.status;
+    error.data = data;
+    throw error;
+  }
   return data;
+}
+
+// An element with properties and children (strings become text nodes, never HTML).
+function element(tag, props, ...children) {
+  const out = document.createElement(tag);
+  Object.assign(out, props || {});
+  out.append(...children);
+  return out;
 }
 
 function setStatus(text, kind) {
@@ -52,20 +72,20 @@ async function busy(work) {
 // ------------------------------------------------------------------ views
 function buildViews() {
   const holder = $('views');
-  holder.innerHTML = '';
+  holder.replaceChildren();
   S.views = S.summary.cameras.map((cam, index) => {
     const box = document.createElement('div');
     box.className = 'view';
     box.dataset.camera = cam.name;
-    const title = document.createElement('div');
-    title.className = 'title';
-    title.innerHTML = `<span>${cam.name} <span class="note">${cam.width}x${cam.height}</span>` +
-      '</span><span class="err"></span>';
+    const err = element('span', { className: 'err' });
+    const title = element('div', { className: 'title' },
+      element('span', {}, cam.name + ' ',
+        element('span', { className: 'note' }, `${cam.width}x${cam.height}`)), err);
     const canvas = document.createElement('canvas');
     canvas.id = 'view-' + cam.name;
     box.append(title, canvas);
     holder.append(box);
-    const view = { cam, index, box, canvas, err: title.querySelector('.err'), image: null,
+    const view = { cam, index, box, canvas, err, image: null,
       s: 1, tx: 0, ty: 0, fitted: false };
     attachMouse(view);
     return view;
@@ -158,6 +178,7 @@ function attachMouse(view) {
       drag = { pan: true, x, y, tx: view.tx, ty: view.ty };
       return;
     }
+    if (!S.loaded) return;                  // the instant's saved labels are not here yet
     // the selected keypoint's own point is dragged; while it is not placed in this view a
     // click places it (even beside another point); once placed, another point near the
     // click is dragged (and selected), else the selected keypoint moves to the click
@@ -249,6 +270,85 @@ function undo() {
   changed();
 }
 
+// ------------------------------------------------------------------ saving
+// What `to` changed from `from`: [[camera, keypoint, [u, v] | null (deleted)], ...].
+function labelDelta(from, to) {
+  const out = [];
+  for (const cam of new Set([...Object.keys(from), ...Object.keys(to)])) {
+    const a = from[cam] || {};
+    const b = to[cam] || {};
+    for (const kp of new Set([...Object.keys(a), ...Object.keys(b)])) {
+      const p = a[kp];
+      const q = b[kp];
+      if (!q) {
+        if (p) out.push([cam, kp, null]);
+      } else if (!p || p[0] !== q[0] || p[1] !== q[1]) {
+        out.push([cam, kp, [q[0], q[1]]]);
+      }
+    }
+  }
+  return out;
+}
+
+function applyDelta(labels, delta) {
+  const out = JSON.parse(JSON.stringify(labels));
+  for (const [cam, kp, uv] of delta) {
+    if (uv) {
+      if (!out[cam]) out[cam] = {};
+      out[cam][kp] = [uv[0], uv[1]];
+    } else if (out[cam]) {
+      delete out[cam][kp];
+      if (Object.keys(out[cam]).length === 0) delete out[cam];
+    }
+  }
+  return out;
+}
+
+// Save this tab's labels `mine` of instant t. S.sync[t] holds the labels saved on the
+// server (base) at its version, and this tab's labels they were built from (local). The
+// save sends base + (what this tab changed since local), with that version. A 409 means
+// another tab or client saved the instant meanwhile: it brings the saved labels and their
+// version, the same change is applied to them and sent again - per keypoint and view, so
+// both tabs' points survive (a point both changed takes this tab's value, the later
+// edit). Reloading the server's version instead would drop this tab's edit.
+async function saveInstant(t, mine) {
+  const sync = S.sync[t];
+  const delta = labelDelta(sync.local, mine);
+  let merged = false;
+  for (let attempt = 0; ; attempt += 1) {
+    const labels = applyDelta(sync.base, delta);
+    try {
+      const saved = await api('PUT', `/api/labels/${t}`, { labels, version: sync.version });
+      sync.base = labels;
+      sync.version = saved.version;
+      sync.local = mine;
+      if (merged) adoptMerge(t, mine, labels);
+      return saved;
+    } catch (error) {
+      if (error.status !== 409 || attempt >= 5) throw error;
+      sync.base = error.data.labels;
+      sync.version = error.data.version;
+      merged = true;
+    }
+  }
+}
+
+// The page takes in the points another tab or client saved (those this tab has not
+// changed since `mine`), in its labels and its undo history, and says so.
+function adoptMerge(t, mine, saved) {
+  const later = new Set(labelDelta(mine, S.labels).map(([c, k]) => c + '\n' + k));
+  const foreign = labelDelta(mine, saved).filter(([c, k]) => !later.has(c + '\n' + k));
+  S.notice = `instant ${t} was saved by another tab or client meanwhile: merged, ` +
+    `${foreign.length} of its points taken in, your changes kept`;
+  $('notice').textContent = S.notice;
+  if (t !== S.t || !foreign.length) return;
+  S.labels = applyDelta(S.labels, foreign);
+  S.history = S.history.map((h) => JSON.stringify(applyDelta(JSON.parse(h), foreign)));
+  S.generation += 1;
+  draw();
+  renderKeypoints();
+}
+
 // Save the instant, then triangulate and fetch epipolar curves (in that order).
 function changed() {
   S.prefill = false;
@@ -257,13 +357,13 @@ function changed() {
   const labels = JSON.parse(snapshot());
   draw();
   // saves go out one after the other, in the order of the changes (never a stale one last)
-  const save = S.saves.then(() => api('PUT', `/api/labels/${t}`, { labels }));
+  const save = S.saves.then(() => saveInstant(t, labels));
   S.saves = save.catch(() => null);
   busy(async () => {
     const saved = await save;
     S.labelled = saved.labelled;
     renderLabelled();
-    await refreshAssist(t, labels);
+    await refreshAssist(t, t === S.t ? JSON.parse(snapshot()) : labels);
   });
 }
 
@@ -301,15 +401,21 @@ async function openInstant(t) {
   S.history = [];
   S.assist = {};
   S.epipolar = {};
+  S.loaded = false;
   $('instant').value = t;
   $('stamp').textContent = 'stamp ' + S.summary.instants[t].stamp_ns + ' ns';
   renderLabelled();
   renderSuggestions();
   await busy(async () => {
+    await S.saves;                       // this tab's own saves are in what comes back
     const data = await api('GET', `/api/labels/${t}`);
     if (S.t !== t) return;
     S.labels = data.labels;
     S.prefill = data.prefill;
+    // a pre-fill is the detector's, not saved: the server has no labels there yet
+    const base = data.prefill ? {} : data.labels;
+    S.sync[t] = { version: data.version, base, local: JSON.parse(JSON.stringify(base)) };
+    S.loaded = true;
     renderSuggestions();
     const loads = S.views.map((view) => new Promise((resolve) => {
       const image = new Image();
@@ -438,13 +544,13 @@ function draw() {
 // ------------------------------------------------------------------ side panel
 function renderKeypoints() {
   const list = $('keypoints');
-  list.innerHTML = '';
+  list.replaceChildren();
   S.summary.keypoints.forEach((kp, c) => {
-    const li = document.createElement('li');
     const count = Object.values(S.labels).filter((p) => p[kp]).length;
-    li.innerHTML = `<span class="swatch" style="background:${COLORS[c % COLORS.length]}">` +
-      `</span>${kp}<span class="count">${count}/${S.views.length}` +
-      `${S.assist[kp] ? ' 3D' : ''}</span>`;
+    const swatch = element('span', { className: 'swatch' });
+    swatch.style.background = COLORS[c % COLORS.length];
+    const li = element('li', {}, swatch, kp, element('span', { className: 'count' },
+      `${count}/${S.views.length}${S.assist[kp] ? ' 3D' : ''}`));
     li.className = c === S.selected ? 'selected' : '';
     li.dataset.keypoint = kp;
     li.addEventListener('click', () => selectKeypoint(c));
@@ -462,14 +568,14 @@ function instantButton(t, extra) {
 
 function renderLabelled() {
   const holder = $('labelled');
-  holder.innerHTML = '';
+  holder.replaceChildren();
   if (!S.labelled.length) holder.textContent = 'none yet';
   S.labelled.forEach((t) => holder.append(instantButton(t)));
 }
 
 function renderSuggestions() {
   const holder = $('suggestions');
-  holder.innerHTML = '';
+  holder.replaceChildren();
   if (!S.suggest) return;
   const here = S.suggest.disagreement[String(S.t)];
   $('disagreement').textContent = here === undefined || here === null ? ''
@@ -491,11 +597,12 @@ document.addEventListener('keydown', (event) => {
   const key = event.key;
   if ((event.ctrlKey || event.metaKey) && key.toLowerCase() === 'z') {
     event.preventDefault();
-    undo();
+    if (S.loaded) undo();
   } else if (key === 'a') {
-    acceptGhosts();
+    if (S.loaded) acceptGhosts();
   } else if (key === 'Delete' || key === 'Backspace') {
     event.preventDefault();
+    if (!S.loaded) return;
     const kp = keypointName();
     const cams = event.shiftKey ? S.views.map((v) => v.cam.name)
       : (S.hoverView ? [S.hoverView] : []);
