@@ -67,7 +67,11 @@ def create_app(session, hosts, predictor=None, token=None):
     def json_body():
         if not request.is_json:
             raise ValueError('expected a JSON body (Content-Type: application/json)')
-        body = request.get_json()                 # 413 beyond the limit, 400 if not JSON
+        # a chunked body (no Content-Length) is read up to the limit only: one that
+        # reaches it is refused rather than parsed cut
+        if len(request.get_data(cache=True)) >= limit and request.content_length is None:
+            raise RequestEntityTooLarge()
+        body = request.get_json()                 # 400 if not JSON
         if not isinstance(body, dict):
             raise ValueError(f'expected a JSON object, got {type(body).__name__}')
         return body
@@ -78,10 +82,10 @@ def create_app(session, hosts, predictor=None, token=None):
             raise ValueError('expected a JSON body {"labels": {camera: {keypoint: [u, v]}}}')
         return body, session.points_from_json(body['labels'])
 
-    def name_field(body, field):
+    def name_field(body, field, what='a name'):
         value = body.get(field)
         if not isinstance(value, str) or len(value) > NAME_CHARS:
-            raise ValueError(f'{field}: expected a name (a string of at most {NAME_CHARS} '
+            raise ValueError(f'{field}: expected {what} (a string of at most {NAME_CHARS} '
                              f'characters), got {short(value)}')
         return value
 
@@ -106,7 +110,7 @@ def create_app(session, hosts, predictor=None, token=None):
     @app.errorhandler(RequestEntityTooLarge)
     def too_large(error):
         size = request.content_length
-        got = f'{size} bytes' if size is not None else 'a body'
+        got = f'{size} bytes' if size is not None else f'a chunked body of {limit}+ bytes'
         return jsonify(error=f'request too large: {got}, the limit is {limit} bytes (twice '
                        'the labels of a full instant of this rig and skeleton)'), 413
 
@@ -167,7 +171,7 @@ def create_app(session, hosts, predictor=None, token=None):
     @app.put('/api/labels/<int:t>')
     def put_labels(t):
         body, points = body_points()
-        version = name_field(body, 'version')
+        version = name_field(body, 'version', 'the version of GET /api/labels/<t>')
         rows, version = session.set_instant(t, points, version)
         return jsonify(rows=rows, labelled=session.labelled_instants(), version=version)
 
