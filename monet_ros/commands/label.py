@@ -22,6 +22,7 @@ Host headers get 421: DNS rebinding); changes need the page's per-run token
 (monet_ros.label_app.guard).
 """
 import os
+import re
 import sys
 
 HELP = 'label keypoints in a browser: click two views, the others are filled in by geometry'
@@ -85,6 +86,11 @@ def run(args):
 
     if not 0 <= args.port <= 65535:
         raise ConfigError('monet label', 'port', f'must be in 0..65535, got {args.port}')
+    for name in args.allow_host:
+        # a DNS name or IPv4 address, or an IPv6 address (bare or in brackets)
+        if not re.fullmatch(r'[A-Za-z0-9_.-]+|\[?[0-9A-Fa-f:.]*:[0-9A-Fa-f:.]*\]?', name):
+            raise ConfigError('monet label', 'allow_host', f'{name!r}: expected a host name '
+                              'or address (no scheme, port or path; IPv6 in [ ])')
     config = LabelConfig(flag_px=args.flag_px, threshold_px=args.threshold_px,
                          suggestions=args.suggestions)
     device = check_device('monet label', args.device) if args.model else None
@@ -98,10 +104,6 @@ def run(args):
     if args.model:
         from monet_ros.label_app.suggest import Predictor
         predictor = Predictor(session, args.model, device=device)
-    for name in args.allow_host:
-        if not name or any(ch in name for ch in '/@?# '):
-            raise ConfigError('monet label', 'allow_host', f'{name!r}: expected a host name '
-                              'or address (no scheme, port or path)')
     import logging
     import socket
 

@@ -134,7 +134,8 @@ def test_a_port_in_use_is_one_line(raw_rec, tmp_path):
 
 
 @pytest.mark.parametrize('case', ['no_recording', 'bad_import', 'labels_folder', 'bad_port',
-                                  'bad_labels', 'bad_model', 'model_skeleton'])
+                                  'bad_labels', 'bad_model', 'model_skeleton',
+                                  'bad_allow_host'])
 def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
     bag, model, rig, stamps = raw_rec
     labels = tmp_path / 'labels.csv'
@@ -147,6 +148,8 @@ def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
         'bad_model': ([bag, '--labels', labels, '--model', tmp_path / 'm.pt'], ['m.pt']),
         'model_skeleton': ([bag, '--labels', labels, '--model', model, '--skeleton',
                             tmp_path / 'sk.yaml'], ['skeleton']),
+        'bad_allow_host': ([bag, '--labels', labels, '--allow-host', 'http://studio:80/'],
+                           ['allow_host']),
     }[case]
     (tmp_path / 'sk.yaml').write_text('keypoints: [a, b]\n')
     if case == 'bad_labels':
