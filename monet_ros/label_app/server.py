@@ -23,7 +23,8 @@
 
 Every request passes guard.refusal first: a Host that is not this server's gets 421, a
 foreign Origin 403, a PUT / POST without the run's X-Monet-Token header 403. Bodies are
-JSON (Content-Type application/json) of at most guard.request_limit bytes (else 413).
+JSON (Content-Type application/json) of at most guard.request_limit bytes (else 413; the
+rest of a refused body is read and dropped, never kept).
 Every response carries guard.CSP. Errors are JSON {error: message} with status 400 (bad
 request), 404 (no such instant, camera or keypoint), 409 (version conflict), 413, 421, 403.
 """
@@ -41,11 +42,26 @@ from monet_ros.label_app.session import NAME_CHARS, VersionConflict, short
 
 # The page's placeholder for the run's token (static/index.html).
 TOKEN_MARK = '__MONET_TOKEN__'
+# Most bytes of a refused (413) body read and dropped; a client sending more sees a reset.
+DISCARD_BYTES = 1 << 30
 
 
 def static_folder():
     """Folder of the page's assets inside the installed package."""
     return str(resources.files('monet_ros.label_app') / 'static')
+
+
+def discard_body(stream, length, most=DISCARD_BYTES, chunk=1 << 20):
+    """Read and drop what is left of a refused request body (at most `most` bytes, `chunk`
+    at a time: memory stays at one chunk), so that the client, still sending, reads the
+    413 instead of a connection reset when the server closes. length: Content-Length, or
+    None for a chunked body (read to its end)."""
+    left = most if length is None else min(int(length), most)
+    while left > 0:
+        data = stream.read(min(chunk, left))
+        if not data:
+            break
+        left -= len(data)
 
 
 def create_app(session, hosts, predictor=None, token=None):
@@ -109,6 +125,7 @@ def create_app(session, hosts, predictor=None, token=None):
 
     @app.errorhandler(RequestEntityTooLarge)
     def too_large(error):
+        discard_body(request.environ['wsgi.input'], request.content_length)
         size = request.content_length
         got = f'{size} bytes' if size is not None else f'a chunked body of {limit}+ bytes'
         return jsonify(error=f'request too large: {got}, the limit is {limit} bytes (twice '

@@ -10,7 +10,7 @@ from helpers.label_app import TOKEN_HEADER, label_server, page_token, request
 from helpers.recordings import noise_recording
 import pytest
 
-from monet_ros.label_app.guard import request_limit
+from monet_ros.label_app.guard import allowed_hosts, request_limit
 from monet_ros.skeleton import load_skeleton
 
 W, H = 64, 48
@@ -40,6 +40,18 @@ def change(url, t, labels, version=None, headers=None):
     sent = {TOKEN_HEADER: page_token(url), **(headers or {})}
     return request(f'{url}/api/labels/{t}', 'PUT', {'labels': labels, 'version': version},
                    headers=sent)
+
+
+def test_allowed_hosts_are_the_loopback_names_the_bound_one_and_the_given_ones():
+    assert allowed_hosts('127.0.0.1', 8080) == {
+        'localhost:8080', '127.0.0.1:8080', '[::1]:8080'}
+    # a wildcard bind names no host; IPv6 in brackets; port 80 also bare (browsers omit it)
+    assert allowed_hosts('0.0.0.0', 80, ['Studio.LAN', 'fe80::1', '[fe80::2]']) == {
+        'localhost:80', '127.0.0.1:80', '[::1]:80', 'studio.lan:80', '[fe80::1]:80',
+        '[fe80::2]:80', 'localhost', '127.0.0.1', '[::1]', 'studio.lan', '[fe80::1]',
+        '[fe80::2]'}
+    assert allowed_hosts('192.168.1.5', 9000) == {
+        'localhost:9000', '127.0.0.1:9000', '[::1]:9000', '192.168.1.5:9000'}
 
 
 def test_only_the_bound_host_names_are_served(server):
@@ -106,7 +118,7 @@ def test_every_response_has_a_csp_without_inline_script(server):
     assert 'innerHTML' not in app and 'insertAdjacentHTML' not in app
 
 
-def test_bodies_over_the_limit_get_413_before_they_are_read(server):
+def test_bodies_over_the_limit_get_413_and_are_never_parsed(server):
     url, labels, rig, stamps = server
     names = [c.name for c in rig]
     keypoints = load_skeleton('human14').keypoints

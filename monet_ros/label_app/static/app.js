@@ -212,7 +212,7 @@ function attachMouse(view) {
     draw();
   });
   const end = () => {
-    if (drag && !drag.pan && drag.moved) {
+    if (drag && !drag.pan && drag.moved && S.loaded) {
       S.history.push(drag.before);
       changed();
     }
@@ -313,6 +313,7 @@ function applyDelta(labels, delta) {
 // edit). Reloading the server's version instead would drop this tab's edit.
 async function saveInstant(t, mine) {
   const sync = S.sync[t];
+  if (!sync) throw new Error(`instant ${t}: its saved labels were not loaded`);
   const delta = labelDelta(sync.local, mine);
   let merged = false;
   for (let attempt = 0; ; attempt += 1) {
