@@ -80,7 +80,7 @@ def run(args):
     from monet_ros.commands.common import check_device
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.config import ConfigError
-    from monet_ros.label_app.guard import allowed_hosts
+    from monet_ros.label_app.guard import WILDCARD, allowed_hosts
     from monet_ros.label_app.server import create_app
     from monet_ros.label_app.session import LabelConfig, LabelSession
 
@@ -127,6 +127,10 @@ def run(args):
         print(f'monet label: note: bound to {args.host}: anyone who reaches this port can '
               'read the images and change the labels (no authentication); host names '
               f'served: {", ".join(sorted(app.config["MONET_HOSTS"]))}', flush=True)
+    if host in WILDCARD:                   # every interface: open it by a served name
+        host = 'localhost'
+    elif ':' in host:
+        host = f'[{host}]'
     print(f'monet label: serving http://{host}:{port}/ (Ctrl-C to stop)', flush=True)
     try:
         server.serve_forever()

@@ -128,8 +128,8 @@ def create_app(session, hosts, predictor=None, token=None):
         discard_body(request.environ['wsgi.input'], request.content_length)
         size = request.content_length
         got = f'{size} bytes' if size is not None else f'a chunked body of {limit}+ bytes'
-        return jsonify(error=f'request too large: {got}, the limit is {limit} bytes (twice '
-                       'the labels of a full instant of this rig and skeleton)'), 413
+        return jsonify(error=f'request too large: {got}, the limit is {limit} bytes (1 MiB '
+                       'or twice a fully labelled instant of this rig and skeleton)'), 413
 
     @app.errorhandler(HTTPException)
     def http_error(error):

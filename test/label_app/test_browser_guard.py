@@ -101,13 +101,15 @@ def test_html_in_camera_and_keypoint_names_stays_text(synth, tmp_path, browser, 
         title = browser.find_element('css selector', '#views .view .title')
         assert title.text.startswith(evil_cam)
         # a second line: the Content-Security-Policy stops inline script that got in
-        browser.execute_script('document.body.insertAdjacentHTML("beforeend", arguments[0]);',
-                               '<img src="/static/app.css" '
-                               'onerror="document.title=\'inline\'" '
-                               'onload="document.title=\'inline\'">')
-        browser.execute_async_script(
-            'const done = arguments[0]; setTimeout(done, 500);')     # let it load or fail
-        assert browser.title == 'monet label'
+        # (an image that fails to load: its inline onerror would run first, if allowed)
+        outcome = browser.execute_async_script(
+            'const done = arguments[1];'
+            'document.body.insertAdjacentHTML("beforeend", arguments[0]);'
+            'const img = document.body.lastElementChild;'
+            'img.addEventListener("error", () => done("error"));'
+            'img.addEventListener("load", () => done("load"));',
+            '<img src="/static/app.css" onerror="document.title=\'inline\'">')
+        assert outcome == 'error' and browser.title == 'monet label'
         assert 'script-src' in request(url + '/')[1]['Content-Security-Policy']
 
 
