@@ -4,22 +4,30 @@ player read.
 
     monet import videos SESSION_DIR --calibration calibration.toml --out rec
         [--fps 60] [--offsets cam01=3] [--resize 0.5] [--compressed|--raw]
-        [--camera-map cam_01=cam01] [--start-ns N]
+        [--format jpeg|png] [--camera-map cam_01=cam01] [--start-ns N] [--timing container]
 
 - SESSION_DIR holds one video per camera (any file OpenCV/FFmpeg decodes: .mp4, .avi,
-  .mkv, .mov, ...) or one folder of images per camera (.png/.jpg, sorted by name). A
-  camera of the calibration (any monet_ros.geometry.load_rig format) is matched to the
-  entry whose name contains the camera name, as anipose does (the longest camera name
-  wins, so cam1 does not take cam10's file); --camera-map renames calibration cameras
-  first (Pose2Sim's cam_01 -> cam01 for files cam01.mp4). Every camera must match exactly
-  one entry (else exit 2 naming the camera and the entries); entries no camera matches
-  are listed and ignored.
-- Stamps: stamp of video frame j of camera c = start + round((j - offset_c) * 1e9 / fps)
-  ns; --offsets cam=N drops camera c's first N frames (its frame N becomes instant 0),
-  N < 0 delays it by |N| instants. fps: --fps, else the videos' own rate (they must agree;
-  image folders need --fps). Every camera's frame of one instant has the same stamp.
-- Topics per camera NAME: /NAME/image_raw/compressed (CompressedImage, --compressed, the
-  default; --format jpeg|png, png is lossless) or /NAME/image_raw (Image rgb8, --raw,
+  .mkv, .mov, ...) or one folder of images per camera (.png/.jpg). A camera of the
+  calibration (any monet_ros.geometry.load_rig format) is matched to the entry whose name
+  contains the camera name, as anipose does (the longest camera name wins, so cam1 does
+  not take cam10's file); --camera-map renames calibration cameras first (Pose2Sim's
+  cam_01 -> cam01 for files cam01.mp4). Every camera must match exactly one entry (else
+  exit 2 naming the camera and the entries); entries no camera matches are listed and
+  ignored.
+- Instants (monet_ros.io.frame_sources): an image is the instant of the number in its
+  file name (frame_0004.png -> 4, counted from the session's smallest number; names
+  without numbers: name order, with a note); a video frame is the instant nearest its
+  container time at the instant rate (round(time * fps); the frame index for a constant
+  frame rate video; --timing index: always the index). A file or frame that is not there
+  is a missing view at its instant; a second frame nearest one instant (VFR) is dropped;
+  both are counted and printed, and a variable-frame-rate video is named with how its
+  frames were placed.
+- Stamps: stamp of instant i = start + round(i * 1e9 / fps) ns, the same for every
+  camera's view of it; --offsets cam=N: camera c's instant N becomes instant 0 (its
+  first N dropped), N < 0 delays it by |N| instants. fps (the instant rate): --fps, else
+  the videos' own rate (they must agree; image folders need --fps).
+- Topics per camera NAME: /NAME/image_raw/compressed (CompressedImage, the default;
+  --format jpeg|png, png is lossless) or, with --raw, /NAME/image_raw (Image rgb8,
   lossless), /NAME/camera_info every frame (K, D, size; frame NAME_optical), and one
   /tf_static (world -> NAME_optical).
 - Image size (monet_ros.io.rig_fit.fit_camera): the calibration's size must be the
@@ -39,14 +47,14 @@ import sys
 
 import numpy as np
 
+from monet_ros.io.frame_sources import FrameSourceError
+
 HELP = 'videos (or image folders) + calibration -> a rosbag2 MCAP recording'
-VIDEO_SUFFIXES = ('.mp4', '.avi', '.mkv', '.mov', '.mpg', '.mpeg', '.m4v', '.webm', '.wmv',
-                  '.mts', '.ts', '.flv')
-IMAGE_SUFFIXES = ('.png', '.jpg', '.jpeg', '.bmp', '.tif', '.tiff')
 DEFAULT_START_NS = 1_767_225_600_000_000_000          # 2026-01-01T00:00:00Z
+TIMINGS = ('container', 'index')
 
 
-class ImportVideoError(ValueError):
+class ImportVideoError(FrameSourceError):
     """A session, calibration or option that cannot be imported; the message names it."""
 
 
@@ -58,99 +66,32 @@ def add_arguments(parser):
     p.add_argument('--calibration', required=True, help='calibration / rig file (any format '
                    'monet_ros.geometry.load_rig reads: anipose/Pose2Sim TOML, rig YAML, ...)')
     p.add_argument('--out', required=True, help='output rosbag2 folder (must not exist)')
-    p.add_argument('--fps', type=float, default=None, help='frame rate (default: the videos)')
+    p.add_argument('--fps', type=float, default=None, help='instant rate (default: the '
+                   "videos'); video frames go to the instant nearest their container time")
+    p.add_argument('--timing', choices=TIMINGS, default='container',
+                   help='video frame -> instant: container time (default) or frame index '
+                   '(a slow-motion file whose container rate is not the capture rate)')
     p.add_argument('--offsets', action='append', default=[], metavar='CAM=N',
                    help="drop camera CAM's first N frames (negative: delay it); repeatable")
     p.add_argument('--resize', type=float, default=1.0, help='scale images and calibration '
                    '(0 < s <= 1, e.g. 0.5)')
     group = p.add_mutually_exclusive_group()
-    group.add_argument('--compressed', dest='raw', action='store_false',
-                       help='CompressedImage topics (default)')
-    group.add_argument('--raw', dest='raw', action='store_true', help='raw Image rgb8 topics')
-    p.add_argument('--format', choices=('jpeg', 'png'), default='jpeg',
-                   help='compression of --compressed (png is lossless)')
+    group.add_argument('--compressed', dest='transport', action='store_const',
+                       const='compressed', help='CompressedImage topics (default)')
+    group.add_argument('--raw', dest='transport', action='store_const', const='raw',
+                       help='raw Image rgb8 topics')
+    p.set_defaults(transport='compressed')
+    p.add_argument('--format', choices=('jpeg', 'png'), default=None,
+                   help='compression of the CompressedImage topics (default jpeg; png is '
+                   'lossless)')
     p.add_argument('--quality', type=int, default=90, help='JPEG quality 1..100')
     p.add_argument('--camera-map', action='append', default=[], metavar='SRC=DST',
                    help='rename calibration cameras (e.g. cam_01=cam01); repeatable')
     p.add_argument('--start-ns', type=int, default=DEFAULT_START_NS,
                    help='stamp of instant 0 (ns; default 2026-01-01T00:00:00Z)')
-    p.add_argument('--max-frames', type=int, default=0, help='import at most N instants')
+    p.add_argument('--max-frames', type=int, default=0, help='import at most N instants '
+                   '(0 = all)')
     p.add_argument('--quiet', action='store_true', help='no progress bar')
-
-
-class _Source:
-    """Frames of one camera: a video (OpenCV) or a folder of images; rgb uint8."""
-
-    def __init__(self, path):
-        import cv2
-        self.path = Path(path)
-        if self.path.is_dir():
-            self.files = sorted(f for f in self.path.iterdir()
-                                if f.suffix.lower() in IMAGE_SUFFIXES)
-            if not self.files:
-                raise ImportVideoError(f'{self.path}: no image ({", ".join(IMAGE_SUFFIXES)})')
-            first = self._imread(self.files[0])
-            self.height, self.width = first.shape[:2]
-            self.count, self.fps, self.capture, self.position = len(self.files), None, None, 0
-            return
-        self.files = None
-        self.capture = cv2.VideoCapture(str(self.path))
-        if not self.capture.isOpened():
-            raise ImportVideoError(f'{self.path}: OpenCV cannot open this video')
-        self.width = int(self.capture.get(cv2.CAP_PROP_FRAME_WIDTH))
-        self.height = int(self.capture.get(cv2.CAP_PROP_FRAME_HEIGHT))
-        self.count = int(self.capture.get(cv2.CAP_PROP_FRAME_COUNT))
-        fps = float(self.capture.get(cv2.CAP_PROP_FPS))
-        self.fps = fps if np.isfinite(fps) and fps > 0 else None
-        self.position = 0
-
-    def _imread(self, path):
-        import cv2
-        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if image is None:
-            raise ImportVideoError(f'{path}: cannot read the image')
-        return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
-
-    def read(self):
-        """Next frame (H, W, 3) rgb uint8, or None at the end."""
-        import cv2
-        if self.files is not None:
-            if self.position >= len(self.files):
-                return None
-            image = self._imread(self.files[self.position])
-        else:
-            ok, image = self.capture.read()
-            if not ok:
-                return None
-            image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
-        self.position += 1
-        if image.shape[:2] != (self.height, self.width):
-            raise ImportVideoError(f'{self.path}: frame {self.position - 1} is '
-                                   f'{image.shape[1]}x{image.shape[0]}, the first was '
-                                   f'{self.width}x{self.height}')
-        return image
-
-    def close(self):
-        if self.capture is not None:
-            self.capture.release()
-
-
-def session_entries(session):
-    """{name: path} of the videos and image folders in a session folder."""
-    session = Path(session)
-    if not session.is_dir():
-        raise ImportVideoError(f'{session}: not a folder')
-    out = {}
-    for entry in sorted(session.iterdir()):
-        if entry.is_file() and entry.suffix.lower() in VIDEO_SUFFIXES:
-            out[entry.name] = entry
-        elif entry.is_dir() and any(f.suffix.lower() in IMAGE_SUFFIXES
-                                    for f in entry.iterdir()):
-            out[entry.name] = entry
-    if not out:
-        raise ImportVideoError(f'{session}: no video ({", ".join(VIDEO_SUFFIXES)}) or image '
-                               'folder')
-    return out
 
 
 def _offsets(items, names):
@@ -168,25 +109,143 @@ def _offsets(items, names):
     return out
 
 
-def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, raw=False,
-                  fmt='jpeg', quality=90, camera_map=(), start_ns=DEFAULT_START_NS,
-                  max_frames=0, progress=True):
-    """Write the recording (module docstring). Returns a dict: cameras (Camera list as
-    written), files {camera: path}, instants, stamps (first, last), fps, notes, skipped
-    {camera: frames dropped by offsets / beyond the shortest camera}."""
-    from tqdm import tqdm
-
-    from monet_ros.geometry import load_rig
-    from monet_ros.io import BagWriter
-    from monet_ros.io.rig_fit import fit_camera
-    from monet_ros.labels import match_camera_names, parse_name_map
-
+def _check_options(fps, resize, quality, start_ns, max_frames, timing):
+    """ImportVideoError naming the first option out of its range."""
     if not 0 < resize <= 1:
         raise ImportVideoError(f'--resize must be in (0, 1], got {resize}')
     if fps is not None and not (np.isfinite(fps) and fps > 0):
         raise ImportVideoError(f'--fps must be positive, got {fps}')
     if not 1 <= int(quality) <= 100:
         raise ImportVideoError(f'--quality must be in 1..100, got {quality}')
+    if int(start_ns) < 0:
+        raise ImportVideoError(f'--start-ns must be >= 0 ns, got {start_ns}')
+    if int(max_frames) < 0:
+        raise ImportVideoError(f'--max-frames must be >= 0 (0 = every instant), got '
+                               f'{max_frames}')
+    if timing not in TIMINGS:
+        raise ImportVideoError(f'--timing must be one of {", ".join(TIMINGS)}, got {timing!r}')
+
+
+class _Placer:
+    """Frames of one FrameSource, each at its instant (module docstring), one ahead."""
+
+    def __init__(self, source, fps, timing, base, offset):
+        self.source, self.fps, self.timing, self.base, self.offset = (source, fps, timing,
+                                                                      base, offset)
+        self.skipped = 0            # frames before instant 0 (offsets)
+        self.dropped = 0            # a second frame nearest an instant already given
+        self.missing = 0            # instants (up to the last written) without this view
+        self.worst_ms = 0.0         # largest |container time - instant time| kept
+        self.pending = self._next()
+
+    def _instant(self, key):
+        """(instant before the offset, |time - instant time| ms) of a frame key."""
+        src = self.source
+        if src.kind == 'images':
+            return key - (self.base if src.numbered else 0), 0.0
+        if self.timing == 'index' or not src.times_ok:
+            return src.position - 1, 0.0
+        instant = int(round(key * self.fps / 1000.0))
+        return instant, abs(key - instant * 1000.0 / self.fps)
+
+    def _next(self):
+        while True:
+            item = self.source.read()
+            if item is None:
+                return None
+            instant, off_ms = self._instant(item[0])
+            if instant - self.offset < 0:
+                self.skipped += 1
+                continue
+            return instant - self.offset, off_ms, item[1]
+
+    def take(self, t):
+        """The image of instant t or None (a missing view, counted). Of several frames
+        nearest instant t the one nearest in time is kept, the others are dropped."""
+        while self.pending is not None and self.pending[0] < t:
+            self.dropped += 1          # a guard: instants never go back (FrameSource)
+            self.pending = self._next()
+        if self.pending is None or self.pending[0] > t:
+            self.missing += 1
+            return None
+        best = self.pending
+        self.pending = self._next()
+        while self.pending is not None and self.pending[0] == t:
+            self.dropped += 1
+            if self.pending[1] < best[1]:
+                best = self.pending
+            self.pending = self._next()
+        self.worst_ms = max(self.worst_ms, best[1])
+        return best[2]
+
+    def remaining(self):
+        """Read and count the frames left (after --max-frames)."""
+        count = 0 if self.pending is None else 1
+        while self.source.read() is not None:
+            count += 1
+        self.pending = None
+        return count
+
+
+def _rate(names, sources, files, fps):
+    """The instant rate: --fps, else the videos' agreeing nominal rate."""
+    if fps is not None:
+        return float(fps)
+    rates = {n: s.fps for n, s in sources.items() if s.fps}
+    if len(rates) != len(names):
+        raise ImportVideoError('--fps is needed: ' + ', '.join(
+            str(files[n]) for n in names if n not in rates) + ' has no frame rate')
+    if max(rates.values()) - min(rates.values()) > 1e-3 * max(rates.values()):
+        raise ImportVideoError('the videos disagree on the frame rate ('
+                               + ', '.join(f'{n} {r:g}' for n, r in rates.items())
+                               + '); give --fps (the instant rate: frames go to the instant '
+                               'nearest their container time)')
+    return float(np.median(list(rates.values())))
+
+
+def _timing_notes(placers, files, fps, timing, fps_given):
+    notes = []
+    for name, p in placers.items():
+        src = p.source
+        if src.kind != 'video':
+            continue
+        if not src.times_ok and src.position > 1:
+            notes.append(f'{files[name]}: no container timestamps: frames stamped by index '
+                         f'at {fps:g} fps')
+        elif src.variable_rate:
+            low, high = src.intervals_ms
+            how = (f'--timing index stamped its frames by index at {fps:g} fps (container '
+                   'times ignored)' if timing == 'index' else
+                   f'{"--fps " if fps_given else ""}{fps:g} fps is the instant grid: each '
+                   f'frame went to the instant nearest its container time (at most '
+                   f'{p.worst_ms:.1f} ms off), not to its index')
+            notes.append(f'{files[name]} has a variable frame rate (frame intervals '
+                         f'{low:.1f}..{high:.1f} ms): {how}')
+        elif timing == 'container' and src.fps and abs(src.fps - fps) > 1e-3 * fps:
+            notes.append(f'{files[name]} is {src.fps:g} fps, the instant rate {fps:g} fps: '
+                         'frames placed by container time (use --timing index to stamp '
+                         'every frame by its index instead)')
+    return notes
+
+
+def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, raw=False,
+                  fmt='jpeg', quality=90, camera_map=(), start_ns=DEFAULT_START_NS,
+                  max_frames=0, progress=True, timing='container'):
+    """Write the recording (module docstring). Returns a dict: cameras (Camera list as
+    written), files {camera: path}, instants, stamps (first, last), fps, notes, skipped
+    {camera: frames not imported: before instant 0 by offsets, beyond --max-frames},
+    missing {camera: instants without its view}, dropped {camera: frames sharing an
+    instant with an earlier one}, counts {camera: frames read}. Raises ImportVideoError
+    (a ValueError) naming the file or option."""
+    from tqdm import tqdm
+
+    from monet_ros.geometry import load_rig
+    from monet_ros.io import BagWriter
+    from monet_ros.io.frame_sources import FrameSource, session_entries
+    from monet_ros.io.rig_fit import fit_camera
+    from monet_ros.labels import match_camera_names, parse_name_map
+
+    _check_options(fps, resize, quality, start_ns, max_frames, timing)
     if Path(out).exists():
         raise ImportVideoError(f'{out}: output exists; choose a new folder')
     rename = dict(parse_name_map(camera_map, 'camera'))
@@ -196,19 +255,15 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
     entries = session_entries(session)
     files = {cam: entries[e] for cam, e in match_camera_names(names, list(entries)).items()}
     shifts = _offsets(offsets, names)
-    sources = {n: _Source(files[n]) for n in names}
+    sources = {}
     notes, final = [], []
     try:
-        rates = {n: s.fps for n, s in sources.items() if s.fps}
-        if fps is None:
-            if len(rates) != len(names):
-                raise ImportVideoError('--fps is needed: ' + ', '.join(
-                    str(files[n]) for n in names if n not in rates) + ' has no frame rate')
-            if max(rates.values()) - min(rates.values()) > 1e-3 * max(rates.values()):
-                raise ImportVideoError('the videos disagree on the frame rate ('
-                                       + ', '.join(f'{n} {r:g}' for n, r in rates.items())
-                                       + '); give --fps')
-            fps = float(np.median(list(rates.values())))
+        for n in names:
+            sources[n] = FrameSource(files[n])
+        rate = _rate(names, sources, files, fps)
+        firsts = [s.first_number for s in sources.values() if s.first_number is not None]
+        base = min(firsts) if firsts else 0
+        notes += [s.order_note for s in sources.values() if s.order_note]
         for cam in cameras:
             src = sources[cam.name]
             fitted, note = fit_camera(cam, src.width, src.height, files[cam.name])
@@ -219,33 +274,27 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
                 fitted = fitted.crop((0, 0, fitted.width, fitted.height), size)
             final.append(fitted.replace(topic=(f'/{cam.name}/image_raw' if raw
                                                else f'/{cam.name}/image_raw/compressed')))
-        skipped = {n: 0 for n in names}
-        for n, k in shifts.items():              # drop the first k frames
-            for _ in range(max(k, 0)):
-                if sources[n].read() is None:
-                    break
-                skipped[n] += 1
-        lengths = {n: max(s.count - max(shifts.get(n, 0), 0), 0) + max(-shifts.get(n, 0), 0)
-                   for n, s in sources.items()}
-        total = max(lengths.values()) if lengths else 0
+        placers = {n: _Placer(sources[n], rate, timing, base, shifts.get(n, 0))
+                   for n in names}
+        spans = [(s.numbers[-1] - base if s.kind == 'images' and s.numbered else s.count - 1)
+                 - shifts.get(n, 0) + 1 for n, s in sources.items()]
+        total = max(max(spans), 0)
         if max_frames:
             total = min(total, int(max_frames))
-        period = 1e9 / fps
+        period = 1e9 / rate
         stamps = []
         with BagWriter(out) as writer:
             writer.write_tf_static(int(start_ns), final)
             bar = tqdm(total=total or None, desc='monet import videos', unit='instant',
                        disable=not progress, file=sys.stderr)
-            t, active = 0, set(names)
-            while active and (not max_frames or t < max_frames):
+            t = 0
+            while any(p.pending is not None for p in placers.values()) and \
+                    (not max_frames or t < max_frames):
                 stamp = int(start_ns) + int(round(t * period))
                 wrote = False
                 for cam in final:
-                    if cam.name not in active or t < -min(shifts.get(cam.name, 0), 0):
-                        continue
-                    image = sources[cam.name].read()
+                    image = placers[cam.name].take(t)
                     if image is None:
-                        active.discard(cam.name)
                         continue
                     if (image.shape[1], image.shape[0]) != (cam.width, cam.height):
                         import cv2
@@ -259,16 +308,17 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
                                                       fmt=fmt, quality=quality)
                     writer.write_camera_info(f'/{cam.name}/camera_info', stamp, cam, frame_id)
                     wrote = True
-                if not wrote:
-                    break
-                stamps.append(stamp)
+                if wrote:
+                    stamps.append(stamp)
+                else:                  # no camera has this instant: not in the recording
+                    for p in placers.values():
+                        p.missing -= 1
                 bar.update(1)
                 t += 1
             bar.close()
-        if max_frames:
-            for n in names:
-                while sources[n].read() is not None:
-                    skipped[n] += 1
+        skipped = {n: p.skipped + (p.remaining() if max_frames else 0)
+                   for n, p in placers.items()}
+        notes += _timing_notes(placers, files, rate, timing, fps is not None)
     except BaseException:
         shutil.rmtree(out, ignore_errors=True)   # no half-written recording (rerun works)
         raise
@@ -279,7 +329,9 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
         shutil.rmtree(out, ignore_errors=True)
         raise ImportVideoError(f'{session}: no frame could be read')
     return dict(cameras=final, files=files, instants=len(stamps), stamps=(stamps[0],
-                stamps[-1]), fps=fps, notes=notes, skipped=skipped,
+                stamps[-1]), fps=rate, notes=notes, skipped=skipped,
+                missing={n: p.missing for n, p in placers.items()},
+                dropped={n: p.dropped for n, p in placers.items()},
                 counts={n: sources[n].position for n in names})
 
 
@@ -288,23 +340,36 @@ def run(args):
     from monet_ros.io import BagWriterError
     from monet_ros.labels import LabelError
 
+    prog = 'monet import videos'
+    raw = args.transport == 'raw'
+    if raw and args.format is not None:
+        print(f'{prog}: --format {args.format} applies to CompressedImage topics, not --raw',
+              file=sys.stderr)
+        return 2
     try:
         result = import_videos(args.session, args.calibration, args.out, fps=args.fps,
-                               offsets=args.offsets, resize=args.resize, raw=args.raw,
-                               fmt=args.format, quality=args.quality,
+                               offsets=args.offsets, resize=args.resize, raw=raw,
+                               fmt=args.format or 'jpeg', quality=args.quality,
                                camera_map=args.camera_map, start_ns=args.start_ns,
-                               max_frames=args.max_frames, progress=not args.quiet)
+                               max_frames=args.max_frames, progress=not args.quiet,
+                               timing=args.timing)
     except (ImportVideoError, LabelError, RigError, BagWriterError, ValueError,
             OSError) as error:
-        print(f'monet import videos: {error}', file=sys.stderr)
+        print(f'{prog}: {error}', file=sys.stderr)
         return 2
     for note in result['notes']:
-        print(f'monet import videos: note: {note}', file=sys.stderr)
+        print(f'{prog}: note: {note}', file=sys.stderr)
     dropped = {n: k for n, k in result['skipped'].items() if k}
-    print(f'monet import videos: {len(result["cameras"])} cameras x {result["instants"]} '
-          f'instants at {result["fps"]:g} fps, stamps {result["stamps"][0]} .. '
+    missing = {n: k for n, k in result['missing'].items() if k}
+    doubled = {n: k for n, k in result['dropped'].items() if k}
+    kind = 'Image rgb8' if raw else f'CompressedImage {args.format or "jpeg"}'
+    print(f'{prog}: {len(result["cameras"])} cameras x {result["instants"]} '
+          f'instants at {result["fps"]:g} fps ({kind}), stamps {result["stamps"][0]} .. '
           f'{result["stamps"][1]} ns -> {args.out}'
-          + (f'; frames not imported (offsets / --max-frames): {dropped}' if dropped else ''))
+          + (f'; frames not imported (offsets / --max-frames): {dropped}' if dropped else '')
+          + (f'; instants without a view (missing frames): {missing}' if missing else '')
+          + (f'; frames dropped (a second frame nearest one instant): {doubled}'
+             if doubled else ''))
     for cam in result['cameras']:
         print(f'  {cam.name} <- {result["files"][cam.name]} ({cam.width}x{cam.height}, '
               f'{result["counts"][cam.name]} frames read)')

@@ -174,3 +174,185 @@ def test_negative_offset_delays_a_camera_and_a_failed_import_leaves_nothing(sess
     assert main(args) == 2
     assert 'trial_cam2: frame 4 is 10x10, the first was 64x48' in capsys.readouterr().err
     assert not (tmp_path / 'b').exists()
+
+
+def _save_folder(folder, frames, numbers, pattern='frame_{:04d}.png'):
+    folder.mkdir(parents=True)
+    for f, n in zip(frames, numbers):
+        cv2.imwrite(str(folder / pattern.format(n)), cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+
+
+def _decoded(bag, topic):
+    """{stamp: rgb image} of an image topic (CompressedImage or Image)."""
+    from monet_ros.io.images import any_image_to_numpy
+    return {m.stamp_ns: np.asarray(any_image_to_numpy(m.msg)) for m in bag.messages([topic])}
+
+
+def test_image_folders_with_gaps_are_matched_by_file_number(session, tmp_path, capsys):
+    """cam1 lacks frame_0004/0005: its views of instants 4 and 5 are missing (counted and
+    printed), every other view is the file of its own number; numbering from 1 works and
+    names without numbers fall back to name order with a note."""
+    root, cams, _ = session
+    frames = np.random.default_rng(5).integers(0, 256, (3, 10, 48, 64, 3), dtype=np.uint8)
+    videos = tmp_path / 'gaps'
+    numbers = {0: range(1, 11), 1: [n for n in range(1, 11) if n not in (5, 6)],
+               2: range(2, 11)}                      # cam2 lacks its first file too
+    for v, numbers_v in numbers.items():
+        _save_folder(videos / f'cam{v}', frames[v, [n - 1 for n in numbers_v]], numbers_v)
+    out = tmp_path / 'rec'
+    assert main(['import', 'videos', str(videos), '--calibration',
+                 str(root / 'calibration.yaml'), '--out', str(out), '--fps', '30',
+                 '--format', 'png', '--start-ns', str(START), '--quiet']) == 0
+    text = capsys.readouterr().out
+    assert "instants without a view (missing frames): {'cam1': 2, 'cam2': 1}" in text
+    bag = open_bag(out)
+    for v, numbers_v in numbers.items():
+        got = _decoded(bag, f'/cam{v}/image_raw/compressed')
+        # file N is instant N - 1 (the session's smallest number is 1): stamp and pixels
+        assert sorted(got) == [START + round((n - 1) * 1e9 / FPS) for n in numbers_v]
+        for n in numbers_v:
+            np.testing.assert_array_equal(got[START + round((n - 1) * 1e9 / FPS)],
+                                          frames[v, n - 1])
+    rec = load_recording(out, skeleton=('a',))
+    assert rec.num_instants == 7 and rec.skipped == 3          # instants 0, 4, 5 incomplete
+    # names without numbers: name order, said so
+    plain = tmp_path / 'plain'
+    for v in range(3):
+        _save_folder(plain / f'cam{v}', frames[v, :3], 'abc', pattern='{}.png')
+    assert main(['import', 'videos', str(plain), '--calibration',
+                 str(root / 'calibration.yaml'), '--out', str(tmp_path / 'p'), '--fps', '30',
+                 '--quiet']) == 0
+    err = capsys.readouterr().err
+    assert 'cam0: file names carry no frame number: frames taken in name order' in err
+    # two files of one number: named
+    _save_folder(tmp_path / 'dup' / 'cam0', frames[0, :2], (3, 3), pattern='{}_x.png')
+    cv2.imwrite(str(tmp_path / 'dup' / 'cam0' / 'img03.png'), frames[0, 0])
+    for v in (1, 2):
+        _save_folder(tmp_path / 'dup' / f'cam{v}', frames[v, :1], (3,))
+    assert main(['import', 'videos', str(tmp_path / 'dup'), '--calibration',
+                 str(root / 'calibration.yaml'), '--out', str(tmp_path / 'd'), '--fps', '30',
+                 '--quiet']) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count('\n') == 0 and 'frame number 3 is also' in err
+
+
+VFR_TIMES = np.array([0, 20, 40, 60, 80, 100, 133, 200, 266, 333, 433, 533]) / 1000.0
+
+
+def _vfr_session(tmp_path, session):
+    """cam0, cam1: constant 30 fps FFV1 .mkv; cam2: an MP4 whose frames have the container
+    times VFR_TIMES (frame j is flat grey 20 j, so it is known after lossy coding)."""
+    from helpers.videos import write_vfr_mp4
+
+    root, cams, _ = session
+    frames = np.random.default_rng(9).integers(0, 256, (2, 17, 48, 64, 3), dtype=np.uint8)
+    videos = tmp_path / 'vfr'
+    videos.mkdir()
+    for v in range(2):
+        writer = cv2.VideoWriter(str(videos / f'cam{v}.mkv'), cv2.VideoWriter_fourcc(*'FFV1'),
+                                 FPS, (64, 48))
+        for f in frames[v]:
+            writer.write(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+        writer.release()
+    grey = np.stack([np.full((48, 64, 3), 20 * j, np.uint8) for j in range(len(VFR_TIMES))])
+    write_vfr_mp4(videos / 'cam2.mp4', grey, VFR_TIMES)
+    # the container really holds these times (OpenCV's own reading)
+    cap = cv2.VideoCapture(str(videos / 'cam2.mp4'))
+    times = []
+    while cap.read()[0]:
+        times.append(cap.get(cv2.CAP_PROP_POS_MSEC))
+    np.testing.assert_allclose(times, VFR_TIMES * 1000, atol=0.5)
+    return root, videos, frames
+
+
+def test_variable_frame_rate_video_is_stamped_by_container_time(session, tmp_path, capsys):
+    """A VFR camera beside two 30 fps ones: without --fps the rates disagree (exit 2,
+    advising --fps); with --fps 30 each of its frames is at the instant nearest its
+    container time (frame 11 at 533 ms -> instant 16, not 11), the nearer of two frames
+    of one instant is kept, and the note names the VFR video and what --fps did."""
+    root, videos, frames = _vfr_session(tmp_path, session)
+    args = ['import', 'videos', str(videos), '--calibration', str(root / 'calibration.yaml'),
+            '--start-ns', str(START), '--raw', '--quiet']
+    assert main(args + ['--out', str(tmp_path / 'x')]) == 2
+    assert 'disagree on the frame rate' in capsys.readouterr().err
+    out = tmp_path / 'rec'
+    assert main(args + ['--out', str(out), '--fps', '30']) == 0
+    captured = capsys.readouterr()
+    assert 'cam2.mp4 has a variable frame rate (frame intervals 20.0..100.0 ms)' in \
+        captured.err
+    assert '--fps 30 fps is the instant grid' in captured.err and 'not to its index' in \
+        captured.err
+    bag = open_bag(out)
+    got = _decoded(bag, '/cam2/image_raw')
+    # independent: instant of each frame = round(time * fps); per instant the nearest frame
+    instant = np.round(VFR_TIMES * FPS).astype(int)
+    expected = {}
+    for i in np.unique(instant):
+        js = np.flatnonzero(instant == i)
+        expected[i] = js[np.argmin(np.abs(VFR_TIMES[js] - i / FPS))]
+    assert sorted(got) == [START + round(i * 1e9 / FPS) for i in sorted(expected)]
+    for i, j in expected.items():
+        stamp = START + round(i * 1e9 / FPS)
+        assert abs(float(got[stamp].mean()) - 20 * j) < 4, (i, j)
+        assert abs(stamp - START - VFR_TIMES[j] * 1e9) <= 0.5e9 / FPS
+    assert START + round(16 * 1e9 / FPS) in got                    # frame 11 at 533 ms
+    n_missing = 17 - len(expected)
+    assert f"instants without a view (missing frames): {{'cam2': {n_missing}}}" in \
+        captured.out
+    assert f"frames dropped (a second frame nearest one instant): {{'cam2': " \
+        f"{len(VFR_TIMES) - len(expected)}}}" in captured.out
+    # the constant-rate cameras: frame j at instant j, exactly
+    for v in range(2):
+        cfr = _decoded(bag, f'/cam{v}/image_raw')
+        assert sorted(cfr) == [START + round(i * 1e9 / FPS) for i in range(17)]
+        np.testing.assert_array_equal(cfr[START + round(5 * 1e9 / FPS)], frames[v, 5])
+    # --timing index: by index, and said so
+    assert main(args + ['--out', str(tmp_path / 'idx'), '--fps', '30', '--timing',
+                        'index']) == 0
+    assert '--timing index stamped its frames by index' in capsys.readouterr().err
+    assert len(_decoded(open_bag(tmp_path / 'idx'), '/cam2/image_raw')) == len(VFR_TIMES)
+
+
+def test_default_is_compressed_jpeg_and_format_png_alone_works(session, tmp_path, capsys):
+    """No transport option: CompressedImage jpeg topics (as help and README say); --format
+    png alone: CompressedImage png, lossless; --raw: Image."""
+    root, cams, frames = session
+    base = ['import', 'videos', str(root / 'videos'), '--calibration',
+            str(root / 'calibration.yaml'), '--fps', '30', '--max-frames', '2', '--quiet']
+    assert main(base + ['--out', str(tmp_path / 'd')]) == 0
+    assert '(CompressedImage jpeg)' in capsys.readouterr().out
+    bag = open_bag(tmp_path / 'd')
+    for cam in cams:
+        assert f'/{cam.name}/image_raw' not in bag.topics
+        info = bag.topics[f'/{cam.name}/image_raw/compressed']
+        assert info.msgtype == 'sensor_msgs/msg/CompressedImage' and info.count == 2
+    assert {m.msg.format for m in bag.messages(['/cam0/image_raw/compressed'])} == {'jpeg'}
+    assert main(base + ['--out', str(tmp_path / 'p'), '--format', 'png']) == 0
+    bag = open_bag(tmp_path / 'p')
+    assert {m.msg.format for m in bag.messages(['/cam2/image_raw/compressed'])} == {'png'}
+    got = _decoded(bag, '/cam2/image_raw/compressed')
+    np.testing.assert_array_equal([got[s] for s in sorted(got)], frames[2, :2])
+    assert main(base + ['--out', str(tmp_path / 'r'), '--raw']) == 0
+    assert open_bag(tmp_path / 'r').topics['/cam0/image_raw'].msgtype == \
+        'sensor_msgs/msg/Image'
+    capsys.readouterr()
+    assert main(base + ['--out', str(tmp_path / 'rp'), '--raw', '--format', 'png']) == 2
+    assert '--format png applies to CompressedImage topics, not --raw' in \
+        capsys.readouterr().err
+
+
+@pytest.mark.parametrize('option, value, message', [
+    ('--max-frames', '-1', '--max-frames must be >= 0 (0 = every instant), got -1'),
+    ('--start-ns', '-5', '--start-ns must be >= 0 ns, got -5'),
+    ('--fps', '0', '--fps must be positive, got 0.0'),
+    ('--quality', '0', '--quality must be in 1..100, got 0'),
+    ('--resize', '2', '--resize must be in (0, 1], got 2.0'),
+])
+def test_option_errors_name_the_option(session, tmp_path, capsys, option, value, message):
+    root, _, _ = session
+    assert main(['import', 'videos', str(root / 'videos'), '--calibration',
+                 str(root / 'calibration.yaml'), '--out', str(tmp_path / 'o'), '--fps', '30',
+                 option, value, '--quiet']) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f'monet import videos: {message}'
+    assert not (tmp_path / 'o').exists()
