@@ -5,11 +5,16 @@ load_reference(path, index, keypoints, ...) -> Reference on the recording's inst
 - 2D sources (labels CSV stamp/frame keyed, dlc, lightning-pose, sleap, anipose, dannce)
   go through the one label validator (monet_ros.labels.resolve_labels); the 3D reference
   is then their triangulation (DLT over the labelled views, >= 2 views);
-- TRC: Frame# N (1-based) is instant N-1 of the recording (the recording imported from
-  the same videos from their first frame); Units mm / cm / m converted to metres;
-  axes='yzx' undoes a Y-up file (Pose2Sim);
-- anipose CSV: rows matched by stamp_ns when present (nearest instant within half a
-  frame period), else fnum = instant index.
+- TRC: row Frame# N is at (N - 1) / DataRate s after the recording's first instant
+  (the recording imported from the same videos from their first frame; the Time column
+  is not used: Pose2Sim writes Frame# / DataRate, OpenSim (Frame# - 1) / DataRate); Units
+  mm / cm / m converted to metres; axes='yzx' undoes a Y-up file (Pose2Sim);
+- anipose CSV: rows at their stamp_ns when present, else at fnum / reference_fps s after
+  the first instant (default: the recording's median frame period);
+- rows are put on the recording's instants by time (align_rows): at the same rate the
+  nearest row within half a frame period; at another rate resampled by linear
+  interpolation in time (or refused); rows outside the recording are counted
+  (`Reference.alignment`), never paired by index.
 Reference keypoints are matched to the model's by name (keypoint_map renames); names the
 model lacks are listed in `Reference.unused` and not scored.
 
@@ -34,7 +39,8 @@ LABEL_FORMATS = ('labels', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'dannce'
 class Reference:
     """source; keypoints (C, the model's order); stamps (T,) recording instants;
     points2d (T, V, C, 2) px or None; X (T, C, 3) metres (NaN = none); unused: reference
-    keypoint names the model lacks; kind '2d' (labels, X triangulated) or '3d'."""
+    keypoint names the model lacks; kind '2d' (labels, X triangulated) or '3d'; alignment:
+    how 3D rows were put on the instants (align_rows' info), None for labels."""
     source: str
     keypoints: tuple
     stamps: np.ndarray
@@ -42,6 +48,7 @@ class Reference:
     X: np.ndarray
     kind: str
     unused: tuple = field(default_factory=tuple)
+    alignment: dict = None
 
 
 def guess_format(path):
@@ -90,32 +97,106 @@ def _take(values, pick, shape_tail):
     return out
 
 
-def _instants_3d(path, frames, stamps_ref, stamps):
-    """Instant index per reference row (frames 0-based, or stamps matched nearest)."""
+RATE_POLICIES = ('resample', 'refuse')
+SAME_RATE = 0.02            # relative period difference within which two rates are one
+# (29.97 and 30 Hz are one rate: nearest rows in time follow the drift; 25 and 30 are not)
+
+
+def _rate_text(period_ns):
+    return f'{1e9 / period_ns:.4g} Hz' if period_ns > 0 else 'an unknown rate'
+
+
+def align_rows(path, ref_stamps, values, stamps, ref_period_ns=None, policy='resample'):
+    """Reference rows (3D points at their own times) on the recording's instants.
+
+    ref_stamps (R,) int ns (increasing), values (R, C, 3), stamps (T,) the recording's
+    instants. ref_period_ns: the reference's frame period (default: the median of its
+    stamp differences). Same rate (periods within 0.1 %): each instant takes the row
+    nearest in time within half a recording period ('nearest'). Another rate: policy
+    'resample' interpolates linearly in time between the two rows around each instant
+    (only rows at most 1.5 reference periods apart; an instant on a row takes it as is;
+    a NaN end gives NaN) ('linear'); 'refuse' raises LabelError naming both rates.
+    Returns (X (T, C, 3) NaN where no reference, info dict: rule, reference_hz,
+    recording_hz, rows, rows_unmatched (rows no instant took for 'nearest'; rows more
+    than half a recording period outside the recording's span for 'linear'), instants
+    (with a reference value)). Raises LabelError when no row falls on the recording."""
     from monet_ros.labels import frame_period_ns
-    T = len(stamps)
-    if stamps_ref is not None:
-        tol = frame_period_ns(stamps) // 2
-        j = np.clip(np.searchsorted(stamps, stamps_ref), 1, max(T - 1, 1))
-        cand = np.stack([j - 1, np.minimum(j, T - 1)])
-        d = np.abs(stamps[cand] - stamps_ref[None])
-        best = cand[np.argmin(d, axis=0), np.arange(len(stamps_ref))]
-        bad = np.flatnonzero(np.min(d, axis=0) > tol)
-        if len(bad):
-            raise LabelError(f'{path}:{bad[0] + 2}: field stamp_ns: {stamps_ref[bad[0]]} '
-                             f'matches no instant of the recording ({len(bad)} rows)')
-        return best
-    bad = np.flatnonzero((frames < 0) | (frames >= T))
-    if len(bad):
-        raise LabelError(f'{path}: frame {frames[bad[0]]} (row {bad[0] + 1}) is not an instant '
-                         f'of the recording (0 .. {T - 1}; {len(bad)} rows)')
-    return frames
+    ref = np.asarray(ref_stamps, np.int64)
+    stamps = np.asarray(stamps, np.int64)
+    values = np.asarray(values, float)
+    R, T = len(ref), len(stamps)
+    rec_period = frame_period_ns(stamps)
+    period = int(ref_period_ns) if ref_period_ns else (
+        int((ref[-1] - ref[0]) / (R - 1)) if R > 1 else 0)
+    if R and np.any(np.diff(ref) <= 0):
+        bad = int(np.flatnonzero(np.diff(ref) <= 0)[0]) + 1
+        raise LabelError(f'{path}: row {bad + 1}: time {ref[bad]} ns does not follow '
+                         f'{ref[bad - 1]} ns (rows must be in time order)')
+    if R == 0:
+        raise LabelError(f'{path}: no reference row')
+    same = rec_period <= 0 or period <= 0 or abs(period - rec_period) <= SAME_RATE * rec_period
+    X = np.full((T,) + values.shape[1:], np.nan)
+    half = max(rec_period // 2, 1) if rec_period > 0 else max(period // 2, 1)
+    info = dict(reference_hz=1e9 / period if period > 0 else float('nan'),
+                recording_hz=1e9 / rec_period if rec_period > 0 else float('nan'), rows=R)
+    outside = (ref < stamps[0] - half) | (ref > stamps[-1] + half)
+    if outside.all():
+        raise LabelError(f'{path}: no reference row falls on the recording (rows '
+                         f'{ref[0]} .. {ref[-1]} ns, instants {stamps[0]} .. {stamps[-1]} '
+                         'ns)')
+    j = np.clip(np.searchsorted(ref, stamps), 1, max(R - 1, 1))
+    cand = np.stack([j - 1, np.minimum(j, R - 1)])                  # (2, T) rows around
+    dist = np.abs(ref[cand] - stamps[None])
+    nearest = cand[np.argmin(dist, axis=0), np.arange(T)]
+    near = np.min(dist, axis=0) <= half
+    if same:
+        X[near] = values[nearest[near]]
+        used = np.zeros(R, bool)
+        used[nearest[near]] = True
+        info.update(rule='nearest', rows_unmatched=int((~used).sum()))
+    elif policy == 'refuse':
+        raise LabelError(f'{path}: the reference is at {_rate_text(period)}, the recording '
+                         f'at {_rate_text(rec_period)}: rows cannot be paired one to one; '
+                         'resample it (--reference-rate-mismatch resample) or give a '
+                         'reference at the recording\'s rate')
+    else:
+        if policy not in RATE_POLICIES:
+            raise LabelError(f'reference rate policy must be one of '
+                             f'{", ".join(RATE_POLICIES)}, got {policy!r}')
+        hi = np.searchsorted(ref, stamps, side='right')
+        lo = hi - 1
+        inside = (lo >= 0) & (hi < R)
+        lo_c, hi_c = np.clip(lo, 0, R - 1), np.clip(hi, 0, R - 1)
+        gap = ref[hi_c] - ref[lo_c]
+        ok = inside & (gap > 0) & (gap <= 1.5 * period)
+        w = np.where(ok, (stamps - ref[lo_c]) / np.where(gap > 0, gap, 1), 0.0)
+        X[ok] = (1 - w[ok, None, None]) * values[lo_c[ok]] + w[ok, None, None] * values[
+            hi_c[ok]]
+        on_row = np.min(dist, axis=0) == 0                          # exactly on a row
+        X[on_row] = values[nearest[on_row]]
+        info.update(rule='linear', rows_unmatched=int(outside.sum()))
+    info['instants'] = int(np.isfinite(X).all(-1).any(-1).sum())
+    return X, info
+
+
+def alignment_text(info):
+    """One line: how reference rows were put on the recording's instants."""
+    if info.get('rule') == 'linear':
+        how = (f'{info["reference_hz"]:.4g} Hz resampled to the recording\'s '
+               f'{info["recording_hz"]:.4g} Hz by linear interpolation in time between '
+               'neighbouring rows')
+    else:
+        how = 'rows matched to the nearest instant in time'
+    return (f'{how}; {info["rows"]} rows, {info["rows_unmatched"]} outside the recording; '
+            f'{info["instants"]} instants with a reference')
 
 
 def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
-                   camera=None):
+                   camera=None, reference_fps=None, rate_policy='resample'):
     """Reference of `path` on the recording `index` (commands.info.RecordingIndex) for the
-    model's `keypoints` (module docstring). options: LabelOptions (name maps, skip_bad).
+    model's `keypoints` (module docstring). options: LabelOptions (name maps, skip_bad);
+    reference_fps: rate of an anipose CSV's fnum (default the recording's); rate_policy:
+    'resample' or 'refuse' a 3D reference at another rate (align_rows).
     Raises LabelError (or ExportError) naming the file and what does not fit."""
     from monet_ros.geometry.triangulation import triangulate
     from monet_ros.io.export_tables import read_anipose_csv, read_trc
@@ -134,16 +215,28 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
             if scale is None:
                 raise LabelError(f'{path}:3: field Units: {trc["units"]!r}, expected m, cm '
                                  'or mm')
-            names, values, rows = trc['keypoints'], trc['X'] * scale, trc['frames'] - 1
-            at = _instants_3d(path, rows, None, stamps)
+            if not (np.isfinite(trc['rate']) and trc['rate'] > 0):
+                raise LabelError(f'{path}:3: field DataRate: {trc["rate"]!r}, needed to '
+                                 'put the rows on the recording\'s time')
+            names, values = trc['keypoints'], trc['X'] * scale
+            period = 1e9 / trc['rate']
+            # Frame# 1 is the recording's first instant (Pose2Sim writes Time = Frame# /
+            # DataRate, OpenSim (Frame# - 1) / DataRate: the frame number is the one rule)
+            ref_stamps = stamps[0] + np.round((trc['frames'] - 1) * period).astype(np.int64)
         else:
             table = read_anipose_csv(path)
             names, values = table['keypoints'], table['X']
-            at = _instants_3d(path, table['fnum'], table['stamps_ns'], stamps)
+            period = 1e9 / reference_fps if reference_fps else None
+            if table['stamps_ns'] is not None:
+                ref_stamps = table['stamps_ns']
+            else:           # fnum at --reference-fps, else at the recording's own rate
+                from monet_ros.labels import frame_period_ns
+                step = period or frame_period_ns(stamps)
+                ref_stamps = stamps[0] + np.round(table['fnum'] * step).astype(np.int64)
         pick, unused = _names(names, keypoints, kmap)
-        X = np.full((T, C, 3), np.nan)
-        X[at] = _take(values, pick, (3,))
-        return Reference(str(path), keypoints, stamps, None, X, '3d', unused)
+        X, info = align_rows(path, ref_stamps, _take(values, pick, (3,)), stamps,
+                             ref_period_ns=period, policy=rate_policy)
+        return Reference(str(path), keypoints, stamps, None, X, '3d', unused, info)
     if fmt not in LABEL_FORMATS:
         raise LabelError(f'unknown reference format {fmt!r}; one of trc, anipose3d, '
                          f'{", ".join(LABEL_FORMATS)}')

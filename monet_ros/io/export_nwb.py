@@ -4,14 +4,16 @@ write_nwb(path, result) writes one NWBFile holding, in processing module 'behavi
 - Skeletons with one Skeleton (nodes = keypoints, edges = the skeleton's bones when given);
 - MultiCameraPoseEstimation 'monet_pose': one PoseEstimationSeries per keypoint with the
   3D points (T, 3) in the rig's world frame (metres), confidence = mean peak value of the
-  inlier views, timestamps = header stamps in seconds from the first instant; and one
+  inlier views, timestamps = seconds from the first instant (export_tables.TIME_BASE: the
+  TRC Time of the same instant); and one
   PoseEstimation per camera ('<camera>_2d', device = a CalibratedCamera with K, R, t, dist
   of the source image) whose PoseEstimationSeries hold the 2D detections (T, 2) in source
   image pixels with the heatmap peak value as confidence (NaN where not detected).
-session_start_time = the first stamp (UTC). read back with pynwb.NWBHDF5IO (ndx_pose
-imported).
+session_start_time = the first stamp (UTC, to the microsecond: datetime's resolution), so
+session_start_time + timestamp is the header stamp within 1 us. Read back with
+pynwb.NWBHDF5IO (ndx_pose imported).
 """
-from datetime import datetime, timezone
+from datetime import datetime, timedelta, timezone
 import os
 from pathlib import Path
 
@@ -34,10 +36,12 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
 
     import monet_ros
 
+    from monet_ros.io.export_tables import export_times
+
     stamps = np.asarray(stamps_ns, dtype=np.int64)
-    start = datetime.fromtimestamp(int(stamps[0]) // 1_000_000_000, tz=timezone.utc) \
-        if len(stamps) else datetime.now(timezone.utc)
-    times = (stamps - stamps[0]) / 1e9 if len(stamps) else np.zeros(0)
+    start = datetime.fromtimestamp(0, tz=timezone.utc) + timedelta(
+        microseconds=int(stamps[0]) // 1000) if len(stamps) else datetime.now(timezone.utc)
+    times = export_times(stamps)
     nwb = NWBFile(session_description=description, identifier=f'monet-{int(stamps[0])}'
                   if len(stamps) else 'monet', session_start_time=start)
     behavior = nwb.create_processing_module('behavior', 'keypoints from monet_ros')

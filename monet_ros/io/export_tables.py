@@ -17,8 +17,14 @@ TRC (OpenSim's marker file, the layout Pose2Sim writes; tab separated):
 monet writes the rig's world frame as it is (Units m); Pose2Sim's demo .trc is Y-up
 (trc(X, Y, Z) = world(Y, Z, X)): pass axes='yzx' for OpenSim's convention. Frame numbers
 count instants from the first processed one at the median frame period, so a gap in the
-recording is a gap in Frame#; Time = Frame# / DataRate as Pose2Sim writes it (the rate is
-the median stamp period's, snapped to 0.001 Hz when within 1e-4 Hz).
+recording is a gap in Frame#; the rate is the median stamp period's, snapped to 0.001 Hz
+when within 1e-4 Hz.
+
+One time base for every export (TIME_BASE): time of an instant = (its header stamp - the
+first exported instant's stamp) / 1e9 s, so the first instant is 0.0: TRC Time, the NWB
+timestamps (export_nwb) and stamp_ns - stamp_ns[0] of the CSV / npz are the same numbers.
+(Pose2Sim writes Time = Frame# / DataRate, one period later; readers here place TRC rows
+by Frame#, which both agree on.)
 """
 import csv
 import os
@@ -29,6 +35,7 @@ import numpy as np
 from monet_ros.labels import frame_period_ns
 
 FIELDS = ('x', 'y', 'z', 'error', 'ncams', 'score')
+TIME_BASE = 'seconds from the first exported instant (its header stamp); first instant 0.0'
 AXES = {'xyz': (0, 1, 2), 'yzx': (1, 2, 0)}
 
 
@@ -44,6 +51,13 @@ def frame_numbers(stamps_ns):
     if period <= 0:
         return np.zeros(len(stamps), np.int64)
     return np.round((stamps - stamps[0]) / period).astype(np.int64)
+
+
+def export_times(stamps_ns):
+    """(T,) seconds of each instant from the first one (TIME_BASE): the time column of
+    every export."""
+    stamps = np.asarray(stamps_ns, dtype=np.int64)
+    return (stamps - stamps[0]) / 1e9 if len(stamps) else np.zeros(0)
 
 
 def _cell(x, integer=False):
@@ -147,8 +161,9 @@ def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m'):
              f'{int(fnum[0]) if T else 1}\t{T}',
              'Frame#\tTime\t' + ''.join(f'{k}\t\t\t' for k in keypoints)[:-1],
              '\t\t' + '\t'.join(f'{a}{c + 1}' for c in range(C) for a in 'XYZ')]
+    times = export_times(stamps_ns)
     for t in range(T):
-        time = float(fnum[t] / rate) if rate else 0.0
+        time = float(times[t])
         lines.append(f'{int(fnum[t])}\t{time!r}\t'
                      + '\t'.join(_cell(v) for v in X[t].reshape(-1)))
     with open(tmp, 'w', encoding='utf-8', newline='') as f:

@@ -1,6 +1,6 @@
 """`monet process` writes, beside its MCAP, the anipose CSV, the TRC, the NWB (ndx-pose)
 and the 2D detections with their crop cameras - all equal to the /monet/keypoints3d it
-published - and prints dropout, inlier views and that reprojection error is agreement."""
+published, on one time base (TRC Time = NWB timestamps, first instant 0.0) - and prints dropout, inlier views and that reprojection error is agreement."""
 from helpers.recordings import noise_recording, small_checkpoint
 import numpy as np
 
@@ -49,8 +49,19 @@ def test_process_writes_analysis_files_equal_to_its_mcap(tmp_path, capsys):
                                    - det['points2d'][t, v, c]) for v in views]
             assert abs(np.mean(dist) - csv['error'][t, c]) < 1e-6
             assert len(views) == csv['ncams'][t, c]
+    # one time base (item 11): TRC Time = NWB timestamps = (stamp - first stamp) / 1e9 s,
+    # the first instant 0.0; NWB's session_start_time + timestamp = the stamp (to 1 us)
+    since_first = (np.asarray(stamps) - stamps[0]) / 1e9
+    np.testing.assert_array_equal(trc['times'], since_first)
+    assert trc['times'][0] == 0.0
     with NWBHDF5IO(str(out / 'keypoints.nwb'), 'r') as io:
-        pose = io.read().processing['behavior']['monet_pose']
+        nwb = io.read()
+        pose = nwb.processing['behavior']['monet_pose']
+        for series in (pose.pose_estimation_series['head'],
+                       pose.pose_estimations['cam0_2d'].pose_estimation_series['head']):
+            np.testing.assert_array_equal(series.timestamps[:], trc['times'])
+        start_us = round(nwb.session_start_time.timestamp() * 1e6)
+        assert start_us == stamps[0] // 1000
         np.testing.assert_array_equal(pose.pose_estimation_series['head'].data[:],
                                       csv['X'][:, 0])
         np.testing.assert_array_equal(

@@ -74,8 +74,10 @@ def test_trc_reference_in_mm_and_y_up(scene, tmp_path):
     with pytest.raises(LabelError, match='no reference keypoint'):
         load_reference(path, index, ('x', 'y'))
     long = write_trc(tmp_path / 'long.trc', KP, 10**18 + np.arange(9) * 33_333_333, X[[0] * 9])
-    with pytest.raises(LabelError, match=r'long.trc: frame 5 .* is not an instant'):
-        load_reference(long, index, KP)
+    ref = load_reference(long, index, KP)          # rows after the recording: counted
+    assert ref.alignment['rule'] == 'nearest' and ref.alignment['rows'] == 9
+    assert ref.alignment['rows_unmatched'] == 4 and ref.alignment['instants'] == 5
+    np.testing.assert_allclose(ref.X, X[[0] * 5], rtol=1e-12)
 
 
 def test_real_pose2sim_trc_and_its_projections_agree(shared_data, tmp_path):
@@ -106,3 +108,64 @@ def test_real_pose2sim_trc_and_its_projections_agree(shared_data, tmp_path):
     figures = score(ref2d, index.stamps, ref3d.X, ref2d.points2d)
     assert figures['mm_median'] < 1e-3 and figures['px_median'] == 0.0
     assert figures['views_2d'] == 3 * 4 * 21 and figures['coverage'] == 1.0
+
+
+def _trajectory(t):
+    """(len(t), 3, 3) metres: three joints moving smoothly (not linearly) in time t (s)."""
+    t = np.asarray(t, float)[:, None, None]
+    base = np.array([[0.0, 0.0, 1.0], [0.1, -0.2, 1.2], [-0.3, 0.1, 0.9]])
+    return base + 0.5 * np.sin(2 * np.pi * 1.7 * t + np.arange(3)[:, None]) * \
+        np.array([1.0, 0.5, 0.2])
+
+
+def test_reference_at_another_rate_is_matched_by_time(tmp_path):
+    """A 25 Hz TRC (mm) on a 30 Hz recording: each instant gets the reference linearly
+    interpolated at its own time (np.interp, independently), the row after the recording
+    is counted, never pairs by index; 'refuse' says both rates; an anipose CSV with stamps
+    or with fnum + its fps is put on the same times; same-rate rows with jittered stamps
+    take the nearest."""
+    from monet_ros.io.export_tables import write_anipose_csv
+    cams = ring_rig(3, width=640, height=480, focal=500.0)
+    stamps = 10**18 + 123 + np.round(np.arange(12) * 1e9 / 30).astype(np.int64)
+    index = Index(stamps, cams)
+    t_ref = np.arange(11) / 25.0                                   # 0 .. 0.4 s
+    X_ref = _trajectory(t_ref)
+    ref_stamps = 10**18 + np.round(t_ref * 1e9).astype(np.int64)
+    path = write_trc(tmp_path / 'ref25.trc', KP, ref_stamps, X_ref * 1000.0, units='mm')
+    ref = load_reference(path, index, KP)
+    t_rec = (stamps - stamps[0]) / 1e9
+    expected = np.stack([[[np.interp(t_rec, t_ref, X_ref[:, c, d])[i] for d in range(3)]
+                          for c in range(3)] for i in range(12)])
+    np.testing.assert_allclose(ref.X, expected, rtol=1e-9, atol=1e-12)
+    assert ref.alignment['rule'] == 'linear'
+    assert ref.alignment['reference_hz'] == pytest.approx(25.0)
+    assert ref.alignment['recording_hz'] == pytest.approx(30.0, rel=1e-6)
+    assert ref.alignment['rows'] == 11 and ref.alignment['rows_unmatched'] == 1  # 0.4 s
+    assert ref.alignment['instants'] == 12
+    # scored against the truth at the recording's times, the error is interpolation only
+    figures = score(ref, stamps, _trajectory(t_rec))
+    assert figures['mm_median'] < 25.0 and figures['coverage'] == 1.0
+    with pytest.raises(LabelError, match=r'ref25.trc: the reference is at 25 Hz, the '
+                       r'recording at 30 Hz: rows cannot be paired'):
+        load_reference(path, index, KP, rate_policy='refuse')
+    # anipose CSV with stamps (absolute) at 25 Hz: the same values
+    nan = np.full(X_ref.shape[:2], np.nan)
+    write_anipose_csv(tmp_path / 'ref25.csv', KP, stamps[0] + ref_stamps - 10**18, X_ref,
+                      nan, nan, nan)
+    np.testing.assert_allclose(load_reference(tmp_path / 'ref25.csv', index, KP).X, expected,
+                               rtol=1e-9, atol=1e-12)
+    # ... without stamps (anipose's own layout): fnum at --reference-fps 25
+    lines = (tmp_path / 'ref25.csv').read_text().splitlines()
+    (tmp_path / 'fnum.csv').write_text('\n'.join(line.rsplit(',', 1)[0] for line in lines))
+    np.testing.assert_allclose(load_reference(tmp_path / 'fnum.csv', index, KP,
+                                              reference_fps=25.0).X, expected, rtol=1e-9,
+                               atol=1e-12)
+    # same rate, stamps jittered by up to 2 ms: the nearest row, exactly
+    jitter = stamps + np.array([0, 2, -2, 1, -1, 2, 0, -2, 1, 2, -1, 2]) * 1_000_000
+    X30 = _trajectory(t_rec)
+    write_anipose_csv(tmp_path / 'ref30.csv', KP, jitter[:10], X30[:10], nan[:10], nan[:10],
+                      nan[:10])
+    same = load_reference(tmp_path / 'ref30.csv', index, KP)
+    assert same.alignment['rule'] == 'nearest' and same.alignment['instants'] == 10
+    np.testing.assert_array_equal(same.X[:10], X30[:10])
+    assert np.isnan(same.X[10:]).all()

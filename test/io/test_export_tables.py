@@ -70,7 +70,8 @@ def test_trc_round_trip_is_exact(tmp_path, axes):
     got = read_trc(path, axes=axes)
     assert got['keypoints'] == KP and got['rate'] == 60.0
     np.testing.assert_array_equal(got['frames'], [1, 2, 3, 5])
-    np.testing.assert_allclose(got['times'], np.array([1, 2, 3, 5]) / 60.0)
+    # Time = seconds from the first instant's stamp (the NWB timestamps' base)
+    np.testing.assert_array_equal(got['times'], (STAMPS - STAMPS[0]) / 1e9)
     np.testing.assert_array_equal(got['X'], X)
     if axes == 'yzx':                       # stored Y-up: trc = world(Y, Z, X)
         np.testing.assert_array_equal(read_trc(path)['X'], X[..., [1, 2, 0]])
@@ -89,7 +90,9 @@ def test_real_pose2sim_trc_reads_and_rewrites_identically(shared_data, tmp_path)
     back = read_trc(ours)
     np.testing.assert_array_equal(back['X'], trc['X'])
     np.testing.assert_array_equal(back['frames'], trc['frames'])
-    np.testing.assert_allclose(back['times'], trc['times'], rtol=1e-12)
+    # Pose2Sim's Time is Frame# / DataRate (one period after ours, which starts at 0.0)
+    np.testing.assert_allclose(back['times'] + 1 / 60, trc['times'], rtol=1e-6)
+    assert back['times'][0] == 0.0
     # same header lines as Pose2Sim's own file, apart from the file name
     theirs = path.read_text().splitlines()
     mine = ours.read_text().splitlines()
