@@ -158,7 +158,7 @@ def align_rows(path, ref_stamps, values, stamps, ref_period_ns=None, policy='res
         raise LabelError(f'{path}: the reference is at {_rate_text(period)}, the recording '
                          f'at {_rate_text(rec_period)}: rows cannot be paired one to one; '
                          'resample it (--reference-rate-mismatch resample) or give a '
-                         'reference at the recording\'s rate')
+                         "reference at the recording's rate")
     else:
         if policy not in RATE_POLICIES:
             raise LabelError(f'reference rate policy must be one of '
@@ -217,7 +217,7 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
                                  'or mm')
             if not (np.isfinite(trc['rate']) and trc['rate'] > 0):
                 raise LabelError(f'{path}:3: field DataRate: {trc["rate"]!r}, needed to '
-                                 'put the rows on the recording\'s time')
+                                 "put the rows on the recording's time")
             names, values = trc['keypoints'], trc['X'] * scale
             period = 1e9 / trc['rate']
             # Frame# 1 is the recording's first instant (Pose2Sim writes Time = Frame# /

@@ -35,7 +35,6 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
     from pynwb import NWBHDF5IO, NWBFile
 
     import monet_ros
-
     from monet_ros.io.export_tables import export_times
 
     stamps = np.asarray(stamps_ns, dtype=np.int64)

@@ -1,6 +1,7 @@
 """`monet process` writes, beside its MCAP, the anipose CSV, the TRC, the NWB (ndx-pose)
 and the 2D detections with their crop cameras - all equal to the /monet/keypoints3d it
-published, on one time base (TRC Time = NWB timestamps, first instant 0.0) - and prints dropout, inlier views and that reprojection error is agreement."""
+published, on one time base (TRC Time = NWB timestamps, first instant 0.0) - and prints
+dropout, inlier views and that reprojection error is agreement."""
 from helpers.recordings import noise_recording, small_checkpoint
 import numpy as np
 
