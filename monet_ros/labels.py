@@ -328,7 +328,8 @@ class LabelOptions:
     """How labels are matched to a recording (validated on construction).
 
     camera_map, keypoint_map: (source name, recording name) pairs ('cam_01=cam01' strings
-    are accepted too); skip_bad: drop and count bad rows instead of raising;
+    are accepted too; keypoint_map also takes a shipped map's name, see
+    monet_ros.keypoint_maps); skip_bad: drop and count bad rows instead of raising;
     stamp_tolerance: fraction of the median frame period within which a stamp matches its
     nearest instant (0 < x <= 0.5; default 0.5 = half a frame period)."""
     camera_map: tuple = ()
@@ -338,7 +339,12 @@ class LabelOptions:
 
     def __post_init__(self):
         object.__setattr__(self, 'camera_map', parse_name_map(self.camera_map, 'camera'))
-        object.__setattr__(self, 'keypoint_map', parse_name_map(self.keypoint_map, 'keypoint'))
+        from monet_ros.keypoint_maps import KeypointMapError, expand_keypoint_maps
+        try:                          # shipped maps by name: --keypoint-map body25b
+            keypoint_map = expand_keypoint_maps(self.keypoint_map)
+        except KeypointMapError as error:
+            raise LabelError(str(error)) from None
+        object.__setattr__(self, 'keypoint_map', parse_name_map(keypoint_map, 'keypoint'))
         if not isinstance(self.skip_bad, bool):
             raise LabelError(f'skip_bad must be true or false, got {self.skip_bad!r}')
         tol = self.stamp_tolerance

@@ -1,8 +1,15 @@
 """`monet eval CKPT... --data REC --reference REF`: every checkpoint run over the recording
 exactly as `monet process` runs it (the same function, tracked crops), then scored against
 a reference (monet_ros.evaluation.reference): ONE row per checkpoint with 2D pixel error
-and PCK@px on labelled views, 3D error in mm (median / mean / p90), PCK@mm and coverage.
-Writes OUT/reference.csv and OUT/reference.json.
+and PCK@px on labelled views (a 3D reference: on its projection into the cameras), 3D
+error in mm (median / mean / p90), PCK@mm and coverage.
+
+Instants scored: those with a reference, less the instants labelled in the training
+labels (--labels, or for a 3D reference the data folder's labels.csv) unless
+--include-labelled: a model is not scored on what it was trained on. The command says
+which (ranges of instant indices) and writes them to OUT/reference_instants.csv (frame,
+stamp_ns, status: scored / labelled / no reference). Writes OUT/reference.csv and
+OUT/reference.json.
 """
 import csv
 import json
@@ -23,6 +30,15 @@ def add_reference_arguments(parser):
                         help='reference format (default: from the file)')
     parser.add_argument('--reference-axes', choices=('xyz', 'yzx'), default='xyz',
                         help='TRC axes: yzx for a Y-up file (Pose2Sim)')
+    parser.add_argument('--reference-fps', type=float, default=None,
+                        help="rate of an anipose CSV's fnum without stamp_ns (default: the "
+                        "recording's)")
+    parser.add_argument('--reference-rate-mismatch', choices=('resample', 'refuse'),
+                        default='resample', help='a 3D reference at another rate than the '
+                        'recording: interpolate it linearly in time at the instants '
+                        '(default) or refuse')
+    parser.add_argument('--include-labelled', action='store_true',
+                        help='also score the instants labelled in the training labels')
     parser.add_argument('--rig', help="rig file (default: the recording's)")
     parser.add_argument('--px-thresholds', default='5,10,20', help='2D PCK thresholds (px)')
     parser.add_argument('--mm-thresholds', default='25,50,100', help='3D PCK thresholds (mm)')
@@ -38,11 +54,44 @@ def _thresholds(text, flag):
     return values
 
 
+def _scored_instants(args, reference, bag_path):
+    """(T,) bool scored, (T,) bool labelled, labels path or None (module docstring)."""
+    from monet_ros.evaluation.reference import labelled_instants
+    from monet_ros.learning.recording import find_recording_parts
+
+    has_ref = np.isfinite(reference.X).all(-1).any(-1)
+    if reference.points2d is not None:
+        has_ref |= np.isfinite(reference.points2d).all(-1).any(axis=(1, 2))
+    path = args.labels or (find_recording_parts(bag_path)['labels']
+                           if reference.kind == '3d' else None)
+    labelled = labelled_instants(path, reference.stamps) if path else \
+        np.zeros(len(has_ref), bool)
+    scored = has_ref & (~labelled if not args.include_labelled else True)
+    if has_ref.any() and not scored.any():
+        raise ValueError(f'--reference {args.reference}: every instant with a reference is '
+                         f'labelled in {path} (the training labels); --include-labelled '
+                         'scores them')
+    return scored, has_ref & labelled, path
+
+
+def _write_instants(path, reference, scored, labelled):
+    has_ref = np.isfinite(reference.X).all(-1).any(-1)
+    if reference.points2d is not None:
+        has_ref |= np.isfinite(reference.points2d).all(-1).any(axis=(1, 2))
+    with open(path, 'w', newline='') as f:
+        w = csv.writer(f, lineterminator='\n')
+        w.writerow(['frame', 'stamp_ns', 'status'])
+        for t, stamp in enumerate(reference.stamps):
+            status = 'scored' if scored[t] else 'labelled' if labelled[t] else \
+                'not scored' if has_ref[t] else 'no reference'
+            w.writerow([t, int(stamp), status])
+
+
 def run_reference(args):
     from monet_ros.commands.info import recording_index
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.commands.process import process_recording
-    from monet_ros.evaluation.reference import load_reference, score
+    from monet_ros.evaluation.reference import alignment_text, load_reference, score
     from monet_ros.io.export_tables import ExportError, read_anipose_csv
     from monet_ros.labels import LabelError
     from monet_ros.learning.recording import RecordingError
@@ -65,10 +114,14 @@ def run_reference(args):
                 _, meta = load_checkpoint(path)
                 keypoints = tuple(meta['keypoints'])
                 if keypoints not in references:
-                    references[keypoints] = load_reference(
+                    ref = load_reference(
                         args.reference, index, keypoints, fmt=args.reference_format,
-                        options=options, axes=args.reference_axes)
-                reference = references[keypoints]
+                        options=options, axes=args.reference_axes,
+                        reference_fps=args.reference_fps,
+                        rate_policy=args.reference_rate_mismatch)
+                    references[keypoints] = (ref, *_scored_instants(args, ref,
+                                                                    args.data[0]))
+                reference, scored, labelled, labels_path = references[keypoints]
                 out = Path(tmp) / f'run{n}'
                 process_recording(index.bag, path, out, rig=args.rig, device=args.device,
                                   progress=False, exports=('csv', 'npz'),
@@ -82,7 +135,8 @@ def run_reference(args):
                 for v, o in enumerate(order):
                     if o is not None:
                         p2[:, v] = det['points2d'][:, o]
-                figures = score(reference, table['stamps_ns'], table['X'], p2, px, mm)
+                figures = score(reference, table['stamps_ns'], table['X'], p2, px, mm,
+                                instants=scored)
                 rows.append(dict(checkpoint=str(path), mode=meta.get('mode') or Path(path).stem,
                                  step=meta.get('step'), **figures))
     except (LabelError, ExportError, RecordingError, CheckpointError, ValueError,
@@ -97,13 +151,26 @@ def run_reference(args):
         w.writeheader()
         w.writerows(rows)
     (out_dir / 'reference.json').write_text(json.dumps(rows, indent=1))
-    ref = next(iter(references.values()))
+    ref, scored, labelled, labels_path = next(iter(references.values()))
+    _write_instants(out_dir / 'reference_instants.csv', ref, scored, labelled)
     cols = ['mode', 'step', 'px_median', *[f'pck2d@{t:g}px' for t in px], 'mm_median',
             'mm_mean', 'mm_p90', *[f'pck3d@{t:g}mm' for t in mm], 'coverage']
     cols = [c for c in cols if c in keys]
+    two_d = (f', {rows[0].get("views_2d")} labelled views' if ref.kind == '2d' else
+             f'; 2D: its projection into the {len(index.cameras)} cameras '
+             f'({rows[0].get("views_2d")} points inside the images, occlusion unknown)')
     print(f'reference: {args.reference} ({ref.kind}, {rows[0]["joints_3d"]} joints in 3D'
-          + (f', {rows[0].get("views_2d")} labelled views' if ref.kind == '2d' else '')
-          + (f'; not in the model: {", ".join(ref.unused)}' if ref.unused else '') + ')')
+          + two_d + (f'; not in the model: {", ".join(ref.unused)}' if ref.unused else '')
+          + ')')
+    if ref.alignment:
+        print(f'reference time: {alignment_text(ref.alignment)}')
+    from monet_ros.commands.info import _ranges
+    print(f'scored instants: {int(scored.sum())} of {len(scored)} '
+          f'({_ranges(np.flatnonzero(scored).tolist())})'
+          + (f'; not scored: {int(labelled.sum())} labelled in {labels_path} '
+             '(--include-labelled scores them)' if labelled.any() and not
+             args.include_labelled else '')
+          + f'; listed in {out_dir / "reference_instants.csv"}')
     print('| ' + ' | '.join(['checkpoint', *cols]) + ' |')
     print('|' + '---|' * (len(cols) + 1))
     for r in rows:

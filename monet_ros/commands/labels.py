@@ -17,7 +17,9 @@ def add_label_arguments(parser):
                         help="rename label cameras to the recording's (e.g. cam_01=cam01; "
                         'repeatable or comma separated)')
     parser.add_argument('--keypoint-map', action='append', default=[], metavar='SRC=DST',
-                        help="rename label keypoints to the skeleton's (repeatable)")
+                        help="rename label / reference keypoints to the skeleton's, or a "
+                        'shipped map: body25, body25b (Pose2Sim .trc), coco17, halpe26 -> '
+                        'human14 (repeatable)')
     parser.add_argument('--skip-bad-labels', action='store_true',
                         help='drop and count label rows that match no camera, keypoint or '
                         'instant or lie outside the image (default: such a row is an error)')

@@ -18,9 +18,10 @@ load_reference(path, index, keypoints, ...) -> Reference on the recording's inst
 Reference keypoints are matched to the model's by name (keypoint_map renames); names the
 model lacks are listed in `Reference.unused` and not scored.
 
-score(...) -> dict of figures: 2D pixel error of detections (median, mean, PCK@px) on
-labelled views, 3D error (median, mean, p90 in mm, PCK@mm) and coverage (fraction of
-reference joints that were triangulated).
+score(...) -> dict of figures on the chosen instants: 2D pixel error of detections
+(median, mean, PCK@px) on labelled views - for a 3D reference on its projection into
+every camera (project_reference) -, 3D error (median, mean, p90 in mm, PCK@mm) and
+coverage (fraction of reference joints that were triangulated).
 """
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,7 +39,8 @@ LABEL_FORMATS = ('labels', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'dannce'
 @dataclass
 class Reference:
     """source; keypoints (C, the model's order); stamps (T,) recording instants;
-    points2d (T, V, C, 2) px or None; X (T, C, 3) metres (NaN = none); unused: reference
+    points2d (T, V, C, 2) px: the labels, or for a 3D reference its projection into the
+    cameras (project_reference); X (T, C, 3) metres (NaN = none); unused: reference
     keypoint names the model lacks; kind '2d' (labels, X triangulated) or '3d'; alignment:
     how 3D rows were put on the instants (align_rows' info), None for labels."""
     source: str
@@ -191,6 +193,48 @@ def alignment_text(info):
             f'{info["instants"]} instants with a reference')
 
 
+def project_reference(X, cameras):
+    """(T, C, 3) world points (metres) -> (T, V, C, 2) pixels: each camera's projection
+    (Camera.project, with lens distortion) of the reference, NaN for NaN points, points
+    behind the camera and points outside the image (pixel-edge box -0.5 .. size - 0.5).
+    Occlusion is not known: every point inside an image counts as seen there."""
+    X = np.asarray(X, float)
+    T, C = X.shape[:2]
+    flat = X.reshape(-1, 3)
+    out = np.full((T, len(cameras), C, 2), np.nan)
+    for v, cam in enumerate(cameras):            # one batched projection per camera
+        with np.errstate(invalid='ignore', divide='ignore'):
+            depth = cam.to_camera(flat)[:, 2]
+            uv = cam.project(flat)
+            inside = (depth > 0) & (uv[:, 0] >= -0.5) & (uv[:, 0] <= cam.width - 0.5) & \
+                (uv[:, 1] >= -0.5) & (uv[:, 1] <= cam.height - 0.5)
+        out[:, v] = np.where(inside[:, None], uv, np.nan).reshape(T, C, 2)
+    return out
+
+
+def labelled_instants(path, stamps):
+    """(T,) bool: instants of the recording (stamps (T,) ns) that a labels CSV (stamp- or
+    frame-keyed, monet_ros.labels) labels: a stamp within half a frame period of an
+    instant, a frame = an instant index. Rows matching no instant are ignored here (the
+    label validator reports them where the labels are used)."""
+    from monet_ros.labels import frame_period_ns, read_label_rows
+    stamps = np.asarray(stamps, np.int64)
+    T = len(stamps)
+    out = np.zeros(T, bool)
+    rows = read_label_rows(path)
+    frames = np.array([r.frame for r in rows if r.frame is not None], np.int64)
+    out[frames[(frames >= 0) & (frames < T)]] = True
+    keyed = np.array([r.stamp_ns for r in rows if r.stamp_ns is not None], np.int64)
+    if len(keyed) and T:
+        j = np.clip(np.searchsorted(stamps, keyed), 1, max(T - 1, 1))
+        cand = np.stack([j - 1, np.minimum(j, T - 1)])
+        dist = np.abs(stamps[cand] - keyed[None])
+        best = cand[np.argmin(dist, axis=0), np.arange(len(keyed))]
+        half = max(frame_period_ns(stamps) // 2, 1)
+        out[best[np.min(dist, axis=0) <= half]] = True
+    return out
+
+
 def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
                    camera=None, reference_fps=None, rate_policy='resample'):
     """Reference of `path` on the recording `index` (commands.info.RecordingIndex) for the
@@ -236,7 +280,8 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
         pick, unused = _names(names, keypoints, kmap)
         X, info = align_rows(path, ref_stamps, _take(values, pick, (3,)), stamps,
                              ref_period_ns=period, policy=rate_policy)
-        return Reference(str(path), keypoints, stamps, None, X, '3d', unused, info)
+        return Reference(str(path), keypoints, stamps, project_reference(X, index.cameras),
+                         X, '3d', unused, info)
     if fmt not in LABEL_FORMATS:
         raise LabelError(f'unknown reference format {fmt!r}; one of trc, anipose3d, '
                          f'{", ".join(LABEL_FORMATS)}')
@@ -272,11 +317,15 @@ def _pct(values, thresholds):
 
 
 def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
-          mm_thresholds=MM_THRESHOLDS):
+          mm_thresholds=MM_THRESHOLDS, instants=None):
     """Figures of a prediction against a Reference. stamps (N,) of the predicted instants
-    (a subset of the reference's); X (N, C, 3) metres; points2d (N, V, C, 2) source px.
-    An instant / joint the prediction lacks (not processed, or not triangulated) counts
-    against coverage, not in the error statistics."""
+    (a subset of the reference's); X (N, C, 3) metres; points2d (N, V, C, 2) source px;
+    instants: (T,) bool of the reference's instants to score (default all). An instant /
+    joint the prediction lacks (not processed, or not triangulated) counts against
+    coverage, not in the error statistics. 2D figures are on the labelled views, or for a
+    3D reference on its projection into every camera (points2d_from says which)."""
+    keep_t = np.ones(len(reference.stamps), bool) if instants is None else \
+        np.asarray(instants, bool)
     where = {int(s): i for i, s in enumerate(reference.stamps)}
     rows = np.array([where.get(int(s), -1) for s in stamps])
     keep = rows >= 0
@@ -284,11 +333,12 @@ def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
     pred_X = ref_X.copy()
     pred_X[rows[keep]] = np.asarray(X, float)[keep]
     ref_X[:] = reference.X
+    ref_X[~keep_t] = np.nan
     has_ref = np.isfinite(ref_X).all(-1)
     has_pred = np.isfinite(pred_X).all(-1)
     mm = np.linalg.norm(pred_X - ref_X, axis=-1)[has_ref & has_pred] * 1000.0
     out = dict(reference=reference.source, kind=reference.kind,
-               joints_3d=int(has_ref.sum()),
+               instants_scored=int(has_ref.any(-1).sum()), joints_3d=int(has_ref.sum()),
                coverage=float((has_ref & has_pred).sum() / has_ref.sum()) if has_ref.any()
                else float('nan'),
                mm_median=float(np.median(mm)) if mm.size else float('nan'),
@@ -299,12 +349,13 @@ def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
     if reference.points2d is not None and points2d is not None:
         pred2 = np.full(reference.points2d.shape, np.nan)
         pred2[rows[keep]] = np.asarray(points2d, float)[keep]
-        ref2 = reference.points2d
+        ref2 = np.where(keep_t[:, None, None, None], reference.points2d, np.nan)
         labelled = np.isfinite(ref2).all(-1)
         px_all = np.linalg.norm(pred2 - ref2, axis=-1)[labelled]
         # a labelled view without a detection is a miss: infinitely far
         px = np.where(np.isfinite(px_all), px_all, np.inf)
-        out.update(views_2d=int(labelled.sum()),
+        out.update(points2d_from='projection' if reference.kind == '3d' else 'labels',
+                   views_2d=int(labelled.sum()),
                    px_median=float(np.median(px)) if px.size else float('nan'),
                    px_mean=float(px[np.isfinite(px)].mean()) if np.isfinite(px).any()
                    else float('nan'))

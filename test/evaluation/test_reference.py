@@ -169,3 +169,37 @@ def test_reference_at_another_rate_is_matched_by_time(tmp_path):
     assert same.alignment['rule'] == 'nearest' and same.alignment['instants'] == 10
     np.testing.assert_array_equal(same.X[:10], X30[:10])
     assert np.isnan(same.X[10:]).all()
+
+
+def test_real_pose2sim_trc_with_body25b_is_projected_for_2d(shared_data):
+    """`keypoint_map=('body25b',)` alone puts Pose2Sim's 21 markers on human14 (14 used,
+    7 listed); the 2D reference is its projection: OpenCV's projectPoints of the same 3D
+    points with the recording's cameras (independent), NaN only outside the images."""
+    from helpers.scenes import cv2_project
+
+    from monet_ros.commands.info import recording_index
+    from monet_ros.io.export_tables import read_trc
+    from monet_ros.skeleton import load_skeleton
+
+    index = recording_index(shared_data / 'derived_pose2sim_4cam_mcap'
+                            / 'pose2sim_balancing_4cam')
+    trc_path = next((shared_data / 'pose2sim_demo_balancing').rglob('*.trc'))
+    keypoints = load_skeleton('human14').keypoints
+    ref = load_reference(trc_path, index, keypoints, axes='yzx',
+                         options=LabelOptions(keypoint_map=('body25b',)))
+    assert ref.unused == ('RBigToe', 'RSmallToe', 'RHeel', 'LBigToe', 'LSmallToe', 'LHeel',
+                          'Nose')
+    trc = read_trc(trc_path, axes='yzx')
+    np.testing.assert_array_equal(ref.X[:, keypoints.index('r_hip')],
+                                  trc['X'][:, trc['keypoints'].index('RHip')])
+    np.testing.assert_array_equal(ref.X[:, keypoints.index('head')],
+                                  trc['X'][:, trc['keypoints'].index('Head')])
+    assert ref.alignment['rule'] == 'nearest' and ref.alignment['instants'] == 100
+    for v, cam in enumerate(index.cameras):
+        uv = cv2_project(cam, ref.X.reshape(-1, 3)).reshape(100, 14, 2)
+        seen = np.isfinite(ref.points2d[:, v]).all(-1)
+        inside = np.isfinite(uv).all(-1) & (uv >= -0.5).all(-1) & \
+            (uv[..., 0] <= cam.width - 0.5) & (uv[..., 1] <= cam.height - 0.5)
+        np.testing.assert_array_equal(seen, inside)
+        assert seen.mean() > 0.95
+        np.testing.assert_allclose(ref.points2d[:, v][seen], uv[seen], atol=1e-6)
