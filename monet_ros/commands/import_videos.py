@@ -214,11 +214,11 @@ def _timing_notes(placers, files, fps, timing, fps_given):
                          f'at {fps:g} fps')
         elif src.variable_rate:
             low, high = src.intervals_ms
+            grid = f'--fps {fps:g}' if fps_given else f"the videos' {fps:g} fps"
             how = (f'--timing index stamped its frames by index at {fps:g} fps (container '
                    'times ignored)' if timing == 'index' else
-                   f'{"--fps " if fps_given else ""}{fps:g} fps is the instant grid: each '
-                   f'frame went to the instant nearest its container time (at most '
-                   f'{p.worst_ms:.1f} ms off), not to its index')
+                   f'{grid} is the instant grid: each frame went to the instant nearest its '
+                   f'container time (at most {p.worst_ms:.1f} ms off), not to its index')
             notes.append(f'{files[name]} has a variable frame rate (frame intervals '
                          f'{low:.1f}..{high:.1f} ms): {how}')
         elif timing == 'container' and src.fps and abs(src.fps - fps) > 1e-3 * fps:
