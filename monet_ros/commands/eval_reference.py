@@ -38,7 +38,9 @@ def add_reference_arguments(parser):
                         'recording: interpolate it linearly in time at the instants '
                         '(default) or refuse')
     parser.add_argument('--include-labelled', action='store_true',
-                        help='also score the instants labelled in the training labels')
+                        help='also score the instants labelled in the training labels '
+                        "(--labels; for a 3D reference also the data folder's labels.csv), "
+                        'which are left out by default')
     parser.add_argument('--rig', help="rig file (default: the recording's)")
     parser.add_argument('--px-thresholds', default='5,10,20', help='2D PCK thresholds (px)')
     parser.add_argument('--mm-thresholds', default='25,50,100', help='3D PCK thresholds (mm)')
