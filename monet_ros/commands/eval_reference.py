@@ -56,36 +56,39 @@ def _thresholds(text, flag):
     return values
 
 
+def _has_reference(reference):
+    """(T,) bool: instants where the reference has a 3D point or a 2D point."""
+    has = np.isfinite(reference.X).all(-1).any(-1)
+    if reference.points2d is not None:
+        has |= np.isfinite(reference.points2d).all(-1).any(axis=(1, 2))
+    return has
+
+
 def _scored_instants(args, reference, bag_path):
-    """(T,) bool scored, (T,) bool labelled, labels path or None (module docstring)."""
+    """(T,) bool scored, (T,) bool labelled (with a reference), labels path or None: the
+    rule of the module docstring. ValueError when labelled instants leave none."""
     from monet_ros.evaluation.reference import labelled_instants
     from monet_ros.learning.recording import find_recording_parts
 
-    has_ref = np.isfinite(reference.X).all(-1).any(-1)
-    if reference.points2d is not None:
-        has_ref |= np.isfinite(reference.points2d).all(-1).any(axis=(1, 2))
+    has_ref = _has_reference(reference)
     path = args.labels or (find_recording_parts(bag_path)['labels']
                            if reference.kind == '3d' else None)
-    labelled = labelled_instants(path, reference.stamps) if path else \
-        np.zeros(len(has_ref), bool)
-    scored = has_ref & (~labelled if not args.include_labelled else True)
+    labelled = has_ref & (labelled_instants(path, reference.stamps) if path else False)
+    scored = has_ref if args.include_labelled else has_ref & ~labelled
     if has_ref.any() and not scored.any():
         raise ValueError(f'--reference {args.reference}: every instant with a reference is '
                          f'labelled in {path} (the training labels); --include-labelled '
                          'scores them')
-    return scored, has_ref & labelled, path
+    return scored, labelled, path
 
 
 def _write_instants(path, reference, scored, labelled):
-    has_ref = np.isfinite(reference.X).all(-1).any(-1)
-    if reference.points2d is not None:
-        has_ref |= np.isfinite(reference.points2d).all(-1).any(axis=(1, 2))
+    """frame, stamp_ns, status (scored / labelled / no reference) of every instant."""
     with open(path, 'w', newline='') as f:
         w = csv.writer(f, lineterminator='\n')
         w.writerow(['frame', 'stamp_ns', 'status'])
         for t, stamp in enumerate(reference.stamps):
-            status = 'scored' if scored[t] else 'labelled' if labelled[t] else \
-                'not scored' if has_ref[t] else 'no reference'
+            status = 'scored' if scored[t] else 'labelled' if labelled[t] else 'no reference'
             w.writerow([t, int(stamp), status])
 
 
