@@ -114,12 +114,13 @@ def test_eval_3d_reference_at_another_rate_scores_its_projection(tmp_path, capsy
     assert err.count('\n') == 0 and 'the reference is at 25 Hz, the recording at 30.3 Hz' in err
 
 
+@pytest.mark.slow
 def test_readme_eval_example_on_the_real_pose2sim_trc(shared_data, tmp_path, capsys):
     """The README's example: Pose2Sim's .trc (BODY_25B marker names) scored on the derived
     4-camera recording with `--keypoint-map body25b` alone (no 14 pairs by hand)."""
     trc = next((shared_data / 'pose2sim_demo_balancing').rglob('*.trc'))
     rec = shared_data / 'derived_pose2sim_4cam_mcap' / 'pose2sim_balancing_4cam'
-    model = small_checkpoint(tmp_path / 'm.pt', seed=0)
+    model = small_checkpoint(tmp_path / 'm.pt', seed=0, input_size=(64, 48))
     args = ['eval', str(model), '--data', str(rec), '--reference', str(trc),
             '--reference-axes', 'yzx', '--out', str(tmp_path / 'report')]
     assert monet(args) == 2
