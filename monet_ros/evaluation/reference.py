@@ -136,6 +136,9 @@ def align_rows(path, ref_stamps, values, stamps, ref_period_ns=None, policy='res
                          f'{ref[bad - 1]} ns (rows must be in time order)')
     if R == 0:
         raise LabelError(f'{path}: no reference row')
+    if policy not in RATE_POLICIES:
+        raise LabelError(f'reference rate policy must be one of {", ".join(RATE_POLICIES)}, '
+                         f'got {policy!r}')
     same = rec_period <= 0 or period <= 0 or abs(period - rec_period) <= SAME_RATE * rec_period
     X = np.full((T,) + values.shape[1:], np.nan)
     half = max(rec_period // 2, 1) if rec_period > 0 else max(period // 2, 1)
@@ -162,9 +165,6 @@ def align_rows(path, ref_stamps, values, stamps, ref_period_ns=None, policy='res
                          'resample it (--reference-rate-mismatch resample) or give a '
                          "reference at the recording's rate")
     else:
-        if policy not in RATE_POLICIES:
-            raise LabelError(f'reference rate policy must be one of '
-                             f'{", ".join(RATE_POLICIES)}, got {policy!r}')
         hi = np.searchsorted(ref, stamps, side='right')
         lo = hi - 1
         inside = (lo >= 0) & (hi < R)
@@ -187,10 +187,12 @@ def alignment_text(info):
         how = (f'{info["reference_hz"]:.4g} Hz resampled to the recording\'s '
                f'{info["recording_hz"]:.4g} Hz by linear interpolation in time between '
                'neighbouring rows')
+        unmatched = f'{info["rows_unmatched"]} outside the recording'
     else:
         how = 'rows matched to the nearest instant in time'
-    return (f'{how}; {info["rows"]} rows, {info["rows_unmatched"]} outside the recording; '
-            f'{info["instants"]} instants with a reference')
+        unmatched = f'{info["rows_unmatched"]} on no instant'
+    return (f'{how}; {info["rows"]} rows, {unmatched}; {info["instants"]} instants with a '
+            'reference')
 
 
 def project_reference(X, cameras):

@@ -130,8 +130,8 @@ def test_readme_eval_example_on_the_real_pose2sim_trc(shared_data, tmp_path, cap
     assert 'joints in 3D; 2D: its projection into the 4 cameras' in out
     assert 'not in the model: RBigToe, RSmallToe, RHeel, LBigToe, LSmallToe, LHeel, ' \
         'Nose)' in out
-    assert 'reference time: rows matched to the nearest instant in time; 100 rows, 0 ' \
-        'outside the recording; 100 instants with a reference' in out
+    assert 'reference time: rows matched to the nearest instant in time; 100 rows, 0 on ' \
+        'no instant; 100 instants with a reference' in out
     assert 'scored instants: 100 of 100 (0-99)' in out
     with open(tmp_path / 'report' / 'reference.csv') as f:
         row = next(csv.DictReader(f))
