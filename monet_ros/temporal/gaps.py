@@ -10,7 +10,8 @@ def frames_for(seconds, stamps_ns):
     if len(stamps) < 2:
         return 0
     period = float(np.median(np.diff(stamps))) / 1e9
-    return int(np.floor(seconds / period + 1e-9)) if period > 0 else 0
+    # (tolerance: integer-ns periods, 16666667 ns at 60 Hz, make 0.25 s 14.9999994 frames)
+    return int(np.floor(seconds / period * (1 + 1e-6))) if period > 0 else 0
 
 
 def bridgeable(observed, max_frames):
