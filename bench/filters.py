@@ -92,11 +92,14 @@ def aniposelib_optim(lib, cameras, points2d, score, edges, start=None):
     pts = points2d.transpose(1, 0, 2, 3)                               # (V, T, C, 2)
     if start is None:
         start = triangulate(pts.reshape(V, T * C, 2), cameras).reshape(T, C, 3)
+    import warnings
     quiet = io.StringIO()
     stdout, sys.stdout = sys.stdout, quiet                             # its progress prints
     try:
-        return group.optim_points(pts, start, constraints=[list(e) for e in edges],
-                                  scores=score.transpose(1, 0, 2))
+        with warnings.catch_warnings():            # numba's object-mode fallback warnings
+            warnings.simplefilter('ignore')
+            return group.optim_points(pts, start, constraints=[list(e) for e in edges],
+                                      scores=score.transpose(1, 0, 2))
     finally:
         sys.stdout = stdout
 
