@@ -15,6 +15,7 @@ frames at once. Writes into OUT (atomically) the files of `monet process`:
 keypoints3d.csv (anipose's layout), keypoints3d.trc, keypoints.nwb (monet_ros.io.
 export_results), and with --filter the filtered points (monet_ros.temporal).
 """
+from pathlib import Path
 import sys
 
 import numpy as np
@@ -142,7 +143,6 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
         written = write_results(staging, exports, cameras, pts.keypoints, a,
                                 edges=sk.bone_indices if sk else None, trc_axes=trc_axes,
                                 smoothed=smoothed)
-    from pathlib import Path
     counts = dict(cells=T * V * C, missing=int((~present).sum()), low_score=int(low.sum()),
                   points=T * C, triangulated=int((~missing_points).sum()),
                   not_triangulated=dict(zip(pts.keypoints,

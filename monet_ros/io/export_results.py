@@ -8,6 +8,9 @@ threshold), confidence (T, V, C) heatmap peak values, inliers (T, V, C) bool (vi
 by the triangulation), K_heat (T, V, 3, 3) the heatmap's virtual camera (crop + scale of
 the source camera: K_heat = S K, NaN where the view is missing), heat_size (2,) (w, h).
 With the rig, points2d and K_heat let 2D accuracy be scored against labels.
+
+write_results(...) writes the same files from arrays (`monet triangulate`); with a
+temporal.Smoothed (`--filter`) csv / trc / nwb hold the filtered points.
 """
 import os
 from pathlib import Path
