@@ -22,6 +22,7 @@ projections and one LSMR solve. The same objective as anipose's triangulate_opti
 Jacobian instead of finite differences over a jac_sparsity pattern.
 """
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -50,7 +51,7 @@ def _robust(name, z):
         return np.stack([np.log1p(z), 1 / (1 + z), -1 / (1 + z) ** 2])
     if name == 'soft_l1':
         s = np.sqrt(1 + z)
-        return np.stack([2 * (s - 1), 1 / s, -0.5 / s ** 3])
+        return np.stack([2 * z / (s + 1), 1 / s, -0.5 / s ** 3])   # 2 (s - 1), no cancelling
     if name == 'huber':
         big = z > 1
         sz = np.sqrt(np.where(big, z, 1.0))
@@ -61,15 +62,12 @@ def _robust(name, z):
     raise ValueError(f'loss must be cauchy, soft_l1, huber or linear, got {name!r}')
 
 
-def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, config):
-    """OptimResult.
-
-    X0 (T, C, 3) start (m; finite where keep); keep (T, C) bool: the joints/frames to
-    solve for (observed or bridged); points2d (T, V, C, 2) detections in source px (NaN =
-    missing); score (T, V, C); cameras: V Camera; stamps_ns (T,) increasing; edges (B, 2)
-    keypoint index pairs; lengths (B,) m (NaN: bone left out); config:
-    temporal.FilterConfig (reprojection_px, loss, acceleration_m_s2, bone_mm,
-    confidence_threshold, max_iterations)."""
+def build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, config):
+    """The least-squares problem of optimise (same arguments): a namespace with
+    residuals(x) (m,), jacobian(x) (m, 3N) scipy.sparse CSR, loss(z) (3, m) (robust on the
+    n_reproj reprojection residuals, which come first), x0 (3N,) from X0[keep], keep,
+    N, n_reproj, obs (t, v, c index arrays of the reprojection terms), shape (T, C);
+    None when nothing is kept."""
     X0 = np.asarray(X0, np.float64)
     keep = np.asarray(keep, bool) & np.isfinite(X0).all(-1)
     T, C = keep.shape
@@ -80,7 +78,7 @@ def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, conf
     index[keep] = np.arange(keep.sum())
     N = int(keep.sum())
     if N == 0:
-        return OptimResult(np.full((T, C, 3), np.nan), np.zeros((T, C)), 0.0, 0, 0)
+        return None
     # reprojection terms: one per (t, v, c) detection of a kept joint
     seen = (np.isfinite(points2d).all(-1) & (score >= config.confidence_threshold)
             & keep[:, None, :])
@@ -159,8 +157,30 @@ def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, conf
         out = _robust('linear', z)
         out[:, :n_reproj] = _robust(config.loss, z[:n_reproj])
         return out
+    return SimpleNamespace(residuals=residuals, jacobian=jacobian, loss=loss,
+                           x0=X0[keep].reshape(-1), keep=keep, N=N, n_reproj=n_reproj,
+                           obs=(ot, ov, oc), shape=(T, C))
 
-    solution = least_squares(residuals, X0[keep].reshape(-1), jac=jacobian, loss=loss,
+
+def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, config):
+    """OptimResult.
+
+    X0 (T, C, 3) start (m; finite where keep); keep (T, C) bool: the joints/frames to
+    solve for (observed or bridged); points2d (T, V, C, 2) detections in source px (NaN =
+    missing); score (T, V, C); cameras: V Camera; stamps_ns (T,) increasing; edges (B, 2)
+    keypoint index pairs; lengths (B,) m (NaN: bone left out); config:
+    temporal.FilterConfig (reprojection_px, loss, acceleration_m_s2, bone_mm,
+    confidence_threshold, max_iterations)."""
+    problem = build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths,
+                            config)
+    T, C = np.shape(keep)
+    if problem is None:
+        return OptimResult(np.full((T, C, 3), np.nan), np.zeros((T, C)), 0.0, 0, 0)
+    residuals, keep, N, n_reproj = (problem.residuals, problem.keep, problem.N,
+                                    problem.n_reproj)
+    ot, ov, oc = problem.obs
+    score = np.asarray(score, np.float64)
+    solution = least_squares(residuals, problem.x0, jac=problem.jacobian, loss=problem.loss,
                              method='trf', tr_solver='lsmr', x_scale='jac',
                              max_nfev=config.max_iterations, ftol=1e-6, xtol=1e-8)
     X = np.full((T, C, 3), np.nan)
