@@ -134,6 +134,27 @@ def test_sleap_analysis_files_give_the_same_3d(pose2sim, tmp_path, capsys):
     np.testing.assert_array_equal(s['X'], ref['X'])
 
 
+def test_anipose_pose_2d_folder_gives_the_same_3d(pose2sim, tmp_path, capsys):
+    rig, cameras, det = pose2sim
+    table = write_table(tmp_path / 'points.csv', det)
+    assert run([table, '--rig', rig, *MAP, '--out', tmp_path / 'ref', '--fps', 60],
+               capsys)[0] == 0
+    pose = tmp_path / 'pose-2d'
+    pose.mkdir()
+    cols = pd.MultiIndex.from_product([['DLC_resnet50_demo'], NAMES, ['x', 'y', 'likelihood']],
+                                      names=['scorer', 'bodyparts', 'coords'])
+    for v in range(4):                  # anipose's pose-2d: DeepLabCut's H5 per camera
+        pd.DataFrame(det[v].reshape(FRAMES, -1), index=pd.RangeIndex(FRAMES),
+                     columns=cols).to_hdf(pose / f'trial-cam0{v + 1}.h5',
+                                          key='df_with_missing', mode='w')
+    code, text, _ = run([pose, '--rig', rig, *MAP, '--out', tmp_path / 'a', '--fps', 60],
+                        capsys)
+    assert code == 0, text
+    assert 'anipose rows' in text
+    np.testing.assert_array_equal(read_anipose_csv(tmp_path / 'a' / 'keypoints3d.csv')['X'],
+                                  read_anipose_csv(tmp_path / 'ref' / 'keypoints3d.csv')['X'])
+
+
 def test_filter_adds_change_and_bridged_columns(pose2sim, tmp_path, capsys):
     rig, cameras, det = pose2sim
     table = write_table(tmp_path / 'points.csv', det)
