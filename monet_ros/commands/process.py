@@ -215,7 +215,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
             from monet_ros.temporal import smooth_points
             a = collector.arrays()
             smoothed = smooth_points(a['X'], a['score'], a['points2d'], a['conf2d'], cameras,
-                                     a['stamps'], edges or (), filter_config, error=a['error'])
+                                     a['stamps'], edges or (), filter_config, error=a['error'],
+                                     progress=progress)
             write_filtered(writer, frame_id, smoothed, a['stamps'])
         figures['filter'] = smoothed
         written = collector.write(staging, exports, edges=edges, trc_axes=trc_axes,

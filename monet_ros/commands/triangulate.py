@@ -52,6 +52,7 @@ def add_arguments(parser):
                         help='files written into OUT: any of csv, trc, nwb, npz')
     parser.add_argument('--trc-axes', choices=('xyz', 'yzx'), default='xyz',
                         help='TRC axes: world as is, or yzx = Y-up as Pose2Sim/OpenSim')
+    parser.add_argument('--quiet', action='store_true', help='no progress bar')
     add_filter_arguments(parser)
 
 
@@ -83,10 +84,11 @@ def fuse_all(points, score, cameras, config):
 
 def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, camera_map=None,
                        fusion_config=None, filter_config=None, exports=('csv', 'trc', 'nwb'),
-                       trc_axes='xyz'):
+                       trc_axes='xyz', progress=False):
     """Triangulate (and filter) 2D tables; write `out`. Returns a dict of figures: frames,
     cameras, keypoints, rows, counts (cells, missing, low_score, triangulated, per-joint
     not triangulated), exports {format: path}, filter (temporal.Smoothed or None), notes.
+    progress: optim's iterations as a tqdm bar.
     Raises ValueError / LabelError / ConfigError / OSError naming the file or option."""
     from monet_ros.commands.common import atomic_output_dir, check_new_output
     from monet_ros.config import ConfigError
@@ -137,7 +139,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     if filter_config.method != 'none':
         edges = sk.bone_indices if sk else ()
         smoothed = smooth_points(a['X'], a['score'], points, score, cameras, a['stamps'],
-                                 edges, filter_config, error=a['error'])
+                                 edges, filter_config, error=a['error'], progress=progress)
     with atomic_output_dir(out) as staging:
         staging.mkdir(parents=True, exist_ok=True)
         written = write_results(staging, exports, cameras, pts.keypoints, a,
@@ -169,7 +171,7 @@ def run(args):
                              skeleton=args.skeleton,
                              camera_map=dict(parse_name_map(args.camera_map)),
                              fusion_config=fusion, filter_config=filt, exports=exports,
-                             trc_axes=args.trc_axes)
+                             trc_axes=args.trc_axes, progress=not args.quiet)
     n = fig['counts']
     name = 'monet triangulate'
     print(f'{name}: {fig["frames"]} frames (from frame {fig["first_frame"]}) x '

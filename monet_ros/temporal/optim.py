@@ -162,7 +162,8 @@ def build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths,
                            obs=(ot, ov, oc), shape=(T, C))
 
 
-def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, config):
+def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, config,
+             progress=False):
     """OptimResult.
 
     X0 (T, C, 3) start (m; finite where keep); keep (T, C) bool: the joints/frames to
@@ -170,7 +171,11 @@ def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, conf
     missing); score (T, V, C); cameras: V Camera; stamps_ns (T,) increasing; edges (B, 2)
     keypoint index pairs; lengths (B,) m (NaN: bone left out); config:
     temporal.FilterConfig (reprojection_px, loss, acceleration_m_s2, bone_mm,
-    confidence_threshold, max_iterations)."""
+    confidence_threshold, max_iterations); progress: a tqdm bar of the iterations on
+    stderr."""
+    import sys
+
+    from tqdm import tqdm
     problem = build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths,
                             config)
     T, C = np.shape(keep)
@@ -180,9 +185,16 @@ def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, conf
                                     problem.n_reproj)
     ot, ov, oc = problem.obs
     score = np.asarray(score, np.float64)
-    solution = least_squares(residuals, problem.x0, jac=problem.jacobian, loss=problem.loss,
-                             method='trf', tr_solver='lsmr', x_scale='jac',
-                             max_nfev=config.max_iterations, ftol=1e-6, xtol=1e-8)
+    bar = tqdm(total=config.max_iterations, desc='filter optim', unit='iteration',
+               disable=not progress, file=sys.stderr)
+
+    def jacobian(x):
+        bar.update()
+        return problem.jacobian(x)
+    with bar:
+        solution = least_squares(residuals, problem.x0, jac=jacobian, loss=problem.loss,
+                                 method='trf', tr_solver='lsmr', x_scale='jac',
+                                 max_nfev=config.max_iterations, ftol=1e-6, xtol=1e-8)
     X = np.full((T, C, 3), np.nan)
     X[keep] = solution.x.reshape(N, 3)
     # support: score x robust weight of each view, averaged over a joint's views

@@ -75,7 +75,7 @@ def reprojection_stats(X, points2d, score, cameras, confidence_threshold, thresh
 
 
 def smooth_points(X, score, points2d, conf2d, cameras, stamps_ns, edges=(),
-                  config=None, error=None):
+                  config=None, error=None, progress=False):
     """Smoothed of a recording.
 
     X (T, C, 3) frame-by-frame triangulated points (m, NaN = missing); score (T, C) their
@@ -84,8 +84,8 @@ def smooth_points(X, score, points2d, conf2d, cameras, stamps_ns, edges=(),
     keypoint index pairs of the skeleton's bones (optim's bone term; none: no bone term);
     config: FilterConfig with method 'kalman' or 'optim' (None: kalman); error (T, C): the mean
     reprojection error (px) of each raw point over its inlier views (fusion's), None =
-    computed here (Kalman measurement noise grows with it). Raises ValueError on
-    shapes."""
+    computed here (Kalman measurement noise grows with it); progress: optim's iterations
+    as a tqdm bar on stderr. Raises ValueError on shapes."""
     start = time.perf_counter()
     config = config or FilterConfig(method='kalman')
     X = np.asarray(X, np.float64)
@@ -122,7 +122,7 @@ def smooth_points(X, score, points2d, conf2d, cameras, stamps_ns, edges=(),
             notes.append('no skeleton bones: no bone-length term')
         keep = np.isfinite(kalman.X).all(-1)
         result = optimise(kalman.X, keep, points2d, conf2d, cameras, stamps_ns, edges,
-                          lengths, config)
+                          lengths, config, progress=progress)
         out, conf = result.X, result.support
         rejected = np.zeros_like(rejected)      # the robust loss weighs, nothing is gated
     finite = np.isfinite(out).all(-1)
