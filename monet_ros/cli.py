@@ -28,6 +28,7 @@ SUBCOMMANDS = {
     'eval': 'eval',
     'demo': 'demo',
     'process': 'process',
+    'triangulate': 'triangulate',
     'pipeline': 'pipeline',
     'import': 'import_videos',
     'labels': 'labels',

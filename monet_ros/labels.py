@@ -24,6 +24,10 @@ instant, as `monet info` lists them) instead of `stamp_ns`::
     frame,camera,keypoint,u,v
     42,cam0,head,312.25,101.5
 
+A 2D points table (`monet triangulate`, read with read_label_rows(path, points=True))
+is frame-indexed, may add a detection score column (frame,camera,keypoint,u,v,score) and
+may hold empty / NaN u, v or score for a missing detection.
+
 read_labels(path, keypoints) -> Labels: stamp_ns -> camera -> (C, 2) float64 array in
 keypoint order, NaN where unlabelled (stamp-keyed files only). write_labels(path, rows)
 writes atomically.
@@ -55,6 +59,7 @@ import numpy as np
 
 HEADER = ('stamp_ns', 'camera', 'keypoint', 'u', 'v')
 FRAME_HEADER = ('frame', 'camera', 'keypoint', 'u', 'v')
+SCORED_FRAME_HEADER = FRAME_HEADER + ('score',)
 
 
 class LabelError(ValueError):
@@ -124,7 +129,9 @@ class LabelRow:
 
     source: file name (for messages); line: 1-based line (CSV) or row/record number;
     stamp_ns or frame (exactly one is not None); camera, keypoint: names as in the source;
-    u, v: pixels (finite). where: how to name the place in messages (default 'line N')."""
+    u, v: pixels (finite; NaN only in a 2D points table). where: how to name the place in
+    messages (default 'line N'). score: the detection's confidence (likelihood) when the
+    source has one, else None."""
     source: str
     line: int
     stamp_ns: int | None
@@ -134,14 +141,17 @@ class LabelRow:
     u: float
     v: float
     where: str = ''
+    score: float | None = None
 
     @property
     def place(self):
         return f'{self.source}:{self.where or self.line}'
 
 
-def read_label_rows(path):
-    """LabelRow list of a stamp-keyed or frame-indexed labels CSV (module docstring).
+def read_label_rows(path, points=False):
+    """LabelRow list of a stamp-keyed or frame-indexed labels CSV (module docstring);
+    points=True: a 2D points table instead (frame-indexed, optional score column, empty /
+    NaN u, v, score allowed: NaN in the rows).
 
     Only the syntax is checked here (header, field count, integer stamp/frame, finite u/v,
     non-empty names); names, instants and bounds are checked by resolve_labels. Raises
@@ -161,13 +171,14 @@ def read_label_rows(path):
                 raise LabelError(f'{path}: empty file, expected the header '
                                  f'{",".join(HEADER)} or {",".join(FRAME_HEADER)}')
             header = tuple(h.strip() for h in header)
-            if header not in (HEADER, FRAME_HEADER):
+            allowed = (FRAME_HEADER, SCORED_FRAME_HEADER) if points else (HEADER, FRAME_HEADER)
+            if header not in allowed:
                 raise LabelError(f'{path}:1: header is {",".join(header)!r}, expected '
-                                 f'{",".join(HEADER)!r} or {",".join(FRAME_HEADER)!r}')
+                                 f'{",".join(allowed[0])!r} or {",".join(allowed[1])!r}')
             for row in reader:
                 if not row or all(not cell.strip() for cell in row):
                     continue
-                rows.append(_parse_row(path, reader.line_num, row, header))
+                rows.append(_parse_row(path, reader.line_num, row, header, points))
         except csv.Error as error:
             raise LabelError(f'{path}:{reader.line_num}: not valid CSV ({error})') from None
         except UnicodeDecodeError as error:
@@ -226,12 +237,13 @@ def _first(first, row):
     return f'first at {first.place}'
 
 
-def _parse_row(path, line, row, header):
-    """LabelRow of one CSV row, or LabelError."""
+def _parse_row(path, line, row, header, points=False):
+    """LabelRow of one CSV row, or LabelError. points: a 2D points table's row (NaN /
+    empty u, v allowed; an optional score)."""
     if len(row) != len(header):
         raise LabelError(f'{path}:{line}: expected {len(header)} fields '
                          f'({",".join(header)}), got {len(row)}')
-    key_text, camera, keypoint, u_text, v_text = (cell.strip() for cell in row)
+    key_text, camera, keypoint, u_text, v_text = (cell.strip() for cell in row[:5])
     key = header[0]
     try:
         value = int(key_text)
@@ -246,15 +258,24 @@ def _parse_row(path, line, row, header):
         raise LabelError(f'{path}:{line}: field keypoint: empty')
     coords = []
     for name, text in (('u', u_text), ('v', v_text)):
-        try:
-            number = float(text)
-        except ValueError:
-            number = math.nan
-        if not math.isfinite(number):
-            raise LabelError(f'{path}:{line}: field {name}: {text!r} is not a finite number')
-        coords.append(number)
+        coords.append(_number(path, line, name, text, points))
+    score = _number(path, line, 'score', row[5].strip(), True) if len(header) > 5 else None
     stamp, frame = (value, None) if key == 'stamp_ns' else (None, value)
-    return LabelRow(str(path), line, stamp, frame, camera, keypoint, coords[0], coords[1])
+    return LabelRow(str(path), line, stamp, frame, camera, keypoint, coords[0], coords[1],
+                    score=score)
+
+
+def _number(path, line, name, text, missing_ok):
+    """float of a cell; NaN for an empty / NaN cell when missing_ok; else LabelError."""
+    if missing_ok and text.lower() in ('', 'nan'):
+        return math.nan
+    try:
+        number = float(text)
+    except ValueError:
+        number = math.nan
+    if not math.isfinite(number):
+        raise LabelError(f'{path}:{line}: field {name}: {text!r} is not a finite number')
+    return number
 
 
 def write_labels(path, rows):

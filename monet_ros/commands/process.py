@@ -2,12 +2,16 @@
 possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 MCAP.
 
     monet process REC --model CKPT --out OUT [--rig RIG] [--heatmaps] [--threads N]
-        [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx]
+        [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx] [--filter none|kalman|optim]
 
 Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
 (monet_ros.io.export_results): keypoints3d.csv (anipose's 3D CSV layout),
 keypoints3d.trc (OpenSim / Pose2Sim), keypoints.nwb (NWB + ndx-pose, 3D and the 2D
 detections per camera) and detections2d.npz (2D detections + crop cameras).
+
+--filter kalman|optim smooths the 3D over the whole recording (monet_ros.temporal): the
+analysis files then hold the filtered points and the MCAP also /monet/keypoints3d_filtered
+(/monet/keypoints3d stays the frame-by-frame result).
 
 The same functions as the live nodes: Detector.predict (one batched forward per instant),
 crop_rule.TrackedCrops (the detector node's crop rule: around the previous instant's 3D
@@ -67,6 +71,8 @@ def add_arguments(parser):
                         'nwb (ndx-pose), npz (2D detections + crop cameras); "none" for none')
     parser.add_argument('--trc-axes', choices=('xyz', 'yzx'), default='xyz',
                         help='TRC axes: world as is, or yzx = Y-up as Pose2Sim/OpenSim')
+    from monet_ros.commands.filter_options import add_filter_arguments
+    add_filter_arguments(parser)
 
 
 @dataclass(frozen=True)
@@ -108,7 +114,7 @@ def view_problem(image, camera):
 
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
                       skeleton=None, progress=True, backend='torch', threads=0, exports=(),
-                      trc_axes='xyz', camera_map=(), precision='float32'):
+                      trc_axes='xyz', camera_map=(), precision='float32', filter_config=None):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
@@ -117,6 +123,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     precision: 'float32' or 'bfloat16' (models.detector.check_precision).
     exports: formats of monet_ros.io.export_results written inside `out` (figures['exports']:
     {format: path}; figures['summary']: per-joint dropout and inlier views).
+    filter_config: a temporal.FilterConfig; with a method other than 'none' the exports
+    hold the filtered points and figures['filter'] is the temporal.Smoothed.
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
@@ -201,7 +209,18 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
             errors.add(float(np.nanmean(result.reprojection_error)) if finite.any()
                        else float('nan'))
             num_views.add(float(result.num_views.mean()))
-        written = collector.write(staging, exports, edges=edges, trc_axes=trc_axes)
+        smoothed = None
+        if filter_config is not None and filter_config.method != 'none' and figures['frames']:
+            from monet_ros.commands.filter_options import write_filtered
+            from monet_ros.temporal import smooth_points
+            a = collector.arrays()
+            smoothed = smooth_points(a['X'], a['score'], a['points2d'], a['conf2d'], cameras,
+                                     a['stamps'], edges or (), filter_config, error=a['error'],
+                                     progress=progress)
+            write_filtered(writer, frame_id, smoothed, a['stamps'])
+        figures['filter'] = smoothed
+        written = collector.write(staging, exports, edges=edges, trc_axes=trc_axes,
+                                  smoothed=smoothed)
     figures['exports'] = {fmt: Path(out) / Path(path).relative_to(staging)
                           for fmt, path in written.items()}
     figures['summary'] = collector.summary()
@@ -213,6 +232,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
 
 def run(args):
     from monet_ros.commands.common import check_device, check_threads
+    from monet_ros.commands.filter_options import filter_config_from_args
     from monet_ros.io.export_results import parse_formats
     from monet_ros.labels import parse_name_map
 
@@ -221,6 +241,7 @@ def run(args):
                            min_views=args.min_views, method=args.method,
                            slop_ms=args.slop_ms, track=not args.no_track,
                            heatmaps=args.heatmaps)
+    filter_config = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)
     figures = process_recording(
@@ -228,7 +249,7 @@ def run(args):
         config=config, skeleton=args.skeleton, device=device, progress=not args.quiet,
         backend=args.backend, threads=args.threads, exports=parse_formats(args.export),
         trc_axes=args.trc_axes, camera_map=parse_name_map(args.camera_map),
-        precision=args.precision)
+        precision=args.precision, filter_config=filter_config)
     fps = figures['frames'] / figures['seconds'] if figures['seconds'] else 0.0
     skipped = figures['skipped_views']
     print(f'monet process: {figures["frames"]} frames ({figures["views"]} views, '
@@ -249,6 +270,10 @@ def run(args):
         print(f'monet process: mean inlier views per joint: {views}')
         print('monet process: reprojection error measures agreement between the views used, '
               'not accuracy: score accuracy with `monet eval --reference`')
+    if figures['filter'] is not None:
+        print(f'monet process: {figures["filter"].summary()}')
+        for note in figures['filter'].notes:
+            print(f'monet process: filter: {note}')
     for fmt, path in figures['exports'].items():
         print(f'monet process: wrote {fmt}: {path}')
     report = figures['report']

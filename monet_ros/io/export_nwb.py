@@ -9,6 +9,10 @@ write_nwb(path, result) writes one NWBFile holding, in processing module 'behavi
   PoseEstimation per camera ('<camera>_2d', device = a CalibratedCamera with K, R, t, dist
   of the source image) whose PoseEstimationSeries hold the 2D detections (T, 2) in source
   image pixels with the heatmap peak value as confidence (NaN where not detected).
+With a filter (`--filter kalman|optim`) the 3D series hold the filtered points and their
+confidence, and the module also holds two TimeSeries (T, C), columns in keypoint order:
+'filter_change_mm' (|filtered - raw|, mm) and 'filter_bridged' (1 where the raw point was
+missing and the filter bridged the gap).
 session_start_time = the first stamp (UTC, to the microsecond: datetime's resolution), so
 session_start_time + timestamp is the header stamp within 1 us. Read back with
 pynwb.NWBHDF5IO (ndx_pose imported).
@@ -21,9 +25,11 @@ import numpy as np
 
 
 def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidence2d,
-              edges=None, description='monet_ros multiview keypoints'):
+              edges=None, description='monet_ros multiview keypoints', filtered=None):
     """keypoints (C,); stamps_ns (T,); X (T, C, 3); score (T, C); cameras: V Camera;
-    points2d (T, V, C, 2) source px; confidence2d (T, V, C). Atomic (tmp + os.replace)."""
+    points2d (T, V, C, 2) source px; confidence2d (T, V, C); filtered: None or dict(method,
+    change_mm (T, C), bridged (T, C)) when X is a filter's output. Atomic (tmp +
+    os.replace)."""
     from ndx_pose import (
         CalibratedCamera,
         MultiCameraPoseEstimation,
@@ -32,7 +38,7 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
         Skeleton,
         Skeletons,
     )
-    from pynwb import NWBHDF5IO, NWBFile
+    from pynwb import NWBHDF5IO, NWBFile, TimeSeries
 
     import monet_ros
     from monet_ros.io.export_tables import export_times
@@ -73,9 +79,22 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
         reference_frame='rig world frame', confidence=np.asarray(score[:, c], float),
         confidence_definition='mean heatmap peak value of the inlier views',
         timestamps=times) for c, k in enumerate(keypoints)]
+    how = 'triangulated keypoints (robust DLT over inlier views)'
+    if filtered is not None:
+        how += f', filtered over time ({filtered["method"]})'
+        order = ', '.join(keypoints)
+        behavior.add(TimeSeries(
+            name='filter_change_mm', data=np.asarray(filtered['change_mm'], float),
+            unit='mm', timestamps=times,
+            description=f'|filtered - raw| per keypoint ({order})'))
+        behavior.add(TimeSeries(
+            name='filter_bridged', data=np.asarray(filtered['bridged'], np.uint8),
+            unit='n.a.', timestamps=times,
+            description=f'1 where the raw point was missing and the filter bridged the gap '
+            f'({order})'))
     behavior.add(MultiCameraPoseEstimation(
         name='monet_pose', pose_estimation_series=series3d, pose_estimations=per_camera,
-        description='triangulated keypoints (robust DLT over inlier views)',
+        description=how,
         scorer='monet_ros fusion', source_software='monet_ros',
         source_software_version=str(version), skeleton=skeleton))
     path = Path(path)

@@ -8,6 +8,9 @@ threshold), confidence (T, V, C) heatmap peak values, inliers (T, V, C) bool (vi
 by the triangulation), K_heat (T, V, 3, 3) the heatmap's virtual camera (crop + scale of
 the source camera: K_heat = S K, NaN where the view is missing), heat_size (2,) (w, h).
 With the rig, points2d and K_heat let 2D accuracy be scored against labels.
+
+write_results(...) writes the same files from arrays (`monet triangulate`); with a
+temporal.Smoothed (`--filter`) csv / trc / nwb hold the filtered points.
 """
 import os
 from pathlib import Path
@@ -92,33 +95,53 @@ class ResultsCollector:
                     mean_inlier_views=float(np.nanmean(views)) if np.isfinite(views).any()
                     else float('nan'))
 
-    def write(self, folder, formats=FORMATS, edges=None, trc_axes='xyz'):
-        """Write the chosen formats into `folder` -> {format: path}."""
-        from monet_ros.io.export_tables import write_anipose_csv, write_trc
-        folder = Path(folder)
-        a = self.arrays()
-        out = {}
-        if 'csv' in formats:
-            out['csv'] = write_anipose_csv(folder / FILE_NAMES['csv'], self.keypoints,
-                                           a['stamps'], a['X'], a['error'], a['ncams'],
-                                           a['score'])
-        if 'trc' in formats:
-            out['trc'] = write_trc(folder / FILE_NAMES['trc'], self.keypoints, a['stamps'],
-                                   a['X'], axes=trc_axes)
-        if 'npz' in formats:
-            path = folder / FILE_NAMES['npz']
-            tmp = folder / ('.tmp_' + FILE_NAMES['npz'])
-            with open(tmp, 'wb') as f:
-                np.savez_compressed(f, stamps_ns=a['stamps'], cameras=np.array(self.names),
-                                    keypoints=np.array(self.keypoints),
-                                    points2d=a['points2d'], confidence=a['conf2d'],
-                                    inliers=a['inliers'], K_heat=a['K_heat'],
-                                    heat_size=np.array(self.heat_size or (0, 0)))
-            os.replace(tmp, path)
-            out['npz'] = path
-        if 'nwb' in formats and len(a['stamps']):
-            from monet_ros.io.export_nwb import write_nwb
-            out['nwb'] = write_nwb(folder / FILE_NAMES['nwb'], self.keypoints, a['stamps'],
-                                   a['X'], a['score'], self.cameras, a['points2d'],
-                                   a['conf2d'], edges=edges)
-        return out
+    def write(self, folder, formats=FORMATS, edges=None, trc_axes='xyz', smoothed=None):
+        """Write the chosen formats into `folder` -> {format: path} (write_results)."""
+        return write_results(folder, formats, self.cameras, self.keypoints, self.arrays(),
+                             edges=edges, trc_axes=trc_axes, smoothed=smoothed,
+                             heat_size=self.heat_size)
+
+
+def write_results(folder, formats, cameras, keypoints, a, edges=None, trc_axes='xyz',
+                  smoothed=None, heat_size=None):
+    """Write the chosen formats into `folder` -> {format: path}.
+
+    cameras: V Camera; keypoints (C,); a: dict of arrays as ResultsCollector.arrays gives
+    (stamps (T,), X (T, C, 3), error, ncams, score (T, C), points2d (T, V, C, 2), conf2d,
+    inliers (T, V, C), K_heat (T, V, 3, 3)); smoothed: a temporal.Smoothed of the same
+    frames: csv, trc and nwb then hold the filtered points (with their confidence, change
+    and bridged flags); npz always holds the 2D detections."""
+    from monet_ros.io.export_tables import write_anipose_csv, write_trc
+    folder = Path(folder)
+    names = [c.name for c in cameras]
+    X, error, ncams, score = a['X'], a['error'], a['ncams'], a['score']
+    extra = filtered = None
+    if smoothed is not None:
+        X, error, ncams, score = smoothed.X, smoothed.error, smoothed.ncams, smoothed.score
+        extra = {'change_mm': smoothed.change_mm, 'bridged': smoothed.bridged.astype(float)}
+        filtered = dict(method=smoothed.method, change_mm=smoothed.change_mm,
+                        bridged=smoothed.bridged)
+    out = {}
+    if 'csv' in formats:
+        out['csv'] = write_anipose_csv(folder / FILE_NAMES['csv'], keypoints, a['stamps'], X,
+                                       error, ncams, score, extra=extra)
+    if 'trc' in formats:
+        out['trc'] = write_trc(folder / FILE_NAMES['trc'], keypoints, a['stamps'], X,
+                               axes=trc_axes)
+    if 'npz' in formats:
+        path = folder / FILE_NAMES['npz']
+        tmp = folder / ('.tmp_' + FILE_NAMES['npz'])
+        with open(tmp, 'wb') as f:
+            np.savez_compressed(f, stamps_ns=a['stamps'], cameras=np.array(names),
+                                keypoints=np.array(keypoints),
+                                points2d=a['points2d'], confidence=a['conf2d'],
+                                inliers=a['inliers'], K_heat=a['K_heat'],
+                                heat_size=np.array(heat_size or (0, 0)))
+        os.replace(tmp, path)
+        out['npz'] = path
+    if 'nwb' in formats and len(a['stamps']):
+        from monet_ros.io.export_nwb import write_nwb
+        out['nwb'] = write_nwb(folder / FILE_NAMES['nwb'], keypoints, a['stamps'], X, score,
+                               cameras, a['points2d'], a['conf2d'], edges=edges,
+                               filtered=filtered)
+    return out

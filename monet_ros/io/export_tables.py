@@ -5,6 +5,10 @@ anipose CSV (what `anipose triangulate` writes, one row per frame): for every ke
 the columns K_x, K_y, K_z (world units of the rig, metres here), K_error (mean
 reprojection error of the inlier views, px), K_ncams (inlier views), K_score (mean peak
 confidence), then fnum (frame number); monet adds stamp_ns (header stamp, ns) at the end.
+With a filter (`--filter kalman|optim`) the points are the filtered ones, K_score their
+confidence, and two more columns per keypoint come after the keypoint groups, before fnum
+(anipose's readers ignore them): K_change_mm (|filtered - raw|, mm) and K_bridged (1 where
+the raw point was missing and the filter bridged the gap, else 0).
 Missing values are empty cells (pandas' default), as anipose's own files.
 
 TRC (OpenSim's marker file, the layout Pose2Sim writes; tab separated):
@@ -36,6 +40,7 @@ from monet_ros.labels import frame_period_ns
 
 FIELDS = ('x', 'y', 'z', 'error', 'ncams', 'score')
 TIME_BASE = 'seconds from the first exported instant (its header stamp); first instant 0.0'
+EXTRA_FIELDS = ('change_mm', 'bridged')
 AXES = {'xyz': (0, 1, 2), 'yzx': (1, 2, 0)}
 
 
@@ -71,8 +76,13 @@ def _atomic_writer(path):
     return path, path.with_name(path.name + '.tmp')
 
 
-def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score):
-    """Write anipose's 3D CSV. X (T, C, 3); error, ncams, score (T, C). Atomic."""
+def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=None):
+    """Write anipose's 3D CSV. X (T, C, 3); error, ncams, score (T, C); extra: None or
+    {field: (T, C)} for fields of EXTRA_FIELDS (module docstring). Atomic."""
+    extra = {f: np.asarray(v, float) for f, v in (extra or {}).items()}
+    bad = [f for f in extra if f not in EXTRA_FIELDS]
+    if bad:
+        raise ExportError(f'{path}: unknown extra column {bad[0]!r}; one of {EXTRA_FIELDS}')
     X = np.asarray(X, float)
     T, C = X.shape[:2]
     fnum = frame_numbers(stamps_ns)
@@ -80,12 +90,15 @@ def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score):
     with open(tmp, 'w', newline='', encoding='utf-8') as f:
         w = csv.writer(f, lineterminator='\n')
         w.writerow([f'{k}_{field}' for k in keypoints for field in FIELDS]
+                   + [f'{k}_{field}' for field in extra for k in keypoints]
                    + ['fnum', 'stamp_ns'])
         for t in range(T):
             row = []
             for c in range(C):
                 row += [_cell(X[t, c, 0]), _cell(X[t, c, 1]), _cell(X[t, c, 2]),
                         _cell(error[t, c]), _cell(ncams[t, c], True), _cell(score[t, c])]
+            for field, values in extra.items():
+                row += [_cell(values[t, c], field == 'bridged') for c in range(C)]
             w.writerow(row + [int(fnum[t]), int(stamps_ns[t])])
     os.replace(tmp, path)
     return path
@@ -93,8 +106,8 @@ def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score):
 
 def read_anipose_csv(path):
     """dict(keypoints, fnum (T,), stamps_ns (T,) or None, X (T, C, 3), error, ncams, score
-    (T, C)) of an anipose 3D CSV (anipose's own or ours). Raises ExportError naming the
-    file, line and column."""
+    (T, C), extra {field: (T, C)} of the EXTRA_FIELDS columns present) of an anipose 3D
+    CSV (anipose's own or ours). Raises ExportError naming the file, line and column."""
     path = Path(path)
     try:
         with open(path, newline='', encoding='utf-8-sig') as f:
@@ -109,10 +122,11 @@ def read_anipose_csv(path):
         raise ExportError(f'{path}:1: no <keypoint>_x/_y/_z columns (anipose 3D layout)')
     col = {h: i for i, h in enumerate(header)}
     T, C = len(rows) - 1, len(keypoints)
-    out = {f: np.full((T, C), np.nan) for f in FIELDS}
+    present = [f for f in EXTRA_FIELDS if any(f'{k}_{f}' in col for k in keypoints)]
+    out = {f: np.full((T, C), np.nan) for f in FIELDS + tuple(present)}
     for t, row in enumerate(rows[1:]):
         for c, k in enumerate(keypoints):
-            for f in FIELDS:
+            for f in out:
                 i = col.get(f'{k}_{f}')
                 if i is None or i >= len(row) or not row[i].strip():
                     continue
@@ -137,7 +151,8 @@ def read_anipose_csv(path):
     fnum = ints('fnum')
     return dict(keypoints=tuple(keypoints), fnum=np.arange(T) if fnum is None else fnum,
                 stamps_ns=ints('stamp_ns'), X=np.stack([out['x'], out['y'], out['z']], -1),
-                error=out['error'], ncams=out['ncams'], score=out['score'])
+                error=out['error'], ncams=out['ncams'], score=out['score'],
+                extra={f: out[f] for f in present})
 
 
 def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m'):

@@ -99,11 +99,12 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
             u, v = values[r, coords['x']], values[r, coords['y']]
             if not (math.isfinite(u) and math.isfinite(v)):
                 continue
-            if 'likelihood' in coords and not values[r, coords['likelihood']] >= min_score:
+            score = float(values[r, coords['likelihood']]) if 'likelihood' in coords else None
+            if score is not None and not score >= min_score:
                 dropped += 1
                 continue
             rows.append(LabelRow(str(source), line, None, frame, cam, name, float(u),
-                                 float(v), where))
+                                 float(v), where, score))
     return rows, tuple(groups), dropped
 
 

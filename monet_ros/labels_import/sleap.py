@@ -8,7 +8,7 @@ of the documented shapes):
   track has an instance;
 - node_names (nodes,), track_names (tracks,): byte strings;
 - point_scores: documented (frames, nodes, tracks) -> read (tracks, nodes, frames);
-  optional, used by --min-score;
+  optional, used by --min-score and as the detection score of `monet triangulate`;
 - video_path: the video the file belongs to (its name gives the camera).
 The frame axis is the video's frame index. With several tracks the keypoint is named
 '<track>/<node>'.
@@ -52,7 +52,7 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
                 raise LabelError(f'{path}: field track_occupancy: shape {occupancy.shape}, '
                                  f'expected ({n_frames}, {n_tracks})')
         scores = None
-        if 'point_scores' in f and min_score > 0:
+        if 'point_scores' in f:
             scores = np.asarray(f['point_scores'][()], dtype=np.float64)
             if scores.shape != (n_tracks, len(nodes), n_frames):
                 raise LabelError(f'{path}: field point_scores: shape {scores.shape}, '
@@ -70,8 +70,9 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
     points = tracks.transpose(3, 0, 2, 1)
     ok = np.isfinite(points).all(-1) & occupancy[:, :, None]
     dropped = 0
-    if scores is not None:
-        low = ok & ~(scores.transpose(2, 0, 1) >= min_score)
+    score = scores.transpose(2, 0, 1) if scores is not None else None   # (frames, tracks, nodes)
+    if score is not None and min_score > 0:
+        low = ok & ~(score >= min_score)
         dropped = int(low.sum())
         ok &= ~low
     rows = []
@@ -79,7 +80,8 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
         u, v = points[frame, track, node]
         rows.append(LabelRow(str(path), int(frame) + 1, None, int(frame), cam,
                              keypoints[track * len(nodes) + node], float(u), float(v),
-                             f'frame {frame} track {names[track]} node {nodes[node]}'))
+                             f'frame {frame} track {names[track]} node {nodes[node]}',
+                             None if score is None else float(score[frame, track, node])))
     return rows, tuple(keypoints), dropped
 
 

@@ -1,0 +1,48 @@
+"""The --filter options of `monet process` and `monet triangulate` (one spelling for both):
+the fields of monet_ros.temporal.FilterConfig as command-line options."""
+from dataclasses import fields
+
+from monet_ros.temporal import LOSSES, METHODS, FilterConfig
+
+FILTER_TOPIC = '/monet/keypoints3d_filtered'
+
+# option -> FilterConfig field (and its help from the field's description)
+_OPTIONS = {'--max-gap-s': 'max_gap_s', '--measurement-noise-mm': 'measurement_noise_mm',
+            '--acceleration-m-s2': 'acceleration_m_s2', '--gate-sigma': 'gate_sigma',
+            '--reprojection-px': 'reprojection_px', '--bone-mm': 'bone_mm',
+            '--max-iterations': 'max_iterations'}
+
+
+def add_filter_arguments(parser):
+    """--filter {none,kalman,optim} and the filter's parameters (physical units)."""
+    meta = {f.name: f for f in fields(FilterConfig)}
+    parser.add_argument('--filter', choices=METHODS, default='none',
+                        help='3D over time: none (frame-by-frame robust triangulation), '
+                        'kalman (constant-velocity Kalman + RTS smoother with outlier gating; '
+                        'fast) or optim (least squares over the recording: robust '
+                        'reprojection + smoothness + bone lengths of --skeleton)')
+    for option, name in _OPTIONS.items():
+        f = meta[name]
+        parser.add_argument(option, type=type(f.default), default=f.default,
+                            help=f'{f.metadata["description"]} (default {f.default})')
+    parser.add_argument('--loss', choices=LOSSES, default=meta['loss'].default,
+                        help=f'{meta["loss"].metadata["description"]} (default '
+                        f'{meta["loss"].default})')
+
+
+def filter_config_from_args(args, confidence_threshold, threshold_px):
+    """FilterConfig of the options above; the fusion's thresholds decide which views count.
+    Raises ConfigError naming the field."""
+    values = {name: getattr(args, option[2:].replace('-', '_'))
+              for option, name in _OPTIONS.items()}
+    return FilterConfig(method=args.filter, loss=args.loss,
+                        confidence_threshold=confidence_threshold, threshold_px=threshold_px,
+                        **values)
+
+
+def write_filtered(writer, frame_id, smoothed, stamps_ns, topic=FILTER_TOPIC):
+    """The filtered points of a temporal.Smoothed as /monet/keypoints3d messages (same
+    layout) on `topic`, one per instant of stamps_ns."""
+    for t, stamp in enumerate(stamps_ns):
+        writer.write_keypoints3d(topic, int(stamp), frame_id, smoothed.X[t], smoothed.score[t],
+                                 smoothed.error[t], smoothed.ncams[t])

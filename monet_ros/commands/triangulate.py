@@ -1,0 +1,196 @@
+"""`monet triangulate`: 3D keypoints from another tool's 2D detections and a calibration.
+
+    monet triangulate POINTS2D... --rig CAL --out OUT [--format auto|dlc|sleap|anipose|
+        frames] [--filter none|kalman|optim] [--fps F] [--skeleton human14]
+        [--camera-map SRC=DST] [--threshold-px 15] [--confidence-threshold 0.1]
+        [--min-views 2] [--method exclusion|ransac] [--export csv,trc,nwb,npz]
+
+POINTS2D: what `monet labels import` reads (DeepLabCut / Lightning Pose prediction CSV or
+H5 per camera, SLEAP analysis H5 per camera, an anipose pose-2d folder) or a frame-indexed
+table frame,camera,keypoint,u,v[,score] (monet_ros.labels_import.points2d); the score /
+likelihood is the detection confidence. Triangulation is the fusion's (fusion.fuse_points:
+views below --confidence-threshold, NaN and missing views left out, confidence-weighted
+robust DLT with worst-view exclusion or RANSAC, cheirality-checked), batched over all
+frames at once. Writes into OUT (atomically) the files of `monet process`:
+keypoints3d.csv (anipose's layout), keypoints3d.trc, keypoints.nwb (monet_ros.io.
+export_results), and with --filter the filtered points (monet_ros.temporal).
+"""
+from pathlib import Path
+import sys
+
+import numpy as np
+
+HELP = '3D keypoints from 2D detections of other tools (DeepLabCut, SLEAP, anipose, CSV)'
+_CHUNK = 16384          # keypoint columns per batched triangulation (bounded memory)
+
+
+def add_arguments(parser):
+    from monet_ros.commands.filter_options import add_filter_arguments
+    from monet_ros.labels_import.points2d import FORMATS
+    parser.add_argument('points2d', nargs='+', help='2D tables: per-camera DeepLabCut / '
+                        'SLEAP files, an anipose pose-2d folder, or a frame,camera,keypoint,'
+                        'u,v[,score] CSV')
+    parser.add_argument('--rig', required=True, help='calibration (rig YAML, Pose2Sim / '
+                        'anipose TOML, ...)')
+    parser.add_argument('--out', required=True, help='output folder (must not exist)')
+    parser.add_argument('--format', choices=FORMATS, default='auto',
+                        help='2D table format (default: detected from the files)')
+    parser.add_argument('--fps', type=float, default=None,
+                        help='frame rate (Hz) of the 2D frames: their times (needed by '
+                        '--filter; default 30 without a filter)')
+    parser.add_argument('--skeleton', default=None, help='skeleton preset or YAML: output '
+                        "keypoints and order, and the bones (optim's bone-length term, NWB)")
+    parser.add_argument('--camera-map', action='append', default=[], metavar='SRC=DST',
+                        help="rename the 2D tables' cameras to the rig's (repeatable)")
+    parser.add_argument('--threshold-px', type=float, default=15.0,
+                        help='inlier threshold (image pixels)')
+    parser.add_argument('--confidence-threshold', type=float, default=0.1,
+                        help='detection score below which a view is left out')
+    parser.add_argument('--min-views', type=int, default=2, help='fewest inlier views')
+    parser.add_argument('--method', choices=('exclusion', 'ransac'), default='exclusion')
+    parser.add_argument('--export', default='csv,trc,nwb',
+                        help='files written into OUT: any of csv, trc, nwb, npz')
+    parser.add_argument('--trc-axes', choices=('xyz', 'yzx'), default='xyz',
+                        help='TRC axes: world as is, or yzx = Y-up as Pose2Sim/OpenSim')
+    parser.add_argument('--quiet', action='store_true', help='no progress bar')
+    add_filter_arguments(parser)
+
+
+def fuse_all(points, score, cameras, config):
+    """Frame-by-frame fusion of every frame at once: points (T, V, C, 2), score (T, V, C)
+    -> dict X (T, C, 3), error, ncams, score (T, C), inliers (T, V, C), points2d (T, V, C,
+    2) as fused (NaN below the confidence threshold). Columns are independent, so this is
+    fuse_points per frame, batched in chunks of _CHUNK keypoints."""
+    from monet_ros.fusion import fuse_points
+    T, V, C = score.shape
+    p = points.transpose(1, 0, 2, 3).reshape(V, T * C, 2)
+    s = np.nan_to_num(score.transpose(1, 0, 2).reshape(V, T * C), nan=0.0)
+    X = np.full((T * C, 3), np.nan)
+    error, conf = np.full(T * C, np.nan), np.zeros(T * C)
+    ncams = np.zeros(T * C, np.uint32)
+    inliers = np.zeros((V, T * C), bool)
+    fused = np.full((V, T * C, 2), np.nan)
+    for a in range(0, T * C, _CHUNK):
+        b = min(a + _CHUNK, T * C)
+        r = fuse_points(p[:, a:b], s[:, a:b], cameras, config)
+        X[a:b], error[a:b], conf[a:b], ncams[a:b] = (r.X, r.reprojection_error,
+                                                     r.confidence, r.num_views)
+        inliers[:, a:b], fused[:, a:b] = r.inliers, r.points2d
+    return dict(X=X.reshape(T, C, 3), error=error.reshape(T, C), score=conf.reshape(T, C),
+                ncams=ncams.reshape(T, C),
+                inliers=inliers.reshape(V, T, C).transpose(1, 0, 2),
+                points2d=fused.reshape(V, T, C, 2).transpose(1, 0, 2, 3))
+
+
+def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, camera_map=None,
+                       fusion_config=None, filter_config=None, exports=('csv', 'trc', 'nwb'),
+                       trc_axes='xyz', progress=False):
+    """Triangulate (and filter) 2D tables; write `out`. Returns a dict of figures: frames,
+    cameras, keypoints, rows, counts (cells, missing, low_score, triangulated, per-joint
+    not triangulated), exports {format: path}, filter (temporal.Smoothed or None), notes.
+    progress: optim's iterations as a tqdm bar.
+    Raises ValueError / LabelError / ConfigError / OSError naming the file or option."""
+    from monet_ros.commands.common import atomic_output_dir, check_new_output
+    from monet_ros.config import ConfigError
+    from monet_ros.fusion import FusionConfig
+    from monet_ros.geometry import load_rig
+    from monet_ros.io.export_results import write_results
+    from monet_ros.labels_import.points2d import read_points2d
+    from monet_ros.skeleton import load_skeleton
+    from monet_ros.temporal import FilterConfig, smooth_points
+
+    fusion_config = fusion_config or FusionConfig()
+    filter_config = filter_config or FilterConfig()
+    notes = []
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise ConfigError('monet triangulate', 'fps', f'must be > 0, got {fps}')
+    if fps is None:
+        if filter_config.method != 'none':
+            raise ConfigError('monet triangulate', 'fps', f'--filter {filter_config.method} '
+                              'needs the frame rate of the 2D frames (--fps F, Hz)')
+        fps = 30.0
+        notes.append('--fps not given: times in the outputs assume 30 frames/s')
+    check_new_output(out, 'monet triangulate')
+    rig_cameras = load_rig(rig)
+    names = [c.name for c in rig_cameras]
+    sk = load_skeleton(skeleton) if skeleton else None
+    pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,
+                        camera_map=camera_map)
+    used = [v for v in range(len(names)) if np.isfinite(pts.points[:, v]).any()]
+    if len(used) < max(2, fusion_config.min_views):
+        raise ValueError(f'{", ".join(map(str, paths))}: detections in '
+                         f'{len(used)} camera(s) ({", ".join(names[v] for v in used)}); '
+                         f'triangulation needs at least {max(2, fusion_config.min_views)}')
+    unused = [n for v, n in enumerate(names) if v not in used]
+    if unused:
+        notes.append(f'rig cameras without 2D detections, left out: {", ".join(unused)}')
+    cameras = [rig_cameras[v] for v in used]
+    points, score = pts.points[:, used], pts.score[:, used]
+    T, V, C = score.shape
+    present = np.isfinite(points).all(-1)
+    low = present & ~(np.nan_to_num(score, nan=-1.0) >= fusion_config.confidence_threshold)
+    a = fuse_all(points, score, cameras, fusion_config)
+    frames = pts.frames - pts.frames[0]
+    a['stamps'] = np.round(frames * (1e9 / fps)).astype(np.int64)
+    a['conf2d'] = score
+    a['K_heat'] = np.broadcast_to(np.stack([c.K for c in cameras]), (T, V, 3, 3))
+    missing_points = ~np.isfinite(a['X']).all(-1)
+    smoothed = None
+    if filter_config.method != 'none':
+        edges = sk.bone_indices if sk else ()
+        smoothed = smooth_points(a['X'], a['score'], points, score, cameras, a['stamps'],
+                                 edges, filter_config, error=a['error'], progress=progress)
+    with atomic_output_dir(out) as staging:
+        staging.mkdir(parents=True, exist_ok=True)
+        written = write_results(staging, exports, cameras, pts.keypoints, a,
+                                edges=sk.bone_indices if sk else None, trc_axes=trc_axes,
+                                smoothed=smoothed)
+    counts = dict(cells=T * V * C, missing=int((~present).sum()), low_score=int(low.sum()),
+                  points=T * C, triangulated=int((~missing_points).sum()),
+                  not_triangulated=dict(zip(pts.keypoints,
+                                            missing_points.sum(axis=0).tolist())))
+    return dict(frames=T, first_frame=int(pts.frames[0]), cameras=[c.name for c in cameras],
+                keypoints=pts.keypoints, rows=pts.rows, nan_rows=pts.nan_rows, fmt=pts.fmt,
+                counts=counts, filter=smoothed, notes=notes, arrays=a,
+                exports={f: Path(out) / Path(p).relative_to(staging)
+                         for f, p in written.items()})
+
+
+def run(args):
+    from monet_ros.commands.filter_options import filter_config_from_args
+    from monet_ros.fusion import FusionConfig
+    from monet_ros.io.export_results import parse_formats
+    from monet_ros.labels import parse_name_map
+
+    fusion = FusionConfig(threshold_px=args.threshold_px,
+                          confidence_threshold=args.confidence_threshold,
+                          min_views=args.min_views, method=args.method)
+    filt = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
+    exports = parse_formats(args.export)
+    fig = triangulate_points(args.points2d, args.rig, args.out, fmt=args.format, fps=args.fps,
+                             skeleton=args.skeleton,
+                             camera_map=dict(parse_name_map(args.camera_map)),
+                             fusion_config=fusion, filter_config=filt, exports=exports,
+                             trc_axes=args.trc_axes, progress=not args.quiet)
+    n = fig['counts']
+    name = 'monet triangulate'
+    print(f'{name}: {fig["frames"]} frames (from frame {fig["first_frame"]}) x '
+          f'{len(fig["cameras"])} cameras ({", ".join(fig["cameras"])}) x '
+          f'{len(fig["keypoints"])} keypoints from {fig["rows"]} {fig["fmt"]} rows; '
+          f'{n["triangulated"]} of {n["points"]} points triangulated')
+    nan = f', {fig["nan_rows"]} of them NaN' if fig['nan_rows'] else ''
+    print(f'{name}: skipped views: {n["missing"]} of {n["cells"]} missing (no detection'
+          f'{nan}), '
+          f'{n["low_score"]} below --confidence-threshold {args.confidence_threshold}')
+    lost = ', '.join(f'{k} {v}' for k, v in n['not_triangulated'].items() if v)
+    print(f'{name}: frames not triangulated per keypoint (fewer than {args.min_views} '
+          f'consistent views): {lost or "none"}')
+    for note in fig['notes']:
+        print(f'{name}: note: {note}', file=sys.stderr)
+    if fig['filter'] is not None:
+        print(f'{name}: {fig["filter"].summary()}')
+        for note in fig['filter'].notes:
+            print(f'{name}: filter: {note}')
+    for fmt, path in fig['exports'].items():
+        print(f'{name}: wrote {fmt}: {path}')
+    return 0

@@ -1,0 +1,152 @@
+"""Another tool's 2D detections as arrays for triangulation (`monet triangulate`; no ROS).
+
+Reads any 2D table `monet labels import` reads (the same readers): DeepLabCut / Lightning
+Pose prediction CSV / H5 (likelihood = score), SLEAP analysis H5 (point_scores = score),
+anipose pose-2d folders, and the frame-indexed points table frame,camera,keypoint,u,v
+[,score] (monet_ros.labels, read_label_rows(points=True)). A source without scores gets
+score 1. Frames are the tables' frame indices (0-based video frames); the arrays cover
+every frame from the first to the last one seen.
+"""
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from monet_ros.labels import LabelError, read_label_rows
+from monet_ros.labels_import import ImportResult, import_labels
+
+FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'frames')
+
+
+@dataclass
+class Points2D:
+    """frames (T,) int frame indices; cameras (V,) names; keypoints (C,); points (T, V, C,
+    2) px (NaN = missing); score (T, V, C) (NaN = missing); fmt: the format read;
+    rows: detections read; nan_rows: rows with NaN u / v (missing)."""
+    frames: np.ndarray
+    cameras: tuple
+    keypoints: tuple
+    points: np.ndarray
+    score: np.ndarray
+    fmt: str
+    rows: int
+    nan_rows: int
+
+
+def _h5_is_sleap(path):
+    import h5py
+    try:
+        with h5py.File(path, 'r') as f:
+            return 'tracks' in f
+    except (OSError, ValueError):
+        return False
+
+
+def detect_format(paths):
+    """The format of 2D table paths (list of Path): dlc, sleap, anipose or frames.
+    Raises LabelError naming the file when it is none of them."""
+    first = paths[0]
+    if first.is_dir():
+        h5 = sorted(first.rglob('*.h5'))
+        if h5:
+            return 'sleap' if _h5_is_sleap(h5[0]) else 'anipose'
+        return 'dlc'
+    suffix = first.suffix.lower()
+    if suffix in ('.h5', '.hdf5'):
+        return 'sleap' if _h5_is_sleap(first) else 'dlc'
+    if suffix == '.csv':
+        try:
+            with open(first, encoding='utf-8-sig') as f:
+                head = f.readline().split(',')[0].strip()
+        except (OSError, UnicodeDecodeError) as error:
+            raise LabelError(f'{first}: cannot read ({error})') from None
+        if head == 'scorer':
+            return 'dlc'
+        if head == 'frame':
+            return 'frames'
+        raise LabelError(f'{first}:1: first field {head!r}: neither a DeepLabCut table '
+                         "('scorer') nor a points table ('frame,camera,keypoint,u,v[,score]')")
+    raise LabelError(f'{first}: not a 2D table (.csv, .h5 or an anipose pose-2d folder)')
+
+
+def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
+    """Points2D of 2D tables.
+
+    paths: a path or list (files, or a folder); cameras: the rig's camera names (V, in
+    rig order: the output's order; cameras with no detection stay NaN); fmt: one of
+    FORMATS; keypoints: names fixing the output's keypoints and order (a detection of
+    another keypoint is an error), None = the sources' keypoints in their order;
+    camera_map: {source camera: rig camera}.
+    Raises LabelError (one line naming the file and field) for an unknown camera or
+    keypoint, a wrong column set, a (frame, camera, keypoint) given twice, per-camera
+    files of different lengths, or nothing to read."""
+    paths = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)]
+    for p in paths:
+        if not p.exists():
+            raise LabelError(f'{p}: no such file or folder')
+    if fmt not in FORMATS:
+        raise LabelError(f'unknown 2D format {fmt!r}; one of {", ".join(FORMATS)}')
+    if fmt == 'auto':
+        fmt = detect_format(paths)
+    cameras = tuple(cameras)
+    camera_map = dict(camera_map or {})
+    if fmt == 'frames':
+        rows = [r for p in paths for r in read_label_rows(p, points=True)]
+        rows = [replace(r, camera=camera_map.get(r.camera, r.camera)) for r in rows]
+        result = ImportResult(rows, tuple(dict.fromkeys(r.keypoint for r in rows)))
+    else:
+        result = import_labels(fmt, paths, cameras=cameras, camera_map=camera_map)
+    rows = result.rows
+    if not rows:
+        raise LabelError(f'{", ".join(map(str, paths))}: no 2D detections found')
+    for r in rows:
+        if r.camera not in cameras:
+            raise LabelError(f'{r.place}: field camera: {r.camera!r} is not a camera of the '
+                             f'rig ({", ".join(cameras)}); --camera-map SRC=DST renames')
+    names = tuple(keypoints) if keypoints is not None else result.keypoints
+    kindex = {k: i for i, k in enumerate(names)}
+    for r in rows:
+        if r.keypoint not in kindex:
+            raise LabelError(f'{r.place}: field keypoint: {r.keypoint!r} is not a keypoint '
+                             f'of the skeleton ({", ".join(names)})')
+    _check_lengths(rows)
+    frame = np.array([r.frame for r in rows], np.int64)
+    first, last = int(frame.min()), int(frame.max())
+    T, V, C = last - first + 1, len(cameras), len(names)
+    cindex = {c: i for i, c in enumerate(cameras)}
+    t = frame - first
+    v = np.array([cindex[r.camera] for r in rows])
+    c = np.array([kindex[r.keypoint] for r in rows])
+    flat = (t * V + v) * C + c
+    unique, counts = np.unique(flat, return_counts=True)
+    if (counts > 1).any():
+        twice = unique[counts > 1][0]
+        r = rows[int(np.flatnonzero(flat == twice)[1])]
+        raise LabelError(f'{r.place}: frame {r.frame} camera {r.camera} keypoint '
+                         f'{r.keypoint} is given twice')
+    points = np.full((T, V, C, 2), np.nan)
+    score = np.full((T, V, C), np.nan)
+    uv = np.array([(r.u, r.v) for r in rows], np.float64)
+    s = np.array([1.0 if r.score is None else r.score for r in rows], np.float64)
+    points[t, v, c] = uv
+    score[t, v, c] = s
+    nan_rows = int((~np.isfinite(uv).all(-1)).sum())
+    return Points2D(frames=np.arange(first, last + 1), cameras=cameras, keypoints=names,
+                    points=points, score=score, fmt=fmt, rows=len(rows), nan_rows=nan_rows)
+
+
+def _check_lengths(rows):
+    """Per-camera files (each file one camera) must cover the same frames: LabelError
+    naming two files whose frame counts (last frame + 1) differ."""
+    by_source = {}
+    for r in rows:
+        entry = by_source.setdefault(r.source, [set(), -1])
+        entry[0].add(r.camera)
+        entry[1] = max(entry[1], r.frame)
+    if len(by_source) < 2 or any(len(cams) > 1 for cams, _ in by_source.values()):
+        return
+    lengths = {src: last + 1 for src, (_, last) in by_source.items()}
+    if len(set(lengths.values())) > 1:
+        (a, na), (b, nb) = sorted(lengths.items(), key=lambda kv: kv[1])[::len(lengths) - 1]
+        raise LabelError(f'{a}: {na} frames but {b}: {nb} frames; the per-camera files of '
+                         'one recording must cover the same frames')

@@ -1,0 +1,44 @@
+"""2D tables as arrays for `monet triangulate`: the frame-indexed points table (optional
+score, empty / NaN cells = missing), DeepLabCut predictions with likelihood, duplicates."""
+import numpy as np
+import pytest
+
+from monet_ros.labels import LabelError, read_label_rows
+from monet_ros.labels_import.points2d import detect_format, read_points2d
+
+
+def test_points_table_with_and_without_scores(tmp_path):
+    scored = tmp_path / 'scored.csv'
+    scored.write_text('frame,camera,keypoint,u,v,score\n'
+                      '3,a,head,10.5,20.25,0.9\n'
+                      '4,b,head,,,\n'
+                      '5,b,tail,1,2,nan\n')
+    p = read_points2d(scored, ['a', 'b', 'c'])
+    assert p.fmt == 'frames' and p.keypoints == ('head', 'tail')
+    np.testing.assert_array_equal(p.frames, [3, 4, 5])
+    assert p.points.shape == (3, 3, 2, 2) and p.rows == 3 and p.nan_rows == 1
+    np.testing.assert_array_equal(p.points[0, 0, 0], [10.5, 20.25])
+    assert p.score[0, 0, 0] == 0.9 and np.isnan(p.score[2, 1, 1])
+    assert np.isnan(p.points[1, 1, 0]).all() and np.isnan(p.points[:, 2]).all()
+    plain = tmp_path / 'plain.csv'
+    plain.write_text('frame,camera,keypoint,u,v\n0,a,head,1,2\n0,b,head,3,4\n')
+    p = read_points2d(plain, ['a', 'b'], keypoints=['tail', 'head'])
+    assert p.keypoints == ('tail', 'head') and np.all(p.score[:, :, 1] == 1.0)
+    assert np.isnan(p.points[:, :, 0]).all()
+    # a labels file stays strict: no score column, no empty coordinates
+    with pytest.raises(LabelError, match='scored.csv:1: header is'):
+        read_label_rows(scored)
+
+
+def test_duplicates_and_formats_are_named(tmp_path):
+    twice = tmp_path / 'twice.csv'
+    twice.write_text('frame,camera,keypoint,u,v\n0,a,head,1,2\n0,a,head,3,4\n')
+    with pytest.raises(LabelError, match='twice.csv:3: frame 0 camera a keypoint head is '
+                       'given twice'):
+        read_points2d(twice, ['a', 'b'])
+    other = tmp_path / 'other.csv'
+    other.write_text('x,y\n1,2\n')
+    with pytest.raises(LabelError, match="other.csv:1: first field 'x': neither"):
+        detect_format([other])
+    with pytest.raises(LabelError, match='no such file'):
+        read_points2d(tmp_path / 'missing.csv', ['a'])
