@@ -259,23 +259,29 @@ def _other_maxima(flat, first, w, h, k, floor):
     return out
 
 
-def decode_heatmap_peaks(views, k, floor=0.0, eps=1e-10):
+def decode_heatmap_peaks(views, k, floor=0.0, channels=None, eps=1e-10):
     """The k highest local maxima of every map, each refined as decode_heatmaps' peak.
 
     views: V numpy arrays (C, h_v, w_v) (as decode_heatmap_views); k >= 1 candidates per
     map; floor: the local maxima below it (or <= 0) are not reported (fusion passes its
     confidence_threshold: weaker candidates would be ignored anyway, and only the pixels
-    above it are searched, so the cost follows the blobs, not the map size).
+    above it are searched, so the cost follows the blobs, not the map size); channels:
+    indices (C',) of the maps to decode (default all; the fusion retries a few).
     Candidate 0 is the argmax, exactly decode_heatmap_views' peak and confidence (at any
     floor); candidates 1..k-1 are the other pixels >= their 8 neighbours, highest first.
     -> peaks (V, C, k, 2) (u, v) heatmap pixels, NaN where a map has fewer candidates;
-    confidence (V, C, k), 0 there; finite (V,) bool as decode_heatmap_views'.
+    confidence (V, C, k), 0 there; finite (V,) bool as decode_heatmap_views' (C = C' with
+    channels given: of those maps only).
     Raises ValueError for k < 1 or a view whose shape does not fit.
     """
     if int(k) != k or k < 1:
         raise ValueError(f'decode_heatmap_peaks: k must be an integer >= 1, got {k}')
     k = int(k)
-    views, channels = _check_views(views, 'decode_heatmap_peaks')
+    views, count = _check_views(views, 'decode_heatmap_peaks')
+    if channels is not None:
+        views = [view[np.asarray(channels, np.intp)] for view in views]   # (a small copy)
+        count = len(channels)
+    channels = count
     flats, first, checks, dtype = _argmax_views(views, channels)
     index = np.empty((len(views), channels, k), np.intp)
     index[:, :, 0] = first
