@@ -170,7 +170,7 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer
 def _fuse_best(points2d, conf, cameras, config, timer=None):
     """The single-peak fusion: points2d (V, C, 2), conf (V, C) -> FusionResult."""
     points2d = np.array(points2d, np.float64)
-    conf = np.asarray(conf, np.float64)
+    conf = np.array(conf, np.float64)           # (a copy: the result's, updated in place)
     weak = ~(conf >= config.confidence_threshold) | ~np.isfinite(points2d).all(axis=-1)
     points2d[weak] = np.nan
     weights = np.where(weak, 0.0, conf)
