@@ -15,8 +15,10 @@ with more inlier views is kept. A view whose best peak is another joint (the oth
 then contributes its second peak instead of being dropped; where all views agree nothing
 changes and nothing more is computed. Default K = 2 (bench/peaks.py: on two-peak
 synthetic heatmaps with 15% of the maps' best peak on the wrong joint, p90 3D error
-115 -> 103 mm at threshold_px 15 and 68 -> 43 mm at 8; K = 3 adds nothing there; the same
-answers as K = 1 on clean and non-swapped two-peak maps).
+119 -> 103 mm at threshold_px 15 and 68 -> 35 mm at 8; K = 3 adds nothing there; the same
+answers as K = 1 on clean and non-swapped two-peak maps; with the trained demo model of
+`monet pipeline` about the same (p90 84.6 -> 85.4 mm): its second peaks are rarely above
+the confidence threshold).
 """
 from collections import Counter
 from dataclasses import dataclass, field
