@@ -141,3 +141,111 @@ def test_a_view_with_a_non_finite_value_is_skipped_the_others_fused(bad):
     np.testing.assert_array_equal(got.inliers[keep], ref.inliers)
     assert not got.inliers[2].any() and np.isnan(got.points2d[2]).all()
     assert np.abs(got.X - X).max() < 0.03  # noise of 0.2 heatmap px, 3 views
+
+
+def render_swapped(rig, X, swapped_views, partner):
+    """Two-peak heatmaps: in `swapped_views` every map's HIGHER peak (1.0) is at the
+    partner joint and the true joint is the second (0.7); elsewhere the true joint is the
+    only peak (0.9). -> heatmaps (V, C, h, w), K_heat (V, 3, 3)."""
+    heat, K_heat = [], []
+    for v, cam in enumerate(rig):
+        uv = cv2_project(cam, X)
+        box = subject_box(uv, cam.width, cam.height, GRID[0] / GRID[1])
+        p = to_crop(uv, box, GRID)
+        if v in swapped_views:
+            maps = np.maximum(gaussian_heatmaps(p, GRID[::-1], 1.5, 0.7),
+                              gaussian_heatmaps(p[partner], GRID[::-1], 1.5, 1.0))
+        else:
+            maps = gaussian_heatmaps(p, GRID[::-1], 1.5, 0.9)
+        heat.append(maps)
+        K_heat.append(cam.crop(box, GRID).K)
+    return np.stack(heat), np.stack(K_heat)
+
+
+def _spread_scene(rng):
+    """4 cameras, 8 joints far apart (>= 0.25 m: each other's peaks are outliers), paired
+    0-1, 2-3, ... as left / right partners."""
+    rig = ring_rig(4)
+    while True:
+        X = rng.uniform([-0.4, -0.4, 0.5], [0.4, 0.4, 1.6], size=(8, 3))
+        d = np.linalg.norm(X[:, None] - X[None], axis=-1) + np.eye(8)
+        if d.min() > 0.25:
+            return rig, X, np.arange(8) ^ 1
+
+
+def test_top_k_uses_the_second_peak_where_the_first_is_the_other_joint():
+    """Views 1 and 2 see every joint's partner as the higher peak (the two wrong views
+    agree with each other): one peak per view can at best keep the 2 right views (or
+    triangulates the partner); with 2 candidates per view the true joint is seen by all 4
+    views, from the second peak of views 1 and 2, within 1 mm of the truth."""
+    rig, X, partner = _spread_scene(np.random.default_rng(21))
+    heat, K_heat = render_swapped(rig, X, (1, 2), partner)
+    one = fuse_heatmaps(heat, K_heat, rig, FusionConfig(peaks_per_view=1))
+    two = fuse_heatmaps(heat, K_heat, rig, FusionConfig(peaks_per_view=2))
+    assert (one.num_views <= 2).all()
+    np.testing.assert_array_equal(two.num_views, 4)
+    assert np.abs(two.X - X).max() < 1e-3
+    np.testing.assert_array_equal(two.peak_index[[1, 2]], 1)
+    np.testing.assert_array_equal(two.peak_index[[0, 3]], 0)
+    np.testing.assert_array_equal(one.peak_index, 0)
+    # the confidences are of the peaks used: the 0.7 Gaussians in views 1, 2 (the value at
+    # the peak pixel, a little under the sub-pixel maximum), 0.9 in views 0, 3
+    assert (two.peak_confidence[[1, 2]] <= 0.7).all() and (two.peak_confidence[[1, 2]] > 0.6).all()
+    assert (two.peak_confidence[[0, 3]] > 0.8).all()
+    np.testing.assert_allclose(two.confidence, two.peak_confidence.mean(axis=0), rtol=1e-12)
+    # one swapped view: one peak per view drops it (3 views), two candidates use it (4)
+    heat, K_heat = render_swapped(rig, X, (2,), partner)
+    one = fuse_heatmaps(heat, K_heat, rig, FusionConfig(peaks_per_view=1))
+    two = fuse_heatmaps(heat, K_heat, rig, FusionConfig(peaks_per_view=2))
+    np.testing.assert_array_equal(one.num_views, 3)
+    np.testing.assert_array_equal(two.num_views, 4)
+    assert np.abs(two.X - X).max() < 1e-3 and np.abs(one.X - X).max() < 1e-3
+
+
+@pytest.mark.parametrize('method', ['exclusion', 'ransac'])
+def test_one_peak_per_view_is_the_single_peak_fusion_exactly(method):
+    """peaks_per_view=1 gives exactly the decode + robust triangulation of the best peaks
+    (the fusion before candidates, composed here from its parts); and on single-peak maps
+    2 candidates per view change nothing."""
+    from monet_ros.geometry import triangulate_robust
+    from monet_ros.models import decode_heatmap_views
+    rig, X, partner = _spread_scene(np.random.default_rng(22))
+    for heat, K_heat in (render_swapped(rig, X, (1, 2), partner),
+                         render(rig, X, wrong=(0,), noise=0.4,
+                                rng=np.random.default_rng(3))[:2]):
+        config = FusionConfig(peaks_per_view=1, method=method)
+        got = fuse_heatmaps(heat, K_heat, rig, config)
+        peaks, conf, _ = decode_heatmap_views(list(heat))
+        S = heat_to_source(K_heat, np.stack([c.K for c in rig]))
+        uv = (peaks - S[:, None, :2, 2]) / np.diagonal(S, axis1=1, axis2=2)[:, None, :2]
+        uv[conf < config.confidence_threshold] = np.nan
+        X_ref, inliers_ref = triangulate_robust(
+            uv, rig, weights=np.where(conf < config.confidence_threshold, 0.0, conf),
+            threshold_px=config.threshold_px, method=method)
+        np.testing.assert_array_equal(got.X, X_ref)
+        np.testing.assert_array_equal(got.inliers, inliers_ref & np.isfinite(X_ref).all(1))
+        np.testing.assert_array_equal(got.points2d, uv)
+    single = render(rig, X, wrong=(0,), noise=0.4, rng=np.random.default_rng(3))[:2]
+    for config in (FusionConfig(peaks_per_view=1, method=method),):
+        a = fuse_heatmaps(*single, rig, config)
+        b = fuse_heatmaps(*single, rig, FusionConfig(peaks_per_view=2, method=method))
+        for name in ('X', 'inliers', 'confidence', 'reprojection_error', 'points2d'):
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_fuse_points_takes_candidates_too():
+    """fuse_points with (V, C, K, 2) candidates (another tool's top-K detections): the
+    true point is found where the best candidate of two views is wrong."""
+    rng = np.random.default_rng(23)
+    rig, X = scene(rng, count=4)
+    uv = np.stack([cv2_project(cam, X) for cam in rig])
+    wrong = uv + np.array([90.0, -60.0])
+    points = np.stack([uv, wrong], axis=2)                  # candidate 0 true, 1 wrong
+    points[[0, 3]] = points[[0, 3]][:, :, ::-1]             # views 0, 3: the wrong one first
+    conf = np.broadcast_to([0.9, 0.6], points.shape[:3])
+    result = fuse_points(points, conf, rig, FusionConfig())
+    np.testing.assert_array_equal(result.num_views, 4)
+    assert np.abs(result.X - X).max() < 1e-6
+    np.testing.assert_array_equal(result.peak_index[[0, 3]], 1)
+    with pytest.raises(ValueError, match=r'\(V, C, K, 2\)'):
+        fuse_points(points, conf[..., 0], rig)

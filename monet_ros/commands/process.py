@@ -27,7 +27,7 @@ import time
 import numpy as np
 
 from monet_ros.config import ConfigError, config_subset, setting
-from monet_ros.fusion import FusionConfig
+from monet_ros.fusion import PEAKS_PER_VIEW, FusionConfig
 
 HELP = 'run detector + fusion over a recording offline, write keypoints3d to an MCAP'
 
@@ -52,6 +52,9 @@ def add_arguments(parser):
                         help='heatmap peak value below which a view is ignored')
     parser.add_argument('--min-views', type=int, default=2, help='fewest inlier views')
     parser.add_argument('--method', choices=('exclusion', 'ransac'), default='exclusion')
+    parser.add_argument('--peaks-per-view', type=int, default=PEAKS_PER_VIEW,
+                        help='heatmap local maxima per view and keypoint tried where a view '
+                        'disagrees (1 = the highest peak only)')
     parser.add_argument('--no-track', action='store_true',
                         help='full-frame crops instead of following the subject')
     parser.add_argument('--heatmaps', action='store_true',
@@ -240,7 +243,7 @@ def run(args):
                            confidence_threshold=args.confidence_threshold,
                            min_views=args.min_views, method=args.method,
                            slop_ms=args.slop_ms, track=not args.no_track,
-                           heatmaps=args.heatmaps)
+                           heatmaps=args.heatmaps, peaks_per_view=args.peaks_per_view)
     filter_config = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)

@@ -21,6 +21,7 @@ from monet_ros.geometry.epipolar import (
 from monet_ros.geometry.rig import RigError, load_rig, read_rig, save_rig
 from monet_ros.geometry.triangulation import (
     reprojection_error,
+    select_candidates,
     triangulate,
     triangulate_robust,
 )
@@ -32,5 +33,5 @@ __all__ = [
     'rectification_homographies', 'rectifying_rotation', 'relative_pose', 'skew_matrix',
     'stereo_rectify',
     'RigError', 'load_rig', 'read_rig', 'save_rig',
-    'reprojection_error', 'triangulate', 'triangulate_robust',
+    'reprojection_error', 'select_candidates', 'triangulate', 'triangulate_robust',
 ]

@@ -11,6 +11,7 @@ reprojection error counts as infinite); a point with fewer than 2 (min_views) vi
 NaN with no inlier views. (Rays that meet behind the cameras reproject with 0 px error, so
 the reprojection error alone cannot catch them.)
 """
+from functools import lru_cache
 from itertools import combinations
 from math import comb
 
@@ -173,6 +174,20 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
     return X, np.where(inliers, errors, np.nan), inliers
 
 
+def _two_view_points(B1, B2, valid):
+    """Linear two-view points (..., 3) from the DLT rows B1, B2 (..., 2, 4) of two views:
+    the 4 rows solved with X inhomogeneous (3x3 normal equations); garbage where not
+    valid (..., bool)."""
+    A = np.concatenate([B1, B2], axis=-2)  # (..., 4, 4)
+    AtA = A[..., :3].swapaxes(-1, -2) @ A[..., :3]
+    Atb = -(A[..., :3].swapaxes(-1, -2) @ A[..., 3:])
+    AtA[~valid] = np.eye(3)
+    try:
+        return np.linalg.solve(AtA, Atb)[..., 0]
+    except np.linalg.LinAlgError:  # a degenerate pair (e.g. coincident rays)
+        return (np.linalg.pinv(AtA) @ Atb)[..., 0]
+
+
 def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     V, N = w.shape
     avail = w > 0
@@ -195,15 +210,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
         r2 += r2 >= r1
         a, b = order[r1, cols], order[r2, cols]  # (H, n)
     valid = avail[a, todo] & avail[b, todo]
-    # two-view hypothesis per pair: the 4 DLT rows, solved with X inhomogeneous (3x3)
-    A = np.concatenate([B[a, todo], B[b, todo]], axis=-2)  # (H, n, 4, 4)
-    AtA = A[..., :3].swapaxes(-1, -2) @ A[..., :3]
-    Atb = -(A[..., :3].swapaxes(-1, -2) @ A[..., 3:])
-    AtA[~valid] = np.eye(3)
-    try:
-        Xh = np.linalg.solve(AtA, Atb)[..., 0]
-    except np.linalg.LinAlgError:  # a degenerate pair (e.g. coincident rays)
-        Xh = (np.linalg.pinv(AtA) @ Atb)[..., 0]
+    Xh = _two_view_points(B[a, todo], B[b, todo], valid)
     err = _view_errors(rig, Xh, obs[:, todo])  # (H, V, n)
     err[_behind(rig, Xh, np.ones(err.shape, bool))] = np.inf  # cheirality
     inl = (err < threshold_px) & avail[None, :, todo]
@@ -280,3 +287,128 @@ def _robust(obs, ideal, w, rig, threshold_px, min_views, method, max_subsets,
         rng = np.random.default_rng(seed)
         return _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng)
     raise ValueError(f"method must be 'exclusion' or 'ransac', got {method!r}")
+
+
+@lru_cache(maxsize=32)
+def _every_pair(V, K):
+    """(a, i, b, j), each (C(V, 2) K^2, 1): every candidate pair of two views a < b."""
+    pairs = np.array(list(combinations(range(V), 2)))                # (P, 2)
+    ij = np.stack(np.meshgrid(np.arange(K), np.arange(K), indexing='ij'), -1).reshape(-1, 2)
+    a, b = (np.repeat(pairs[:, q], len(ij))[:, None] for q in (0, 1))
+    i, j = (np.tile(ij[:, q], len(pairs))[:, None] for q in (0, 1))
+    for x in (a, i, b, j):
+        x.setflags(write=False)
+    return a, i, b, j
+
+
+def _candidate_pairs(avail, max_hypotheses, rng):
+    """Hypotheses (view a, candidate i, view b, candidate j), each (H, N) or (H, 1), a != b:
+    every pair of candidates of two different views when C(V, 2) K^2 <= max_hypotheses,
+    else max_hypotheses random ones per keypoint (two distinct views with a candidate,
+    seeded).
+    avail (V, N, K) bool."""
+    V, N, K = avail.shape
+    if comb(V, 2) * K * K <= max_hypotheses:
+        return _every_pair(V, K)                 # (H, 1) each: the same for every keypoint
+    seen = avail.any(axis=2)                                         # (V, N)
+    order = np.argsort(~seen, axis=0, kind='stable')                 # views with candidates
+    count = np.maximum(seen.sum(axis=0), 2)
+    cols = np.arange(N)
+    r1 = (rng.random((max_hypotheses, N)) * count).astype(int)
+    r2 = (rng.random((max_hypotheses, N)) * (count - 1)).astype(int)
+    r2 += r2 >= r1
+    i = (rng.random((max_hypotheses, N)) * K).astype(int)
+    j = (rng.random((max_hypotheses, N)) * K).astype(int)
+    return order[r1, cols], i, order[r2, cols], j
+
+
+def select_candidates(points2d, cameras, weights=None, threshold_px=15.0, max_hypotheses=64,
+                      seed=0):
+    """Which of K candidate detections of each view to triangulate, per keypoint: the most
+    consistent combination of views and candidates (a view whose best peak is another
+    joint contributes its second peak instead of being dropped).
+
+    points2d (V, N, K, 2) observed pixels of K candidates per view and keypoint (e.g. the
+    top-K heatmap maxima, best first), NaN = missing; weights (V, N, K) >= 0 (their
+    confidences; 0 or NaN = missing). Hypotheses: the linear two-view points of pairs of
+    candidates of two different views (every pair while C(V, 2) K^2 <= max_hypotheses,
+    else max_hypotheses random pairs per keypoint, seeded), dropped when either view sees
+    the point behind it (cheirality). Each hypothesis is projected into every view; a view
+    supports it when its candidate nearest to the projection is within threshold_px (and
+    the point is in front of it). Score: number of supporting views, ties broken by their
+    mean weight (relative to the keypoint's largest), then by their mean distance (px)
+    (_support_score).
+    The winner is refined once (weighted DLT on its supporting candidates, supporters
+    re-selected as the nearest candidates within threshold_px, kept when >= 2).
+    Batched over keypoints and hypotheses (one (H, V, N, K) distance array).
+    Returns (choice (V, N) int: the candidate index of each view, 0 (the best) where the
+    view supports no hypothesis or no hypothesis has 2 supporters; support (V, N) bool:
+    the supporting views). Feed the chosen candidates to triangulate_robust (its
+    outlier rejection and cheirality then decide the inliers)."""
+    obs = np.asarray(points2d, dtype=np.float64)
+    V = len(cameras)
+    if obs.ndim != 4 or obs.shape[0] != V or obs.shape[3] != 2:
+        raise ValueError(f'points2d must have shape (V={V}, N, K, 2), got {obs.shape}')
+    _, N, K, _ = obs.shape
+    if weights is not None and np.shape(weights) != obs.shape[:3]:
+        raise ValueError(f'weights must have shape {obs.shape[:3]}, got {np.shape(weights)}')
+    if not threshold_px > 0:
+        raise ValueError(f'threshold_px must be > 0, got {threshold_px}')
+    rig = stack_cameras(cameras)
+    flat_w = None if weights is None else np.reshape(weights, (V, N * K))
+    _, ideal, w = _prepare(obs.reshape(V, N * K, 2), cameras, flat_w, rig)
+    w = w.reshape(V, N, K)
+    avail = w > 0
+    B = dlt_rows(ideal, rig['P']).reshape(V, N, K, 2, 4)
+    a, i, b, j = _candidate_pairs(avail, max_hypotheses, np.random.default_rng(seed))
+    cols = np.arange(N)
+    valid = avail[a, cols, i] & avail[b, cols, j]                    # (H, N)
+    Xh = _two_view_points(B[a, cols, i], B[b, cols, j], valid)       # (H, N, 3)
+    in_front = depths(rig, Xh) > 0                                   # (H, V, N)
+    hcols = np.arange(valid.shape[0])[:, None]
+    valid &= in_front[hcols, a, cols] & in_front[hcols, b, cols]
+    nearest, dist = _nearest_candidates(rig, Xh, obs, avail)         # (H, V, N)
+    support = (dist < threshold_px) & in_front
+    score = _support_score(support, dist, w, nearest, threshold_px)
+    score[~valid] = -1.0
+    best = np.argmax(score, axis=0)                                  # (N,)
+    found = score[best, cols] >= 2                                   # 2 supporters or more
+    choice = np.where(support[best, :, cols].T, nearest[best, :, cols].T, 0)
+    chosen = support[best, :, cols].T & found
+    # refine: weighted DLT on the supporters, then the nearest candidates of that point
+    Bc = np.take_along_axis(B, choice[:, :, None, None, None], axis=2)[:, :, 0]
+    wc = np.take_along_axis(w, choice[:, :, None], axis=2)[:, :, 0]
+    Xr = solve_dlt(Bc, wc * chosen)
+    near_r, dist_r = _nearest_candidates(rig, Xr, obs, avail)
+    with np.errstate(invalid='ignore'):
+        support_r = (dist_r < threshold_px) & (depths(rig, Xr) > 0)
+    better = found & (support_r.sum(axis=0) >= 2) & np.isfinite(Xr).all(axis=1)
+    choice = np.where(better, np.where(support_r, near_r, 0), np.where(chosen, choice, 0))
+    support = np.where(better, support_r, chosen)
+    return choice, support
+
+
+def _nearest_candidates(rig, X, obs, avail):
+    """Per view, the candidate nearest the projection of X (..., N, 3): (index, distance)
+    (..., V, N), distance inf where a view has no candidate; obs (V, N, K, 2)."""
+    with np.errstate(invalid='ignore', divide='ignore', over='ignore'):  # (depth 0: inf)
+        d = np.linalg.norm(project_views(rig, X)[..., None, :] - obs, axis=-1)  # (.., V,N,K)
+    d = np.where(avail & np.isfinite(d), d, np.inf)
+    nearest = np.argmin(d, axis=-1)
+    return nearest, np.take_along_axis(d, nearest[..., None], axis=-1)[..., 0]
+
+
+def _support_score(support, dist, w, nearest, threshold_px):
+    """(H, N): supporting views + 0.8 x their mean weight / the keypoint's largest weight +
+    0.1 x (1 - their mean distance / threshold_px): the count decides, the two tie-breaks
+    add less than 1 together; between equally supported hypotheses (e.g. the left ankle
+    where two views' best peaks are on the right one, and the right ankle from the same
+    maps' second peaks) the stronger peaks win."""
+    count = support.sum(axis=1)
+    w_near = np.take_along_axis(w[None], nearest[..., None], axis=-1)[..., 0]  # (H, V, N)
+    top = np.maximum(w.max(axis=(0, 2)), 1e-300)                             # (N,)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        n = np.maximum(count, 1)
+        mean_w = np.where(support, w_near, 0.0).sum(axis=1) / n / top
+        mean_d = np.where(support, dist, 0.0).sum(axis=1) / n
+    return count + 0.8 * mean_w + 0.1 * (1 - mean_d / threshold_px)

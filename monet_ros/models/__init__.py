@@ -13,6 +13,7 @@ from monet_ros.models.crop import (
 )
 from monet_ros.models.detector import Detector, images_to_tensor
 from monet_ros.models.heatmaps import (
+    decode_heatmap_peaks,
     decode_heatmap_views,
     decode_heatmaps,
     labelled_mask,
@@ -23,8 +24,8 @@ from monet_ros.models.registry import MODELS, build_model
 
 __all__ = [
     'CheckpointError', 'Detector', 'MODELS', 'build_model', 'crop_images', 'crop_to_original',
-    'decode_heatmap_views', 'decode_heatmaps', 'fit_boxes_to_aspect', 'full_frame_boxes',
-    'fuse_for_inference', 'images_to_tensor',
+    'decode_heatmap_peaks', 'decode_heatmap_views', 'decode_heatmaps', 'fit_boxes_to_aspect',
+    'full_frame_boxes', 'fuse_for_inference', 'images_to_tensor',
     'labelled_mask', 'load_checkpoint', 'read_checkpoint', 'render_heatmaps',
     'save_checkpoint',
 ]

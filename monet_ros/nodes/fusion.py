@@ -6,6 +6,12 @@ virtual camera, same stamp) for each camera, pairs them per camera by exact stam
 the cameras by stamp (exact or within `slop_ms`), and calls the fusion core
 (monet_ros.fusion.fuse_heatmaps). A silent camera is waited for `timeout_s`, then left out
 (fewer views) and reported in /diagnostics; after `silent_after_s` frames no longer wait.
+
+With `filter:=true` (settable live) the keypoints go through the causal per-joint Kalman
+filter of monet_ros.temporal.live (no frames of delay, outliers gated, reset on a stamp
+jump): the filtered ones on keypoints3d (and the skeleton markers), the raw ones on
+keypoints3d_raw. A bridged joint (predicted, no accepted measurement this frame) keeps
+num_views of the raw fusion (0 when not triangulated), so it stays recognisable.
 """
 from collections import OrderedDict
 import copy
@@ -36,6 +42,7 @@ from monet_ros.nodes.names import (
     HEATMAP_CAMERA_INFO,
     HEATMAPS,
     KEYPOINTS3D,
+    KEYPOINTS3D_RAW,
     RIG_MARKERS,
     SKELETON,
     TF_STATIC,
@@ -48,16 +55,19 @@ from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.nodes.sync import StampSynchronizer
 from monet_ros.nodes.tf import rig_tf_message, tf_message_class
 from monet_ros.skeleton import load_skeleton
+from monet_ros.temporal.live import LiveFilter, LiveFilterConfig
 from monet_ros.timing import StageTimer
 
 # Parameters that may change while running (`ros2 param set`), effective next frame.
-LIVE = ('confidence_threshold', 'threshold_px', 'min_views')
+FILTER_PARAMETERS = tuple(f for f in LiveFilterConfig.__dataclass_fields__)
+LIVE = ('confidence_threshold', 'threshold_px', 'min_views', 'peaks_per_view',
+        *FILTER_PARAMETERS)
 # Unpaired heatmaps / camera_info kept per camera while waiting for their partner.
 _PAIR_BACKLOG = 30
 
 
 @dataclass(frozen=True)
-class FusionNodeConfig(FusionConfig):
+class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     rig: str = setting('', 'rig file (any format load_rig reads) or a recording whose '
                        'camera_info + /tf_static give the rig; required')
     cameras: tuple[str, ...] = setting((), 'rig cameras to fuse (default: all of the rig)')
@@ -118,6 +128,9 @@ class FusionNode(Node):
         self.config = config = declare_config(self, FusionNodeConfig, overrides, live=LIVE,
                                               on_change=self.apply_live)
         self.core_config = config_subset(config, FusionConfig)
+        self.live_filter = LiveFilter(config_subset(config, LiveFilterConfig)) \
+            if config.filter else None
+        self.filter_counts = dict(resets=0, restarts=0, gated=0)  # of replaced filters
         self.timer = StageTimer()  # per-stage wall time, reported in /diagnostics
         if config.threads:
             import torch
@@ -154,6 +167,7 @@ class FusionNode(Node):
                 CameraInfo, config.camera_info_topic.format(camera=name),
                 lambda msg, n=name: self.on_message(n, 1, msg), inputs)
         self.pub_points = self.create_publisher(PointCloud2, KEYPOINTS3D, STREAM_OUT)
+        self.pub_raw = self.create_publisher(PointCloud2, KEYPOINTS3D_RAW, STREAM_OUT)
         self.pub_skeleton = self.create_publisher(MarkerArray, SKELETON, STREAM_OUT)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
         if config.publish_tf:
@@ -177,7 +191,17 @@ class FusionNode(Node):
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
         self.core_config = config_subset(config, FusionConfig)
         self.sync.min_keys = config.min_views
+        filter_config = config_subset(config, LiveFilterConfig)
+        if self.live_filter is None or self.live_filter.config != filter_config:
+            # switched on, off or retuned: a fresh state from the next frame
+            self.keep_filter_counts()
+            self.live_filter = LiveFilter(filter_config) if config.filter else None
         self.config = config
+
+    def keep_filter_counts(self):
+        if self.live_filter is not None:
+            for key in self.filter_counts:
+                self.filter_counts[key] += getattr(self.live_filter, key)
 
     # ------------------------------------------------------------------ input
     def on_message(self, name, kind, msg):
@@ -268,15 +292,24 @@ class FusionNode(Node):
             stats.fused += 1
             stats.errors = (stats.errors + [float(errors[k])])[-100:]
         self.last_result, self.last_stamp_ns = result, group.stamp_ns
+        X = result.X
+        if self.live_filter is not None:
+            start = time.perf_counter()
+            X, _ = self.live_filter.update(group.stamp_ns, result.X)
+            self.timer.add('filter', time.perf_counter() - start)
         start = time.perf_counter()
+        if self.live_filter is not None:
+            self.pub_raw.publish(keypoints3d_to_cloud(
+                group.stamp_ns, self.frame_id, result.X, result.confidence,
+                result.reprojection_error, result.num_views))
         self.pub_points.publish(keypoints3d_to_cloud(
-            group.stamp_ns, self.frame_id, result.X, result.confidence,
+            group.stamp_ns, self.frame_id, X, result.confidence,
             result.reprojection_error, result.num_views))
         # the skeleton markers (~2 ms a frame to build and serialize) only while someone
         # (RViz, a recorder) subscribes
         if self.pub_skeleton.get_subscription_count():
             self.pub_skeleton.publish(skeleton_marker_array(
-                group.stamp_ns, self.frame_id, result.X, self.skeleton.bone_indices,
+                group.stamp_ns, self.frame_id, X, self.skeleton.bone_indices,
                 ns=self.marker_ns, lifetime_ns=int(self.config.marker_lifetime_s * 1e9),
                 names=self.skeleton.keypoints if self.config.marker_labels else None))
         self.timer.add('publish', time.perf_counter() - start)
@@ -302,6 +335,13 @@ class FusionNode(Node):
         self.pub_skeleton.wait_for_all_acked(Duration(seconds=1.0))
 
     # ------------------------------------------------------------------ diagnostics
+    def filter_totals(self):
+        """Time resets, joint restarts and gated measurements of the live filter(s) since
+        start."""
+        live = self.live_filter
+        return {key: value + (getattr(live, key) if live is not None else 0)
+                for key, value in self.filter_counts.items()}
+
     def publish_diagnostics(self):
         now = time.monotonic()
         msg = DiagnosticArray()
@@ -316,6 +356,8 @@ class FusionNode(Node):
                 ('time_resets', self.sync.stats.resets),
                 ('repeated_stamps', dict(self.sync.stats.repeated_by_key)),
                 ('fusion_ms_median', f'{fusion_ms:.3f}'),
+                ('filter', 'on' if self.live_filter is not None else 'off'),
+                *((f'filter_{key}', value) for key, value in self.filter_totals().items()),
                 # mean ms per call since start: receive (per view), decode, undistort,
                 # triangulate, errors, publish (per frame)
                 *self.timer.summary().items())])

@@ -9,6 +9,7 @@ launch file's PushRosNamespace / namespace=) moves a whole rig. Camera driver to
 DEFAULT_NAMESPACE = 'monet'
 
 KEYPOINTS3D = 'keypoints3d'
+KEYPOINTS3D_RAW = 'keypoints3d_raw'   # the unfiltered keypoints while the filter is on
 SKELETON = 'skeleton'
 RIG_MARKERS = 'rig_markers'
 MODEL = 'model'

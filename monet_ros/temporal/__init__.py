@@ -1,7 +1,8 @@
 """3D over time (no ROS): offline filters of triangulated keypoints over a whole
 recording (a Kalman / RTS smoother with outlier gating, a spatiotemporal least-squares
-optimisation with bone lengths), gap bridging and bone-length estimation. Used by
-`monet process --filter` and `monet triangulate --filter`.
+optimisation with bone lengths), gap bridging and bone-length estimation, used by
+`monet process --filter` and `monet triangulate --filter`; and the fusion node's live
+causal filter (temporal.live).
 """
 from monet_ros.temporal.bones import bone_lengths
 from monet_ros.temporal.config import LOSSES, METHODS, FilterConfig

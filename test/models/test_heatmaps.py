@@ -136,3 +136,58 @@ def test_decode_finds_border_peaks_and_empty_maps_give_the_argmax():
     flat = heat[[0, 2]].reshape(2, 3, -1).argmax(-1)
     np.testing.assert_array_equal(peaks[0, 1], [flat[0, 1] % 24, flat[0, 1] // 24])
     np.testing.assert_array_equal(peaks[1, 2], [flat[1, 2] % 24, flat[1, 2] // 24])
+
+
+def _brute_force_maxima(m, floor):
+    """Local maxima of one map (>= their 8 neighbours, the border replicated), >= floor and
+    > 0, as (value, flat index) highest first (ties: lowest index), written with loops."""
+    h, w = m.shape
+    found = []
+    for row in range(h):
+        for col in range(w):
+            window = [m[min(max(row + dr, 0), h - 1), min(max(col + dc, 0), w - 1)]
+                      for dr in (-1, 0, 1) for dc in (-1, 0, 1)]
+            if m[row, col] >= max(window) and m[row, col] >= floor and m[row, col] > 0:
+                found.append((-m[row, col], row * w + col))
+    return [(-v, i) for v, i in sorted(found)]
+
+
+@pytest.mark.parametrize('dtype', [np.float32, np.float64])
+def test_decode_peaks_first_is_decode_views_the_rest_local_maxima(dtype):
+    """decode_heatmap_peaks: candidate 0 is exactly decode_heatmap_views' peak (any floor);
+    the next ones are the other local maxima above the floor, highest first, refined to
+    the sub-pixel Gaussian centres; fewer maxima give NaN / 0."""
+    from monet_ros.models import decode_heatmap_peaks, decode_heatmap_views
+    rng = np.random.default_rng(11)
+    heat = _awkward_views(rng, dtype)
+    with np.errstate(invalid='ignore'):
+        peaks, confidence, finite = decode_heatmap_peaks(list(heat), 3, floor=0.2)
+        ref_peaks, ref_confidence, ref_finite = decode_heatmap_views(list(heat))
+    np.testing.assert_array_equal(peaks[:, :, 0], ref_peaks)
+    np.testing.assert_array_equal(confidence[:, :, 0], ref_confidence)
+    np.testing.assert_array_equal(finite, ref_finite)
+    # two Gaussians of heights 0.9 and 0.5 (and 0.15, under the floor)
+    points = np.array([[[25.0, 20.6], [10.4, 10.0], [3.3, 27.0]]])
+    g = render_heatmaps(points, (32, 32), 1.5).astype(dtype)[0]
+    two = np.maximum(np.maximum(0.9 * g[0], 0.5 * g[1]), 0.15 * g[2])
+    views = [np.stack([two, g[1], np.zeros_like(two)])]
+    peaks, confidence, _ = decode_heatmap_peaks(views, 3, floor=0.2)
+    np.testing.assert_allclose(peaks[0, 0, :2], points[0, :2], atol=0.05)
+    # (the confidence is the map's value at the peak pixel, as decode_heatmaps')
+    np.testing.assert_array_equal(confidence[0, 0, :2], [two.max(), two[10, 10]])
+    assert np.isnan(peaks[0, 0, 2]).all() and confidence[0, 0, 2] == 0   # 0.15 < floor
+    assert np.isnan(peaks[0, 1:, 1:]).all() and (confidence[0, 1:, 1:] == 0).all()
+    # floor 0: the third Gaussian is found too; channels: only those maps
+    peaks, confidence, _ = decode_heatmap_peaks(views, 3, floor=0.0, channels=[0])
+    assert peaks.shape == (1, 1, 3, 2)
+    np.testing.assert_allclose(peaks[0, 0], points[0], atol=0.05)
+    # the candidates are the brute-force local maxima of random maps
+    maps = (rng.random((4, 9, 11)) ** 3).astype(dtype)
+    peaks, confidence, _ = decode_heatmap_peaks([maps], 4, floor=0.3)
+    for c, m in enumerate(maps):
+        expected = [v for v, i in _brute_force_maxima(m, 0.3) if i != m.argmax()][:3]
+        got = confidence[0, c, 1:]
+        np.testing.assert_array_equal(got[:len(expected)], np.array(expected, dtype))
+        assert (got[len(expected):] == 0).all()
+    with pytest.raises(ValueError, match='k must be an integer >= 1'):
+        decode_heatmap_peaks([maps], 0)

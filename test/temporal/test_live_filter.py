@@ -1,0 +1,158 @@
+"""temporal.live.LiveFilter against a textbook Kalman filter, and its resets and NaN rules."""
+import numpy as np
+import pytest
+
+from monet_ros.config import ConfigError
+from monet_ros.temporal.live import LOST_AFTER, LiveFilter, LiveFilterConfig
+
+T0 = 1_700_000_000_000_000_000
+NO_GATE = dict(filter=True, filter_gate=1e9, filter_max_gap_s=1e3)
+
+
+def textbook(config, stamps, measured):
+    """A 6-state [x y z vx vy vz] constant-velocity Kalman filter per joint with full
+    matrices (F, Q = q G G^T, H, R), one joint at a time; a joint starts at its first
+    measurement with velocity variance 4 (m/s)^2; no gating."""
+    r2 = (config.filter_noise_mm * 1e-3) ** 2
+    q = config.filter_acceleration ** 2
+    J = measured.shape[1]
+    x, P = np.zeros((J, 6)), np.zeros((J, 6, 6))
+    H = np.hstack([np.eye(3), np.zeros((3, 3))])
+    live = np.zeros(J, bool)
+    out, last = [], None
+    for stamp, X in zip(stamps, measured):
+        dt = 0.0 if last is None else (stamp - last) * 1e-9
+        last = stamp
+        F = np.eye(6)
+        F[:3, 3:] = dt * np.eye(3)
+        G = np.vstack([dt * dt / 2 * np.eye(3), dt * np.eye(3)])
+        frame = np.full((J, 3), np.nan)
+        for j in range(J):
+            if live[j]:
+                x[j] = F @ x[j]
+                P[j] = F @ P[j] @ F.T + q * G @ G.T
+                if np.isfinite(X[j]).all():
+                    K = P[j] @ H.T @ np.linalg.inv(H @ P[j] @ H.T + r2 * np.eye(3))
+                    x[j] = x[j] + K @ (X[j] - H @ x[j])
+                    P[j] = (np.eye(6) - K @ H) @ P[j]
+                frame[j] = x[j, :3]
+            elif np.isfinite(X[j]).all():
+                x[j] = np.concatenate([X[j], np.zeros(3)])
+                P[j] = np.diag([r2] * 3 + [4.0] * 3)
+                live[j] = True
+                frame[j] = X[j]
+        out.append(frame)
+    return np.stack(out)
+
+
+def trajectory(rng, frames=60, joints=14, noise=0.02):
+    """Stamps (irregular, 25-40 ms apart), truth and noisy measurements (F, J, 3) m."""
+    stamps = T0 + np.cumsum(rng.integers(25_000_000, 40_000_000, frames))
+    t = (stamps - stamps[0]) * 1e-9
+    phase = rng.uniform(0, 2 * np.pi, (joints, 3))
+    truth = 0.3 * np.sin(2 * np.pi * 0.7 * t[:, None, None] + phase) + 1.0
+    return stamps, truth, truth + rng.normal(0, noise, truth.shape)
+
+
+def run(f, stamps, measured):
+    outputs = [f.update(s, X) for s, X in zip(stamps, measured)]
+    return np.stack([o[0] for o in outputs]), np.stack([o[1] for o in outputs])
+
+
+def test_equals_the_textbook_filter_and_smooths():
+    rng = np.random.default_rng(0)
+    stamps, truth, measured = trajectory(rng)
+    measured[10:13, 4] = np.nan                  # a short gap: predicted, as the textbook
+    config = LiveFilterConfig(**NO_GATE)
+    got, measured_mask = run(LiveFilter(config), stamps, measured)
+    np.testing.assert_allclose(got, textbook(config, stamps, measured), atol=1e-12)
+    assert not measured_mask[10:13, 4].any() and measured_mask[13:, 4].all()
+    late = slice(20, None)                       # after the start-up
+    raw = np.sqrt(np.mean((measured[late] - truth[late]) ** 2))
+    filtered = np.sqrt(np.mean((got[late] - truth[late]) ** 2))
+    assert filtered < 0.85 * raw, (filtered, raw)
+
+
+@pytest.mark.parametrize('jump_ns', [-5_000_000_000, -1, 1_500_000_000])
+def test_a_time_jump_resets_the_state(jump_ns):
+    """A stamp going backwards (a replay loop) or jumping more than filter_reset_s: every
+    joint restarts from the new measurement (the output IS the measurement), counted;
+    a normal step after it filters again."""
+    rng = np.random.default_rng(1)
+    stamps, _, measured = trajectory(rng, frames=30)
+    f = LiveFilter(LiveFilterConfig(filter=True, filter_reset_s=1.0))
+    run(f, stamps[:20], measured[:20])
+    far = measured[20] + 0.5                     # somewhere else entirely
+    out, measured_mask = f.update(stamps[19] + jump_ns, far)
+    np.testing.assert_array_equal(out, far)
+    assert measured_mask.all() and f.resets == 1
+    out, _ = f.update(stamps[19] + jump_ns + 33_000_000, far + 0.01)
+    assert np.abs(out - (far + 0.01)).max() > 1e-4          # filtered, not a copy
+    assert f.resets == 1
+    # no reset for a normal step: the output is not the measurement
+    g = LiveFilter(LiveFilterConfig(filter=True))
+    run(g, stamps[:20], measured[:20])
+    out, _ = g.update(stamps[20], measured[20])
+    assert g.resets == 0 and np.abs(out - measured[20]).max() > 1e-4
+
+
+def test_nan_input_does_not_poison_the_state():
+    """A NaN joint is predicted (bridged up to filter_max_gap_s, then NaN and restarted
+    from its next measurement); the other joints are exactly as without it; a whole NaN
+    frame or inf leaves the state finite."""
+    rng = np.random.default_rng(2)
+    stamps, truth, measured = trajectory(rng, frames=60, joints=5)
+    holey = measured.copy()
+    holey[20:24, 2] = np.nan                     # ~120 ms: bridged
+    holey[30:45, 3] = np.nan                     # ~500 ms: longer than filter_max_gap_s
+    holey[50] = np.nan                           # a frame with nothing triangulated
+    holey[51, 1] = np.inf
+    config = LiveFilterConfig(filter=True, filter_max_gap_s=0.25, filter_gate=1e9)
+    got, mask = run(LiveFilter(config), stamps, holey)
+    alone, _ = run(LiveFilter(config), stamps, np.where(np.isnan(holey[:, [0]]), np.nan,
+                                                        holey[:, [0]]))
+    np.testing.assert_array_equal(got[:, 0], alone[:, 0])       # joints are independent
+    assert np.isfinite(got[20:24, 2]).all() and not mask[20:24, 2].any()
+    # predicted: on the straight line of constant velocity from the last estimate
+    velocity = (got[20:24, 2] - got[19, 2]) / ((stamps[20:24] - stamps[19]) * 1e-9)[:, None]
+    np.testing.assert_allclose(velocity, np.broadcast_to(velocity[0], velocity.shape),
+                               atol=1e-9)
+    gap = (stamps[30:45] - stamps[29]) * 1e-9
+    np.testing.assert_array_equal(np.isnan(got[30:45, 3]).all(axis=1), gap > 0.25)
+    np.testing.assert_array_equal(got[45, 3], holey[45, 3])       # restarted from it
+    assert np.isfinite(got[52:]).all() and mask[52:].all()
+    assert np.abs(got[55:] - truth[55:]).max() < 0.1
+
+
+def test_an_outlier_is_gated_and_a_real_jump_followed():
+    rng = np.random.default_rng(3)
+    stamps, truth, measured = trajectory(rng, frames=60, joints=3, noise=0.01)
+    spiked = measured.copy()
+    spiked[30, 1] += [0.5, 0.0, 0.0]             # one frame 0.5 m off: rejected
+    spiked[40:, 2] += [0.0, 0.6, 0.0]            # the joint really moved: followed
+    f = LiveFilter(LiveFilterConfig(filter=True))
+    got, mask = run(f, stamps, spiked)
+    assert not mask[30, 1] and np.abs(got[30, 1] - truth[30, 1]).max() < 0.05
+    assert f.gated >= 1 + LOST_AFTER - 1
+    assert not mask[40:40 + LOST_AFTER - 1, 2].any()
+    np.testing.assert_array_equal(got[40 + LOST_AFTER - 1, 2], spiked[40 + LOST_AFTER - 1, 2])
+    assert np.abs(got[50:, 2] - truth[50:, 2] - [0, 0.6, 0]).max() < 0.05
+
+
+def test_bad_settings_and_shapes_are_named():
+    with pytest.raises(ConfigError, match="'filter_noise_mm'"):
+        LiveFilterConfig(filter_noise_mm=0.0)
+    with pytest.raises(ConfigError, match="'filter_reset_s'"):
+        LiveFilterConfig(filter_reset_s=-1.0)
+    with pytest.raises(ValueError, match=r'X must be \(J, 3\)'):
+        LiveFilter().update(T0, np.zeros((14, 2)))
+
+
+def test_the_live_filter_imports_neither_ros_nor_torch(repo_root):
+    import subprocess
+    import sys
+    code = ('import sys, monet_ros.temporal.live; '
+            "print(sorted(m for m in ('rclpy', 'torch') if m in sys.modules))")
+    out = subprocess.run([sys.executable, '-c', code], cwd=repo_root, capture_output=True,
+                         text=True, check=True).stdout
+    assert out.strip().splitlines()[-1] == '[]'
