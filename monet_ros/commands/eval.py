@@ -49,12 +49,13 @@ def load_results_json(path):
 def run(args):
     import numpy as np
 
-    from monet_ros.commands.common import check_device, check_threads
+    from monet_ros.commands.common import check_threads
     from monet_ros.evaluation import markdown_table, write_report
     from monet_ros.evaluation.evaluate import evaluate_detector
     from monet_ros.learning.recording import load_recording
     from monet_ros.learning.trainer import crop_boxes
     from monet_ros.models.detector import Detector
+    from monet_ros.models.device import check_device
 
     check_threads('monet eval', args.threads)
     device = check_device('monet eval', args.device)

@@ -93,13 +93,13 @@ def _write_instants(path, reference, scored, labelled):
 
 
 def run_reference(args):
-    from monet_ros.commands.info import recording_index
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.commands.process import process_recording
     from monet_ros.evaluation.reference import alignment_text, load_reference, score
     from monet_ros.io.export_tables import ExportError, read_anipose_csv
     from monet_ros.labels import LabelError
     from monet_ros.learning.recording import RecordingError
+    from monet_ros.learning.recording_index import recording_index
     from monet_ros.models import CheckpointError, load_checkpoint
 
     prog = 'monet eval'

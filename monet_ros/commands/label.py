@@ -77,12 +77,12 @@ def _imports(items):
 
 
 def run(args):
-    from monet_ros.commands.common import check_device
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.config import ConfigError
     from monet_ros.label_app.guard import WILDCARD, allowed_hosts
     from monet_ros.label_app.server import create_app
     from monet_ros.label_app.session import LabelConfig, LabelSession
+    from monet_ros.models.device import check_device
 
     if not 0 <= args.port <= 65535:
         raise ConfigError('monet label', 'port', f'must be in 0..65535, got {args.port}')

@@ -55,10 +55,10 @@ def add_arguments(parser):
 
 
 def run(args):
-    from monet_ros.commands.info import recording_index
     from monet_ros.labels import LabelError, resolve_labels, write_labels
     from monet_ros.labels_import import import_labels
     from monet_ros.learning.recording import RecordingError
+    from monet_ros.learning.recording_index import recording_index
     from monet_ros.skeleton import SkeletonError, load_skeleton
 
     try:

@@ -267,7 +267,7 @@ def run(args):
         args.duration = args.duration or 20.0
     if not args.model:
         raise ConfigError('monet pipeline', 'model', '--model is required with --bag')
-    from monet_ros.commands.common import check_device
+    from monet_ros.models.device import check_device
     options = PipelineOptions(rate=args.rate, duration=args.duration,
                               start_delay=args.start_delay)
     device = check_device('monet pipeline', args.device)

@@ -139,7 +139,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from monet_ros.io.images import to_rgb8
     from monet_ros.io.multiview import image_topics
     from monet_ros.models import Detector
-    from monet_ros.nodes.rig import load_node_rig, select_cameras
+    from monet_ros.rig_select import load_node_rig, select_cameras
     from monet_ros.skeleton import load_skeleton
 
     config = config or ProcessConfig()
@@ -234,10 +234,11 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
 
 
 def run(args):
-    from monet_ros.commands.common import check_device, check_threads
+    from monet_ros.commands.common import check_threads
     from monet_ros.commands.filter_options import filter_config_from_args
     from monet_ros.io.export_results import parse_formats
     from monet_ros.labels import parse_name_map
+    from monet_ros.models.device import check_device
 
     config = ProcessConfig(threshold_px=args.threshold_px,
                            confidence_threshold=args.confidence_threshold,

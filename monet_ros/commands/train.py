@@ -73,12 +73,13 @@ def config_from_args(args):
 
 
 def run(args):
-    from monet_ros.commands.common import check_device, check_threads
+    from monet_ros.commands.common import check_threads
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.commands.train_holdout import hold_out, score_holdout
     from monet_ros.learning.recording import load_recording
     from monet_ros.learning.trainer import Trainer, TrainingData
     from monet_ros.models import build_model
+    from monet_ros.models.device import check_device
 
     options = TrainRunOptions(max_instants=args.max_instants, threads=args.threads)
     config = config_from_args(args)

@@ -42,10 +42,10 @@ def hold_out(recording, n, out):
 
 def score_holdout(bag, rig, model, labels_path, recording, camera_map=()):
     """Figures (evaluation.reference.score) of `model` on the held-out labels."""
-    from monet_ros.commands.info import RecordingIndex
     from monet_ros.commands.process import process_recording
     from monet_ros.evaluation.reference import load_reference, score
     from monet_ros.io.export_tables import read_anipose_csv
+    from monet_ros.learning.recording_index import RecordingIndex
 
     index = RecordingIndex(bag, list(recording.cameras), {}, recording.stamps,
                            np.ones(len(recording.stamps), bool), None)

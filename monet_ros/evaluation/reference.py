@@ -239,10 +239,10 @@ def labelled_instants(path, stamps):
 
 def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
                    camera=None, reference_fps=None, rate_policy='resample'):
-    """Reference of `path` on the recording `index` (commands.info.RecordingIndex) for the
-    model's `keypoints` (module docstring). options: LabelOptions (name maps, skip_bad);
-    reference_fps: rate of an anipose CSV's fnum (default the recording's); rate_policy:
-    'resample' or 'refuse' a 3D reference at another rate (align_rows).
+    """Reference of `path` on the recording `index` (learning.recording_index.RecordingIndex)
+    for the model's `keypoints` (module docstring). options: LabelOptions (name maps,
+    skip_bad); reference_fps: rate of an anipose CSV's fnum (default the recording's);
+    rate_policy: 'resample' or 'refuse' a 3D reference at another rate (align_rows).
     Raises LabelError (or ExportError) naming the file and what does not fit."""
     from monet_ros.geometry.triangulation import triangulate
     from monet_ros.io.export_tables import read_anipose_csv, read_trc

@@ -78,13 +78,8 @@ def multiview_reprojection(detections, cameras, gt3d=None):
         if gt.shape != (T, C, 3):
             raise ValueError(f'gt3d must be (T={T}, C={C}, 3), got {gt.shape}')
         gt_flat = gt.reshape(T * C, 3)
-        gt2d = project_points(gt_flat, cameras)                        # (V, T*C, 2)
+        gt2d = project_views(cameras, gt_flat)                         # (V, T*C, 2)
         gt_error = reprojection_error(X, gt2d, cameras).reshape(V, T, C).transpose(1, 0, 2)
         error3d = np.linalg.norm(X - gt_flat, axis=-1).reshape(T, C)
     return ReprojectionResult(X.reshape(T, C, 3), consistency, gt_error, error3d)
 
-
-def project_points(X, cameras):
-    """(N, 3) world points -> (V, N, 2) pixels in each camera (geometry.project_views);
-    NaN points stay NaN."""
-    return project_views(cameras, np.asarray(X, dtype=np.float64))

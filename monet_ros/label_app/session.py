@@ -83,8 +83,8 @@ class LabelSession:
 
     def __init__(self, rec, labels_path, rig=None, skeleton='human14', imports=(),
                  options=None, config=None):
-        from monet_ros.commands.info import recording_index
         from monet_ros.labels import LabelOptions
+        from monet_ros.learning.recording_index import recording_index
         from monet_ros.skeleton import load_skeleton
 
         self.config = config or LabelConfig()

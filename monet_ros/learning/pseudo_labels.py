@@ -15,8 +15,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from monet_ros.evaluation.reprojection import project_points
-from monet_ros.geometry import triangulate, triangulate_robust
+from monet_ros.geometry import project_views, triangulate, triangulate_robust
 
 
 @dataclass(frozen=True)
@@ -50,7 +49,7 @@ def _in_front(X, cameras):
 def project_to_views(X, cameras):
     """(N, 3) world points -> (V, N, 2) pixels, NaN where missing, behind or outside the image."""
     X = np.asarray(X, dtype=np.float64)
-    proj = project_points(X, cameras)
+    proj = project_views(cameras, X)
     with np.errstate(invalid='ignore'):
         front = _in_front(np.nan_to_num(X), cameras) & np.all(np.isfinite(X), axis=1)[None]
     proj[~front] = np.nan

@@ -22,7 +22,6 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 from std_msgs.msg import String
 
 from monet_ros.atomic import sha256_file
-from monet_ros.commands.common import check_device
 from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.crop_rule import TrackedCrops, TrackedRule
 from monet_ros.io import (
@@ -38,6 +37,7 @@ from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
 from monet_ros.io.images import image_for_crop, raw_to_rgb8, to_rgb8
 from monet_ros.models import CheckpointError, Detector
 from monet_ros.models.detector import PRECISIONS
+from monet_ros.models.device import check_device
 from monet_ros.nodes.names import (
     DEBUG_CAMERA_INFO,
     DEBUG_IMAGE,
@@ -50,8 +50,8 @@ from monet_ros.nodes.names import (
 )
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
-from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import log_bad_once, run_node
+from monet_ros.rig_select import load_node_rig, select_cameras
 from monet_ros.timing import StageTimer
 
 # Parameters that may change while running (`ros2 param set`), effective next frame.

@@ -50,11 +50,11 @@ from monet_ros.nodes.names import (
 )
 from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import HEATMAPS_IN, LATCHED, STREAM_OUT
-from monet_ros.nodes.rig import load_node_rig, select_cameras
 from monet_ros.nodes.runner import log_bad_once, run_node
-from monet_ros.nodes.sync import StampSynchronizer
 from monet_ros.nodes.tf import rig_tf_message, tf_message_class
+from monet_ros.rig_select import load_node_rig, select_cameras
 from monet_ros.skeleton import load_skeleton
+from monet_ros.sync import StampSynchronizer
 from monet_ros.temporal.live import LiveFilter, LiveFilterConfig
 from monet_ros.timing import StageTimer
 

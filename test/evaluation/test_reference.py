@@ -84,8 +84,8 @@ def test_real_pose2sim_trc_and_its_projections_agree(shared_data, tmp_path):
     """Pose2Sim's .trc (Y-up, metres) on the derived 4-camera bag: projected into 3
     instants as frame-indexed labels with the calibration's camera names, the labels'
     triangulation returns the .trc points (real distortion, real geometry)."""
-    from monet_ros.commands.info import recording_index
     from monet_ros.io.export_tables import read_trc
+    from monet_ros.learning.recording_index import recording_index
 
     index = recording_index(shared_data / 'derived_pose2sim_4cam_mcap'
                             / 'pose2sim_balancing_4cam')
@@ -177,8 +177,8 @@ def test_real_pose2sim_trc_with_body25b_is_projected_for_2d(shared_data):
     points with the recording's cameras (independent), NaN only outside the images."""
     from helpers.scenes import cv2_project
 
-    from monet_ros.commands.info import recording_index
     from monet_ros.io.export_tables import read_trc
+    from monet_ros.learning.recording_index import recording_index
     from monet_ros.skeleton import load_skeleton
 
     index = recording_index(shared_data / 'derived_pose2sim_4cam_mcap'

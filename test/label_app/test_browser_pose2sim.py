@@ -51,7 +51,7 @@ def best_pair(cams, X):
 @pytest.mark.slow
 def test_label_pose2sim_three_instants_within_20mm(shared_data, tmp_path, browser,
                                                     label_page):
-    from monet_ros.commands.info import recording_index
+    from monet_ros.learning.recording_index import recording_index
 
     bag, trc_path = shared_data / BAG, shared_data / TRC
     if not bag.exists() or not trc_path.exists():

@@ -52,7 +52,7 @@ def distance_to_polyline(point, line):
 
 def saved(path, synth_dir, cameras, keypoints):
     """The saved table through the labels loader (read_label_rows + resolve_labels)."""
-    from monet_ros.commands.info import recording_index
+    from monet_ros.learning.recording_index import recording_index
     index = recording_index(synth_dir)
     labels, report = resolve_labels(read_label_rows(path), index.stamps, cameras, keypoints)
     assert report.total_skipped == 0 and report.kept == report.rows
@@ -62,7 +62,7 @@ def saved(path, synth_dir, cameras, keypoints):
 def test_click_two_views_ghosts_accept_drag_undo_reload(synth, tmp_path, browser, label_page):
     cams = load_rig(synth / 'rig.yaml')
     names = [c.name for c in cams]
-    from monet_ros.commands.info import recording_index
+    from monet_ros.learning.recording_index import recording_index
     stamps = recording_index(synth).stamps
     gt = np.load(synth / 'ground_truth.npz')
     X = gt['keypoints3d'][list(gt['stamps']).index(stamps[T])]      # (C, 3) of instant T

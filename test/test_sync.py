@@ -1,5 +1,5 @@
 """Stamp synchroniser: exact and slop matching, partial groups on timeout, order, late items."""
-from monet_ros.nodes.sync import StampSynchronizer
+from monet_ros.sync import StampSynchronizer
 
 
 class FakeClock:

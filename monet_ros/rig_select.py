@@ -1,4 +1,5 @@
-"""The `rig` and `cameras` parameters shared by the nodes: load and select cameras."""
+"""The `rig` and `cameras` parameters / options shared by the nodes and the commands (e.g.
+`monet process`): load a rig and select its cameras."""
 from pathlib import Path
 
 from monet_ros.config import ConfigError
