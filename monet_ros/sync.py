@@ -20,6 +20,10 @@ Pure Python (no rclpy; message_filters is not in the pip wheels). The rule:
   late and counted. A stamp more than `reset_after_ns` before the last released one means
   time jumped back (a restarted source): open groups are released and history forgotten.
 - Released groups with fewer than `min_keys` items are dropped and counted.
+
+Every item added ends in exactly one place, counted per key: a released group, a dropped
+group (`stats.dropped_by_key`), late (`late_by_key`), repeated (`repeated_by_key`), or an
+open group (`open_items`).
 """
 from collections import Counter, deque
 from dataclasses import dataclass, field
@@ -46,6 +50,8 @@ class SyncStats:
     unknown_key: int = 0
     resets: int = 0         # time jumped back (e.g. a restarted source)
     repeated_by_key: Counter = field(default_factory=Counter)
+    late_by_key: Counter = field(default_factory=Counter)
+    dropped_by_key: Counter = field(default_factory=Counter)   # items of dropped groups
 
 
 class StampSynchronizer:
@@ -127,6 +133,7 @@ class StampSynchronizer:
         if group is None:
             if any(abs(s - stamp_ns) <= self.slop_ns for s in self.released):
                 self.stats.late += 1
+                self.stats.late_by_key[key] += 1
                 return released + self._ready()
             group = Group(stamp_ns, {}, first_arrival=self.clock())
             index = len(self.pending)
@@ -170,6 +177,10 @@ class StampSynchronizer:
                 break
         return released
 
+    def open_items(self, key):
+        """How many items of `key` wait in open groups."""
+        return sum(key in group.items for group in self.pending)
+
     def poll(self):
         """Release the groups that are ready (timeouts expire with the clock)."""
         return self._ready()
@@ -187,6 +198,7 @@ class StampSynchronizer:
         group.missing = tuple(k for k in self.keys if k not in group.items)
         if len(group.items) < self.min_keys:
             self.stats.dropped += 1
+            self.stats.dropped_by_key.update(group.items.keys())
             return []
         if group.missing:
             self.stats.partial += 1

@@ -83,3 +83,24 @@ def test_time_jumping_back_restarts_instead_of_dropping_everything():
     sync.add('a', 100, 3)                                           # 4900 ns back: a reset
     [group] = sync.add('b', 100, 3)
     assert group.stamp_ns == 100 and sync.stats.resets == 1
+
+
+def test_every_item_is_counted_once_per_key():
+    """released + dropped + late + repeated + open = added, per key (the fusion node's
+    per-camera outcomes)."""
+    clock = FakeClock()
+    sync = StampSynchronizer(['a', 'b', 'c'], timeout_s=0.2, min_keys=2, clock=clock)
+    released = []
+    for key, stamp in [('a', 10), ('b', 10), ('a', 10), ('c', 20), ('a', 30)]:
+        released += sync.add(key, stamp, stamp)
+    clock.now = 0.3
+    released += sync.poll()                 # 10 (a, b) released; 20 (c alone) dropped
+    released += sync.add('b', 10, 10)       # b repeats its 10
+    released += sync.add('c', 10, 10)       # c's 10 comes after 10 was released: late
+    released += sync.add('b', 40, 40)       # opens 40, which waits
+    counts = {k: sum(k in g.items for g in released) for k in 'abc'}
+    assert counts == {'a': 1, 'b': 1, 'c': 0}
+    assert sync.stats.repeated_by_key == {'a': 1, 'b': 1}
+    assert sync.stats.late_by_key == {'c': 1}
+    assert sync.stats.dropped_by_key == {'c': 1, 'a': 1}   # 20 (c) and 30 (a) timed out
+    assert {k: sync.open_items(k) for k in 'abc'} == {'a': 0, 'b': 1, 'c': 0}

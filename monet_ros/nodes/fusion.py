@@ -12,6 +12,11 @@ filter of monet_ros.temporal.live (no frames of delay, outliers gated, reset on 
 jump): the filtered ones on keypoints3d (and the skeleton markers), the raw ones on
 keypoints3d_raw. A bridged joint (predicted, no accepted measurement this frame) keeps
 num_views of the raw fusion (0 when not triangulated), so it stays recognisable.
+
+Every heatmap received ends in exactly one per-camera counter of /diagnostics and of the
+stop summary (OUTCOMES): received = fused + bad_messages + unpaired + repeated + late +
+dropped + waiting. A heatmap or camera_info whose partner (same stamp) has not come within
+`silent_after_s` is unpaired and let go.
 """
 from collections import OrderedDict
 import copy
@@ -64,6 +69,12 @@ LIVE = ('confidence_threshold', 'threshold_px', 'min_views', 'peaks_per_view',
         *FILTER_PARAMETERS)
 # Unpaired heatmaps / camera_info kept per camera while waiting for their partner.
 _PAIR_BACKLOG = 30
+# Where a received heatmap ends (one per heatmap): in a fused frame; rejected (decoding,
+# validation, or the fusion core refused the view); no camera_info of its stamp came;
+# its stamp repeated one the camera gave; its instant was already released; its frame had
+# fewer than min_views views or its fusion failed; still waiting (for a camera_info or for
+# the other cameras).
+OUTCOMES = ('fused', 'bad_messages', 'unpaired', 'repeated', 'late', 'dropped', 'waiting')
 
 
 @dataclass(frozen=True)
@@ -106,13 +117,19 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
 
 
 class CameraStats:
-    """Per-camera counters reported in /diagnostics."""
+    """Per-camera counters reported in /diagnostics (the synchroniser keeps the rest of the
+    outcomes: FusionNode.outcomes)."""
 
     def __init__(self):
         self.received = 0
         self.bad = 0
-        self.unpaired = 0
+        self.unpaired = 0         # heatmaps whose camera_info never came
+        self.repeated = 0         # heatmaps replaced, before pairing, by one of the same stamp
+        self.dropped = 0          # views of frames whose fusion failed
         self.fused = 0
+        self.info_received = 0
+        self.info_paired = 0
+        self.info_unpaired = 0    # camera_info whose heatmap never came (or replaced)
         self.last_seen = None
         self.errors = []          # recent per-frame mean reprojection errors (px)
         self.last_bad = ''
@@ -209,21 +226,65 @@ class FusionNode(Node):
         stats = self.stats[name]
         stamp = header_stamp_ns(msg)
         mine, other = self.pending[name][kind], self.pending[name][1 - kind]
+        now = time.monotonic()
         if kind == 0:
             stats.received += 1
-            stats.last_seen = time.monotonic()
+            stats.last_seen = now
             self.first_heard = self.first_heard or stats.last_seen
+        else:
+            stats.info_received += 1
         if stamp in other:
-            partner = other.pop(stamp)
+            partner, _ = other.pop(stamp)
             heat_msg, info_msg = (msg, partner) if kind == 0 else (partner, msg)
+            stats.info_paired += 1
             self.on_pair(name, stamp, heat_msg, info_msg)
         else:
-            mine[stamp] = msg
+            if stamp in mine:               # a second message of this stamp replaces the first
+                self.let_go(stats, kind, repeated=True)
+                del mine[stamp]
+            mine[stamp] = (msg, now)
             while len(mine) > _PAIR_BACKLOG:
                 mine.popitem(last=False)
-                stats.unpaired += 1
+                self.let_go(stats, kind)
         for group in self.sync.poll():
             self.fuse(group)
+
+    @staticmethod
+    def let_go(stats, kind, repeated=False):
+        """Count a heatmap (kind 0) or camera_info (1) given up before pairing."""
+        if kind == 1:
+            stats.info_unpaired += 1
+        elif repeated:
+            stats.repeated += 1
+        else:
+            stats.unpaired += 1
+
+    def expire_unpaired(self, now):
+        """Let go of the heatmaps / camera_info waiting for their partner longer than
+        silent_after_s (oldest first: the backlogs are in arrival order)."""
+        for name, backlogs in self.pending.items():
+            for kind, backlog in enumerate(backlogs):
+                while backlog and now - next(iter(backlog.values()))[1] \
+                        >= self.config.silent_after_s:
+                    backlog.popitem(last=False)
+                    self.let_go(self.stats[name], kind)
+
+    def outcomes(self, name):
+        """{outcome: count} of camera `name`'s received heatmaps (OUTCOMES order); their sum
+        is stats.received."""
+        stats, sync = self.stats[name], self.sync.stats
+        return {'fused': stats.fused, 'bad_messages': stats.bad, 'unpaired': stats.unpaired,
+                'repeated': stats.repeated + sync.repeated_by_key[name],
+                'late': sync.late_by_key[name],
+                'dropped': stats.dropped + sync.dropped_by_key[name],
+                'waiting': len(self.pending[name][0]) + self.sync.open_items(name)}
+
+    def camera_info_counts(self, name):
+        stats = self.stats[name]
+        return {'camera_info_received': stats.info_received,
+                'camera_info_paired': stats.info_paired,
+                'camera_info_unpaired': stats.info_unpaired,
+                'camera_info_waiting': len(self.pending[name][1])}
 
     def on_pair(self, name, stamp, heat_msg, info_msg):
         start = time.perf_counter()
@@ -253,6 +314,7 @@ class FusionNode(Node):
 
     def on_poll(self):
         now = time.monotonic()
+        self.expire_unpaired(now)
         # a camera not heard from yet counts as live until silent_after_s after the first
         # heatmap of any camera (it may still be starting up): the first frames wait for it
         starting = self.first_heard is None or now - self.first_heard < \
@@ -275,11 +337,15 @@ class FusionNode(Node):
         except ValueError as error:
             # e.g. a camera_info whose K is not a crop of the rig camera: name the view.
             message = str(error)
+            index = None
             if message.startswith('view '):
                 index = int(message.split()[1].rstrip(':'))
                 self.bad_message(cameras[index].name, message)
             else:
                 self.get_logger().error(f'fusion failed at stamp {group.stamp_ns}: {error}')
+            for k, cam in enumerate(cameras):
+                if k != index:
+                    self.stats[cam.name].dropped += 1
             return
         for index, reason in result.skipped_views.items():  # e.g. a 2x2 heatmap grid
             self.bad_message(cameras[index].name, reason)
@@ -288,6 +354,8 @@ class FusionNode(Node):
         self.fusion_seconds = (self.fusion_seconds + [result.seconds])[-100:]
         errors = result.view_mean_errors()
         for k, i in enumerate(views):
+            if k in result.skipped_views:      # counted as a bad message above
+                continue
             stats = self.stats[self.names[i]]
             stats.fused += 1
             stats.errors = (stats.errors + [float(errors[k])])[-100:]
@@ -328,8 +396,11 @@ class FusionNode(Node):
                                            self.get_clock().now().to_msg()))
 
     def on_stop(self):
-        """Before the node goes: clear the viewers' skeleton (DELETEALL), waiting briefly
-        for the subscribers to acknowledge it."""
+        """Before the node goes: log where every received message ended (one line per
+        camera), clear the viewers' skeleton (DELETEALL), waiting briefly for the
+        subscribers to acknowledge it."""
+        for line in self.summary_lines():
+            self.get_logger().info(line)
         msg = delete_all_markers(self.get_clock().now().nanoseconds, self.frame_id)
         self.pub_skeleton.publish(msg)
         self.pub_skeleton.wait_for_all_acked(Duration(seconds=1.0))
@@ -341,6 +412,19 @@ class FusionNode(Node):
         live = self.live_filter
         return {key: value + (getattr(live, key) if live is not None else 0)
                 for key, value in self.filter_counts.items()}
+
+    def summary_lines(self):
+        """One line per camera: received heatmaps = the sum of their outcomes, and the
+        camera_info counts."""
+        lines = []
+        for name, stats in self.stats.items():
+            parts = ', '.join(f'{k} {v}' for k, v in self.outcomes(name).items())
+            info = self.camera_info_counts(name)
+            lines.append(f'{name}: {stats.received} heatmaps received: {parts}; '
+                         f'{info["camera_info_received"]} camera_info received: '
+                         f'paired {info["camera_info_paired"]}, unpaired '
+                         f'{info["camera_info_unpaired"]}, waiting {info["camera_info_waiting"]}')
+        return lines
 
     def publish_diagnostics(self):
         now = time.monotonic()
@@ -371,14 +455,19 @@ class FusionNode(Node):
                 level, text = DiagnosticStatus.WARN, f'silent for {silent_for:.1f} s'
             else:
                 level, text = DiagnosticStatus.OK, f'mean reprojection error {error:.2f} px'
+            outcomes = self.outcomes(name)
             if stats.bad and level == DiagnosticStatus.OK:
                 text += f'; {stats.bad} bad messages'
+            if stats.unpaired:
+                text += f'; {stats.unpaired} heatmaps without a camera_info of their stamp'
+                if not stats.fused:
+                    level = DiagnosticStatus.WARN
             msg.status.append(DiagnosticStatus(
                 level=level, name=f'monet fusion: {name}', hardware_id=name, message=text,
                 values=[KeyValue(key=k, value=str(v)) for k, v in (
                     ('mean_reprojection_error_px', f'{error:.4f}'),
-                    ('received', stats.received), ('fused', stats.fused),
-                    ('bad_messages', stats.bad), ('unpaired', stats.unpaired),
+                    ('received', stats.received), *outcomes.items(),
+                    *self.camera_info_counts(name).items(),
                     ('silent_for_s', 'never seen' if silent_for is None
                      else f'{silent_for:.2f}'),
                     ('last_bad_message', stats.last_bad))]))
