@@ -220,7 +220,7 @@ class DetectorNode(Node):
         self.model_reloads = self.model_rejects = 0
         self.get_logger().info(
             f'detecting {len(self.slots)} camera(s) '
-            f'{[(s.name, s.image_topic) for s in self.slots]} with '
+            f'{[(s.name, self.resolve_topic_name(s.image_topic)) for s in self.slots]} with '
             f'{self.detector.metadata.get("architecture")} ({len(self.detector.keypoints)} '
             f'keypoints, heatmaps {self.detector.heatmap_size}) on {self.detector.device}, '
             f'{self.detector.backend} {self.detector.precision}')
@@ -247,6 +247,7 @@ class DetectorNode(Node):
 
     # ------------------------------------------------------------------ input
     def bad_message(self, slot, topic, error):
+        topic = self.resolve_topic_name(topic)      # the name it listens on (namespace, remaps)
         slot.bad += 1
         slot.last_bad = f'{topic}: {error}'
         log_bad_once(self, topic, error, slot.bad)
@@ -276,7 +277,8 @@ class DetectorNode(Node):
             stamp = header_stamp_ns(msg)
             self.tracker.update(cloud_to_keypoints3d(msg)['X'], stamp)
         except ValueError as error:
-            self.get_logger().warning(f'/monet/keypoints3d: bad message ({error})',
+            self.get_logger().warning(f'{self.resolve_topic_name(KEYPOINTS3D)}: bad message '
+                                      f'({error})',
                                       throttle_duration_sec=5.0)
             return
         if self.awaiting_keypoints is not None and stamp >= self.awaiting_keypoints:
@@ -448,7 +450,8 @@ class DetectorNode(Node):
 
     def reject_model(self, reason):
         self.model_rejects += 1
-        self.get_logger().error(f'/monet/model rejected, keeping the current weights: {reason}')
+        self.get_logger().error(f'{self.resolve_topic_name(MODEL)} rejected, keeping the '
+                                f'current weights: {reason}')
 
     # ------------------------------------------------------------------ diagnostics
     def no_publisher(self, slot):

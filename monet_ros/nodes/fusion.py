@@ -310,7 +310,8 @@ class FusionNode(Node):
         stats = self.stats[name]
         stats.bad += 1
         stats.last_bad = str(error)
-        log_bad_once(self, self.config.heatmap_topic.format(camera=name), error, stats.bad)
+        topic = self.resolve_topic_name(self.config.heatmap_topic.format(camera=name))
+        log_bad_once(self, topic, error, stats.bad)
 
     def on_poll(self):
         now = time.monotonic()
