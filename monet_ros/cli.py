@@ -17,6 +17,8 @@ import signal
 import sys
 import threading
 
+from monet_ros.error_text import error_line
+
 EXIT_OK = 0
 EXIT_INTERNAL = 1
 EXIT_BAD_INPUT = 2
@@ -73,19 +75,6 @@ def sigterm_as_interrupt():
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
-
-
-def error_line(error, name=''):
-    """The one line printed for a bad-input error (the message names file/field/option);
-    a leading `name: ` (the command, already the line's prefix) is not repeated."""
-    from monet_ros.commands.common import os_error_text
-
-    if isinstance(error, OSError):
-        return os_error_text(error)
-    if isinstance(error, MemoryError):
-        return 'out of memory (the input or an option asks for too much; see its size)'
-    text = ' '.join((str(error).strip() or type(error).__name__).split())   # one line
-    return text[len(name) + 2:] if name and text.startswith(f'{name}: ') else text
 
 
 def bad_input_errors():

@@ -1,7 +1,6 @@
-"""What every `monet` subcommand shares: bounded option checks, output folders written
-atomically, and OSError / device messages that name the path or option (not a subcommand)."""
+"""What every `monet` subcommand shares: bounded option checks and output folders written
+atomically (their messages name the path or option, not a subcommand)."""
 from contextlib import contextmanager
-import errno
 import os
 from pathlib import Path
 import shutil
@@ -22,20 +21,6 @@ def check_threads(owner, threads):
     if threads:
         import torch
         torch.set_num_threads(threads)
-
-
-def os_error_text(error, path=None):
-    """One line for an OSError that names the file (the error's, else `path`) and, for a
-    full disk or a read-only file system, says so."""
-    where = error.filename or path
-    reason = error.strerror or str(error)
-    if error.errno == errno.ENOSPC:
-        reason = 'no space left on device (disk full)'
-    elif error.errno == errno.EROFS:
-        reason = 'read-only file system'
-    if error.filename2:
-        where = f'{where} -> {error.filename2}'
-    return f'{where}: {reason}' if where else reason
 
 
 def check_new_output(path, owner, field='out'):

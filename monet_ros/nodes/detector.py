@@ -24,6 +24,7 @@ from std_msgs.msg import String
 from monet_ros.atomic import sha256_file
 from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.crop_rule import TrackedCrops, TrackedRule
+from monet_ros.error_text import error_line
 from monet_ros.io import (
     camera_from_camera_info,
     camera_info_from_camera,
@@ -450,6 +451,7 @@ class DetectorNode(Node):
 
     def reject_model(self, reason):
         self.model_rejects += 1
+        reason = error_line(reason)           # torch's texts span lines: a log line is one
         self.get_logger().error(f'{self.resolve_topic_name(MODEL)} rejected, keeping the '
                                 f'current weights: {reason}')
 

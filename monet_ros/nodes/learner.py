@@ -19,6 +19,7 @@ from rclpy.node import Node
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
+from monet_ros.error_text import error_line
 from monet_ros.learning.online import LearnerConfig, OnlineLearner
 from monet_ros.nodes.names import DIAGNOSTICS, MODEL, node_namespace
 from monet_ros.nodes.params import declare_config
@@ -67,7 +68,7 @@ class LearnerNode(Node):
                 if result is not None:
                     self.report(result)
         except Exception as error:  # noqa: BLE001 - keep the node up to say what happened
-            self.error = f'{type(error).__name__}: {error}'
+            self.error = f'{type(error).__name__}: {error_line(error)}'
             self.running.clear()
             self.get_logger().error(f'training stopped: {self.error}')
 

@@ -22,6 +22,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from monet_ros.error_text import error_line
 from monet_ros.share import share_path
 
 EXIT_OK = 0
@@ -42,8 +43,9 @@ def use_large_data_profile():
 
 
 def start_error(name, error):
-    """Print a start-up error as one clear line on stderr."""
-    print(f'{name}: error: {error}', file=sys.stderr, flush=True)
+    """Print a start-up error as one clear line on stderr (whitespace collapsed: torch's
+    and other libraries' texts span lines; error_text.error_line)."""
+    print(f'{name}: error: {error_line(error, name)}', file=sys.stderr, flush=True)
 
 
 def stopped_by_shutdown(context=None):
@@ -127,10 +129,10 @@ class CallbackGuard:
     def record(self, source, error):
         kind = (source, type(error).__name__)
         self.errors[kind] += 1
-        self.last[source] = f'{type(error).__name__}: {error}'
+        self.last[source] = f'{type(error).__name__}: {error_line(error)}'
         if self.errors[kind] == 1:
             self.node.get_logger().error(
-                f'{source}: message not handled ({type(error).__name__}: {error}); the node '
+                f'{source}: message not handled ({self.last[source]}); the node '
                 'goes on, further errors of this kind are counted in /diagnostics')
 
     def publish(self):

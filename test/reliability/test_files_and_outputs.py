@@ -220,7 +220,7 @@ def test_unwritable_output_folders_are_named(synth_folder, process_inputs, tmp_p
 def test_disk_full_names_the_path():
     """ENOSPC as the OS raises it (writing to /dev/full) names no file: the one line of
     every command names the output path and says the disk is full."""
-    from monet_ros.commands.common import os_error_text
+    from monet_ros.error_text import os_error_text
 
     with pytest.raises(OSError) as caught:
         with open('/dev/full', 'wb') as stream:

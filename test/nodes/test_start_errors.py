@@ -1,0 +1,48 @@
+"""A node that cannot start says why in ONE line on stderr and exits 2 (issue 25 item 15),
+even when the library's text spans lines: torch's refusal of a checkpoint that pickles a
+numpy array is 4+ lines with terminal styling. The real executables, started as a user
+would (`model:=` a bad checkpoint; a learner resuming from one)."""
+from helpers.ros import NodeProcess
+from helpers.scenes import ring_rig
+import numpy as np
+import torch
+
+from monet_ros.geometry import save_rig
+
+
+def bad_checkpoint(path):
+    """A torch.save file that weights_only loading refuses with a multi-line message."""
+    torch.save({'format': 'monet_ros.checkpoint/1', 'weights': np.arange(3)}, path)
+    with open(path, 'rb') as stream:
+        try:
+            torch.load(stream, weights_only=True)
+        except Exception as error:  # noqa: BLE001 - the text is what matters here
+            assert str(error).count('\n') >= 3       # the premise: torch's text spans lines
+    return path
+
+
+def assert_one_line_exit_2(node, name, path):
+    assert node.wait(timeout=120) == 2, node.output()
+    lines = [line for line in node.stderr_path.read_text().splitlines() if line.strip()]
+    assert len(lines) == 1, node.output()
+    assert lines[0].startswith(f'{name}: error: {path}: not a readable checkpoint'), lines
+    assert 'Weights only load failed' in lines[0] and '\x1b' not in lines[0]
+    assert 'Traceback' not in node.output()
+
+
+def test_detector_with_a_bad_checkpoint_prints_one_line(ros_env, tmp_path):
+    save_rig(tmp_path / 'rig.yaml', ring_rig(2))
+    model = bad_checkpoint(tmp_path / 'bad.pt')
+    params = dict(rig=str(tmp_path / 'rig.yaml'), model=str(model), device='cpu')
+    with NodeProcess('detector', ros_env, params) as node:
+        assert_one_line_exit_2(node, 'detector', model)
+
+
+def test_learner_resuming_from_a_bad_checkpoint_prints_one_line(ros_env, tmp_path):
+    out = tmp_path / 'run'
+    out.mkdir()
+    (out / 'trainer_state.pt').write_bytes(b'')     # a run to resume: its model is bad
+    model = bad_checkpoint(out / 'model.pt')
+    params = dict(bags=[str(tmp_path / 'no_bag_needed')], out=str(out), resume=True)
+    with NodeProcess('learner', ros_env, params) as node:
+        assert_one_line_exit_2(node, 'learner', model)
