@@ -50,12 +50,21 @@ def send(pubs, frame):
         pubs[name][0].publish(heat)
 
 
+def fusion_statuses(diagnostics):
+    """{status name: DiagnosticStatus} of the newest /diagnostics message of the fusion node
+    ({} if none yet; other publishers of /diagnostics, such as a callback guard, are
+    skipped)."""
+    for msg in reversed(diagnostics):
+        statuses = {s.name: s for s in msg.status}
+        if 'monet fusion' in statuses:
+            return statuses
+    return {}
+
+
 def fused_frames(diagnostics):
-    """'frames' of the fusion summary in the latest /diagnostics message (0 if none)."""
-    for status in diagnostics[-1].status if diagnostics else ():
-        if status.name == 'monet fusion':
-            return int({kv.key: kv.value for kv in status.values}['frames'])
-    return 0
+    """'frames' of the fusion summary in the newest fusion /diagnostics (0 if none)."""
+    status = fusion_statuses(diagnostics).get('monet fusion')
+    return int({kv.key: kv.value for kv in status.values}['frames']) if status else 0
 
 
 def run_frames(ros, node, pubs, frames, clouds, timeout=30.0):

@@ -108,18 +108,22 @@ def test_detector_survives_bad_stamps_models_intrinsics_and_takes_16bit(ros_env,
             assert (out.header.stamp.sec, out.header.stamp.nanosec) == (-1, 0)
             # 2. the bad announcement was rejected and counted, the node runs on
             assert ros.spin_until(lambda: (diag_values(diagnostics, 'monet detector: cam0')
-                                           or {}).get('model_rejects') == '1', 20, node)
+                                           or {}).get('model_rejects') == '1', 60, node)
             # 3. 16-bit mono images are detected (normalised to the network's input)
             raw = rng.integers(100, 4000, (480, 640), dtype=np.uint16)
             roundtrip(node, T0, lambda s, n: numpy_to_image_msg(raw, s, n, encoding='mono16'))
             # 4. camera_info with K = 1e300: counted as bad, the node runs on
             absurd = camera_info_from_camera(rig[0], T0 + 1, 'cam0')
             absurd.k[0] = 1e300
-            for _ in range(3):
+
+            def bad_counted():
+                return int((diag_values(diagnostics, 'monet detector: cam0')
+                            or {}).get('bad_messages', 0)) >= 1
+            for _ in range(60):           # best-effort in: sent until counted
                 pubs['cam0'][1].publish(absurd)
-                ros.spin_for(0.2)
-            assert ros.spin_until(lambda: int((diag_values(diagnostics, 'monet detector: cam0')
-                                               or {}).get('bad_messages', 0)) >= 1, 20, node)
+                if ros.spin_until(bad_counted, timeout=1.0, process=node):
+                    break
+            assert bad_counted(), node.output()
             assert node.running()
             assert node.stop(signal.SIGINT) == 0, node.output()
         output = node.output()
@@ -157,7 +161,9 @@ def test_fusion_keeps_pre_1970_stamps_and_skips_a_2x2_view(ros_env, tmp_path):
     path = tmp_path / 'rig.yaml'
     save_rig(path, rig)
     X = np.random.default_rng(1).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))
-    params = dict(rig=str(path), skeleton='human14', timeout_s=2.0)
+    # reliable in, a long timeout: a view lost or late under load would change num_views
+    params = dict(rig=str(path), skeleton='human14', timeout_s=30.0,
+                  input_reliability='reliable')
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
@@ -190,7 +196,7 @@ def test_fusion_keeps_pre_1970_stamps_and_skips_a_2x2_view(ros_env, tmp_path):
         np.testing.assert_allclose(got['X'], X, atol=0.01)     # the two good views
         assert (got['num_views'] == 2).all()
         assert ros.spin_until(lambda: int((diag_values(diagnostics, 'monet fusion: cam2')
-                                           or {}).get('bad_messages', 0)) >= 1, 20, node)
+                                           or {}).get('bad_messages', 0)) >= 1, 60, node)
         assert (diag_values(diagnostics, 'monet fusion: cam0') or {}).get('bad_messages') == '0'
         assert node.stop(signal.SIGINT) == 0, node.output()
     assert 'smaller than 3x3' in node.output()

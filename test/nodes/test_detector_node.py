@@ -137,10 +137,11 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
             np.testing.assert_allclose(np.reshape(info.k, (3, 3)),
                                        expected_K(cam.K, box, 32, 24), rtol=1e-12)
             np.testing.assert_allclose(info.d, cam.dist)
-        ros.spin_until(lambda: any(header_stamp_ns(m) == T0 for m in overlays), timeout=10)
+        assert ros.spin_until(lambda: any(header_stamp_ns(m) == T0 for m in overlays),
+                              timeout=60, process=node), node.output()
         overlay = next(m for m in overlays if header_stamp_ns(m) == T0)
         assert (overlay.encoding, overlay.width, overlay.height) == ('bgr8', 640, 480)
-        ros.spin_until(lambda: overlay_infos, timeout=10)
+        assert ros.spin_until(lambda: overlay_infos, timeout=60, process=node)
         np.testing.assert_allclose(np.reshape(overlay_infos[0].k, (3, 3)), rig[1].K)
         # the source image (as bgr) with the crop box drawn in yellow on its right edge
         pixels = np.frombuffer(overlay.data, np.uint8).reshape(480, 640, 3)
@@ -154,10 +155,17 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
             np.testing.assert_allclose(image_msg_to_heatmaps(got[cam.name][0]), want[v],
                                        atol=1e-4)
 
-        # 2. a bad image (wrong size) is counted, the node lives on
-        stream.pubs['cam0'][0].publish(numpy_to_image_msg(images[0][:240, :320], T0 + 1,
-                                                          'cam0'))
-        ros.spin_for(0.5)
+        # 2. a bad image (wrong size) is counted, the node lives on (sent until the node
+        # says so: images are best-effort, newest only)
+        def logged(text, publish):
+            for _ in range(60):
+                publish()
+                if ros.spin_until(lambda: text in node.output(), timeout=1.0, process=node):
+                    return True
+            return False
+        assert logged('bad message (image is 320x240 but the camera is 640x480)',
+                      lambda: stream.pubs['cam0'][0].publish(numpy_to_image_msg(
+                          images[0][:240, :320], T0 + 1, 'cam0'))), node.output()
 
         # 3. crop around the projection of /monet/keypoints3d; one wild joint (1.5 m off)
         # is left out of the box (crop_rule: median/MAD trim)
@@ -165,14 +173,21 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
         X[13, 2] += 1.5
         cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
         ros.wait_for_subscribers(cloud_pub, process=node)
-        for _ in range(5):
-            cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))
-            ros.spin_for(0.1)
-        got = stream.roundtrip(T0 + 2, images, node)
-        tracked = []
         # the very function evaluation and `monet process` crop with (crop_rule), on the
         # same keypoints at the precision the cloud carries
         rule = detector_boxes(first, rig, crop_boxes(rig, X.astype(np.float32)))
+
+        def cropped_around_X(got):
+            return all(np.allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                                   expected_K(cam.K, rule[v], 32, 24), rtol=1e-12)
+                       for v, cam in enumerate(rig))
+        # the cloud (best-effort in) is sent with every frame until the crops follow it
+        for stamp in range(T0 + 100, T0 + 160):
+            cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))
+            got = stream.roundtrip(stamp, images, node)
+            if cropped_around_X(got):
+                break
+        tracked = []
         for v, cam in enumerate(rig):
             np.testing.assert_allclose(np.reshape(got[cam.name][1].k, (3, 3)),
                                        expected_K(cam.K, rule[v], 32, 24), rtol=1e-12)
@@ -215,7 +230,9 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
         for path, digest in ((corrupt, hashlib.sha256(corrupt.read_bytes()).hexdigest()),
                              (first, '0' * 64)):
             model_pub.publish(String(data=json.dumps({'path': str(path), 'sha256': digest})))
-            ros.spin_for(0.5)
+            said = 'corrupt.pt' if path == corrupt else 'does not match the announced'
+            assert ros.spin_until(lambda s=said: s in node.output(), timeout=60, process=node), \
+                node.output()
         got_after = stream.roundtrip(stamp + 1, images, node)
         assert node.stop(signal.SIGINT) == 0, node.output()
     output = node.output()
@@ -302,8 +319,8 @@ def test_backend_and_precision_give_the_core_frame_and_report_stages(ros_env, se
             return None
         assert ros.spin_until(lambda: stage_report() is not None, timeout=30, process=node)
         values = stage_report()
-        for stage in ('convert', 'crop', 'forward', 'publish'):
-            assert float(values[f'{stage}_ms_mean']) > 0, values
+        for stage in ('convert', 'crop', 'forward', 'publish'):   # each stage ran and has
+            assert float(values[f'{stage}_ms_mean']) >= 0, values  # a figure (0.000 if fast)
             assert int(values[f'{stage}_calls']) >= 1
 
 

@@ -48,9 +48,9 @@ def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(
         # cam1 has a raw publisher only: the report names the transport that would work
         raw_cam1 = ros.publisher('/cam1/image_raw', Image)
 
-        def reported():
+        def reported():   # once the detector has discovered the raw publisher too
             status = detector_status(diagnostics, 'cam1')
-            return status is not None and 'no publisher' in status.message
+            return status is not None and 'transport:=raw' in status.message
         assert ros.spin_until(reported, timeout=60, process=node), node.output()
         cam0 = detector_status(diagnostics, 'cam0').message
         cam1 = detector_status(diagnostics, 'cam1').message

@@ -2,7 +2,14 @@
 import signal
 
 from diagnostic_msgs.msg import DiagnosticArray
-from helpers.fusion_frames import WRONG, Frame, fused_frames, publishers, run_frames
+from helpers.fusion_frames import (
+    WRONG,
+    Frame,
+    fused_frames,
+    fusion_statuses,
+    publishers,
+    run_frames,
+)
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import cv2_project, ring_rig
 import numpy as np
@@ -35,7 +42,8 @@ def test_fuses_excludes_the_wrong_view_and_reports_true_errors(ros_env, rig_file
     X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], size=(14, 3))
     frames = [Frame(rig, X, i, rng, noise=0.0 if i % 2 == 0 else 0.3) for i in range(4)]
     # reliable inputs: a view lost under load (best-effort) would change the view counts
-    with RosHarness(ros_env) as ros, start_fusion(ros_env, path, timeout_s=2.0,
+    # a long timeout: a view late under load is waited for, not fused without (3 views)
+    with RosHarness(ros_env) as ros, start_fusion(ros_env, path, timeout_s=30.0,
                                                   input_reliability='reliable') as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         markers = ros.collect('/monet/skeleton', MarkerArray)
@@ -45,8 +53,8 @@ def test_fuses_excludes_the_wrong_view_and_reports_true_errors(ros_env, rig_file
             ros.wait_for_subscribers(heat_pub, process=node)
             ros.wait_for_subscribers(info_pub, process=node)
         got = run_frames(ros, node, pubs, frames, clouds)
-        ros.spin_until(lambda: markers and fused_frames(diagnostics) >= len(frames),
-                       timeout=10, process=node)
+        assert ros.spin_until(lambda: markers and fused_frames(diagnostics) >= len(frames),
+                              timeout=60, process=node), node.output()
         assert node.stop(signal.SIGINT) == 0, node.output()
 
     good = [c.name for v, c in enumerate(rig) if v != WRONG]
@@ -68,17 +76,18 @@ def test_fuses_excludes_the_wrong_view_and_reports_true_errors(ros_env, rig_file
             assert errors.mean() > 0.5
     assert markers[-1].markers[1].points, 'bones of the skeleton are published'
     assert len(load_skeleton('human14').bones) * 2 == len(markers[-1].markers[1].points)
-    status = {s.name: s for s in diagnostics[-1].status}
+    status = fusion_statuses(diagnostics)
     values = {kv.key: kv.value for kv in status[f'monet fusion: cam{WRONG}'].values}
     assert values['mean_reprojection_error_px'] == 'nan'   # never an inlier
     values = {kv.key: kv.value for kv in status['monet fusion: cam0'].values}
     assert np.isfinite(float(values['mean_reprojection_error_px']))
-    # the per-stage profile: every stage ran once per fused frame (receive once per view)
+    # the per-stage profile: every stage ran once per fused frame (receive once per view),
+    # each with a mean time (a figure, not checked: a fast stage prints 0.000 ms)
     summary = {kv.key: kv.value for kv in status['monet fusion'].values}
     fused = int(summary['frames'])
     for stage in ('decode', 'undistort', 'triangulate', 'errors', 'publish'):
         assert int(summary[f'{stage}_calls']) == fused, (stage, summary)
-        assert float(summary[f'{stage}_ms_mean']) > 0
+        assert float(summary[f'{stage}_ms_mean']) >= 0
     assert int(summary['receive_calls']) >= fused
 
 
@@ -88,8 +97,11 @@ def test_keeps_publishing_when_a_camera_goes_silent(ros_env, rig_file):
     X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], size=(14, 3))
     frames = [Frame(rig, X, 0, rng, 0.0)]
     frames += [Frame(rig, X, i, rng, 0.0, silent=('cam1',)) for i in range(1, 4)]
-    with RosHarness(ros_env) as ros, start_fusion(ros_env, path, timeout_s=0.2,
+    # reliable in, frames released by cam1's silence (not a short timeout): a view of
+    # cam0 or cam3 late under load is waited for
+    with RosHarness(ros_env) as ros, start_fusion(ros_env, path, timeout_s=30.0,
                                                   silent_after_s=0.5,
+                                                  input_reliability='reliable',
                                                   diagnostics_period_s=0.2) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
@@ -97,14 +109,17 @@ def test_keeps_publishing_when_a_camera_goes_silent(ros_env, rig_file):
         for heat_pub, _ in pubs.values():
             ros.wait_for_subscribers(heat_pub, process=node)
         got = run_frames(ros, node, pubs, frames, clouds)
-        ros.spin_for(0.6)
+
+        def cam1():
+            return fusion_statuses(diagnostics).get('monet fusion: cam1')
+        # cam1 is reported silent once silent_after_s passed (an event, not a sleep)
+        assert ros.spin_until(lambda: cam1() and 'silent' in cam1().message, timeout=60,
+                              process=node), node.output()
+        assert cam1().level == b'\x01'  # WARN
         assert node.stop(signal.SIGTERM) == 0, node.output()
     late = cloud_to_keypoints3d(got[frames[-1].stamp])
     assert (late['num_views'] == 2).all()          # cam1 silent, cam2 wrong: 2 views left
     assert np.abs(late['X'] - X).max() < 1e-3
-    status = {s.name: s for s in diagnostics[-1].status}
-    assert 'silent' in status['monet fusion: cam1'].message
-    assert status['monet fusion: cam1'].level == b'\x01'  # WARN
 
 
 @pytest.mark.parametrize('change, message', [

@@ -129,7 +129,9 @@ def test_parameters_ranges_live_changes_and_dump_round_trip(ros_env, rig_file, t
     rng = np.random.default_rng(5)
     X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], size=(14, 3))
     service = '/monet/fusion'
-    params = dict(rig=str(path), timeout_s=2.0, input_reliability='reliable')
+    # a long timeout: with min_views 4 a frame released early (a view late under load)
+    # would be dropped, and its re-sent views are repeats, never fused
+    params = dict(rig=str(path), timeout_s=30.0, input_reliability='reliable')
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         described = call(ros, DescribeParameters, f'{service}/describe_parameters',
                          DescribeParameters.Request(names=['threshold_px', 'min_views',
@@ -201,8 +203,8 @@ def test_markers_expire_are_labelled_and_deleted_on_shutdown(ros_env, rig_file):
         run_frames(ros, node, pubs, [Frame(rig, X, 0, rng, 0.0)], clouds)
         assert ros.spin_until(lambda: markers and rig_markers, timeout=20, process=node)
         assert node.stop(signal.SIGINT) == 0, node.output()
-        ros.spin_until(lambda: any(m.action == Marker.DELETEALL
-                                   for a in markers for m in a.markers), timeout=10)
+        assert ros.spin_until(lambda: any(m.action == Marker.DELETEALL
+                                          for a in markers for m in a.markers), timeout=60)
     first = markers[0].markers
     assert {m.ns for m in first} == {'human14/subject0', 'human14/subject0/names'}
     assert all(Duration.from_msg(m.lifetime).nanoseconds == 700_000_000 for m in first)
