@@ -12,9 +12,9 @@ from helpers.label_app import page_token, request
 import numpy as np
 import pytest
 
-from monet_ros.commands.info import recording_index
 from monet_ros.geometry import load_rig
 from monet_ros.labels import read_label_rows, resolve_labels
+from monet_ros.learning.recording_index import recording_index
 from monet_ros.skeleton import load_skeleton
 
 from .conftest import REBOUND_HOST, label_server
