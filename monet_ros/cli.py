@@ -33,6 +33,7 @@ SUBCOMMANDS = {
     'triangulate': 'triangulate',
     'pipeline': 'pipeline',
     'import': 'import_videos',
+    'calibrate': 'calibrate',
     'labels': 'labels',
     'info': 'info',
     'label': 'label',

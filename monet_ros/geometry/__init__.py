@@ -18,7 +18,7 @@ from monet_ros.geometry.epipolar import (
     skew_matrix,
     stereo_rectify,
 )
-from monet_ros.geometry.rig import RigError, load_rig, read_rig, save_rig
+from monet_ros.geometry.rig import RigError, load_rig, read_rig, save_anipose_toml, save_rig
 from monet_ros.geometry.triangulation import (
     reprojection_error,
     select_candidates,
@@ -32,6 +32,6 @@ __all__ = [
     'apply_homography', 'epipolar_lines', 'fundamental_from_params', 'fundamental_matrix',
     'rectification_homographies', 'rectifying_rotation', 'relative_pose', 'skew_matrix',
     'stereo_rectify',
-    'RigError', 'load_rig', 'read_rig', 'save_rig',
+    'RigError', 'load_rig', 'read_rig', 'save_anipose_toml', 'save_rig',
     'reprojection_error', 'select_candidates', 'triangulate', 'triangulate_robust',
 ]

@@ -1,6 +1,7 @@
 """Rig files: read a list of Cameras from the project rig YAML, anipose / Pose2Sim
 calibration.toml, ROS camera_info YAML, OpenCV FileStorage YAML/XML and DANNCE
-label3d .mat files; write the project rig YAML (exact round trip).
+label3d .mat files; write the project rig YAML (exact round trip) and anipose
+calibration.toml (save_anipose_toml).
 
 Every problem raises RigError naming the file and the field. Files are bounded before they
 are parsed (MAX_RIG_BYTES), YAML aliases/anchors are refused (a 600-byte alias bomb would
@@ -251,6 +252,49 @@ def save_rig(path, cameras, frame_id=DEFAULT_FRAME_ID):
                   f'    R: {_mat(cam.R)}', f'    t: {_vec(cam.t)}']
         if cam.topic is not None:
             lines.append(f'    topic: {yaml.safe_dump(cam.topic, default_style=chr(39)).strip()}')
+    path = Path(path)
+    tmp = path.with_name(path.name + '.tmp')
+    tmp.write_text('\n'.join(lines) + '\n')
+    tmp.replace(path)
+
+
+def _toml_value(value):
+    """A TOML value of a str, bool, int, float or nested list/array of numbers."""
+    if isinstance(value, str):
+        return '"' + value.replace('\\', '\\\\').replace('"', '\\"') + '"'
+    if isinstance(value, (bool, np.bool_)):
+        return 'true' if value else 'false'
+    if isinstance(value, (int, np.integer)):
+        return str(int(value))
+    if isinstance(value, (float, np.floating)):
+        return repr(float(value)) if np.isfinite(value) else ('nan' if np.isnan(value) else
+                                                               ('inf' if value > 0 else '-inf'))
+    return '[' + ', '.join(_toml_value(v) for v in (value.tolist() if isinstance(
+        value, np.ndarray) else value)) + ']'
+
+
+def save_anipose_toml(path, cameras, metadata=None):
+    """Write cameras as an anipose / aniposelib calibration.toml: [cam_N] name, size
+    [w, h], matrix (3x3), distortions (OpenCV order, at least 5 values), rotation
+    (Rodrigues vector, world -> camera), translation; then [metadata] (str / number
+    values). load_rig(path) gives the same cameras back (rotation to ~1e-15). Written
+    atomically (a .tmp file renamed)."""
+    import cv2
+
+    if not cameras:
+        raise ValueError('save_anipose_toml needs at least one camera')
+    lines = []
+    for i, cam in enumerate(cameras):
+        dist = np.zeros(max(5, cam.dist.size))
+        dist[:cam.dist.size] = cam.dist
+        lines += [f'[cam_{i}]', f'name = {_toml_value(cam.name)}',
+                  f'size = {_toml_value([int(cam.width), int(cam.height)])}',
+                  f'matrix = {_toml_value(np.asarray(cam.K))}',
+                  f'distortions = {_toml_value(dist)}',
+                  f'rotation = {_toml_value(cv2.Rodrigues(np.asarray(cam.R))[0].ravel())}',
+                  f'translation = {_toml_value(np.asarray(cam.t))}', '']
+    lines.append('[metadata]')
+    lines += [f'{key} = {_toml_value(value)}' for key, value in (metadata or {}).items()]
     path = Path(path)
     tmp = path.with_name(path.name + '.tmp')
     tmp.write_text('\n'.join(lines) + '\n')
