@@ -96,7 +96,7 @@ class Board:
             markers = self.board_x * self.board_y // 2
             if markers > self.dict_size:
                 raise BoardError('dict_size', f'a {self.board_x} x {self.board_y} board has '
-                                 f'{markers} markers, more than the dictionary\'s '
+                                 f"{markers} markers, more than the dictionary's "
                                  f'{self.dict_size}')
 
     @property

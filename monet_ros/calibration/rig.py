@@ -36,7 +36,7 @@ class CalibrationConfig:
     f_scale_px: float = setting(1.0, 'robust loss scale (px)', minimum=0.0,
                                 exclusive_minimum=True)
     min_views: int = setting(5, 'warn when a camera has fewer board views', minimum=1)
-    high_error_px: float = setting(1.0, 'warn when a camera\'s mean reprojection error is '
+    high_error_px: float = setting(1.0, "warn when a camera's mean reprojection error is "
                                    'higher (px)', minimum=0.0, exclusive_minimum=True)
     max_nfev: int = setting(1000, 'most residual evaluations of the bundle adjustment',
                             minimum=1)
