@@ -134,7 +134,6 @@ def input_names(paths):
 
 def camera_names(args, rig_names=None):
     """Names of the inputs in order (--names, the --intrinsics cameras, or the paths)."""
-    from monet_ros.labels import match_camera_names
     if args.names:
         names = [n.strip() for n in args.names.split(',')]
         if len(names) != len(args.inputs) or not all(names) or len(set(names)) < len(names):
@@ -144,13 +143,19 @@ def camera_names(args, rig_names=None):
     raw = input_names(args.inputs)
     if rig_names is None:
         return _short(raw)
-    matched = match_camera_names(rig_names, raw, what='input')
-    by_input = {v: k for k, v in matched.items()}
-    missing = [r for r in raw if r not in by_input]
-    if missing:
-        raise ValueError(f'--intrinsics: no camera of the calibration matches input(s) '
-                         f'{", ".join(missing)} (cameras: {", ".join(rig_names)}); give --names')
-    return [by_input[r] for r in raw]
+    out = []
+    for r in raw:      # the calibration camera whose name the input's contains (longest)
+        hits = [c for c in rig_names if c in r]
+        hits = [c for c in hits if not any(len(o) > len(c) and c in o for o in hits)]
+        if len(hits) != 1:
+            raise ValueError(f'--intrinsics: input {r!r} matches '
+                             + (f'cameras {", ".join(hits)}' if hits else 'no camera')
+                             + f' of the calibration ({", ".join(rig_names)}); give --names')
+        out.append(hits[0])
+    if len(set(out)) < len(out):
+        raise ValueError(f'--intrinsics: two inputs match the same camera ({", ".join(out)});'
+                         ' give --names')
+    return out
 
 
 def _sources(args, names):
@@ -175,18 +180,23 @@ def _frames(source):
         yield image
 
 
-def detect_all(args, board, names):
-    """CameraDetections of every input (index-paired counts checked first for image
-    folders, whose counts are exact)."""
-    from monet_ros.calibration.detect import BoardDetector, detect_frames
+def open_inputs(args, names):
+    """Frame sources of the inputs; with index pairing the image folders' frame counts
+    (exact, unlike a video's) must agree before anything is detected."""
     sources = _sources(args, names)
+    exact = {n: s.count for n, s in zip(names, sources) if s.files is not None}
+    if not args.timestamps and len(set(exact.values())) > 1:
+        for s in sources:
+            s.close()
+        raise ValueError('frame counts do not match across cameras (' + ', '.join(
+            f'{n}: {c}' for n, c in exact.items()) + '); pair frames with --timestamps CSV')
+    return sources
+
+
+def detect_all(args, board, names, sources):
+    """CameraDetections of every input (tqdm progress per camera unless --quiet)."""
+    from monet_ros.calibration.detect import BoardDetector, detect_frames
     try:
-        if not args.timestamps:
-            exact = {n: s.count for n, s in zip(names, sources) if s.files is not None}
-            if len(set(exact.values())) > 1:
-                raise ValueError('frame counts do not match across cameras (' + ', '.join(
-                    f'{n}: {c}' for n, c in exact.items()) + '); pair frames with '
-                    '--timestamps CSV')
         detector = BoardDetector(board)
         return [detect_frames(n, _frames(s), board, total=s.count or None,
                               progress=not args.quiet, detector=detector)
@@ -238,9 +248,10 @@ def run(args):
         fixed = {c.name: c for c in rig}
     else:
         names = camera_names(args)
+    sources = open_inputs(args, names)
     print(f'monet calibrate: board {board.describe()}; cameras '
           + ', '.join(f'{n} <- {p}' for n, p in zip(names, args.inputs)), file=sys.stderr)
-    detections = detect_all(args, board, names)
+    detections = detect_all(args, board, names, sources)
     for d in detections:
         print(f'monet calibrate: {d.name}: {len(d.corners)} frames, board in '
               f'{d.frames_with_board}, no board in {len(d.no_board)}', file=sys.stderr)

@@ -1,0 +1,188 @@
+"""`monet calibrate` end to end on the real sleap-anipose calibration images: image folders,
+videos made from them, --intrinsics, --timestamps, --format both, and bad input (exit 2,
+one line)."""
+import cv2
+import numpy as np
+import pytest
+
+from monet_ros.calibration.extrinsics import rotation_angle_deg
+from monet_ros.cli import main
+from monet_ros.geometry import load_rig
+
+pytestmark = pytest.mark.slow   # detects 21-42 real images per run (~2 min loaded)
+
+
+@pytest.fixture(scope='module')
+def session(shared_data):
+    return shared_data / 'sleap_anipose_minimal_session'
+
+
+def images(session, camera):
+    return sorted((session / camera / 'calibration_images').glob('*.jpg'))
+
+
+def link_images(folder, files):
+    folder.mkdir(parents=True)
+    for f in files:
+        (folder / f.name).symlink_to(f)
+    return folder
+
+
+def run(argv, capsys):
+    code = main(['calibrate', *map(str, argv), '--quiet'])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def relative(a, b):
+    R = b.R @ a.R.T
+    return R, b.t - R @ a.t
+
+
+def check_back_mid(path, reference_path):
+    cams = {c.name: c for c in load_rig(path)}
+    ref = {c.name: c for c in load_rig(reference_path)}
+    assert sorted(cams) == ['back', 'mid']
+    for name in ('back', 'mid'):
+        assert abs(cams[name].K[0, 0] / ref[name].K[0, 0] - 1) < 0.05
+    R, t = relative(cams['back'], cams['mid'])
+    R0, t0 = relative(ref['back'], ref['mid'])
+    assert rotation_angle_deg(R @ R0.T) < 2.0
+    assert np.degrees(np.arccos(t @ t0 / np.linalg.norm(t) / np.linalg.norm(t0))) < 3.0
+    return cams
+
+
+@pytest.fixture(scope='module')
+def image_run(session, tmp_path_factory):
+    out = tmp_path_factory.mktemp('calibrate') / 'calibration.toml'
+    code = main(['calibrate', str(session / 'back' / 'calibration_images'),
+                 str(session / 'mid' / 'calibration_images'), '--board',
+                 str(session / 'board.toml'), '--out', str(out), '--distortion', 'k1k2',
+                 '--format', 'both', '--quiet'])
+    return code, out
+
+
+def test_image_folders(image_run, session):
+    code, out = image_run
+    assert code == 0
+    cams = check_back_mid(out, session / 'calibration.toml')
+    # --format both: the project rig YAML holds the same cameras
+    yaml_cams = {c.name: c for c in load_rig(out.with_suffix('.yaml'))}
+    for name, cam in cams.items():
+        np.testing.assert_allclose(yaml_cams[name].K, cam.K)
+        np.testing.assert_allclose(yaml_cams[name].t, cam.t)
+    report = cv2.imread(str(out.with_name('calibration_report.png')))
+    assert report is not None and report.shape[0] > 400 and report.shape[1] > 600
+    assert report.std() > 10                      # not a blank page
+
+
+def test_summary_printed(session, tmp_path, capsys):
+    code, out, err = run([session / 'back' / 'calibration_images',
+                          session / 'mid' / 'calibration_images', '--board',
+                          session / 'board.toml', '--out', tmp_path / 'c.toml',
+                          '--no-report', '--distortion', 'k1k2'], capsys)
+    assert code == 0
+    assert 'back: 21 frames, board in 21, no board in 0' in err
+    lines = out.splitlines()
+    back = next(line for line in lines if line.startswith('back '))
+    assert back.split()[1:4] == ['21', '0', '21']
+    assert float(back.split()[5]) < 1.0           # mean px
+    assert any(line.startswith('back - mid') for line in lines)
+    geometry = next(line for line in lines if line.startswith('board geometry'))
+    median = float(geometry.split('triangulated ')[1].split()[0])
+    assert abs(median - 24.0) <= 0.5
+    assert not (tmp_path / 'c_report.png').exists()
+
+
+def test_video_input(session, tmp_path, capsys):
+    videos = []
+    for camera in ('back', 'mid'):
+        path = tmp_path / f'{camera}.mp4'
+        writer = cv2.VideoWriter(str(path), cv2.VideoWriter_fourcc(*'mp4v'), 10.0,
+                                 (1280, 1024))
+        assert writer.isOpened()
+        for f in images(session, camera):
+            writer.write(cv2.imread(str(f)))
+        writer.release()
+        videos.append(path)
+    out = tmp_path / 'calibration.toml'
+    code, _, err = run([*videos, '--board', session / 'board.toml', '--out', out,
+                        '--distortion', 'k1k2', '--no-report'], capsys)
+    assert code == 0, err
+    assert 'mid: 21 frames, board in 21' in err
+    check_back_mid(out, session / 'calibration.toml')
+
+
+def test_known_intrinsics_and_names_from_the_calibration(session, tmp_path, capsys):
+    back = link_images(tmp_path / 'rig_back_images', images(session, 'back')[:12])
+    mid = link_images(tmp_path / 'rig_mid_images', images(session, 'mid')[:12])
+    reference = session / 'calibration.toml'
+    out = tmp_path / 'calibration.toml'
+    code, _, err = run([mid, back, '--board', session / 'board.toml', '--out', out,
+                        '--intrinsics', reference, '--no-report'], capsys)
+    assert code == 0, err
+    cams = {c.name: c for c in load_rig(out)}
+    ref = {c.name: c for c in load_rig(reference)}
+    for name in ('back', 'mid'):
+        np.testing.assert_array_equal(cams[name].K, ref[name].K)
+        np.testing.assert_array_equal(cams[name].dist, ref[name].dist)
+    check_back_mid(out, reference)
+
+
+def test_timestamps_pair_unequal_frame_counts(session, tmp_path, capsys):
+    back = link_images(tmp_path / 'back', images(session, 'back')[:12])
+    mid = link_images(tmp_path / 'mid', images(session, 'mid')[:12])
+    # mid started one frame early: an extra (board-less) first frame
+    cv2.imwrite(str(mid / 'mid-0000.jpg'), np.full((1024, 1280, 3), 90, np.uint8))
+    args = [back, mid, '--board', session / 'board.toml', '--out', tmp_path / 'c.toml',
+            '--no-report', '--distortion', 'k1k2']
+    code, _, err = run(args, capsys)
+    assert code == 2
+    assert err.strip().splitlines() == [
+        'monet calibrate: error: frame counts do not match across cameras (back: 12, '
+        'mid: 13); pair frames with --timestamps CSV']
+    csv = tmp_path / 'times.csv'
+    rows = [f'back,{k},{k / 10:.3f}' for k in range(12)]
+    rows += [f'mid,{k},{(k - 1) / 10 + 0.004:.3f}' for k in range(13)]
+    csv.write_text('camera,frame,time_s\n' + '\n'.join(rows) + '\n')
+    code, _, err = run(args + ['--timestamps', csv], capsys)
+    assert code == 0, err
+    assert 'mid: 13 frames, board in 12, no board in 1' in err
+    assert '12 instants paired by time' in err
+    check_back_mid(tmp_path / 'c.toml', session / 'calibration.toml')
+
+
+def impossible_board(tmp_path):
+    path = tmp_path / 'board.toml'
+    path.write_text('board_x = 8\nboard_y = 11\nsquare_length = 24.0\nmarker_length = 30.0\n'
+                    'marker_bits = 4\ndict_size = 1000\n')
+    return path
+
+
+@pytest.mark.parametrize('case, expected', [
+    ('impossible board', "board field 'marker_length': must be positive and smaller"),
+    ('board option', '--board-x: must be in 2..100, got 1'),
+    ('no board', '--board: a board TOML'),
+    ('empty folder', "(camera 'empty'): no image"),
+    ('missing input', 'no such file or folder'),
+    ('bad tolerance', '--tolerance must be positive'),
+])
+def test_bad_input_is_one_line_exit_2(session, tmp_path, capsys, case, expected):
+    back = session / 'back' / 'calibration_images'
+    board = ['--board', session / 'board.toml']
+    empty = tmp_path / 'empty'
+    empty.mkdir()
+    args = {'impossible board': [back, back.parent.parent / 'mid' / 'calibration_images',
+                                 '--board', impossible_board(tmp_path)],
+            'board option': [back, '--board-x', '1', '--board-y', '11', '--square-length',
+                             '24'],
+            'no board': [back],
+            'empty folder': [back, empty] + board,
+            'missing input': [back, tmp_path / 'absent'] + board,
+            'bad tolerance': [back, '--tolerance', '-1'] + board}[case]
+    code, out, err = run(args + ['--out', tmp_path / 'c.toml'], capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('monet calibrate: error: '), err
+    assert expected in lines[0]
+    assert not (tmp_path / 'c.toml').exists()
