@@ -21,6 +21,17 @@ from monet_ros.geometry.camera import _distort
 LOSSES = ('soft_l1', 'huber', 'linear')
 
 
+def _one_blas_thread():
+    """threadpoolctl's limit to one BLAS thread, or nothing where it is not installed (it
+    is pinned in requirements.txt; a speed-up, not a need)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:                                   # pragma: no cover
+        from contextlib import nullcontext
+        return nullcontext()
+    return threadpool_limits(1, user_api='blas')
+
+
 def rodrigues(rvecs):
     """Rotation matrices (n, 3, 3) of Rodrigues vectors (n, 3) (batched cv2.Rodrigues)."""
     rvecs = np.asarray(rvecs, np.float64)
@@ -189,8 +200,13 @@ def bundle_adjust(board, obs, intrinsics, extrinsics, board_poses, root, distort
                           shape=(2 * M, layout.size)).tocsr()
     x0 = _pack(layout, intrinsics, extrinsics, board_poses)
     initial = np.linalg.norm(residuals(x0).reshape(-1, 2), axis=1)
-    result = least_squares(residuals, x0, jac_sparsity=sparsity, x_scale='jac', loss=loss,
-                           f_scale=float(f_scale), method='trf', max_nfev=max_nfev)
+    # One BLAS thread: lsmr's vector products (> 10,000 residuals: OpenBLAS threads them)
+    # are tiny, and threads waiting on each other made a 4-camera fit 10x slower on 2
+    # loaded cores (bench/calibrate.py).
+    with _one_blas_thread():
+        result = least_squares(residuals, x0, jac_sparsity=sparsity, x_scale='jac',
+                               loss=loss, f_scale=float(f_scale), method='trf',
+                               max_nfev=max_nfev)
     rvec, tvec, K, dist, frvec, ftvec = _unpack(layout, result.x, intrinsics)
     R_c, R_f = rodrigues(rvec), rodrigues(frvec)
     out_intr, out_extr = {}, {}
