@@ -98,7 +98,10 @@ def calibrate_rig(detections, board, config=CalibrationConfig(), fixed_intrinsic
             warnings.append(f'camera {d.name!r}: only {views} board views (fewer than '
                             f'{config.min_views}): its calibration is poorly constrained')
         if fixed_intrinsics is not None:
-            cam = fixed_intrinsics[d.name]
+            cam = fixed_intrinsics.get(d.name)
+            if cam is None:
+                raise ValueError(f'--intrinsics: no camera {d.name!r} in the calibration '
+                                 f'({", ".join(fixed_intrinsics)})')
             if (cam.width, cam.height) != tuple(d.size):
                 raise ValueError(f'--intrinsics: camera {d.name!r} is {cam.width}x{cam.height} '
                                  f'there, its images are {d.size[0]}x{d.size[1]}')

@@ -186,3 +186,15 @@ def test_bad_input_is_one_line_exit_2(session, tmp_path, capsys, case, expected)
     assert len(lines) == 1 and lines[0].startswith('monet calibrate: error: '), err
     assert expected in lines[0]
     assert not (tmp_path / 'c.toml').exists()
+
+
+def test_camera_names_from_paths(tmp_path):
+    from monet_ros.commands.calibrate import _short, input_names
+    for name in ('back', 'mid'):
+        (tmp_path / name / 'calibration_images').mkdir(parents=True)
+    assert input_names([tmp_path / 'back' / 'calibration_images',
+                        tmp_path / 'mid' / 'calibration_images']) == ['back', 'mid']
+    assert _short(['minimal_session-back-calibration', 'minimal_session-mid-calibration']) \
+        == ['back', 'mid']
+    assert _short(['cam1', 'cam2']) == ['cam1', 'cam2']      # no separator: kept whole
+    assert _short(['Cam_01.mp4', 'Cam_02.mp4']) == ['01', '02']
