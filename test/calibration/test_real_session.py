@@ -92,3 +92,19 @@ def test_reference_model_k1_centred_principal_point(session):
         assert np.count_nonzero(cam.dist) == 1
         assert abs(cam.dist[0] - reference[cam.name].dist[0]) < 0.05
     check_against_reference(result, reference, chosen, board)
+
+
+def test_inverted_real_images(session, shared_data):
+    """The first image of each camera inverted (a board printed white on black): the same
+    corners are found."""
+    board, detections, _ = session
+    detector = BoardDetector(board)
+    root = shared_data / 'sleap_anipose_minimal_session'
+    for d in detections:
+        first = sorted((root / d.name / 'calibration_images').glob('*.jpg'))[0]
+        image = cv2.imread(str(first), cv2.IMREAD_GRAYSCALE)
+        ids, corners = detector.detect(255 - image)
+        expected = np.flatnonzero(np.isfinite(d.corners[0, :, 0]))
+        np.testing.assert_array_equal(np.sort(ids), expected)
+        order = np.argsort(ids)
+        assert np.abs(corners[order] - d.corners[0, expected]).max() < 0.5
