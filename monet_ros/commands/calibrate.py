@@ -6,7 +6,9 @@ ChArUco or checkerboard images / videos.
         [--timestamps times.csv [--tolerance S]] [--format anipose|rig|both]
         [--report report.png | --no-report] [--names a,b,c]
 
-- INPUT: one video (any file OpenCV decodes) or image folder (sorted by name) per camera.
+- INPUT: one video (any file OpenCV decodes) or image folder per camera (images in the
+  order of the number in their names, as `monet import videos` reads them; frame k of a
+  camera is its k-th image).
   Camera names: --names, else the names of an --intrinsics calibration matched to the
   inputs as `monet import videos` does (the input whose name contains the camera name),
   else the folder / file names (a parent folder's when they repeat, e.g.
@@ -159,7 +161,7 @@ def camera_names(args, rig_names=None):
 
 
 def _sources(args, names):
-    from monet_ros.commands.import_videos import IMAGE_SUFFIXES, _Source
+    from monet_ros.io.frame_sources import IMAGE_SUFFIXES, FrameSource
     sources = []
     for path, name in zip(args.inputs, names):
         p = Path(path)
@@ -168,16 +170,16 @@ def _sources(args, names):
         if p.is_dir() and not any(f.suffix.lower() in IMAGE_SUFFIXES for f in p.iterdir()):
             raise ValueError(f'INPUT {path} (camera {name!r}): no image '
                              f'({", ".join(IMAGE_SUFFIXES)}) in the folder')
-        sources.append(_Source(p))
+        sources.append(FrameSource(p))
     return sources
 
 
 def _frames(source):
     while True:
-        image = source.read()
-        if image is None:
+        frame = source.read()
+        if frame is None:
             return
-        yield image
+        yield frame[1]
 
 
 def open_inputs(args, names):
@@ -249,6 +251,9 @@ def run(args):
     else:
         names = camera_names(args)
     sources = open_inputs(args, names)
+    for source in sources:
+        if source.order_note:
+            print(f'monet calibrate: note: {source.order_note}', file=sys.stderr)
     print(f'monet calibrate: board {board.describe()}; cameras '
           + ', '.join(f'{n} <- {p}' for n, p in zip(names, args.inputs)), file=sys.stderr)
     detections = detect_all(args, board, names, sources)

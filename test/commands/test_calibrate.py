@@ -18,7 +18,9 @@ def session(shared_data):
 
 
 def images(session, camera):
-    return sorted((session / camera / 'calibration_images').glob('*.jpg'))
+    """The camera's images in instant order (the number ending their names)."""
+    return sorted((session / camera / 'calibration_images').glob('*.jpg'),
+                  key=lambda f: int(f.stem.rsplit('-', 1)[1]))
 
 
 def link_images(folder, files):
@@ -131,9 +133,12 @@ def test_known_intrinsics_and_names_from_the_calibration(session, tmp_path, caps
 
 def test_timestamps_pair_unequal_frame_counts(session, tmp_path, capsys):
     back = link_images(tmp_path / 'back', images(session, 'back')[:12])
-    mid = link_images(tmp_path / 'mid', images(session, 'mid')[:12])
-    # mid started one frame early: an extra (board-less) first frame
-    cv2.imwrite(str(mid / 'mid-0000.jpg'), np.full((1024, 1280, 3), 90, np.uint8))
+    mid = tmp_path / 'mid'
+    mid.mkdir()
+    # mid started one frame early: an extra (board-less) first frame, then the 12 images
+    cv2.imwrite(str(mid / 'mid_000.jpg'), np.full((1024, 1280, 3), 90, np.uint8))
+    for k, f in enumerate(images(session, 'mid')[:12]):
+        (mid / f'mid_{k + 1:03d}.jpg').symlink_to(f)
     args = [back, mid, '--board', session / 'board.toml', '--out', tmp_path / 'c.toml',
             '--no-report', '--distortion', 'k1k2']
     code, _, err = run(args, capsys)
