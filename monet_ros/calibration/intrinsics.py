@@ -7,6 +7,8 @@ fix_principal_point (held at the image centre ((w - 1) / 2, (h - 1) / 2)).
 """
 import numpy as np
 
+from monet_ros.calibration.detect import MIN_CORNERS
+
 DISTORTION_MODELS = ('k1', 'k1k2', 'full')
 # Free distortion coefficients of each model, as indices into (k1, k2, p1, p2, k3).
 FREE_DISTORTION = {'k1': (0,), 'k1k2': (0, 1), 'full': (0, 1, 2, 3, 4)}
@@ -32,9 +34,9 @@ def _flags(distortion, square_pixels, fix_principal_point):
 
 def view_points(corners, board):
     """(object points list of (n, 3) float32, image points list of (n, 2) float32, frame
-    indices) of the views in corners (F, N, 2) (NaN = missing) with >= 6 corners."""
+    indices) of the views in corners (F, N, 2) (NaN = missing) with >= MIN_CORNERS (6)."""
     seen = np.isfinite(corners[..., 0])
-    frames = np.flatnonzero(seen.sum(axis=1) >= 6)
+    frames = np.flatnonzero(seen.sum(axis=1) >= MIN_CORNERS)
     obj = [board.object_points[seen[f]].astype(np.float32) for f in frames]
     img = [corners[f][seen[f]].astype(np.float32) for f in frames]
     return obj, img, frames
@@ -72,7 +74,7 @@ def calibrate_intrinsics(corners, board, size, distortion='k1', square_pixels=Tr
 
 
 def board_poses(corners, board, K, dist):
-    """Board -> camera poses of every view with >= 6 corners, given intrinsics.
+    """Board -> camera poses of every view with >= MIN_CORNERS corners, given intrinsics.
 
     Returns (frames (n,), rvecs (n, 3), tvecs (n, 3)) by cv2.solvePnP (iterative, from the
     IPPE planar solution)."""

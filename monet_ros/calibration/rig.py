@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from monet_ros.calibration.bundle import LOSSES, Observations, bundle_adjust, to_camera
+from monet_ros.calibration.detect import MIN_CORNERS
 from monet_ros.calibration.extrinsics import (
     chain_extrinsics,
     components,
@@ -93,7 +94,7 @@ def calibrate_rig(detections, board, config=CalibrationConfig(), fixed_intrinsic
     C, F = corners.shape[:2]
     warnings, left_out, intrinsics, rms = [], {}, {}, {}
     for c, d in enumerate(detections):
-        views = int((np.isfinite(corners[c, ..., 0]).sum(axis=1) >= 6).sum())
+        views = int((np.isfinite(corners[c, ..., 0]).sum(axis=1) >= MIN_CORNERS).sum())
         if views < config.min_views:
             warnings.append(f'camera {d.name!r}: only {views} board views (fewer than '
                             f'{config.min_views}): its calibration is poorly constrained')

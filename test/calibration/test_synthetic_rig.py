@@ -136,3 +136,15 @@ def test_known_intrinsics_fit_extrinsics_only(scene):
         np.testing.assert_array_equal(cam.dist, truth[cam.name].dist)
     check_extrinsics(result, cameras)
     assert result.intrinsics_rms == {}
+
+
+def test_few_views_and_high_error_are_warned(scene):
+    _, detections = scene
+    cut = [replace(d, corners=d.corners.copy()) for d in detections]
+    seen = np.flatnonzero(np.isfinite(cut[2].corners[..., 0]).any(axis=1))
+    cut[2].corners[seen[4:]] = np.nan                    # cam2: 4 board views left
+    result = calibrate_rig(cut, BOARD, CalibrationConfig(distortion='k1k2', min_views=5,
+                                                         high_error_px=0.01))
+    assert "camera 'cam2': only 4 board views (fewer than 5)" in result.warnings[0]
+    high = [w for w in result.warnings if 'is high (> 0.01 px)' in w]
+    assert len(high) == 3                                # every camera is above 0.01 px
