@@ -148,7 +148,7 @@ def project_observations(board_points, obs_cam, obs_frame, obs_corner, R_c, t_c,
                      k[:, 1, 1] * yd + k[:, 1, 2]], axis=1)
 
 
-def bundle_adjust(board, obs, intrinsics, extrinsics, board_poses, root, distortion='k1',
+def bundle_adjust(board, obs, intrinsics, extrinsics, board_poses, root, distortion='k1k2',
                   fit_intrinsics=True, square_pixels=True, fix_principal_point=False,
                   loss='soft_l1', f_scale=1.0, max_nfev=200):
     """Refine cameras and board poses jointly.

@@ -42,7 +42,7 @@ def view_points(corners, board):
     return obj, img, frames
 
 
-def calibrate_intrinsics(corners, board, size, distortion='k1', square_pixels=True,
+def calibrate_intrinsics(corners, board, size, distortion='k1k2', square_pixels=True,
                          fix_principal_point=False):
     """Intrinsics of one camera from its board views.
 

@@ -28,7 +28,7 @@ from monet_ros.config import setting, validate_config
 class CalibrationConfig:
     """Options of `monet calibrate` (validated on construction; ConfigError names a field)."""
 
-    distortion: str = setting('k1', 'lens distortion model (OpenCV k1 k2 p1 p2 k3 terms)',
+    distortion: str = setting('k1k2', 'lens distortion model (OpenCV k1 k2 p1 p2 k3 terms)',
                               choices=DISTORTION_MODELS)
     square_pixels: bool = setting(True, 'fx = fy')
     fix_principal_point: bool = setting(False, 'hold the principal point at the image '
