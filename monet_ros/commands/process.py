@@ -33,7 +33,11 @@ HELP = 'run detector + fusion over a recording offline, write keypoints3d to an 
 
 
 def add_arguments(parser):
-    parser.add_argument('bag', help='recording: rosbag2 folder or .mcap')
+    parser.add_argument('bag', nargs='+', help='recording(s): rosbag2 folder or .mcap (with '
+                        'several, --out is their parent: OUT/<recording name>/ each)')
+    parser.add_argument('--jobs', type=int, default=1,
+                        help='recordings processed at once, one worker process each (one GPU '
+                        'per job when several; --threads default cores // jobs)')
     parser.add_argument('--model', required=True, help='detector checkpoint')
     parser.add_argument('--out', required=True, help='output rosbag2 folder (must not exist; '
                         'written atomically: a failed run leaves nothing behind)')
@@ -248,12 +252,17 @@ def run(args):
     filter_config = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)
-    figures = process_recording(
-        args.bag, args.model, args.out, rig=args.rig, cameras=args.cameras or (),
-        config=config, skeleton=args.skeleton, device=device, progress=not args.quiet,
-        backend=args.backend, threads=args.threads, exports=parse_formats(args.export),
-        trc_axes=args.trc_axes, camera_map=parse_name_map(args.camera_map),
-        precision=args.precision, filter_config=filter_config)
+    options = dict(model=args.model, rig=args.rig, cameras=args.cameras or (), config=config,
+                   skeleton=args.skeleton, backend=args.backend,
+                   exports=parse_formats(args.export), trc_axes=args.trc_axes,
+                   camera_map=parse_name_map(args.camera_map), precision=args.precision,
+                   filter_config=filter_config)
+    if len(args.bag) > 1:         # several recordings: worker processes (process_many.py)
+        from monet_ros.commands.process_many import run_many
+        return run_many(args, options)
+    args.bag = args.bag[0]
+    figures = process_recording(args.bag, out=args.out, device=device,
+                                progress=not args.quiet, threads=args.threads, **options)
     fps = figures['frames'] / figures['seconds'] if figures['seconds'] else 0.0
     skipped = figures['skipped_views']
     print(f'monet process: {figures["frames"]} frames ({figures["views"]} views, '

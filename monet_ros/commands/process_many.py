@@ -1,0 +1,169 @@
+"""`monet process REC... --jobs N`: several recordings, N worker processes.
+
+Each recording is processed by monet_ros.commands.process.process_recording (the same
+function as a single run) in its own worker process and written to OUT/<recording name>/
+(names made unique with _2, _3, ...), atomically as a single run. Workers are started with
+the 'spawn' context: torch's thread pools, CUDA and DDS threads do not survive fork().
+With several CUDA devices the jobs are spread over them round-robin (one device per job);
+CPU threads are split (default --threads per job = cores // jobs). A failed recording is
+reported (one line naming it) and the others go on; the command ends with a summary table
+(recording, frames, frames/s, mean reprojection error, status) and exits 2 if any failed.
+"""
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+import multiprocessing
+import os
+from pathlib import Path
+import signal
+import sys
+
+from monet_ros.config import ConfigError
+
+
+@dataclass(frozen=True)
+class Job:
+    """One recording of a multi-recording run: where it is read and written, on which torch
+    device (None = auto) and with how many CPU threads (0 = the backend default)."""
+    bag: str
+    out: str
+    device: str = None
+    threads: int = 0
+
+
+def recording_name(bag):
+    """The output folder name of a recording: its folder's name, or the file's stem for a
+    .mcap / .db3 file."""
+    path = Path(bag)
+    return path.stem if path.suffix in ('.mcap', '.db3') else path.name
+
+
+def output_folders(bags, out):
+    """OUT/<recording name> per recording, duplicates made unique with _2, _3, ... in the
+    order given (two recordings called `session` -> session, session_2)."""
+    seen, folders = set(), []
+    for bag in bags:
+        base = recording_name(bag) or 'recording'
+        name, k = base, 1
+        while name in seen:
+            k += 1
+            name = f'{base}_{k}'
+        seen.add(name)
+        folders.append(str(Path(out) / name))
+    return folders
+
+
+def plan_jobs(bags, out, jobs, device=None, threads=0, cuda_devices=0, cores=1):
+    """The Job of each recording. device None (auto) with cuda_devices > 1: cuda:i
+    round-robin over the devices; an explicit device is used by every job. threads 0: each
+    job gets max(1, cores // min(jobs, len(bags))) threads (the cores split between the
+    workers running at once), else `threads` per job."""
+    running = max(1, min(jobs, len(bags)))
+    per_job = threads or max(1, cores // running)
+    devices = [None] * len(bags)
+    if device is None and cuda_devices > 1:
+        devices = [f'cuda:{i % cuda_devices}' for i in range(len(bags))]
+    elif device is not None:
+        devices = [device] * len(bags)
+    return [Job(str(bag), folder, dev, per_job)
+            for bag, folder, dev in zip(bags, output_folders(bags, out), devices)]
+
+
+def _ignore_sigint():
+    """Workers leave Ctrl-C to the parent (which cancels the rest and stops them)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def process_job(job, options):
+    """Worker body: process one recording; returns a dict (bag, out, frames, seconds,
+    mean_error, error: None or the one-line reason). Never raises for a bad recording."""
+    from monet_ros.cli import bad_input_errors, error_line
+    from monet_ros.commands.common import check_threads
+    from monet_ros.commands.process import process_recording
+
+    result = dict(bag=job.bag, out=job.out, frames=0, seconds=0.0, mean_error=float('nan'),
+                  error=None)
+    try:
+        check_threads('monet process', job.threads)
+        figures = process_recording(job.bag, out=job.out, device=job.device,
+                                    threads=job.threads, progress=False, **options)
+        result.update(frames=figures['frames'], seconds=figures['seconds'],
+                      mean_error=figures['mean_error'])
+        report = figures['report']
+        if report is not None and not report.ok:
+            result['read_report'] = report.summary()
+    except bad_input_errors() as error:
+        result['error'] = error_line(error, 'monet process')
+    except Exception as error:  # noqa: BLE001 - one recording's bug must not stop the rest
+        result['error'] = f'internal error: {type(error).__name__}: {error_line(error)}'
+    return result
+
+
+def summary_table(results):
+    """The closing table, one row per recording in the order given (a list of lines)."""
+    rows = [('recording', 'frames', 'frames/s', 'mean reproj. error (px)', 'status')]
+    for r in results:
+        fps = r['frames'] / r['seconds'] if r['seconds'] else 0.0
+        error = r['mean_error']
+        rows.append((r['bag'], str(r['frames']), f'{fps:.1f}',
+                     '-' if error != error else f'{error:.2f}',
+                     'ok' if r['error'] is None else 'FAILED'))
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    return ['  '.join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
+
+
+def run_many(args, options):
+    """Process args.bag (several recordings) with args.jobs workers. options: the keyword
+    arguments of process_recording shared by every recording (model, rig, config, ...).
+    Returns the exit code: 0, or 2 if any recording failed."""
+    from tqdm import tqdm
+
+    if args.jobs < 1 or args.jobs > 256:
+        raise ConfigError('monet process', 'jobs', f'must be in 1..256, got {args.jobs}')
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise ConfigError('monet process', 'out', f'{out}: exists and is not a folder (with '
+                          'several recordings --out is the parent of one folder each)')
+    cuda_devices = 0
+    if args.device in (None, '', 'auto'):
+        import torch
+        cuda_devices = torch.cuda.device_count() if torch.cuda.is_available() else 0
+    device = None if args.device in (None, '', 'auto') else args.device
+    jobs = plan_jobs(args.bag, out, args.jobs, device, args.threads, cuda_devices,
+                     len(os.sched_getaffinity(0)))
+    out.mkdir(parents=True, exist_ok=True)
+    results = {}
+    context = multiprocessing.get_context('spawn')
+    pool = ProcessPoolExecutor(max_workers=min(args.jobs, len(jobs)), mp_context=context,
+                               initializer=_ignore_sigint)
+    try:
+        futures = {pool.submit(process_job, job, options): job for job in jobs}
+        done = tqdm(as_completed(futures), total=len(futures), desc='monet process',
+                    unit='recording', disable=args.quiet, file=sys.stderr)
+        for future in done:
+            job = futures[future]
+            try:
+                result = future.result()
+            except Exception as error:  # noqa: BLE001 - a worker died (killed, out of memory)
+                result = dict(bag=job.bag, out=job.out, frames=0, seconds=0.0,
+                              mean_error=float('nan'),
+                              error=f'worker stopped: {type(error).__name__}: {error}')
+            results[job.bag, job.out] = result
+            if result['error'] is not None:
+                print(f'monet process: failed {job.bag}: {result["error"]}', file=sys.stderr,
+                      flush=True)
+            elif 'read_report' in result:
+                print(f'monet process: reading {job.bag}: {result["read_report"]}',
+                      file=sys.stderr)
+    except KeyboardInterrupt:
+        pool.shutdown(wait=False, cancel_futures=True)
+        for process in list(getattr(pool, '_processes', {}).values()):
+            process.terminate()
+        raise
+    pool.shutdown(wait=True)
+    ordered = [results[job.bag, job.out] for job in jobs]
+    for line in summary_table(ordered):
+        print(f'monet process: {line}')
+    failed = sum(r['error'] is not None for r in ordered)
+    print(f'monet process: {len(ordered) - failed} of {len(ordered)} recordings processed '
+          f'-> {out}' + (f'; {failed} failed' if failed else ''))
+    return 2 if failed else 0

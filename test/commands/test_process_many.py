@@ -1,0 +1,74 @@
+"""`monet process REC... --jobs N`: several recordings in worker processes."""
+from helpers.recordings import noise_recording, small_checkpoint
+import numpy as np
+
+from monet_ros.cli import main as monet
+from monet_ros.commands.process_many import output_folders, plan_jobs
+from monet_ros.io import cloud_to_keypoints3d, open_bag
+
+
+def keypoints3d(out):
+    return [(m.stamp_ns, cloud_to_keypoints3d(m.msg))
+            for m in open_bag(out).messages(['/monet/keypoints3d'])]
+
+
+def test_two_jobs_equal_two_single_runs_and_a_failed_recording_is_reported(tmp_path, capsys):
+    model = small_checkpoint(tmp_path / 'model.pt')
+    recs = [tmp_path / 'a' / 'session', tmp_path / 'b' / 'session']   # same name: deduplicated
+    noise_recording(recs[0], cameras=2, frames=3, seed=1)
+    noise_recording(recs[1], cameras=2, frames=2, seed=2)
+    common = ['--model', str(model), '--no-track', '--quiet', '--threads', '1']
+    for i, rec in enumerate(recs):
+        assert monet(['process', str(rec), '--out', str(tmp_path / f'single{i}')] + common) == 0
+    capsys.readouterr()
+    many = tmp_path / 'many'
+    assert monet(['process', *map(str, recs), '--out', str(many), '--jobs', '2'] + common) == 0
+    out = capsys.readouterr().out
+    assert sorted(p.name for p in many.iterdir()) == ['session', 'session_2']
+    for i, name in enumerate(('session', 'session_2')):
+        single, multi = keypoints3d(tmp_path / f'single{i}'), keypoints3d(many / name)
+        assert [s for s, _ in multi] == [s for s, _ in single] and len(single) == 3 - i
+        for (_, a), (_, b) in zip(single, multi):
+            for field in ('X', 'confidence', 'reprojection_error', 'num_views'):
+                np.testing.assert_array_equal(b[field], a[field])
+        assert (many / name / 'keypoints3d.csv').read_bytes() == \
+            (tmp_path / f'single{i}' / 'keypoints3d.csv').read_bytes()
+    rows = [line for line in out.splitlines() if line.startswith(f'monet process: {recs[0]}')]
+    assert len(rows) == 1 and rows[0].split()[3] == '3' and rows[0].endswith('ok')
+
+    # A corrupt recording: one line naming it, the other still written, exit 2.
+    corrupt = tmp_path / 'corrupt.mcap'
+    corrupt.write_bytes(b'\x89MCAP0\r\n' + b'not a recording' * 10)
+    again = tmp_path / 'again'
+    assert monet(['process', str(corrupt), str(recs[0]), '--out', str(again), '--jobs', '2']
+                 + common) == 2
+    captured = capsys.readouterr()
+    failed = [line for line in captured.err.splitlines() if 'failed' in line]
+    assert len(failed) == 1 and failed[0].startswith(f'monet process: failed {corrupt}: ')
+    assert 'Traceback' not in captured.err
+    assert [p.name for p in again.iterdir()] == ['session']
+    assert len(keypoints3d(again / 'session')) == 3
+    row = [line for line in captured.out.splitlines() if str(corrupt) in line]
+    assert len(row) == 1 and row[0].endswith('FAILED')
+    assert '1 of 2 recordings processed' in captured.out and '1 failed' in captured.out
+
+
+def test_jobs_get_one_gpu_each_round_robin_and_a_share_of_the_cores():
+    bags = ['x/r1', 'y/r1', 'z/r2.mcap', 'w/r3']
+    assert output_folders(bags, 'o') == ['o/r1', 'o/r1_2', 'o/r2', 'o/r3']
+    jobs = plan_jobs(bags, 'o', jobs=2, cuda_devices=3, cores=16)
+    assert [j.device for j in jobs] == ['cuda:0', 'cuda:1', 'cuda:2', 'cuda:0']
+    assert {j.threads for j in jobs} == {8}
+    cpu = plan_jobs(bags, 'o', jobs=3, cuda_devices=0, cores=2)
+    assert [j.device for j in cpu] == [None] * 4 and {j.threads for j in cpu} == {1}
+    assert {j.device for j in plan_jobs(bags, 'o', 2, device='cuda:1', cuda_devices=3)} == \
+        {'cuda:1'}
+    assert {j.threads for j in plan_jobs(bags[:1] * 2, 'o', 8, threads=3, cores=16)} == {3}
+    assert {j.threads for j in plan_jobs(bags[:2], 'o', 8, cores=16)} == {8}
+
+
+def test_bad_jobs_is_a_clear_error(tmp_path, capsys):
+    model = small_checkpoint(tmp_path / 'model.pt')
+    args = ['process', 'r1', 'r2', '--model', str(model), '--out', str(tmp_path / 'o')]
+    assert monet(args + ['--jobs', '0']) == 2
+    assert "'jobs': must be in 1..256, got 0" in capsys.readouterr().err
