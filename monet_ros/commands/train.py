@@ -2,6 +2,7 @@
 import argparse
 from dataclasses import dataclass, fields
 import json
+import os
 from pathlib import Path
 import sys
 
@@ -76,8 +77,9 @@ def run(args):
     from monet_ros.commands.common import check_threads
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.commands.train_holdout import hold_out, score_holdout
+    from monet_ros.learning import distributed
+    from monet_ros.learning.distributed import DistributedTrainer as Trainer
     from monet_ros.learning.recording import load_recording
-    from monet_ros.learning.trainer import Trainer, TrainingData
     from monet_ros.models import build_model
     from monet_ros.models.device import check_device
 
@@ -85,6 +87,13 @@ def run(args):
     config = config_from_args(args)
     check_device('monet train', None if config.device == 'auto' else config.device)
     check_threads('monet train', options.threads)
+    world, device = distributed.init_from_env(config.device)     # a torchrun job, if any
+    if world.distributed and args.holdout_labelled:
+        raise ValueError('--holdout-labelled is not supported under torchrun (train, then '
+                         'score the held-out labels with `monet eval`)')
+    if not world.writer:             # rank 0 reports and writes; the other ranks train
+        args.no_progress = True
+        sys.stdout = open(os.devnull, 'w')
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
@@ -93,16 +102,18 @@ def run(args):
                                ground_truth=args.ground_truth, skeleton=args.skeleton,
                                max_instants=options.max_instants or None,
                                label_options=label_options_from_args(args))
-    if recording.read_report.notice(args.data):
-        print(f'monet train: {recording.read_report.notice(args.data)}', file=sys.stderr)
-    for note in recording.rig_notes:
-        print(f'monet train: note: {note}', file=sys.stderr)
+    notes = ([f'monet train: {recording.read_report.notice(args.data)}']
+             if recording.read_report.notice(args.data) else [])
+    notes += [f'monet train: note: {note}' for note in recording.rig_notes]
     if recording.label_report is not None:
-        print(f'monet train: labels: {recording.label_report.summary()}', file=sys.stderr)
+        notes.append(f'monet train: labels: {recording.label_report.summary()}')
+    for line in notes if world.writer else ():
+        print(line, file=sys.stderr)
     held, held_path = hold_out(recording, args.holdout_labelled, args.out)
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
     try:
-        data = TrainingData(recording, config, probe.input_size, probe.heatmap_size)
+        data = distributed.shared_training_data(recording, config, probe.input_size,
+                                                probe.heatmap_size)
     except ValueError as error:
         labelled = recording.labelled_instants
         where = (f'{len(labelled)} labelled instants (indices {labelled.tolist()[:8]}) of '
@@ -112,14 +123,17 @@ def run(args):
                          'out the tail (use --eval-fraction 0 to train on every labelled '
                          'instant)') from None
     if args.resume and (out / 'trainer_state.pt').exists():
-        trainer = Trainer.resume(out, data, config=config)
+        trainer = Trainer.resume(out, data, config=config, device=device)
         print(f'resumed at step {trainer.step_count}', file=sys.stderr)
     else:
-        trainer = Trainer(config, data, out)
-    print(f'{recording.name}: {recording.num_instants} instants x {recording.num_views} views, '
-          f'{len(data.labelled_instants)} labelled, {len(data.unlabeled_instants)} unlabeled, '
-          f'{len(data.held_out)} held out; mode {config.mode}, {trainer.pseudo_label_count} '
-          f'pseudo-labels, device {trainer.device}', file=sys.stderr)
+        trainer = Trainer(config, data, out, device=device)
+    if world.writer:
+        print(f'{recording.name}: {recording.num_instants} instants x {recording.num_views} '
+              f'views, {len(data.labelled_instants)} labelled, {len(data.unlabeled_instants)} '
+              f'unlabeled, {len(data.held_out)} held out; mode {config.mode}, '
+              f'{trainer.pseudo_label_count} pseudo-labels, device {trainer.device}'
+              + (f', {world.world_size} ranks ({world.backend}), {trainer.per_rank_batch} '
+                 'crops per rank per step' if world.distributed else ''), file=sys.stderr)
     try:
         summary = trainer.run(progress=not args.no_progress)
     except RuntimeError as error:
@@ -128,6 +142,9 @@ def run(args):
         if 'inline_container' in str(error) or 'write failed' in str(error):
             raise OSError(28, 'No space left on device', str(out)) from None
         raise
+    if not world.writer:
+        distributed.shutdown()
+        return 0
     summary['checkpoint'] = str(out / 'model.pt')
     fit = summary['fit']
     print(f'fit to the labelled views: median {fit["median_px"]:.2f} px '
@@ -155,6 +172,7 @@ def run(args):
               f'{figures["mm_mean"]:.0f} mm, coverage {100 * figures["coverage"]:.0f}% '
               '(as monet process runs the model)', file=sys.stderr)
     print(json.dumps(summary, indent=1))
+    distributed.shutdown()
     return 0
 
 

@@ -96,7 +96,7 @@ class TrainingData:
     labels (T, V, C, 2) are the recording's labels on the train split (NaN on the held-out
     split); every index below is an instant of the full recording."""
 
-    def __init__(self, recording, config, input_size, heatmap_size):
+    def __init__(self, recording, config, input_size, heatmap_size, tracked=None):
         self.recording = recording
         self.config = config
         self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
@@ -108,7 +108,7 @@ class TrainingData:
         if self.labelled_instants.size == 0:
             raise ValueError(f'{recording.name}: no labelled instant in the training split')
         h_in, w_in = input_size
-        self._tracked = None
+        self._tracked = tracked       # tracked_labels() given (rank 0's, in a torchrun job)
         pseudo = (self.tracked_labels() if config.box_source in ('auto', 'pseudo_labels')
                   else None)
         self.boxes = crop_boxes(recording, config.box_source, w_in / h_in, config.box_margin,
@@ -299,7 +299,7 @@ class Trainer:
         per instant for 'E'], kind in 'L' (labels), 'B' (pseudo-labels), 'E' (epipolar)."""
         pairs = np.concatenate([p[1] for p in parts])
         batch = self.data.cache.views(pairs[:, 0], pairs[:, 1], rng, augment)
-        stages = self.model(batch.images.to(self.device, non_blocking=True))
+        stages = self.forward_batch(batch.images.to(self.device, non_blocking=True))
         terms = {}
         start = 0
         for kind, p, *rest in parts:
@@ -322,6 +322,11 @@ class Trainer:
                                                      K, R, t)
             start += n
         return terms
+
+    def forward_batch(self, images):
+        """The network's stages on a batch of crops (B, 3, H, W); learning.distributed
+        replaces it with a rank's share of the batch + all-gather."""
+        return self.model(images)
 
     def step(self):
         """One optimisation step; returns the loss terms as floats (and runs a bootstrapping
