@@ -132,7 +132,7 @@ def test_torchrun_train_equals_one_process_and_resumes_in_one(folder, repo_root,
 
 
 def rank_pids(root_pid):
-    """{RANK: pid} of the processes below `root_pid` that torchrun started."""
+    """{RANK: pid} of the worker processes that torchrun (`root_pid`) started."""
     found = {}
     for entry in Path('/proc').iterdir():
         if not entry.name.isdigit():
@@ -143,8 +143,7 @@ def rank_pids(root_pid):
         except OSError:
             continue
         env = dict(item.split(b'=', 1) for item in environ if b'=' in item)
-        if b'RANK' in env and b'TORCHELASTIC_RUN_ID' in env and \
-                int(stat[3]) != root_pid and os.getsid(int(entry.name)) == os.getsid(root_pid):
+        if b'RANK' in env and int(stat[1]) == root_pid:            # ppid: torchrun
             found[int(env[b'RANK'])] = int(entry.name)
     return found
 
@@ -157,14 +156,21 @@ def test_killing_a_rank_stops_the_job_and_leaves_whole_checkpoints(folder, repo_
     proc = launch(repo_root, 2, data, '--out', out, '--skeleton', skeleton, '--steps', 2000,
                   '--checkpoint-every', 5, *TRAIN)
     state = out / 'trainer_state.pt'
-    deadline = time.monotonic() + 180
-    while not state.exists() and proc.poll() is None and time.monotonic() < deadline:
-        time.sleep(0.2)
-    assert proc.poll() is None and state.exists(), proc.communicate()
-    ranks = rank_pids(proc.pid)
-    assert sorted(ranks) == [0, 1]
-    os.kill(ranks[1], signal.SIGKILL)
-    _, stderr = proc.communicate(timeout=300)
+    try:
+        deadline = time.monotonic() + 180
+        while not state.exists() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert proc.poll() is None and state.exists(), proc.communicate()
+        ranks = rank_pids(proc.pid)
+        assert sorted(ranks) == [0, 1]
+        os.kill(ranks[1], signal.SIGKILL)
+        _, stderr = proc.communicate(timeout=300)
+    finally:                                    # never leave a job behind
+        for pid in [*rank_pids(proc.pid).values(), proc.pid]:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
     assert proc.returncode != 0
     assert 'monet_ros.cli FAILED' in stderr and 'rank      : 1' in stderr, stderr[-2000:]
     assert 'Signal 9 (SIGKILL)' in stderr
