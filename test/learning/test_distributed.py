@@ -166,11 +166,11 @@ def test_killing_a_rank_stops_the_job_and_leaves_whole_checkpoints(folder, repo_
         os.kill(ranks[1], signal.SIGKILL)
         _, stderr = proc.communicate(timeout=300)
     finally:                                    # never leave a job behind
-        for pid in [*rank_pids(proc.pid).values(), proc.pid]:
-            try:
+        if proc.poll() is None:
+            for pid in rank_pids(proc.pid).values():
                 os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+            proc.kill()
+            proc.communicate()
     assert proc.returncode != 0
     assert 'monet_ros.cli FAILED' in stderr and 'rank      : 1' in stderr, stderr[-2000:]
     assert 'Signal 9 (SIGKILL)' in stderr
