@@ -2,7 +2,8 @@
 # GPU figures in under 5 minutes on a lent GPU machine, set up from the repository alone:
 #
 #     bash bench/gpu.sh            # small / CPM / hourglass images/s at batch 1/8/32,
-#                                  # training steps/s, Detector.predict of 8 cameras
+#                                  # training steps/s, Detector.predict of 8 cameras,
+#                                  # DDP training steps/s at 1 and all GPUs
 #     bash bench/gpu.sh --tiny     # a quick check of the script (CPU fallback here)
 #
 # Python: the repo's .venv when it has torch (a development machine); else a venv
@@ -41,4 +42,16 @@ else
 fi
 "$PY" -c 'import torch; print("# python", __import__("sys").executable, "torch",
 torch.__version__, "cuda" if torch.cuda.is_available() else "no cuda: CPU fallback")'
-exec timeout "$BUDGET_S" "$PY" bench/gpu.py "$@"
+start=$SECONDS
+timeout "$BUDGET_S" "$PY" bench/gpu.py "$@"
+# DDP training steps/s at 1 process and at all GPUs (one rank each; CPU fallback: 1 and 2
+# gloo processes), bench/train_scale.py, in what is left of the budget.
+left=$(( BUDGET_S - (SECONDS - start) ))
+scale=(--steps 20 --repeats 3)
+for arg in "$@"; do [ "$arg" = --tiny ] && scale=(--steps 3 --repeats 1); done
+if [ "$left" -gt 20 ]; then
+    timeout "$left" "$PY" bench/train_scale.py "${scale[@]}" || \
+        echo "# bench/train_scale.py did not finish in the ${left} s left of the budget"
+else
+    echo "# DDP scaling skipped: no budget left (MONET_GPU_BUDGET_S=$BUDGET_S)"
+fi
