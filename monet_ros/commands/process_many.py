@@ -68,9 +68,15 @@ def plan_jobs(bags, out, jobs, device=None, threads=0, cuda_devices=0, cores=1):
             for bag, folder, dev in zip(bags, output_folders(bags, out), devices)]
 
 
-def _ignore_sigint():
-    """Workers leave Ctrl-C to the parent (which cancels the rest and stops them)."""
+def _stop(signum, frame):
+    raise KeyboardInterrupt
+
+
+def _worker_signals():
+    """Workers leave Ctrl-C to the parent, which stops them with SIGTERM: raised as
+    KeyboardInterrupt, so process_recording removes its unfinished output folder."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _stop)
 
 
 def process_job(job, options):
@@ -87,7 +93,9 @@ def process_job(job, options):
         figures = process_recording(job.bag, out=job.out, device=job.device,
                                     threads=job.threads, progress=False, **options)
         result.update(frames=figures['frames'], seconds=figures['seconds'],
-                      mean_error=figures['mean_error'])
+                      mean_error=figures['mean_error'],
+                      skipped={name: (count, figures['skip_reasons'][name])
+                               for name, count in figures['skipped_views'].items()})
         report = figures['report']
         if report is not None and not report.ok:
             result['read_report'] = report.summary()
@@ -134,7 +142,7 @@ def run_many(args, options):
     results = {}
     context = multiprocessing.get_context('spawn')
     pool = ProcessPoolExecutor(max_workers=min(args.jobs, len(jobs)), mp_context=context,
-                               initializer=_ignore_sigint)
+                               initializer=_worker_signals)
     try:
         futures = {pool.submit(process_job, job, options): job for job in jobs}
         done = tqdm(as_completed(futures), total=len(futures), desc='monet process',
@@ -151,13 +159,22 @@ def run_many(args, options):
             if result['error'] is not None:
                 print(f'monet process: failed {job.bag}: {result["error"]}', file=sys.stderr,
                       flush=True)
-            elif 'read_report' in result:
+                continue
+            for name, (count, reason) in sorted(result['skipped'].items()):
+                print(f'monet process: {job.bag}: skipped {count} views of {name}: {reason}',
+                      file=sys.stderr)
+            if 'read_report' in result:
                 print(f'monet process: reading {job.bag}: {result["read_report"]}',
                       file=sys.stderr)
     except KeyboardInterrupt:
+        # Stop the running workers (SIGTERM: each removes its unfinished output) and wait
+        # for them; ProcessPoolExecutor has no public call for this.
+        workers = list((getattr(pool, '_processes', None) or {}).values())
         pool.shutdown(wait=False, cancel_futures=True)
-        for process in list(getattr(pool, '_processes', {}).values()):
+        for process in workers:
             process.terminate()
+        for process in workers:
+            process.join(timeout=60)
         raise
     pool.shutdown(wait=True)
     ordered = [results[job.bag, job.out] for job in jobs]

@@ -72,3 +72,38 @@ def test_bad_jobs_is_a_clear_error(tmp_path, capsys):
     args = ['process', 'r1', 'r2', '--model', str(model), '--out', str(tmp_path / 'o')]
     assert monet(args + ['--jobs', '0']) == 2
     assert "'jobs': must be in 1..256, got 0" in capsys.readouterr().err
+
+
+def test_sigterm_stops_every_worker_and_leaves_no_partial_output(tmp_path, repo_root):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    model = small_checkpoint(tmp_path / 'model.pt')
+    recs = [tmp_path / f'rec{i}' for i in range(2)]
+    for i, rec in enumerate(recs):
+        noise_recording(rec, cameras=2, frames=400, width=160, height=120, seed=i)
+    out = tmp_path / 'out'
+    env = dict(os.environ)
+    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(repo_root), env.get('PYTHONPATH')]))
+    proc = subprocess.Popen([sys.executable, '-m', 'monet_ros.cli', 'process', *map(str, recs),
+                             '--model', str(model), '--out', str(out), '--jobs', '2',
+                             '--quiet', '--no-track'], cwd=repo_root, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 120          # both workers writing their output
+        while len(list(out.glob('.*.partial'))) < 2 and proc.poll() is None and \
+                time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert proc.poll() is None and len(list(out.glob('.*.partial'))) == 2
+        proc.send_signal(signal.SIGTERM)
+        _, stderr = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, stderr
+    assert 'monet process: stopped' in stderr and 'Traceback' not in stderr
+    assert list(out.iterdir()) == []                # nothing half-written is left
