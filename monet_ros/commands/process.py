@@ -1,7 +1,7 @@
 """`monet process`: the detector + fusion core over a recording, offline and as fast as
 possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 MCAP.
 
-    monet process REC --model CKPT --out OUT [--rig RIG] [--heatmaps] [--threads N]
+    monet process REC... --model CKPT --out OUT [--jobs N] [--rig RIG] [--heatmaps] [--threads N]
         [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx] [--filter none|kalman|optim]
 
 Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
