@@ -124,7 +124,8 @@ def run(args):
                          'instant)') from None
     if args.resume and (out / 'trainer_state.pt').exists():
         trainer = Trainer.resume(out, data, config=config, device=device)
-        print(f'resumed at step {trainer.step_count}', file=sys.stderr)
+        if world.writer:
+            print(f'resumed at step {trainer.step_count}', file=sys.stderr)
     else:
         trainer = Trainer(config, data, out, device=device)
     if world.writer:
