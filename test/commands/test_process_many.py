@@ -1,6 +1,7 @@
 """`monet process REC... --jobs N`: several recordings in worker processes."""
 from helpers.recordings import noise_recording, small_checkpoint
 import numpy as np
+import pytest
 
 from monet_ros.cli import main as monet
 from monet_ros.commands.process_many import output_folders, plan_jobs
@@ -12,6 +13,7 @@ def keypoints3d(out):
             for m in open_bag(out).messages(['/monet/keypoints3d'])]
 
 
+@pytest.mark.slow
 def test_two_jobs_equal_two_single_runs_and_a_failed_recording_is_reported(tmp_path, capsys):
     model = small_checkpoint(tmp_path / 'model.pt')
     recs = [tmp_path / 'a' / 'session', tmp_path / 'b' / 'session']   # same name: deduplicated
@@ -74,6 +76,7 @@ def test_bad_jobs_is_a_clear_error(tmp_path, capsys):
     assert "'jobs': must be in 1..256, got 0" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_sigterm_stops_every_worker_and_leaves_no_partial_output(tmp_path, repo_root):
     import os
     import signal

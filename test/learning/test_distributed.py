@@ -34,6 +34,7 @@ def test_shares_cover_the_batch_contiguously():
     assert shares(3, 1).tolist() == [0, 3]
 
 
+@pytest.mark.slow
 def test_two_processes_take_the_single_process_steps(tmp_path):
     """Without BatchNorm's batch statistics: the same losses and weights, rank 0 writes."""
     train_rank(0, 1, 0, tmp_path / 'one', tmp_path / 'one', batchnorm=False)
