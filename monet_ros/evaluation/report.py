@@ -11,11 +11,12 @@ from monet_ros.evaluation.pck import PCKResult
 
 # The paper's rows, in its order.
 MODE_ORDER = ('null', 'supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2',
-              'monet', 'bootstrap2_epipolar')
+              'monet', 'bootstrap2_epipolar', 'epipolar')
 MODE_TITLES = {'null': 'Null (mean pose in the crop)', 'supervised': 'Supervised',
                'spatial': 'Spatial aug.', 'spatiotemporal': 'Spatiotemporal aug.',
                'bootstrap1': 'Bootstrapping I', 'bootstrap2': 'Bootstrapping II',
-               'monet': 'MONET', 'bootstrap2_epipolar': 'Bootstrapping II + L_E (ablation)'}
+               'monet': 'MONET', 'bootstrap2_epipolar': 'Bootstrapping II + L_E (ablation)',
+               'epipolar': 'Supervised + L_E (ablation)'}
 REPORT_PCK = (0.05, 0.1, 0.2)
 
 

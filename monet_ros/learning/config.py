@@ -18,7 +18,7 @@ MAX_BATCH = 4096
 
 # The paper's rows (Table 1), then ablations.
 MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 'monet',
-         'bootstrap2_epipolar')
+         'bootstrap2_epipolar', 'epipolar')
 
 
 @dataclass(frozen=True)
@@ -34,7 +34,8 @@ class ModeSpec:
 # As in the paper: Bootstrapping I / II start from the spatiotemporal augmentation, and
 # MONET is L_L + lambda_e L_E + lambda_p L_B with L_B on the spatiotemporal augmentation.
 # bootstrap2_epipolar (ablation): Bootstrapping II's labels from the spatial augmentation
-# + L_E (this package's earlier `monet`).
+# + L_E (this package's earlier `monet`). epipolar (ablation): L_L + lambda_e L_E only, the
+# measured row of L_E alone (its exact control: lambda_e = 0, the same batch plan).
 MODE_SPECS = {
     'supervised': ModeSpec(False, False, 0, False),
     'spatial': ModeSpec(True, False, 0, False),
@@ -43,6 +44,7 @@ MODE_SPECS = {
     'bootstrap2': ModeSpec(True, True, 2, False),
     'monet': ModeSpec(True, True, 0, True),
     'bootstrap2_epipolar': ModeSpec(True, False, 2, True),
+    'epipolar': ModeSpec(False, False, 0, True),
 }
 
 
@@ -62,8 +64,9 @@ class TrainConfig:
                                 maximum=MAX_BATCH)
     batch_unlabeled: int = setting(2, 'unlabeled instants per step (L_E)', minimum=0,
                                    maximum=MAX_BATCH)
-    views_per_instant: int = setting(4, 'views of each unlabeled instant (L_E pairs)',
-                                     minimum=2, maximum=64)
+    views_per_instant: int = setting(0, 'views of each unlabeled instant (L_E: all their '
+                                     'pairs); 0 = every view of the rig', minimum=0,
+                                     maximum=64)
     lambda_e: float = setting(5.0, 'weight of the epipolar divergence L_E', minimum=0.0)
     lambda_p: float = setting(1.0, 'weight of the pseudo-label loss L_B', minimum=0.0)
     epipolar_warmup: float = setting(0.3, 'monet: fraction of the steps trained without L_E '
@@ -139,6 +142,9 @@ class TrainConfig:
         if self.input_size and (self.input_size % 8 or self.input_size < 32):
             raise ConfigError('TrainConfig', 'input_size',
                               f'must be 0 or a multiple of 8 >= 32, got {self.input_size}')
+        if self.views_per_instant == 1:
+            raise ConfigError('TrainConfig', 'views_per_instant',
+                              'must be 0 (all views) or >= 2 (L_E compares pairs), got 1')
         if self.width and self.width < 4:
             raise ConfigError('TrainConfig', 'width', f'must be 0 or >= 4, got {self.width}')
         if self.device not in ('auto', 'cpu', 'cuda') and not (

@@ -39,8 +39,12 @@ from monet_ros.crop_rule import recording_boxes
 from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.learning.config import TrainConfig
 from monet_ros.learning.dataset import CropCache
-from monet_ros.learning.epipolar import multiview_epipolar_loss
-from monet_ros.learning.losses import masked_heatmap_mse, objective
+from monet_ros.learning.losses import (
+    epipolar_loss_terms,
+    masked_heatmap_mse,
+    objective,
+    reduce_epipolar_terms,
+)
 from monet_ros.learning.pseudo_labels import (
     PseudoLabels,
     bootstrap_pseudo_labels,
@@ -210,6 +214,8 @@ class Trainer:
         self.pseudo = data.initial_pseudo_labels(self.spec, config.tracking)
         self._update_pools()
         self.last_terms = {}
+        self.last_plan = None            # the latest step's batch plan (see batch_plan)
+        self.last_pair_share = None      # share of L_E's view pairs used, latest step
         self.last_checkpoint = None      # path of the latest checkpoints/step_N.pt written
         self._started = time.monotonic()
         self.warnings = []
@@ -258,15 +264,23 @@ class Trainer:
         idx = self.rng.choice(len(pool), size=n, replace=len(pool) < n)
         return pool[idx]
 
+    def views_per_instant(self):
+        """Views of each unlabeled instant in L_E's part: views_per_instant, 0 = all."""
+        V = self.data.recording.num_views
+        return V if self.config.views_per_instant == 0 else min(self.config.views_per_instant, V)
+
     def _batch_plan(self):
         """The (instant, view) crops of one step: parts ('L', pairs), ('B', pairs),
-        ('E', pairs, views per instant). Every mode sees the same number of images per step,
+        ('E', pairs, views per instant), pairs (N, 2) int (instant, view); each step's plan is
+        kept as `last_plan`. The plan depends on the mode, the batch sizes, the step and the
+        RNG only, never on lambda_e / lambda_p: a run with a term's weight 0 draws the same
+        crops (its exact control). Every mode sees the same number of images per step,
         batch_labelled + batch_pseudo + batch_unlabeled x views: a part a mode does not use
         (or cannot fill yet: no pseudo-labels, L_E in its warm-up) gives its share to
         pseudo-labels when the mode has some, else to labels."""
         c = self.config
         V = self.data.recording.num_views
-        k = min(c.views_per_instant, V)
+        k = self.views_per_instant()
         total = c.batch_labelled + c.batch_pseudo + c.batch_unlabeled * k
         n_inst = c.batch_unlabeled if (self.epipolar_active and
                                        len(self.data.unlabeled_instants)) else 0
@@ -312,14 +326,15 @@ class Trainer:
                                                  self.config.sigma)
             else:
                 k = rest[0]
-                heat = nonnegative(stages[-1][sl])
+                heat = stages[-1][sl]          # raw: epipolar_loss makes distributions
                 B = n // k
                 f32 = dict(dtype=torch.float32, device=self.device)
                 K = torch.as_tensor(batch.K[sl], **f32).reshape(B, k, 3, 3)
                 R = torch.as_tensor(batch.R[sl], **f32).reshape(B, k, 3, 3)
                 t = torch.as_tensor(batch.t[sl], **f32).reshape(B, k, 3)
-                terms['E'] = multiview_epipolar_loss(heat.reshape(B, k, *heat.shape[1:]),
-                                                     K, R, t)
+                e = epipolar_loss_terms(heat.reshape(B, k, *heat.shape[1:]), K, R, t)
+                terms['E'] = reduce_epipolar_terms(e, heat)
+                self.last_pair_share = float(e['pair_used'].sum()) / max(1, e['pairs_possible'])
             start += n
         return terms
 
@@ -334,6 +349,7 @@ class Trainer:
         c = self.config
         self.model.train()
         parts = self._batch_plan()
+        self.last_plan = parts
         terms = self._terms(parts, self.rng, c.augment)
         loss = objective(terms, c.lambda_e, c.lambda_p)
         self.optimizer.zero_grad(set_to_none=True)
@@ -344,6 +360,8 @@ class Trainer:
         self.step_count += 1
         out = {'step': self.step_count, 'loss': float(loss.detach()), 'lr': lr}
         out.update({k: float(v.detach()) for k, v in terms.items()})
+        if 'E' in terms:
+            out['E_pair_share'] = self.last_pair_share
         self.last_terms = out
         self._log(out)
         if self.bootstrap_due():
@@ -359,14 +377,13 @@ class Trainer:
         between steps; uses `num` samples of each part."""
         saved = self.rng
         self.rng = np.random.default_rng(seed)
-        c = self.config
         try:
             parts = [('L', self._sample(self.labelled_pool, num))]
             if len(self.pseudo_pool):
                 parts.append(('B', self._sample(self.pseudo_pool, num)))
             if len(self.data.unlabeled_instants):
                 V = self.data.recording.num_views
-                k = min(c.views_per_instant, V)
+                k = self.views_per_instant()
                 inst = self.rng.choice(self.data.unlabeled_instants, size=max(1, num // k))
                 views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
                 parts.append(('E', np.stack([np.repeat(inst, k), views.ravel()], axis=1), k))

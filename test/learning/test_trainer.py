@@ -135,6 +135,39 @@ def test_every_mode_sees_the_same_number_of_images_per_step(recording):
     assert set(counts.values()) == {11}, counts
 
 
+def plans(trainer, steps):
+    """The batch plan of each step: [[(kind, (N, 2) (instant, view)), ...], ...]."""
+    out = []
+    for _ in range(steps):
+        trainer.step()
+        out.append([(part[0], part[1].copy()) for part in trainer.last_plan])
+    return out
+
+
+@pytest.mark.parametrize('mode, field, weight', [('epipolar', 'lambda_e', 5.0),
+                                                 ('monet', 'lambda_e', 5.0),
+                                                 ('monet', 'lambda_p', 1.0)])
+def test_a_terms_exact_control_has_the_identical_batch_plan(recording, mode, field, weight):
+    """The run with a term's weight 0 draws the same instants and views at every step (and
+    the same augmentation: the RNG does not depend on the weights), while the weights do
+    change the training."""
+    runs = {}
+    for w in (weight, 0.0):
+        config = TrainConfig(mode=mode, steps=6, epipolar_warmup=0.5, **dict(TINY, **{field: w}))
+        trainer = Trainer(config, TrainingData(recording, config, (48, 48), (12, 12)))
+        runs[w] = (plans(trainer, 6), trainer)
+    (with_term, a), (control, b) = runs[weight], runs[0.0]
+    kinds = [[kind for kind, _ in step] for step in with_term]
+    term = 'E' if field == 'lambda_e' else 'B'
+    assert sum(term in k for k in kinds) >= 3, kinds        # the term is in the plan
+    assert kinds == [[kind for kind, _ in step] for step in control]
+    for step_a, step_b in zip(with_term, control):
+        for (_, pairs_a), (_, pairs_b) in zip(step_a, step_b):
+            np.testing.assert_array_equal(pairs_a, pairs_b)
+    assert a.rng.bit_generator.state == b.rng.bit_generator.state
+    assert a.last_terms[term] > 0 and a.last_terms['loss'] != b.last_terms['loss']
+
+
 def test_config_errors_name_the_field():
     with pytest.raises(ConfigError, match='mode'):
         TrainConfig(mode='magic')
