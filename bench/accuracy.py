@@ -70,6 +70,11 @@ RIGS = {
     # their own colours (bootstrapping's symmetric ambiguity removed)
     'ring6h': ['--cameras', '6', '--layout', 'ring', '--width', '320', '--height', '240',
                '--hfov', '60', '--height-spread', '0.8', '--distinct-sides'],
+    # ring6h with the two pillars of dome5 (issue 22's rig): non-coplanar, distinct sides,
+    # occluders
+    'ring6ho': ['--cameras', '6', '--layout', 'ring', '--width', '320', '--height', '240',
+                '--hfov', '60', '--height-spread', '0.8', '--distinct-sides',
+                '--occluders', '2'],
     # few views: RANSAC bootstrapping needs 3 agreeing views of 4, so it labels less
     'ring4': ['--cameras', '4', '--layout', 'ring', '--width', '320', '--height', '240',
               '--hfov', '60'],
@@ -160,6 +165,20 @@ def train_and_evaluate(job):
         boxes = recording_boxes(recording, 'ground_truth', w / h, config.box_margin)
     result = evaluate_detector(detector, recording, data.held_out, boxes, label, rig,
                                crop='boxes' if eval_crop == 'ground_truth' else 'tracked')
+    if eval_crop == 'tracked':
+        # detection quality beside the product's figure: the same model on ground-truth crops
+        from monet_ros.crop_rule import recording_boxes
+        h, w = detector.input_size
+        gt_boxes = recording_boxes(recording, 'ground_truth', w / h, config.box_margin)
+        gt = evaluate_detector(detector, recording, data.held_out, gt_boxes, label, rig,
+                               crop='boxes')
+        extra['gt_crop'] = {k: gt.extra[k] for k in ('error2d_mean', 'error2d_median',
+                                                     'error3d_mean', 'error3d_median',
+                                                     'mean_confidence')}
+        extra['gt_crop']['pck@0.1'] = gt.pck.at(0.1)
+    if mode != 'null':
+        extra['fit'] = summary.get('fit')
+        extra['labelled_peak_median'] = float(np.median(trainer.labelled_peaks()))
     result.extra.update(extra)
     result.extra.update({'train_seconds': round(train_s, 1), 'steps': summary['steps'],
                          'pseudo_labels_final': summary['pseudo_labels'],

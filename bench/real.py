@@ -14,10 +14,12 @@ wall-time budget (--budget-s per run: the step count of each mode is set from a 
 probe of its step cost; the table gives the wall times actually spent), with the default
 TrainConfig recipe (no held-out tail: every instant is in the training split, and the scores
 below are on the instants without labels, which L_E and bootstrapping see unlabelled). Each
-model detects every view of every instant on the training crops (boxes from the labels of the
-nearest labelled instant: what a lab has, no reference used), the detections are fused by
-`fusion.fuse_points` (the fusion node's and `monet process`'s triangulation), and scored on
-the unlabelled instants against the reference:
+model is saved as a checkpoint and scored through the code a user runs: `monet process`'s
+core (commands.process.process_recording on the recording's bag: the live detector's
+tracked crop rule, crop_rule.TrackedCrops, and fusion.fuse_heatmaps), and, beside it, for
+detection quality, on ground-truth crops (boxes of the reference projected into each view,
+square, 25% margin; detections fused by fusion.fuse_points). Both are scored on the
+unlabelled instants against the reference:
 
   3D error (mm): median / mean / p90 over the triangulated joints; `tri` = share triangulated;
   PCK@5/10/20 px: share of the detections (every view, every joint the reference projects
@@ -134,6 +136,58 @@ def score(X, points, reference, reference2d, instants):
     return out
 
 
+def process_path(bag, checkpoint, out, stamps, cameras):
+    """`monet process` on `bag` with `checkpoint` (commands.process.process_recording, its
+    defaults: tracked crops, fuse_heatmaps), results read back from its csv / npz exports.
+
+    stamps (T,) ns: the recording's instants; cameras: the recording's cameras (their order).
+    Returns X (T, C, 3) world m and points (T, V, C, 2) its detections in source pixels, NaN
+    for instants or views it gave nothing for, and the number of its frames whose stamp is
+    not an instant of the recording (0 expected)."""
+    from monet_ros.commands.process import process_recording
+    from monet_ros.io.export_tables import read_anipose_csv
+
+    process_recording(bag, checkpoint, out, progress=False, exports=('csv', 'npz'))
+    table = read_anipose_csv(Path(out) / 'keypoints3d.csv')
+    det = np.load(Path(out) / 'detections2d.npz')
+    stamps = np.asarray(stamps, dtype=np.int64)
+    index = {int(s): n for n, s in enumerate(stamps)}
+    C = table['X'].shape[1]
+    X = np.full((len(stamps), C, 3), np.nan)
+    points = np.full((len(stamps), len(cameras), C, 2), np.nan)
+    names = [str(c) for c in det['cameras']]
+    unmatched = 0
+    for row, stamp in enumerate(table['stamps_ns']):
+        n = index.get(int(stamp))
+        if n is None:
+            unmatched += 1
+            continue
+        X[n] = table['X'][row]
+    for row, stamp in enumerate(det['stamps_ns']):
+        n = index.get(int(stamp))
+        if n is None:
+            continue
+        for v, cam in enumerate(cameras):
+            if cam.name in names:
+                points[n, v] = det['points2d'][row, names.index(cam.name)]
+    return X, points, unmatched
+
+
+def ground_truth_crop_path(model, metadata, recording, reference2d, margin=0.25):
+    """Detection quality on ground-truth crops: every view cropped on the reference's
+    projection (square, `margin`), detections fused by fuse_points. Returns (X (T, C, 3),
+    points (T, V, C, 2))."""
+    from monet_ros.evaluation.evaluate import detect_instants
+    from monet_ros.learning.dataset import boxes_from_points
+    from monet_ros.models.detector import Detector
+
+    detector = Detector(model, metadata)
+    boxes = boxes_from_points(reference2d, aspect=1.0, margin=margin)
+    det = detect_instants(detector, recording, np.arange(recording.num_instants), boxes,
+                          crop='boxes')
+    return fuse(det['points'], det['confidence'], recording.cameras), det['points']
+
+
 def labelled_recording(recording, reference2d, instants):
     """The recording (frames shared, not copied) labelled at `instants` only."""
     import dataclasses
@@ -174,11 +228,12 @@ def probe_seconds_per_step(config, data, steps=6):
 def run_job(job):
     """Worker: train one mode on one label set within the budget, detect, fuse, score."""
     import dataclasses
+    import tempfile
 
     import torch
 
     from monet_ros.learning.trainer import Trainer, TrainingData
-    from monet_ros.models import build_model
+    from monet_ros.models import build_model, save_checkpoint
 
     torch.set_num_threads(1)
     count, mode, budget_s, fixed_steps, overrides, seed = job
@@ -212,17 +267,25 @@ def run_job(job):
     trainer = Trainer(config, data, warn=said.append)
     summary = trainer.run(progress=False)
     train_s = time.monotonic() - start
-    points, conf = trainer.detect(np.arange(rec.num_instants))
-    X = fuse(points, conf, rec.cameras)
     unlabelled = np.setdiff1d(np.arange(rec.num_instants), instants)
+    with tempfile.TemporaryDirectory(prefix='monet-real-') as tmp:
+        checkpoint = Path(tmp) / 'model.pt'
+        save_checkpoint(checkpoint, trainer.model, trainer.metadata())
+        X, points, unmatched = process_path(_STATE['bag'], checkpoint, Path(tmp) / 'process',
+                                            rec.stamps, rec.cameras)
     result = score(X, points, reference, reference2d, unlabelled)
+    result['process_unmatched_frames'] = unmatched
+    X_gt, points_gt = ground_truth_crop_path(trainer.model, trainer.metadata(), rec,
+                                             reference2d)
+    result['gt_crop'] = score(X_gt, points_gt, reference, reference2d, unlabelled)
     result.update({'labels': count, 'mode': mode, 'steps': steps, 'train_s': round(train_s, 1),
                    'instants': instants.tolist(), 'fit_px': summary['fit']['median_px'],
                    'fit_heat': summary['fit']['median_heat'],
                    'pseudo_labels': summary['pseudo_labels'], 'warnings': said,
                    'bootstrap': summary['bootstrap']})
-    print(f'[{count} labels {mode}] {steps} steps in {train_s:.0f} s: 3D median '
-          f'{result["median_mm"]:.0f} mm, PCK@10 {result["pck10"]:.3f}, fit '
+    print(f'[{count} labels {mode}] {steps} steps in {train_s:.0f} s: monet process 3D '
+          f'median {fmt(result["median_mm"], ".0f")} mm, PCK@10 {result["pck10"]:.3f}; GT '
+          f'crops {fmt(result["gt_crop"]["median_mm"], ".0f")} mm, fit '
           f'{result["fit_px"]:.1f} px, {len(said)} warnings', file=sys.stderr, flush=True)
     return result
 
@@ -272,15 +335,20 @@ def fmt(value, spec):
 
 def table(rows):
     lines = ['| labelled instants | model | steps | train wall (s) | 3D median / mean / p90 (mm) '
-             '| triangulated | PCK@5 / 10 / 20 px | fit on labels (px) | warnings |',
-             '|---|---|---|---|---|---|---|---|---|']
+             '| triangulated | PCK@5 / 10 / 20 px | GT crops: 3D median / mean / p90 (mm), '
+             'PCK@10 | fit on labels (px) | warnings |',
+             '|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
+        g = r.get('gt_crop')
+        gt = '–' if g is None else (f'{fmt(g["median_mm"], ".0f")} / {fmt(g["mean_mm"], ".0f")}'
+                                    f' / {fmt(g["p90_mm"], ".0f")}, '
+                                    f'{fmt(g.get("pck10"), ".1%")}')
         lines.append(
             f'| {r["labels"] or "–"} | {r["mode"]} | {r["steps"] or "–"} | '
             f'{fmt(r["train_s"] or None, ".0f")} | {fmt(r["median_mm"], ".0f")} / '
             f'{fmt(r["mean_mm"], ".0f")} / {fmt(r["p90_mm"], ".0f")} | '
             f'{r["triangulated"]:.0%} | {fmt(r.get("pck5"), ".1%")} / '
-            f'{fmt(r.get("pck10"), ".1%")} / {fmt(r.get("pck20"), ".1%")} | '
+            f'{fmt(r.get("pck10"), ".1%")} / {fmt(r.get("pck20"), ".1%")} | {gt} | '
             f'{fmt(r.get("fit_px"), ".1f")} | {len(r.get("warnings", []))} |')
     return '\n'.join(lines)
 
@@ -364,7 +432,7 @@ def main(argv=None):
     if len(reference) != recording.num_instants:
         raise SystemExit(f'{len(reference)} reference frames for {recording.num_instants} '
                          'instants')
-    _STATE.update(recording=recording, reference=reference,
+    _STATE.update(recording=recording, reference=reference, bag=root / BAG,
                   reference2d=project_reference(reference, recording.cameras))
     print(f'loaded {recording.num_instants} instants x {recording.num_views} views in '
           f'{time.monotonic() - start:.0f} s', file=sys.stderr)
