@@ -7,7 +7,8 @@ reprojects 4-10 px from OpenPose's 2D at half resolution, the floor of every fig
 trc (X, Y, Z) = world (Y, Z, X), its 14 human14 joints (head = Pose2Sim's Head marker).
 
 For each count N in --labels (2, 3, 5, 10) the labelled instants are N instants spread over the
-recording (one drawn with --seed in each of N equal strata); their labels are the reference
+recording (one drawn with each of --seeds in each of N equal strata: one label set per seed,
+also the training seed); their labels are the reference
 projected into all 4 views (project_to_views: none outside an image). Each mode (supervised,
 bootstrap2, monet) then trains the same network from the same initialisation with the same
 wall-time budget (--budget-s per run: the step count of each mode is set from a short timing
@@ -278,7 +279,8 @@ def run_job(job):
     X_gt, points_gt = ground_truth_crop_path(trainer.model, trainer.metadata(), rec,
                                              reference2d)
     result['gt_crop'] = score(X_gt, points_gt, reference, reference2d, unlabelled)
-    result.update({'labels': count, 'mode': mode, 'steps': steps, 'train_s': round(train_s, 1),
+    result.update({'labels': count, 'seed': seed, 'mode': mode, 'steps': steps,
+                   'train_s': round(train_s, 1),
                    'instants': instants.tolist(), 'fit_px': summary['fit']['median_px'],
                    'fit_heat': summary['fit']['median_heat'],
                    'pseudo_labels': summary['pseudo_labels'], 'warnings': said,
@@ -334,17 +336,18 @@ def fmt(value, spec):
 
 
 def table(rows):
-    lines = ['| labelled instants | model | steps | train wall (s) | 3D median / mean / p90 (mm) '
-             '| triangulated | PCK@5 / 10 / 20 px | GT crops: 3D median / mean / p90 (mm), '
-             'PCK@10 | fit on labels (px) | warnings |',
-             '|---|---|---|---|---|---|---|---|---|---|']
+    lines = ['| labelled instants | seed | model | steps | train wall (s) | 3D median / mean / '
+             'p90 (mm) | triangulated | PCK@5 / 10 / 20 px | GT crops: 3D median / mean / '
+             'p90 (mm), PCK@10 | fit on labels (px) | warnings |',
+             '|---|---|---|---|---|---|---|---|---|---|---|']
     for r in rows:
         g = r.get('gt_crop')
         gt = '–' if g is None else (f'{fmt(g["median_mm"], ".0f")} / {fmt(g["mean_mm"], ".0f")}'
                                     f' / {fmt(g["p90_mm"], ".0f")}, '
                                     f'{fmt(g.get("pck10"), ".1%")}')
         lines.append(
-            f'| {r["labels"] or "–"} | {r["mode"]} | {r["steps"] or "–"} | '
+            f'| {r["labels"] or "–"} | {r.get("seed", "–")} | {r["mode"]} | '
+            f'{r["steps"] or "–"} | '
             f'{fmt(r["train_s"] or None, ".0f")} | {fmt(r["median_mm"], ".0f")} / '
             f'{fmt(r["mean_mm"], ".0f")} / {fmt(r["p90_mm"], ".0f")} | '
             f'{r["triangulated"]:.0%} | {fmt(r.get("pck5"), ".1%")} / '
@@ -394,7 +397,8 @@ def main(argv=None):
                         help='training wall time per run (s), the same for every mode')
     parser.add_argument('--steps', type=int, default=0,
                         help='equal step counts instead of equal wall time')
-    parser.add_argument('--seed', type=int, default=0, help='labelled instants and training')
+    parser.add_argument('--seeds', nargs='+', type=int, default=[0],
+                        help='one set of labelled instants (and training seed) per seed')
     parser.add_argument('--jobs', type=int, default=1, help='runs in parallel (processes)')
     parser.add_argument('--set', nargs='*', default=[], metavar='KEY=VALUE',
                         help='TrainConfig overrides for every run (e.g. lr=3e-4)')
@@ -436,8 +440,8 @@ def main(argv=None):
                   reference2d=project_reference(reference, recording.cameras))
     print(f'loaded {recording.num_instants} instants x {recording.num_views} views in '
           f'{time.monotonic() - start:.0f} s', file=sys.stderr)
-    jobs = [(n, m, args.budget_s, args.steps, overrides, args.seed)
-            for n in args.labels for m in args.modes]
+    jobs = [(n, m, args.budget_s, args.steps, overrides, seed)
+            for seed in args.seeds for n in args.labels for m in args.modes]
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs,
                                  mp_context=multiprocessing.get_context('fork')) as pool:
@@ -446,7 +450,9 @@ def main(argv=None):
         trained = [run_job(j) for j in jobs]
     rows = [openpose_row(root)]
     for n in args.labels:
-        rows += [r for r in trained if r['labels'] == n] + baselines(n, args.seed)
+        for seed in args.seeds:
+            rows += [r for r in trained if r['labels'] == n and r['seed'] == seed]
+            rows += [dict(r, seed=seed) for r in baselines(n, seed)]
     command = 'python bench/real.py ' + ' '.join(argv if argv is not None else sys.argv[1:])
     title = '# Label efficiency on real video (Pose2Sim 4-camera recording)'
     if args.quick:
@@ -456,12 +462,12 @@ def main(argv=None):
         '', f'Command: `{command.strip()}` (wall {time.monotonic() - start:.0f} s, load average '
         f'{os.getloadavg()[0]:.1f} at the end, torch 1 thread per run, {args.jobs} job(s)).',
         f'Budget: {"%d steps" % args.steps if args.steps else "%.0f s" % args.budget_s} per '
-        f'run; seed {args.seed}; overrides {overrides or "none"}; scores on the unlabelled '
+        f'run; seeds {args.seeds}; overrides {overrides or "none"}; scores on the unlabelled '
         'instants (OpenPose row: all instants). How the figures are made: bench/real.py.', '',
         table(rows), '',
         'Labelled instants per count: ' + '; '.join(
-            f'{n}: {choose_instants(recording.num_instants, n, args.seed).tolist()}'
-            for n in args.labels), ''])
+            f'{n} (seed {seed}): {choose_instants(recording.num_instants, n, seed).tolist()}'
+            for n in args.labels for seed in args.seeds), ''])
     warnings = [(r['labels'], r['mode'], w) for r in trained for w in r['warnings']]
     if warnings:
         text += '\nWarnings of the runs:\n\n' + '\n'.join(

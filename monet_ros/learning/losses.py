@@ -1,6 +1,11 @@
-"""Training losses of MONET: L_L / L_B (masked heatmap MSE) and L_E (epipolar divergence).
+"""Training losses of MONET: L_L / L_B (masked heatmap MSE) and L_E (epipolar_loss).
 
 objective = L_L + lambda_e L_E + lambda_p L_B   (the paper: lambda_e = 5, lambda_p = 1)
+
+L_E here is epipolar_loss, the expected symmetric epipolar distance between the views' maps
+read as distributions, not the paper's KL of row maxima (epipolar.epipolar_divergence, kept
+as a public function): that KL falls as maps flatten, this one is lowest for sharp peaks on
+consistent epipolar lines (measured side by side: bench/epipolar_loss.py).
 """
 import torch
 
@@ -116,14 +121,19 @@ def peak_contrast(heat):
         return (flat.amax(-1) - flat.median(-1).values).clamp(0.0, 1.0)
 
 
-def epipolar_loss_terms(outputs, K, R, t, valid=None, floor=HEAT_FLOOR, distribution=None):
+def epipolar_loss_terms(outputs, K, R, t, valid=None, floor=HEAT_FLOOR, distribution=None,
+                        sharpen=False):
     """Per (instant, view pair, keypoint) terms of epipolar_loss; see there for the inputs.
 
     Returns dict: 'distance' (B, P, C) RMS symmetric epipolar distance (heatmap px, with
     gradient), 'weight' (B, P, C) detached weights (0 for unused pairs), 'pairs' (P, 2) the
     unordered view pairs (i < j), 'pair_used' (B, P) bool, 'pairs_possible' (the pairs of
     views present). distribution: optional callable (..., h, w) -> distributions replacing
-    heatmap_distribution (for comparisons, bench/epipolar_loss.py)."""
+    heatmap_distribution (for comparisons, bench/epipolar_loss.py). sharpen: let the
+    spread terms (each map's covariance across the lines) carry gradient too; default
+    False: the value counts the spread, the gradient only moves the maps' means onto
+    consistent lines (with it, training sharpens every map where it already is, and a weak
+    detector's centre-biased maps collapse: measured, bench/results/accuracy.md)."""
     if outputs.dim() != 5:
         raise ValueError(f'epipolar_loss: outputs must be (B, V, C, h, w), got '
                          f'{tuple(outputs.shape)}')
@@ -160,9 +170,10 @@ def epipolar_loss_terms(outputs, K, R, t, valid=None, floor=HEAT_FLOOR, distribu
     l_i = (Fc.transpose(-1, -2) @ m_j[..., None])[..., 0]                  # line in view i
     e = (m_j * l_j).sum(-1)
     F2 = Fc[..., :2, :2]
-    expected = (e * e + (l_j[..., None, :2] @ S_j @ l_j[..., :2, None])[..., 0, 0]
-                + (l_i[..., None, :2] @ S_i @ l_i[..., :2, None])[..., 0, 0]
-                + (F2 @ S_i @ F2.transpose(-1, -2) @ S_j).diagonal(dim1=-2, dim2=-1).sum(-1))
+    spread = ((l_j[..., None, :2] @ S_j @ l_j[..., :2, None])[..., 0, 0]
+              + (l_i[..., None, :2] @ S_i @ l_i[..., :2, None])[..., 0, 0]
+              + (F2 @ S_i @ F2.transpose(-1, -2) @ S_j).diagonal(dim1=-2, dim2=-1).sum(-1))
+    expected = e * e + (spread if sharpen else spread.detach())
     # symmetric epipolar distance: the mean of the two point-to-line squared distances, the
     # line norms taken at the means (detached: they only set the units)
     inv = 0.5 * (1.0 / l_j[..., :2].detach().square().sum(-1).clamp_min(1e-300)
@@ -199,7 +210,10 @@ def epipolar_loss(outputs, K, R, t, valid=None):
     means)^2 + the spread of both maps across the lines, so it is lowest for sharp peaks on
     consistent epipolar lines: a uniform floor, broadening, a shift off the line or a flat
     map all raise it (measured: bench/epipolar_loss.py). The MONET paper's KL between
-    row-max distributions falls instead as maps flatten. Terms are weighted by the detached
+    row-max distributions falls instead as maps flatten. The gradient flows through the
+    means only (the spread terms are detached; epipolar_loss_terms(sharpen=True) keeps
+    theirs): sharpening every map where it is made a weak detector collapse all keypoints
+    onto one consistent point. Terms are weighted by the detached
     peak contrasts of the two maps (peak_contrast: a map the detector is unsure of pulls
     little; + 0.001) and averaged with those weights over the used (pair, keypoint) terms.
     0 (attached) if no pair is used.

@@ -12,8 +12,11 @@ augmentation plus one or two rounds of detections -> RANSAC triangulation -> rep
 as labels, at evenly spaced steps), monet (the paper's: L_L + lambda_e L_E on unlabeled
 instants, after a warm-up of epipolar_warmup x steps without L_E, + lambda_p L_B on the
 spatiotemporal augmentation; monet_bootstrap_rounds > 0 adds bootstrapped labels), and the
-ablation bootstrap2_epipolar (Bootstrapping II from spatial labels + L_E). Every mode sees
-the same number of images per step (see _batch_plan).
+ablations bootstrap2_epipolar (Bootstrapping II from spatial labels + L_E) and epipolar (L_L
++ lambda_e L_E only). L_E is losses.epipolar_loss on the raw last-stage heatmaps of every
+view (views_per_instant = 0) of batch_unlabeled unlabeled instants per step. Every mode sees
+the same number of images per step, and the batch plan never depends on lambda_e /
+lambda_p: a run with a weight of 0 is that term's exact control (see _batch_plan).
 State (weights, Adam, schedule, step, RNG, pseudo-labels) is checkpointed atomically and
 resumes exactly.
 

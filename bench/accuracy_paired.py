@@ -1,0 +1,89 @@
+"""Per-seed paired table of a bench/accuracy.py output: every row against a baseline row.
+
+For each (mode[+tag]) row and seed: 2D error against the ground truth (px mean) with the
+live tracked crops and with ground-truth crops, 3D error (mm mean, tracked crops), the
+detector's median heatmap peak on its labelled views and its fit to them; then the mean
+over seeds and, paired per seed, the difference to --baseline (negative = better) and on
+how many seeds the row beats it.
+
+usage: python bench/accuracy_paired.py OUT [--baseline supervised] [--control ROW=CONTROL]
+"""
+import argparse
+import json
+from pathlib import Path
+import sys
+
+import numpy as np
+
+FIELDS = (('tracked 2D (px)', lambda e: e['error2d_mean']),
+          ('GT-crop 2D (px)', lambda e: e.get('gt_crop', {}).get('error2d_mean')),
+          ('3D (mm)', lambda e: 1000 * e['error3d_mean']),
+          ('GT-crop 3D (mm)', lambda e: 1000 * e['gt_crop']['error3d_mean']
+           if 'gt_crop' in e else None))
+
+
+def load(out):
+    rows = {}
+    for r in json.loads((Path(out) / 'results.json').read_text()):
+        rows.setdefault(r['mode'], {})[r['dataset']] = r['extra']
+    return rows
+
+
+def cell(values):
+    v = [x for x in values if x is not None]
+    return ' / '.join(f'{x:.1f}' for x in v) if v else '–'
+
+
+def table(rows, baseline, controls):
+    datasets = sorted({d for r in rows.values() for d in r})
+    lines = [f'Seeds (datasets): {", ".join(datasets)}. Cells: per seed, then mean; '
+             f'paired: mean of (row - {baseline}) per seed and seeds where the row is better.',
+             '', '| row | ' + ' | '.join(name for name, _ in FIELDS) +
+             f' | paired vs {baseline}: tracked 2D, GT-crop 2D, 3D | labelled peak | '
+             'fit (heat px) |',
+             '|---' * (len(FIELDS) + 4) + '|']
+    for mode in rows:
+        cells = []
+        for _, get in FIELDS:
+            vals = [get(rows[mode][d]) if d in rows[mode] else None for d in datasets]
+            known = [v for v in vals if v is not None]
+            cells.append(f'{cell(vals)} (mean {np.mean(known):.1f})' if known else '–')
+        paired = []
+        for _, get in FIELDS[:3]:
+            diffs = [get(rows[mode][d]) - get(rows[baseline][d]) for d in datasets
+                     if d in rows[mode] and d in rows.get(baseline, {})
+                     and get(rows[mode][d]) is not None and get(rows[baseline][d]) is not None]
+            paired.append(f'{np.mean(diffs):+.1f} ({sum(x < 0 for x in diffs)}/{len(diffs)})'
+                          if diffs and mode != baseline else '–')
+        peak = [rows[mode][d].get('labelled_peak_median') for d in datasets if d in rows[mode]]
+        fit = [(rows[mode][d].get('fit') or {}).get('median_heat') for d in datasets
+               if d in rows[mode]]
+        lines.append(f'| {mode} | ' + ' | '.join(cells) + f' | {", ".join(paired)} | '
+                     f'{cell(peak and [p for p in peak if p is not None])} | '
+                     f'{cell(fit and [f for f in fit if f is not None])} |')
+    for row, control in controls:
+        if row not in rows or control not in rows:
+            continue
+        diffs = [[get(rows[row][d]) - get(rows[control][d]) for _, get in FIELDS[:3]]
+                 for d in datasets if d in rows[row] and d in rows[control]]
+        diffs = np.array(diffs)
+        lines.append(f'\n{row} vs its exact control {control} (same batch plan), paired: '
+                     + ', '.join(f'{name} {diffs[:, k].mean():+.1f} '
+                                 f'({int((diffs[:, k] < 0).sum())}/{len(diffs)} better)'
+                                 for k, (name, _) in enumerate(FIELDS[:3])))
+    return '\n'.join(lines)
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('out')
+    parser.add_argument('--baseline', default='supervised')
+    parser.add_argument('--control', action='append', default=[], metavar='ROW=CONTROL')
+    args = parser.parse_args(argv)
+    controls = [tuple(c.split('=', 1)) for c in args.control]
+    print(table(load(args.out), args.baseline, controls))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
