@@ -122,18 +122,18 @@ def peak_contrast(heat):
 
 
 def epipolar_loss_terms(outputs, K, R, t, valid=None, floor=HEAT_FLOOR, distribution=None,
-                        sharpen=False):
+                        sharpen=True):
     """Per (instant, view pair, keypoint) terms of epipolar_loss; see there for the inputs.
 
     Returns dict: 'distance' (B, P, C) RMS symmetric epipolar distance (heatmap px, with
     gradient), 'weight' (B, P, C) detached weights (0 for unused pairs), 'pairs' (P, 2) the
     unordered view pairs (i < j), 'pair_used' (B, P) bool, 'pairs_possible' (the pairs of
     views present). distribution: optional callable (..., h, w) -> distributions replacing
-    heatmap_distribution (for comparisons, bench/epipolar_loss.py). sharpen: let the
-    spread terms (each map's covariance across the lines) carry gradient too; default
-    False: the value counts the spread, the gradient only moves the maps' means onto
-    consistent lines (with it, training sharpens every map where it already is, and a weak
-    detector's centre-biased maps collapse: measured, bench/results/accuracy.md)."""
+    heatmap_distribution (for comparisons, bench/epipolar_loss.py). sharpen (default
+    True): the spread terms (each map's covariance across the lines) carry gradient, so the
+    loss optimised is the loss reported and training does not flatten maps; False: the
+    gradient only moves the maps' means (measured worse-behaved: maps flatten towards the
+    crop centre and peak contrast falls, bench/results/accuracy.md)."""
     if outputs.dim() != 5:
         raise ValueError(f'epipolar_loss: outputs must be (B, V, C, h, w), got '
                          f'{tuple(outputs.shape)}')
@@ -210,10 +210,10 @@ def epipolar_loss(outputs, K, R, t, valid=None):
     means)^2 + the spread of both maps across the lines, so it is lowest for sharp peaks on
     consistent epipolar lines: a uniform floor, broadening, a shift off the line or a flat
     map all raise it (measured: bench/epipolar_loss.py). The MONET paper's KL between
-    row-max distributions falls instead as maps flatten. The gradient flows through the
-    means only (the spread terms are detached; epipolar_loss_terms(sharpen=True) keeps
-    theirs): sharpening every map where it is made a weak detector collapse all keypoints
-    onto one consistent point. Terms are weighted by the detached
+    row-max distributions falls instead as maps flatten. Measured in training
+    (bench/results/accuracy.md): it raises peak contrast, but on a weak detector it makes
+    the views agree on the cheapest consistent answer, the crop centre, and costs accuracy
+    against its exact control. Terms are weighted by the detached
     peak contrasts of the two maps (peak_contrast: a map the detector is unsure of pulls
     little; + 0.001) and averaged with those weights over the used (pair, keypoint) terms.
     0 (attached) if no pair is used.
