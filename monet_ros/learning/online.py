@@ -29,7 +29,7 @@ import numpy as np
 
 from monet_ros.atomic import atomic_write, sha256_file
 from monet_ros.config import ConfigError, setting
-from monet_ros.learning.config import TrainConfig
+from monet_ros.learning.config import MODES, TrainConfig
 
 PUBLISHED = 'published.json'
 FOREVER = 100_000_000     # TrainConfig.steps of a learner that runs until stopped
@@ -38,6 +38,8 @@ FOREVER = 100_000_000     # TrainConfig.steps of a learner that runs until stopp
 @dataclass(frozen=True)
 class LearnerConfig(TrainConfig):
     """TrainConfig + where the data comes from and when models are announced."""
+    # the learner exists to learn from unlabelled video: L_E (and L_B) on (issue 22 item 6)
+    mode: str = setting('monet', "training mode (a row of the paper's Table 1)", choices=MODES)
     bags: tuple[str, ...] = setting((), 'recordings to learn from: rosbag2 folders, .mcap files '
                                     'or `monet synth` output folders', min_length=1)
     out: str = setting('', 'output folder: checkpoints/, model.pt, trainer_state.pt, '
