@@ -3,6 +3,7 @@ that `monet process` writes (read back from the output bag here, independently).
 import importlib.util
 
 import numpy as np
+import pytest
 import torch
 
 from monet_ros.cli import main as monet
@@ -20,6 +21,7 @@ def bench_real(repo_root):
     return module
 
 
+@pytest.mark.slow
 def test_the_benchs_real_data_path_equals_monet_process(tmp_path, repo_root):
     torch.set_num_threads(1)
     data = tmp_path / 'synth'

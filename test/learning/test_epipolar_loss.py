@@ -148,6 +148,7 @@ def unlabeled_contrast(trainer):
     return float(peak_contrast(heat).mean())
 
 
+@pytest.mark.slow
 def test_training_with_it_keeps_a_fitted_detector_sharp():
     torch.set_num_threads(1)
     recording = blob_recording(num_views=4, T=20, C=3, labelled=(2, 9, 15))
