@@ -11,6 +11,7 @@ import time
 from helpers.recordings import noise_recording, small_checkpoint
 from helpers.ros import NodeProcess, RosHarness
 import numpy as np
+import pytest
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from monet_ros.geometry import save_rig
@@ -167,6 +168,7 @@ def test_detector_runs_in_a_child_process_that_ends_with_the_pipeline(ros_env, t
                     assert not alive(detectors[0]), proc.output()
 
 
+@pytest.mark.slow
 def test_player_and_two_detectors_run_in_child_processes_and_lockstep_fuses_every_frame(
         ros_env, tmp_path):
     """The player runs in its own process (its pid is not the pipeline's: fusion's
