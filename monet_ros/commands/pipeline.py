@@ -33,8 +33,12 @@ import numpy as np
 from monet_ros.commands.pipeline_learn import add_learn_arguments, learner_node
 from monet_ros.config import ConfigError, setting, validate_config
 
-# One batched detector process or several: see bench/pipeline.py --detector-processes.
-DETECTOR_PROCESSES = 1
+# --detector-processes 0 (auto): two detector processes from this many cameras on, else
+# one. bench/pipeline.py --detector-processes 1 2, 128 px bfloat16 (loaded 2-core machine,
+# load ~9): at 16 cameras @ 30 Hz two gave 20 / 24 keypoints3d/s (three-process /
+# pipeline) against 14 / 16 with one, at less CPU per frame; at 8 cameras one did as well
+# (28 / 18 against 28 / 19) with lower latency and CPU.
+TWO_DETECTORS_FROM = 16
 HELP = ('live all-in-one: player + detector + fusion as ROS nodes (player and detector in '
         'child processes)')
 
@@ -79,9 +83,10 @@ def add_arguments(parser):
     parser.add_argument('--start-delay', type=float, default=0.5,
                         help='seconds between start-up and the first frame (discovery)')
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
-    parser.add_argument('--detector-processes', type=int, default=DETECTOR_PROCESSES,
+    parser.add_argument('--detector-processes', type=int, default=0,
                         help='detector processes, each batching its share of the cameras '
-                        f'(default {DETECTOR_PROCESSES}: measured with bench/pipeline.py)')
+                        f'(default 0 = auto: 2 from {TWO_DETECTORS_FROM} cameras on, else 1; '
+                        'measured with bench/pipeline.py)')
     add_learn_arguments(parser)
 
 
@@ -94,8 +99,9 @@ class PipelineOptions:
                               minimum=0.0)
     start_delay: float = setting(0.5, 'seconds between start-up and the first frame',
                                  minimum=0.0, maximum=3600.0)
-    detector_processes: int = setting(1, 'detector processes (cameras split between them)',
-                                      minimum=1, maximum=64)
+    detector_processes: int = setting(0, 'detector processes (cameras split between them; '
+                                      f'0 = 2 from {TWO_DETECTORS_FROM} cameras, else 1)',
+                                      minimum=0, maximum=64)
 
     def __post_init__(self):
         validate_config(self)
@@ -238,9 +244,10 @@ def tf_topics(bag):
 
 def detector_groups(slots, processes):
     """The camera names of `slots` in `processes` contiguous groups of near-equal size (one
-    detector process each); ConfigError naming --detector-processes when there are fewer
-    cameras than processes."""
+    detector process each; 0: auto, see TWO_DETECTORS_FROM); ConfigError naming
+    --detector-processes when there are fewer cameras than processes."""
     names = [slot.name for slot in slots]
+    processes = processes or (2 if len(names) >= TWO_DETECTORS_FROM else 1)
     if processes > len(names):
         raise ConfigError('monet pipeline', 'detector_processes',
                           f'{processes} detector processes for {len(names)} cameras; give at '
