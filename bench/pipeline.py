@@ -12,8 +12,9 @@ image stamp to the arrival of its /monet/keypoints3d, in three layouts:
   three-process: the camera publisher (this bench, as the player or a camera driver would),
       the detector and the fusion each in their own process, over DDS with the Fast DDS
       shared-memory profile (config/fastdds_profile.xml) given to every publisher;
-  pipeline: as `monet pipeline`: publisher and fusion nodes in one process and executor,
-      the detector its child process (monet_ros.nodes.child);
+  pipeline: as `monet pipeline`: the fusion node in one process and executor, the
+      detector and the camera publisher (as its player) each in a child process
+      (monet_ros.nodes.child);
   in-process: publisher, detector and fusion nodes in ONE process and executor (what
       `monet pipeline` was: the detector's GIL-free calls wait behind the other nodes'
       Python, 3-4x slower on a quiet 2-core machine).
@@ -32,11 +33,16 @@ serialized and decoded in place. --viewable runs every end-to-end case twice, wi
 viewable outputs off and on (the detector's debug_image at its default rate with a subscriber
 to every camera's, the fusion node's /tf_static and camera markers), to show what they cost:
 throughput and the nodes' CPU time per keypoints3d (/proc/PID/stat of the detector and fusion
-processes; in-process and pipeline: this process, publisher included, plus the detector child).
+processes; in-process: this process, publisher included; pipeline: the fusion process and
+the detector children, not the publisher).
 --repeat N runs each case N times (off/on interleaved) and shows medians: single 10 s runs
 differ by several percent. --second-job N runs N CPU-bound processes beside the end-to-end
 runs (the loaded-machine figures); --input-size the small net at another input side;
---precision float32 bfloat16 runs every end-to-end case with each detector precision.
+--precision float32 bfloat16 runs every end-to-end case with each detector precision;
+--detector-processes 1 2 each three-process and pipeline case with one detector process
+batching every camera and with two, each batching half (`monet pipeline
+--detector-processes`), e.g. `--cameras 16 --extra --layouts three-process pipeline
+--precision bfloat16 --detector-processes 1 2` for 16 cameras on 2 cores.
 Prints tables and the load average; never asserts.
 """
 import argparse
@@ -196,7 +202,7 @@ def run_env(workdir):
 
 
 def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewable=False,
-         input_size=None, precision='float32'):
+         input_size=None, precision='float32', detector_processes=1):
     """One end-to-end run in a fresh process (clean DDS state); returns its figures."""
     rig = make_rig(RigConfig(num_cameras=views))
     rig_path = workdir / f'rig{views}.yaml'
@@ -204,7 +210,8 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
     model_path = bench_model(workdir, 'small', input_size)
     spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
                 threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
-                workdir=str(workdir), viewable=viewable, precision=precision)
+                workdir=str(workdir), viewable=viewable, precision=precision,
+                detector_processes=detector_processes)
     proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
                           env=run_env(workdir), capture_output=True, text=True,
                           timeout=300 + seconds + warmup)
@@ -438,8 +445,18 @@ def process_cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
+def camera_groups(rig, processes):
+    """The rig's camera names in `processes` contiguous groups (as `monet pipeline
+    --detector-processes`: commands.pipeline.detector_groups)."""
+    names = [cam.name for cam in rig]
+    bounds = np.linspace(0, len(names), processes + 1).round().astype(int)
+    return [names[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+
+
 def worker(spec):
-    """Body of one live run (in its own process): see live()."""
+    """Body of one live run (in its own process): see live(). Layout 'feed': only the
+    camera publisher and stopwatch (the player of the pipeline layout, in a child process),
+    node CPU from the processes spec['cpu_pids']."""
     import rclpy
     from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
     from rclpy.node import Node
@@ -454,19 +471,28 @@ def worker(spec):
                            precision=spec['precision'], debug_image=spec['viewable'])
     fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
                          camera_markers=spec['viewable'])
-    procs, nodes, child = [], [], None
+    groups = camera_groups(rig, spec.get('detector_processes', 1))
+    procs, nodes, children, feeder_proc = [], [], [], None
     if spec['layout'] == 'pipeline':
         from monet_ros.nodes.child import ChildNode
-        child = ChildNode('detector', detector_params)
+        children = [ChildNode('detector', dict(detector_params, cameras=group),
+                              ['-r', f'__node:=detector_{i}'] if len(groups) > 1 else [])
+                    for i, group in enumerate(groups)]
     if spec['layout'] == 'three-process':
         import yaml
         params = Path(spec['workdir']) / f'params_{os.getpid()}.yaml'
-        params.write_text(yaml.safe_dump({'/**/detector': {'ros__parameters': detector_params},
-                                          '/**/fusion': {'ros__parameters': fusion_params}}))
-        procs = [subprocess.Popen([sys.executable, '-m', f'monet_ros.nodes.{name}',
-                                   '--ros-args', '--params-file', str(params)],
+        names = [f'detector_{i}' if len(groups) > 1 else 'detector'
+                 for i in range(len(groups))]
+        params.write_text(yaml.safe_dump(
+            {'/**/fusion': {'ros__parameters': fusion_params},
+             **{f'/**/{name}': {'ros__parameters': dict(detector_params, cameras=group)}
+                for name, group in zip(names, groups)}}))
+        procs = [subprocess.Popen([sys.executable, '-m', f'monet_ros.nodes.{module}',
+                                   '--ros-args', '--params-file', str(params),
+                                   *(['-r', f'__node:={name}'] if name else [])],
                                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-                 for name in ('fusion', 'detector')]
+                 for module, name in [('fusion', None)] + [
+                     ('detector', n if len(groups) > 1 else None) for n in names]]
     heap_for_large_buffers()      # as `monet pipeline`, the player and every node do
     if spec['layout'] in ('in-process', 'pipeline'):
         short_gil_switch()        # as `monet pipeline` (several busy threads, one GIL)
@@ -477,32 +503,52 @@ def worker(spec):
             from monet_ros.nodes.detector import DetectorNode
             from monet_ros.nodes.fusion import FusionNode
             nodes = [FusionNode(overrides=fusion_params)]
-            if child is None:
+            if spec['layout'] == 'in-process':
                 nodes.append(DetectorNode(overrides=detector_params))
             executor = MultiThreadedExecutor(num_threads=4)
         else:
             executor = SingleThreadedExecutor()
-        bench = Node('bench')
-        nodes.append(bench)
         for node in nodes:
             executor.add_node(node)
-        feeder = Feeder(bench, rig, spec['viewable'])
-        if procs:     # three-process: the node processes only (not this publisher)
-            def cpu():
-                return sum(process_cpu_seconds(p.pid) for p in procs)
-        else:         # this whole process (publisher included), plus the detector child
-            def cpu():
-                return time.process_time() + (
-                    process_cpu_seconds(child.process.pid) if child is not None else 0.0)
-        result = feeder.run(lambda t: executor.spin_once(timeout_sec=t), spec['rate'],
-                            spec['seconds'], spec['warmup'], cpu)
+        if spec['layout'] == 'pipeline':
+            # as `monet pipeline`: the player (here the camera publisher and stopwatch) in
+            # its own process; this one runs fusion, and is timed with the detectors
+            pids = [os.getpid()] + [c.process.pid for c in children]
+            feeder_proc = subprocess.Popen(
+                [sys.executable, __file__, '--worker',
+                 json.dumps(dict(spec, layout='feed', cpu_pids=pids))],
+                stdout=subprocess.PIPE, text=True)
+            while feeder_proc.poll() is None:
+                executor.spin_once(timeout_sec=0.05)
+            result = dict(error=[f'feed exit {feeder_proc.returncode}'])
+            for line in reversed(feeder_proc.stdout.read().splitlines()):
+                if line.startswith('{'):
+                    result = json.loads(line)
+                    break
+        else:
+            bench = Node('bench')
+            nodes.append(bench)
+            executor.add_node(bench)
+            feeder = Feeder(bench, rig, spec['viewable'])
+            if procs:     # three-process: the node processes only (not this publisher)
+                def cpu():
+                    return sum(process_cpu_seconds(p.pid) for p in procs)
+            elif spec['layout'] == 'feed':     # the pipeline's processes
+                def cpu():
+                    return sum(process_cpu_seconds(pid) for pid in spec['cpu_pids'])
+            else:         # in-process: this whole process (publisher included)
+                cpu = time.process_time
+            result = feeder.run(lambda t: executor.spin_once(timeout_sec=t), spec['rate'],
+                                spec['seconds'], spec['warmup'], cpu)
     finally:
+        if feeder_proc is not None and feeder_proc.poll() is None:
+            feeder_proc.kill()
         if executor is not None:
             stop_executor(executor)
         for node in reversed(nodes):
             node.destroy_node()
         rclpy.try_shutdown()
-        if child is not None:
+        for child in children:
             child.stop()
         for proc in procs:
             proc.terminate()
@@ -517,8 +563,13 @@ def run_cases(args, runs, workdir, costs):
     costs."""
     for views, rate in runs:
         for layout in args.layouts:
-            for precision in args.precision:
+            for precision, processes in [(p, n) for p in args.precision
+                                         for n in args.detector_processes]:
+                if layout == 'in-process' and processes > 1:
+                    continue          # one process by definition
                 label = layout if len(args.precision) == 1 else f'{layout}, {precision}'
+                if len(args.detector_processes) > 1:
+                    label += f', {processes} detector process{"es" * (processes > 1)}'
                 settings = (False, True) if args.viewable else (False,)
                 results = {viewable: [] for viewable in settings}
                 for _ in range(args.repeat):
@@ -526,7 +577,8 @@ def run_cases(args, runs, workdir, costs):
                         results[viewable].append(live(layout, views, rate, args.seconds,
                                                       args.warmup, args.threads,
                                                       args.backend, workdir, viewable,
-                                                      args.input_size, precision))
+                                                      args.input_size, precision,
+                                                      processes))
                 combined = {viewable: median_result(rs) for viewable, rs in results.items()}
                 for viewable, r in combined.items():
                     print_live_row(views, rate, label, viewable, r)
@@ -613,6 +665,9 @@ def main():
                         help='every table at tiny sizes (2 cameras, 2 s runs, few repeats)')
     parser.add_argument('--receive', type=int, default=3, metavar='RUNS',
                         help='runs of the image-receive table (0: none)')
+    parser.add_argument('--detector-processes', type=int, nargs='+', default=[1],
+                        help='detector processes of the three-process and pipeline layouts '
+                        '(several: each case with each; cameras split between them)')
     parser.add_argument('--worker', help=argparse.SUPPRESS)
     parser.add_argument('--receive-worker', help=argparse.SUPPRESS)
     args = parser.parse_args()

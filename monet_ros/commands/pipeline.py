@@ -1,18 +1,25 @@
-"""`monet pipeline`: player + detector + fusion as ROS nodes, the detector in a child process.
+"""`monet pipeline`: player + detector + fusion as ROS nodes, player and detector in child
+processes.
 
     monet pipeline                           # demo: synthetic recording + a model for it
     monet pipeline --bag REC --model CKPT [--rig RIG] [--rate 0.5] [--loop] [--lockstep]
     monet pipeline --bag REC --model CKPT --loop --learn    # + online learner (hot reload)
 
-One MultiThreadedExecutor runs the player (replaying REC) and the fusion node (and the
-learner); one detector node for every camera (batched forward) runs in a child process
-(monet_ros.nodes.child: with its own interpreter lock it is as fast as the detector
-executable; in this process its short GIL-free calls waited behind the other nodes' Python,
-3-4x slower), started with this command's --ros-args and stopped with it. Other processes
-see the usual topics (/monet/keypoints3d, /monet/skeleton, /diagnostics, ...). A summary
-line is printed every second: frames fused, fps, latency (player publish -> 3D keypoints,
-median / p95) and the mean reprojection error; a final summary when the recording ends
-(or Ctrl-C, or --duration).
+This process runs the fusion node (and the learner) in one MultiThreadedExecutor; the
+player (replaying REC) and the detector (every camera in one batched forward; or
+--detector-processes N, each a share of the cameras) each run in a child process
+(monet_ros.nodes.child: with its own interpreter lock each is as fast as its executable;
+sharing this process, the detector's short GIL-free calls waited behind the other nodes'
+Python, 3-4x slower, and the player's publishing put a tail on fusion's latency: p95 106 /
+312 ms float32 / bfloat16 at 8 cameras @ 30 Hz against 48 / 28 ms in three processes),
+started with this command's --ros-args and stopped with it (SIGKILLed if it dies). The
+player announces each frame on played_frames ([stamp, wall time], a few bytes: this
+process times latency from it without receiving any image) and, with --lockstep, waits for
+the previous frame's keypoints3d itself. Other processes see the usual topics
+(/monet/keypoints3d, /monet/skeleton, /diagnostics, ...). A summary line is printed every
+second: frames fused, fps, latency (player publish -> 3D keypoints, median / p95) and the
+mean reprojection error; a final summary when the recording ends (or Ctrl-C, or
+--duration).
 """
 from collections import deque
 from dataclasses import dataclass
@@ -26,7 +33,14 @@ import numpy as np
 from monet_ros.commands.pipeline_learn import add_learn_arguments, learner_node
 from monet_ros.config import ConfigError, setting, validate_config
 
-HELP = 'live all-in-one: player + detector + fusion as ROS nodes (the detector in a child process)'
+# --detector-processes 0 (auto): two detector processes from this many cameras on, else
+# one. bench/pipeline.py --detector-processes 1 2, 128 px bfloat16 (loaded 2-core machine,
+# load ~9): at 16 cameras @ 30 Hz two gave 20 / 24 keypoints3d/s (three-process /
+# pipeline) against 14 / 16 with one, at less CPU per frame; at 8 cameras one did as well
+# (28 / 18 against 28 / 19) with lower latency and CPU.
+TWO_DETECTORS_FROM = 16
+HELP = ('live all-in-one: player + detector + fusion as ROS nodes (player and detector in '
+        'child processes)')
 
 
 def add_arguments(parser):
@@ -69,6 +83,10 @@ def add_arguments(parser):
     parser.add_argument('--start-delay', type=float, default=0.5,
                         help='seconds between start-up and the first frame (discovery)')
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
+    parser.add_argument('--detector-processes', type=int, default=0,
+                        help='detector processes, each batching its share of the cameras '
+                        f'(default 0 = auto: 2 from {TWO_DETECTORS_FROM} cameras on, else 1; '
+                        'measured with bench/pipeline.py)')
     add_learn_arguments(parser)
 
 
@@ -81,6 +99,9 @@ class PipelineOptions:
                               minimum=0.0)
     start_delay: float = setting(0.5, 'seconds between start-up and the first frame',
                                  minimum=0.0, maximum=3600.0)
+    detector_processes: int = setting(0, 'detector processes (cameras split between them; '
+                                      f'0 = 2 from {TWO_DETECTORS_FROM} cameras, else 1)',
+                                      minimum=0, maximum=64)
 
     def __post_init__(self):
         validate_config(self)
@@ -106,8 +127,8 @@ class Summary:
         self.frames = 0
         self.frames_published = 0
         self.last_fused = None
-        self.cond = threading.Condition(self.lock)
         self.last_stamp = -1
+        self.replay_ended = threading.Event()   # the player's end of the recording
         self.joint_fused = None   # (C,) frames in which each joint was triangulated
         self.joint_views = None   # (C,) sum of its inlier views over those frames
         self.names = None         # keypoint names (the fusion node's skeleton)
@@ -143,23 +164,6 @@ class Summary:
                 self.joint_views = np.zeros(len(fused), np.int64)
             self.joint_fused += fused
             self.joint_views += np.where(fused, result.num_views, 0).astype(np.int64)
-            self.cond.notify_all()
-
-    def gate(self, timeout_s=5.0, tracked=None):
-        """Lockstep: a player gate that waits until the previous frame was fused and, with
-        `tracked` (a callable -> stamp of the keypoints the detector crops around), until the
-        detector holds that frame's keypoints: every frame is cropped from the previous
-        one's 3D, as `monet process` does."""
-        def ready(previous_stamp):
-            return self.last_stamp >= previous_stamp and (
-                tracked is None or (tracked() or -1) >= previous_stamp)
-
-        def wait(previous_stamp):
-            deadline = time.monotonic() + timeout_s
-            with self.cond:
-                while not ready(previous_stamp) and time.monotonic() < deadline:
-                    self.cond.wait(0.005)       # the detector's callback does not notify
-        return wait
 
     def line(self, window=None):
         """The status line: the last `window` seconds, or the whole run (latency percentiles
@@ -238,6 +242,43 @@ def tf_topics(bag):
     return [t for t in ('/tf_static',) if t in open_bag(bag).topics]
 
 
+def detector_groups(slots, processes):
+    """The camera names of `slots` in `processes` contiguous groups of near-equal size (one
+    detector process each; 0: auto, see TWO_DETECTORS_FROM); ConfigError naming
+    --detector-processes when there are fewer cameras than processes."""
+    names = [slot.name for slot in slots]
+    processes = processes or (2 if len(names) >= TWO_DETECTORS_FROM else 1)
+    if processes > len(names):
+        raise ConfigError('monet pipeline', 'detector_processes',
+                          f'{processes} detector processes for {len(names)} cameras; give at '
+                          f'most {len(names)}')
+    bounds = np.linspace(0, len(names), processes + 1).round().astype(int)
+    return [names[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def frames_listener(node, summary):
+    """Subscribe `node` to the player's played_frames: each [stamp ns, wall ns] is the
+    frame's publish time for the latency (wall clock, mapped to this process's monotonic
+    clock), [] the end of the replay (summary.replay_ended)."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    from std_msgs.msg import Int64MultiArray
+
+    from monet_ros.nodes.names import PLAYED_FRAMES
+
+    def on_frame(msg):
+        if len(msg.data) == 0:
+            summary.replay_ended.set()
+        elif len(msg.data) >= 2:
+            stamp, wall_ns = int(msg.data[0]), int(msg.data[1])
+            summary.on_image(PLAYED_FRAMES, stamp,
+                             time.monotonic() - (time.time_ns() - wall_ns) / 1e9)
+
+    # reliable and deep: one small message per frame, none (nor the end marker) lost
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    return node.create_subscription(Int64MultiArray, PLAYED_FRAMES, on_frame, qos)
+
+
 def run(args):
     from monet_ros.nodes import heap_for_large_buffers, passive_openmp, short_gil_switch
     from monet_ros.nodes.runner import (
@@ -252,8 +293,8 @@ def run(args):
         use_large_data_profile,
     )
     passive_openmp()               # before torch loads (the fusion's and learner's threads)
-    heap_for_large_buffers()       # image and heatmap buffers reused, not mapped per message
-    short_gil_switch()             # the player's thread and fusion's callbacks share a GIL
+    heap_for_large_buffers()       # heatmap buffers reused, not mapped per message
+    short_gil_switch()             # fusion's and the learner's callbacks share a GIL
     score = None
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo
@@ -269,7 +310,8 @@ def run(args):
         raise ConfigError('monet pipeline', 'model', '--model is required with --bag')
     from monet_ros.models.device import check_device
     options = PipelineOptions(rate=args.rate, duration=args.duration,
-                              start_delay=args.start_delay)
+                              start_delay=args.start_delay,
+                              detector_processes=args.detector_processes)
     device = check_device('monet pipeline', args.device)
     import torch
 
@@ -282,12 +324,14 @@ def run(args):
     use_large_data_profile()
     import rclpy
     from rclpy.executors import MultiThreadedExecutor
+    from rclpy.node import Node
 
     from monet_ros.models import read_checkpoint
     from monet_ros.nodes.child import ChildNode
     from monet_ros.nodes.detector import DetectorConfig, camera_slots
     from monet_ros.nodes.fusion import FusionNode
-    from monet_ros.nodes.player import PlayerNode
+    from monet_ros.nodes.names import PLAYED_FRAMES, node_namespace
+    from monet_ros.nodes.player import PlayerConfig
 
     rig = args.rig or args.bag
     cameras = list(args.cameras or [])
@@ -295,7 +339,7 @@ def run(args):
     ros_args = list(getattr(args, 'ros_args', None) or ['--ros-args'])
     init_rclpy(ros_args)
     nodes = []
-    detector = executor = None
+    detectors, player, executor = [], None, None
     failed = False
     try:
         with until_shutdown():
@@ -305,8 +349,9 @@ def run(args):
                                                    threshold_px=args.threshold_px,
                                                    confidence_threshold=args.confidence_threshold))
                 nodes.append(fusion)
-                # the detector's parameters, checked here (one line, exit 2) before its
-                # process starts; with lockstep it waits for the previous frame's 3D itself
+                # the detectors' and the player's parameters, checked here (one line, exit
+                # 2) before their processes start; with lockstep the detector waits for the
+                # previous frame's 3D itself
                 detector_params = dict(rig=str(rig), cameras=tuple(cameras),
                                        model=str(args.model),
                                        transport=image_transport(args.bag, fusion.cameras),
@@ -314,13 +359,17 @@ def run(args):
                                        threads=args.threads, debug_image=args.debug_image,
                                        lockstep=args.lockstep, precision=args.precision)
                 slots = camera_slots(DetectorConfig(**detector_params))
+                groups = detector_groups(slots, options.detector_processes)
                 check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],
                                args.skeleton, args.model)
                 player_params = dict(
                     bag=str(args.bag), rate=0.0 if args.lockstep else options.rate,
-                    loop=args.loop, wait_for_subscribers=1, start_delay_s=options.start_delay,
-                    topics=[t for s in slots for t in (s.image_topic, s.info_topic)]
-                    + tf_topics(args.bag))
+                    loop=args.loop, wait_for_subscribers=1, wait_for_topics=(PLAYED_FRAMES,),
+                    start_delay_s=options.start_delay, lockstep=args.lockstep,
+                    announce_frames=True,
+                    topics=tuple(t for s in slots for t in (s.image_topic, s.info_topic))
+                    + tuple(tf_topics(args.bag)))
+                PlayerConfig(**player_params)         # its errors name the parameter
                 if args.learn:
                     nodes.append(learner_node(args, rig, summary))
             except (ValueError, OSError) as error:
@@ -330,12 +379,19 @@ def run(args):
             if score is not None:
                 fusion.listeners.append(score.on_fused)
             summary.names = list(fusion.skeleton.keypoints)
-            detector = ChildNode('detector', detector_params, ros_args)
+            listener = Node('pipeline', **node_namespace({}))
+            frames_listener(listener, summary)
+            nodes.append(listener)
+            for i, group in enumerate(groups):
+                # several detector processes: each its cameras, its own node name
+                rename = ['-r', f'__node:=detector_{i}'] if len(groups) > 1 else []
+                detectors.append(ChildNode('detector', dict(detector_params, cameras=group),
+                                           ros_args + rename))
             executor = MultiThreadedExecutor(num_threads=4)
             for node in nodes:
                 node.callback_guard = CallbackGuard(node)  # a bad message costs only itself
                 executor.add_node(node)
-            player = started = ended = None
+            started = ended = None
             while rclpy.ok() and not stop_requested():
                 try:
                     executor.spin_once(timeout_sec=0.05)
@@ -344,28 +400,21 @@ def run(args):
                         raise
                     break
                 now = time.monotonic()
-                code = detector.exit_code()
+                codes = [(child.name, child.exit_code()) for child in detectors + [player]
+                         if child is not None]
+                code = next(((name, c) for name, c in codes if c is not None), None)
                 if code is not None:       # 0: it got the terminal's Ctrl-C first
-                    if code != 0:
-                        start_error('monet pipeline', f'the detector process exited with '
-                                    f'code {code}')
+                    if code[1] != 0:
+                        start_error('monet pipeline', f'the {code[0]} process exited with '
+                                    f'code {code[1]}')
                         failed = True
                     break
                 if player is None:
                     if not detector_connected(fusion):
-                        continue           # the detector process is still starting
-                    try:                   # the first frame reaches a connected detector
-                        player = PlayerNode(overrides=player_params)
-                    except (ValueError, OSError) as error:
-                        start_error('monet pipeline', error)
-                        failed = True
-                        break
-                    nodes.append(player)
-                    player.listeners.append(summary.on_image)
-                    if args.lockstep:
-                        player.gate = summary.gate()
-                    player.callback_guard = CallbackGuard(player)
-                    executor.add_node(player)
+                        continue           # the detector processes are still starting
+                    # the first frame reaches connected detectors: the player waits for
+                    # their subscriptions and this process's played_frames listener itself
+                    player = ChildNode('player', player_params, ros_args)
                     started = now
                     next_line = started + 1.0
                 if now >= next_line:
@@ -376,19 +425,18 @@ def run(args):
                             print(f'  {score.line()}', flush=True)
                 if options.duration and now - started >= options.duration:
                     break
-                if player.done.is_set():
+                if summary.replay_ended.is_set():
                     # the recording ended: let the frames in flight through, then stop
                     ended = ended or now
                     if now - max(ended, summary.last_fused or ended) > 2.0:
                         break
     finally:
         ignore_signals()
-        for node in nodes:
-            if isinstance(node, PlayerNode):
-                node.stopping.set()           # no publishing into a closing context
+        if player is not None:
+            player.stop()                     # no frames into a closing pipeline
         say_goodbye(nodes)
-        if detector is not None:
-            detector.stop()
+        for child in detectors:
+            child.stop()
         if executor is not None:
             stop_executor(executor)
         for node in reversed(nodes):

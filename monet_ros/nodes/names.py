@@ -19,6 +19,7 @@ DEBUG_IMAGE = '{camera}/debug_image'
 DEBUG_CAMERA_INFO = '{camera}/debug_image/camera_info'
 DIAGNOSTICS = '/diagnostics'
 TF_STATIC = '/tf_static'
+PLAYED_FRAMES = 'played_frames'   # the player's [stamp, wall time] per frame
 
 
 def node_namespace(kwargs):

@@ -6,6 +6,14 @@ installed can be replayed unchanged, plus /clock (the bag time). Messages go out
 reader's log-time order (deterministic), at the recorded pace scaled by `rate` (0 = as fast
 as possible), from `start_offset_s` into the bag, optionally looping. Topic names are
 remapped with ordinary ROS remapping (`--ros-args -r /cam0/image_raw:=/left/image_raw`).
+
+For `monet pipeline` (which runs it in its own process: monet_ros.nodes.child) two options:
+`lockstep` publishes a frame only once the keypoints3d of the previous one arrived (every
+frame processed, pace = processing speed), and `announce_frames` publishes on
+`played_frames` (std_msgs/Int64MultiArray) [header stamp ns, wall time ns (CLOCK_REALTIME)]
+just before each frame's first image goes out, and an empty array when a pass ends the
+replay (no loop): what the pipeline times latency from and knows the end by, without
+receiving a single image.
 """
 from dataclasses import dataclass
 import importlib
@@ -17,12 +25,16 @@ import time
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import PointCloud2
+from std_msgs.msg import Int64MultiArray
 
 from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.io import camera_name_for_topic, open_bag
-from monet_ros.nodes.names import node_namespace
+from monet_ros.io.fast_cdr import decode_header
+from monet_ros.io.fields import stamp_to_ns
+from monet_ros.nodes.names import KEYPOINTS3D, PLAYED_FRAMES, node_namespace
 from monet_ros.nodes.params import declare_config
-from monet_ros.nodes.qos import IMAGE_OUT, LATCHED, STREAM_OUT
+from monet_ros.nodes.qos import IMAGE_OUT, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.runner import run_node
 
 DEFAULT_TYPES = ('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage',
@@ -60,6 +72,14 @@ class PlayerConfig:
                                    'lets late discovery finish so no first frame is lost',
                                    minimum=0.0)
     shutdown_when_done: bool = setting(False, 'exit when the bag has been played (no loop)')
+    lockstep: bool = setting(False, 'publish a frame only once the keypoints3d (node-relative) '
+                             'of the previous frame arrived, at most lockstep_timeout_s '
+                             '(then it goes anyway, counted and logged); also waits for a '
+                             'keypoints3d publisher before playing. Use with rate 0')
+    lockstep_timeout_s: float = setting(5.0, "lockstep: longest wait for the previous frame's "
+                                        'keypoints3d', minimum=0.001)
+    announce_frames: bool = setting(False, 'publish played_frames (Int64MultiArray [stamp ns, '
+                                    'wall ns] before each frame, [] at the end of the replay)')
 
     def __post_init__(self):
         validate_config(self)
@@ -142,12 +162,56 @@ class PlayerNode(Node):
         self.gate = None          # callable(previous_frame_stamp_ns) blocking until the next
         #                           frame may go (lockstep replay in `monet pipeline`)
         self.span = (2 ** 63, 0, 0)   # first, last image log time and frames of pass 1
+        self.fused = threading.Condition()
+        self.fused_stamp = -1         # lockstep: the newest keypoints3d stamp received
+        self.lockstep_timeouts = 0
+        self.last_frame_stamp = None
+        if config.lockstep:
+            # serialized: only the header's stamp is read, never the cloud
+            self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints, STREAM_IN,
+                                     raw=True)
+            self.gate = self.wait_fused
+        self.frames_pub = self.create_publisher(Int64MultiArray, PLAYED_FRAMES, STREAM_OUT) \
+            if config.announce_frames else None
         self.done = threading.Event()
         self.stopping = threading.Event()
         self.thread = threading.Thread(target=self.play, name='player', daemon=True)
         self.get_logger().info(f'replaying {config.bag}: {sorted(self.pubs)} at rate '
                                f'{config.rate}{" (loop)" if config.loop else ""}')
         self.thread.start()
+
+    # ------------------------------------------------------------------ lockstep
+    def on_keypoints(self, data):
+        try:
+            stamp = stamp_to_ns(decode_header(data).stamp)
+        except ValueError as error:
+            self.get_logger().warning(f'{self.resolve_topic_name(KEYPOINTS3D)}: bad message '
+                                      f'({error})', throttle_duration_sec=5.0)
+            return
+        with self.fused:
+            self.fused_stamp = max(self.fused_stamp, stamp)
+            self.fused.notify_all()
+
+    def wait_fused(self, previous_stamp):
+        """Block until keypoints3d of `previous_stamp` (or later) arrived, the node stops,
+        or lockstep_timeout_s passed (counted; logged once)."""
+        deadline = time.monotonic() + self.config.lockstep_timeout_s
+        with self.fused:
+            while self.fused_stamp < previous_stamp and not self.stopping.is_set():
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    self.lockstep_timeouts += 1
+                    if self.lockstep_timeouts == 1:
+                        self.get_logger().warning(
+                            f'lockstep: no {self.resolve_topic_name(KEYPOINTS3D)} for stamp '
+                            f'{previous_stamp} within {self.config.lockstep_timeout_s} s: '
+                            'playing on (counted; logged once)')
+                    return
+                self.fused.wait(min(left, 0.1))
+
+    def announce(self, values):
+        if self.frames_pub is not None:
+            self.frames_pub.publish(Int64MultiArray(data=values))
 
     # ------------------------------------------------------------------ playback
     def wait_for_subscribers(self):
@@ -165,6 +229,8 @@ class PlayerNode(Node):
             missing = [t for t in topics
                        if (self.pubs[t].get_subscription_count() if t in self.pubs
                            else self.count_subscribers(t)) < wanted]
+            if self.config.lockstep and not self.count_publishers(KEYPOINTS3D):
+                missing.append(f'{self.resolve_topic_name(KEYPOINTS3D)} (a publisher)')
             if not missing:
                 self.get_logger().info(f'{len(topics)} topics have {wanted} subscriber(s) '
                                        f'after {time.monotonic() - start:.1f} s: playing')
@@ -187,6 +253,8 @@ class PlayerNode(Node):
                 self.play_once(self.loops * self.loop_shift_ns)
                 self.loops += 1
                 if not self.config.loop:
+                    if not self.stopping.is_set():
+                        self.announce([])          # the end of the replay
                     break
         except Exception as error:  # noqa: BLE001 - report, never kill the process silently
             if not self.stopping.is_set() and self.context.ok():
@@ -213,7 +281,9 @@ class PlayerNode(Node):
         """One pass over the bag; shift_ns is added to header stamps and /clock."""
         start_wall = None
         first_log = None
-        frame_log, frame_stamp = None, None   # log time and stamp of the current image frame
+        # log time and stamp of the current image frame (the stamp carries over from the
+        # previous pass: lockstep gates a pass's first frame on the last one before it)
+        frame_log, frame_stamp = None, self.last_frame_stamp
         offset_ns = int(self.config.start_offset_s * 1e9)
         for item in self.reader.messages(list(self.pubs), decode=False):
             if self.stopping.is_set():
@@ -234,21 +304,25 @@ class PlayerNode(Node):
                 self.span = (min(self.span[0], item.log_time_ns),
                              max(self.span[1], item.log_time_ns),
                              self.span[2] + (item.log_time_ns != frame_log))
+            data = bytes(item.data)
+            if shift_ns and item.topic not in LATCHED_TOPICS:
+                data = shift_cdr_header_stamp(data, shift_ns)
             if image and item.log_time_ns != frame_log:
                 if self.gate is not None and frame_stamp is not None:
                     self.gate(frame_stamp)
+                    if self.stopping.is_set():
+                        return
                 frame_log = item.log_time_ns
+                frame_stamp = cdr_header_stamp_ns(data) or item.log_time_ns
+                self.last_frame_stamp = frame_stamp
+                self.announce([frame_stamp, time.time_ns()])
             if self.clock_pub is not None:
                 clock_ns = item.log_time_ns + shift_ns
                 self.clock_pub.publish(Clock(clock=Time(sec=clock_ns // 1_000_000_000,
                                                         nanosec=clock_ns % 1_000_000_000)))
-            data = bytes(item.data)
-            if shift_ns and item.topic not in LATCHED_TOPICS:
-                data = shift_cdr_header_stamp(data, shift_ns)
             self.pubs[item.topic].publish(data)
             self.published += 1
             if image:
-                frame_stamp = cdr_header_stamp_ns(data) or item.log_time_ns
                 now = time.monotonic()
                 for listener in self.listeners:
                     listener(item.topic, frame_stamp, now)

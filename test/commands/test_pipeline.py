@@ -1,7 +1,9 @@
 """`monet pipeline` as a user runs it: every frame fused, clean exits, the detector in a
 child process that never outlives the command."""
+import json
 import os
 from pathlib import Path
+import re
 import signal
 import sys
 import time
@@ -9,6 +11,7 @@ import time
 from helpers.recordings import noise_recording, small_checkpoint
 from helpers.ros import NodeProcess, RosHarness
 import numpy as np
+import pytest
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 
 from monet_ros.geometry import save_rig
@@ -66,6 +69,8 @@ def test_bad_arguments_fail_at_start(ros_env, tmp_path):
          "unknown camera 'cam5'"),
         (('--bag', tmp_path / 'rec', '--model', model, '--backend', 'onnxruntime',
           '--precision', 'bfloat16'), 'precision bfloat16 needs backend torch'),
+        (('--bag', tmp_path / 'rec', '--model', model, '--detector-processes', 3),
+         '3 detector processes for 2 cameras; give at most 2'),
     ]
     for args, message in cases:
         with pipeline(ros_env, *args) as proc:
@@ -161,3 +166,32 @@ def test_detector_runs_in_a_child_process_that_ends_with_the_pipeline(ros_env, t
                     while alive(detectors[0]) and time.monotonic() < deadline:
                         time.sleep(0.1)
                     assert not alive(detectors[0]), proc.output()
+
+
+@pytest.mark.slow
+def test_player_and_two_detectors_run_in_child_processes_and_lockstep_fuses_every_frame(
+        ros_env, tmp_path):
+    """The player runs in its own process (its pid is not the pipeline's: fusion's
+    interpreter lock is not shared with it), as does each of --detector-processes 2
+    detectors (2 cameras each); lockstep across processes still fuses every frame of two
+    loop passes, in order, and SIGTERM to the pipeline stops them all (exit 0)."""
+    _, stamps = noise_recording(tmp_path / 'rec', cameras=4, frames=4)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    span = stamps[-1] - stamps[0] + (stamps[1] - stamps[0])     # the loop's stamp shift
+    expected = stamps + [s + span for s in stamps]
+    with RosHarness(ros_env) as ros:
+        clouds = ros.collect('/monet/keypoints3d', PointCloud2, 100)
+        with pipeline(ros_env, '--bag', tmp_path / 'rec', '--model', model, '--lockstep',
+                      '--loop', '--detector-processes', 2, '--quiet') as proc:
+            ros.spin_until(lambda: len(clouds) >= len(expected), timeout=120, process=proc)
+            found = children(proc.process.pid)
+            players = [pid for pid, cmd in found.items() if 'monet_ros.nodes.player' in cmd]
+            detectors = {pid: cmd for pid, cmd in found.items()
+                         if 'monet_ros.nodes.detector' in cmd}
+            assert proc.stop(signal.SIGTERM) == 0, proc.output()
+    assert len(players) == 1 and players[0] != proc.process.pid, (found, proc.output())
+    assert not alive(players[0])
+    assert len(detectors) == 2 and not any(alive(pid) for pid in detectors), found
+    groups = sorted(re.search(r'cameras:=(\[[^]]*\])', cmd).group(1) for cmd in detectors.values())
+    assert [json.loads(g) for g in groups] == [['cam0', 'cam1'], ['cam2', 'cam3']], detectors
+    assert [header_stamp_ns(c) for c in clouds[:len(expected)]] == expected, proc.output()

@@ -1,5 +1,6 @@
 """The player executable replays a recording: order, bytes, stamps, rate, offset, /clock."""
 import signal
+import time
 
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import ring_rig
@@ -140,3 +141,44 @@ def test_waits_for_the_fusion_topics_too(ros_env, small_bag):
         assert ros.spin_until(lambda: all(len(v) == 8 for v in images.values()), timeout=60,
                               process=None), player.output()
         assert player.wait(timeout=60) == 0, player.output()
+
+
+def test_lockstep_waits_for_keypoints3d_and_announces_each_frame(ros_env, small_bag):
+    """lockstep: frame i+1 goes out only after a keypoints3d stamped frame i arrived;
+    announce_frames: played_frames carries [stamp, wall time] before each frame's image and
+    [] at the end of the replay."""
+    from sensor_msgs.msg import PointCloud2
+    from std_msgs.msg import Int64MultiArray
+
+    from monet_ros.nodes.qos import STREAM_OUT
+
+    params = dict(bag=str(small_bag), rate=0.0, topics=['/cam0/image_raw'], clock=False,
+                  wait_for_subscribers=1, wait_for_topics=['played_frames'],
+                  start_delay_s=0.5, lockstep=True, lockstep_timeout_s=300.0,
+                  announce_frames=True)
+    with RosHarness(ros_env) as ros:
+        images = ros.collect('/cam0/image_raw', Image, 50)
+        frames = ros.collect('/monet/played_frames', Int64MultiArray, STREAM_OUT)
+        fused = ros.publisher('/monet/keypoints3d', PointCloud2, STREAM_OUT)
+        start_ns = time.time_ns()
+        with NodeProcess('player', ros_env, params) as player:
+            for i in range(8):
+                assert ros.spin_until(lambda i=i: len(frames) > i, timeout=60,
+                                      process=player), player.output()
+                if i < 3:      # nothing more until its keypoints3d is published
+                    ros.spin_for(0.3)
+                    assert len(frames) == i + 1, [list(f.data) for f in frames]
+                cloud = PointCloud2()
+                cloud.header.stamp.sec, cloud.header.stamp.nanosec = divmod(
+                    int(frames[i].data[0]), 10**9)
+                fused.publish(cloud)
+            assert ros.spin_until(lambda: len(frames) == 9 and len(images) == 8, timeout=60,
+                                  process=player), player.output()
+            assert player.stop(signal.SIGTERM) == 0, player.output()
+    end_ns = time.time_ns()
+    expected = [T0 + i * PERIOD for i in range(8)]
+    assert [int(f.data[0]) for f in frames[:8]] == expected
+    assert [header_stamp_ns(m) for m in images] == expected
+    walls = [int(f.data[1]) for f in frames[:8]]
+    assert walls == sorted(walls) and start_ns <= walls[0] and walls[-1] <= end_ns
+    assert list(frames[8].data) == []

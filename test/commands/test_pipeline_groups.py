@@ -1,0 +1,31 @@
+"""`monet pipeline --detector-processes`: the cameras split between detector processes."""
+from types import SimpleNamespace
+
+import pytest
+
+from monet_ros.commands.pipeline import TWO_DETECTORS_FROM, detector_groups
+from monet_ros.config import ConfigError
+
+
+def slots(n):
+    return [SimpleNamespace(name=f'cam{i}') for i in range(n)]
+
+
+@pytest.mark.parametrize('cameras,processes', [(16, 2), (5, 2), (7, 3), (4, 4), (3, 1)])
+def test_groups_are_contiguous_near_equal_and_cover_every_camera(cameras, processes):
+    groups = detector_groups(slots(cameras), processes)
+    assert len(groups) == processes
+    assert [name for group in groups for name in group] == [f'cam{i}' for i in range(cameras)]
+    sizes = [len(group) for group in groups]
+    assert max(sizes) - min(sizes) <= 1 and min(sizes) >= 1
+
+
+def test_auto_is_two_processes_from_the_measured_camera_count():
+    assert len(detector_groups(slots(TWO_DETECTORS_FROM), 0)) == 2
+    assert detector_groups(slots(TWO_DETECTORS_FROM - 1), 0) == [
+        [f'cam{i}' for i in range(TWO_DETECTORS_FROM - 1)]]
+
+
+def test_more_processes_than_cameras_is_an_error_naming_the_option():
+    with pytest.raises(ConfigError, match='detector_processes.*3 detector processes for 2'):
+        detector_groups(slots(2), 3)
