@@ -38,8 +38,10 @@ import numpy as np
 
 from monet_ros.config import setting, validate_config
 from monet_ros.temporal import cv_kalman
-# Consecutive gated measurements after which a joint has lost track (the joint really
-# moved away from the prediction, not one wrong view): it restarts from the measurement.
+
+# Consecutive gated measurements (that do not agree with each other: two that agree
+# restart the joint at once) after which a joint has lost track: it restarts from the
+# measurement.
 LOST_AFTER = 3
 
 
