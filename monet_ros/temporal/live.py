@@ -19,17 +19,18 @@ State resets: all joints when the stamp goes backwards or jumps more than filter
 (a replay loop, a paused recording); one joint when it has had no accepted measurement
 for filter_max_gap_s (it is then NaN until measured again, and restarts from that
 measurement) or when LOST_AFTER measurements in a row were gated (it lost track: a single
-outlier is rejected, a real jump is followed after LOST_AFTER frames).
+outlier is rejected; a real jump is followed from the second measurement, below).
 A NaN (not triangulated) joint is a missing measurement: predicted, never written into
 the state.
 Velocity guards (an outlier right after a restart, or after a missed frame when the
 gate is wide, would otherwise pass and throw the velocity off): a (re)started joint is
 tentative until a second measurement agrees with its first, i.e. lies within
 filter_max_speed x the time between them + filter_gate x sqrt(2) x filter_noise_mm of it;
-a measurement whose update would make a joint faster than filter_max_speed is gated; a
-gated measurement is kept as a candidate, and when the next one agrees with it (a real
-jump, or a fresh joint whose first measurement was the outlier) the joint restarts from
-the pair (velocity by differencing with its two-point covariance r2, r2/dt, 2 r2/dt^2).
+right after a miss (no accepted measurement in the previous frame) a measurement whose
+update would make the joint faster than filter_max_speed is gated; a gated measurement
+is kept as a candidate, and when the next one agrees with it (a real jump, or a fresh
+joint whose first measurement was the outlier) the joint restarts from the pair
+(velocity by differencing, with its two-point covariance r2, r2/dt, 2 r2/dt^2).
 The predict / gate / update step is temporal.cv_kalman, shared with the offline smoother.
 """
 from dataclasses import dataclass
@@ -76,9 +77,10 @@ class LiveFilterConfig:
     # error 676 -> 429 mm (raw 359), p99 72 -> 71; 3 m/s p99 77, 5+ m/s max 540-820 mm.
     # At 30 Hz two measurements agree within 4 m/s x 33 ms + 4 x sqrt(2) x 20 mm = 246 mm
     filter_max_speed: float = setting(
-        4.0, 'filter: fastest a joint moves (m/s): a measurement that would make it faster '
-        'is gated; after a restart the second measurement must lie within this speed '
-        '(plus the noise margin) of the first; two gated ones that agree restart the joint',
+        4.0, 'filter: fastest a joint moves (m/s): after a missed frame a measurement that '
+        'would make it faster is gated; after a restart the second measurement must lie '
+        'within this speed (plus the noise margin) of the first; two gated ones that agree '
+        'restart the joint',
         minimum=0.0, exclusive_minimum=True)
 
     def __post_init__(self):
@@ -116,6 +118,7 @@ class LiveFilter:
         self.candidate_ns = np.zeros(joints, np.int64)
         self.seen_ns = np.zeros(joints, np.int64)  # stamp of the last accepted measurement
         self.gated_run = np.zeros(joints, np.int64)  # consecutive gated measurements
+        self.missed = np.zeros(joints, bool)      # no accepted measurement last frame
 
     def within_reach(self, X, origin, origin_ns, stamp_ns):
         """(J,) bool: X within filter_max_speed x the elapsed time + gate x sqrt(2 r2) of
@@ -144,11 +147,11 @@ class LiveFilter:
         y, S, d2, z = cv_kalman.innovation(self.p, P, X, self.r2)
         # a fresh joint's position is its first measurement (nothing accepted since)
         agrees = ~self.fresh | self.within_reach(X, self.p, self.seen_ns, stamp_ns)
-        # and no accepted measurement makes a joint faster than filter_max_speed: after a
-        # miss the gate is wide enough for an outlier that would throw the velocity off
+        # after a miss the gate is wide enough for an outlier that would throw the velocity
+        # off: there the update may not make the joint faster than filter_max_speed
         speed = np.linalg.norm(self.v + (P[1] / S)[:, None] * y, axis=1)
         accept = live & z & (d2 <= self.gate2) & agrees \
-            & (speed <= self.config.filter_max_speed)
+            & ((speed <= self.config.filter_max_speed) | ~self.missed)
         # gated twice in a row by two measurements that agree with each other: the joint
         # is elsewhere (or a fresh joint's first measurement was the outlier): restart
         # from the pair
@@ -185,4 +188,5 @@ class LiveFilter:
         self.candidate[start] = np.nan
         live |= start
         out = np.where(live[:, None], self.p, np.nan)
+        self.missed = ~(accept | start | pair)
         return out, accept | start | pair

@@ -183,3 +183,22 @@ def test_bad_settings_and_shapes_are_named():
         LiveFilterConfig(filter_reset_s=-1.0)
     with pytest.raises(ValueError, match=r'X must be \(J, 3\)'):
         LiveFilter().update(T0, np.zeros((14, 2)))
+
+
+def test_an_outlier_after_a_missed_frame_cannot_throw_the_velocity_off():
+    """After a missed frame the gate is wide: a 0.3 m outlier passes it (accepted with the
+    speed guard off) but would make the joint faster than filter_max_speed, so it is gated
+    and the joint stays on its path; the next measurements are accepted."""
+    rng = np.random.default_rng(6)
+    stamps = T0 + np.arange(60) * 33_333_333
+    truth = np.broadcast_to([1.0, 0.5, 0.8], (60, 1, 3))               # standing still
+    measured = truth + rng.normal(0, 0.005, truth.shape)
+    measured[30] = np.nan                                             # a missed frame
+    measured[31, 0] += [0.3, 0.0, 0.0]
+    off, off_mask = run(LiveFilter(LiveFilterConfig(filter=True, filter_max_speed=1e9)),
+                        stamps, measured)
+    assert off_mask[31, 0] and np.abs(off[31:34, 0] - truth[31:34, 0]).max() > 0.05
+    f = LiveFilter(LiveFilterConfig(filter=True))
+    got, mask = run(f, stamps, measured)
+    assert not mask[31, 0] and mask[32:, 0].all() and f.gated == 1
+    assert np.abs(got[31:, 0] - truth[31:, 0]).max() < 0.03
