@@ -44,7 +44,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from monet_ros.fusion import FusionConfig, fuse_points  # noqa: E402
+from monet_ros.fusion import FusionConfig, fuse_frames  # noqa: E402
 from monet_ros.geometry import triangulate  # noqa: E402
 from monet_ros.skeleton import load_skeleton  # noqa: E402
 from monet_ros.synth import RigConfig, Subject, make_rig  # noqa: E402
@@ -56,11 +56,8 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def fuse(points2d, score, cameras):
     """Frame-by-frame fusion of (T, V, C, 2) at once -> X (T, C, 3), confidence, error."""
-    T, V, C = score.shape
-    r = fuse_points(points2d.transpose(1, 0, 2, 3).reshape(V, T * C, 2),
-                    score.transpose(1, 0, 2).reshape(V, T * C), cameras, FusionConfig())
-    return (r.X.reshape(T, C, 3), r.confidence.reshape(T, C),
-            r.reprojection_error.reshape(T, C))
+    r = fuse_frames(points2d, score, cameras, FusionConfig())
+    return r['X'], r['score'], r['error']
 
 
 def load_aniposelib(path):

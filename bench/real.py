@@ -107,14 +107,10 @@ def project_reference(reference, cameras):
 
 
 def fuse(points, confidence, cameras, config=None):
-    """(T, V, C, 2) + (T, V, C) -> (T, C, 3) with fusion.fuse_points (all instants at once)."""
-    from monet_ros.fusion import FusionConfig, fuse_points
+    """(T, V, C, 2) + (T, V, C) -> (T, C, 3) with fusion.fuse_frames (all instants at once)."""
+    from monet_ros.fusion import FusionConfig, fuse_frames
 
-    T, V, C, _ = points.shape
-    result = fuse_points(points.transpose(1, 0, 2, 3).reshape(V, T * C, 2),
-                         confidence.transpose(1, 0, 2).reshape(V, T * C), cameras,
-                         config or FusionConfig())
-    return result.X.reshape(T, C, 3)
+    return fuse_frames(points, confidence, cameras, config or FusionConfig())['X']
 
 
 def score(X, points, reference, reference2d, instants):

@@ -31,6 +31,8 @@ from monet_ros.geometry import select_candidates, stack_cameras, triangulate_rob
 from monet_ros.models import decode_heatmap_peaks, decode_heatmap_views
 from monet_ros.timing import NO_TIMER
 
+_CHUNK = 16384          # keypoint columns per batched triangulation (bounded memory)
+
 # Largest |S[0, 1]|, |S[1, 0]|, |S[2] - (0, 0, 1)| accepted for a crop/scale S.
 _CROP_TOL = 1e-6
 _OFF = [1, 3, 6, 7, 8]
@@ -173,6 +175,33 @@ def fuse_points(points2d, peak_confidence, cameras, config=FusionConfig(), timer
                                       config)
     result.seconds = time.perf_counter() - start
     return result
+
+
+def fuse_frames(points, score, cameras, config=FusionConfig()):
+    """Frame-by-frame fusion of every frame at once: points (T, V, C, 2), score (T, V, C)
+    -> dict X (T, C, 3), error, ncams, score (T, C), inliers (T, V, C), points2d (T, V, C,
+    2) as fused (NaN below the confidence threshold). Columns are independent, so this is
+    fuse_points per frame, batched in chunks of _CHUNK keypoints (`monet triangulate`, the
+    benches' frame-by-frame rows)."""
+    points, score = np.asarray(points, np.float64), np.asarray(score, np.float64)
+    T, V, C = score.shape
+    p = points.transpose(1, 0, 2, 3).reshape(V, T * C, 2)
+    s = np.nan_to_num(score.transpose(1, 0, 2).reshape(V, T * C), nan=0.0)
+    X = np.full((T * C, 3), np.nan)
+    error, conf = np.full(T * C, np.nan), np.zeros(T * C)
+    ncams = np.zeros(T * C, np.uint32)
+    inliers = np.zeros((V, T * C), bool)
+    fused = np.full((V, T * C, 2), np.nan)
+    for a in range(0, T * C, _CHUNK):
+        b = min(a + _CHUNK, T * C)
+        r = fuse_points(p[:, a:b], s[:, a:b], cameras, config)
+        X[a:b], error[a:b], conf[a:b], ncams[a:b] = (r.X, r.reprojection_error,
+                                                     r.confidence, r.num_views)
+        inliers[:, a:b], fused[:, a:b] = r.inliers, r.points2d
+    return dict(X=X.reshape(T, C, 3), error=error.reshape(T, C), score=conf.reshape(T, C),
+                ncams=ncams.reshape(T, C),
+                inliers=inliers.reshape(V, T, C).transpose(1, 0, 2),
+                points2d=fused.reshape(V, T, C, 2).transpose(1, 0, 2, 3))
 
 
 def _fuse_best(points2d, conf, cameras, config, timer=None):

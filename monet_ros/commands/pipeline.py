@@ -141,7 +141,9 @@ class Summary:
             if len(self.published) > 10000:
                 self.published.pop(next(iter(self.published)))
 
-    def on_fused(self, stamp_ns, result):
+    def on_fused(self, stamp_ns, result, filtered=None):
+        """A fused frame (the fusion node's listener; its figures are of the raw
+        fusion result: reprojection error and views are not changed by the filter)."""
         now = time.monotonic()
         with self.lock:
             self.frames += 1

@@ -91,10 +91,13 @@ class GroundTruthScore:
     as `monet synth` writes it); rig:
     the rig file (cameras in the fusion node's order); skeleton: preset or YAML (symmetric
     pairs). A looped replay's shifted stamps (player: span + one period per pass) are mapped
-    back to the recording's. on_fused(stamp_ns, FusionResult) accumulates, per keypoint, the
-    3D error (mm; NaN = not triangulated) and, for frames with every view, the 2D distance of
-    each view's decoded peak to the ground truth's projection (px), and counts left/right
-    swaps: symmetric pairs whose crossed assignment is closer to the truth than the direct one.
+    back to the recording's. on_fused(stamp_ns, FusionResult, filtered=None) accumulates, per
+    keypoint, the 3D error (mm; NaN = not triangulated) of the raw fusion result and, when
+    the fusion node's live filter is on (filtered (C, 3) m: what it publishes on
+    keypoints3d), of the filtered keypoints too; for frames with every view, the 2D distance
+    of each view's decoded peak to the ground truth's projection (px), and counts left/right
+    swaps (raw): symmetric pairs whose crossed assignment is closer to the truth than the
+    direct one.
     """
 
     def __init__(self, ground_truth, rig, skeleton='human14'):
@@ -116,7 +119,7 @@ class GroundTruthScore:
         self.span = int(self.stamps[-1] - self.stamps[0]) + period
         self.lookup = {int(s): i for i, s in enumerate(self.stamps)}
         self.lock = threading.Lock()
-        self.err3d, self.err2d, self.swapped = [], [], []
+        self.err3d, self.err2d, self.swapped, self.filtered3d = [], [], [], []
         self.unmatched = 0
 
     def instant(self, stamp_ns):
@@ -124,7 +127,7 @@ class GroundTruthScore:
         first = int(self.stamps[0])
         return self.lookup.get(first + (int(stamp_ns) - first) % self.span)
 
-    def on_fused(self, stamp_ns, result):
+    def on_fused(self, stamp_ns, result, filtered=None):
         from monet_ros.geometry import project_views
 
         t = self.instant(stamp_ns)
@@ -144,15 +147,21 @@ class GroundTruthScore:
             err2d = np.linalg.norm(result.points2d - uv, axis=-1)          # NaN = no peak
         with self.lock:
             self.err3d.append(err)
+            if filtered is not None:
+                self.filtered3d.append(np.linalg.norm(np.asarray(filtered) - truth, axis=1)
+                                       * 1000.0)
             self.swapped.append(swapped)
             if err2d is not None:
                 self.err2d.append(err2d)
 
     def figures(self):
         """dict: frames, median_mm, mean_mm, triangulated (share), pck{px} (share of views x
-        keypoints), swapped (share of symmetric pairs), per-keypoint arrays (C,)."""
+        keypoints), swapped (share of symmetric pairs), per-keypoint arrays (C,) (all of the
+        raw fusion result); filtered_frames, filtered_median_mm, filtered_mean_mm (the live
+        filter's output, over the frames it was on; NaN when never)."""
         with self.lock:
             err3d = np.array(self.err3d).reshape(-1, len(self.keypoints))
+            filt = np.array(self.filtered3d).reshape(-1, len(self.keypoints))
             err2d = np.array(self.err2d).reshape(-1, len(self.cameras), len(self.keypoints))
             swapped = np.array(self.swapped).reshape(-1, len(self.pairs))
         ok = np.isfinite(err3d)
@@ -162,6 +171,11 @@ class GroundTruthScore:
                    'median_mm': float(np.median(err3d[ok])) if ok.any() else float('nan'),
                    'mean_mm': float(np.mean(err3d[ok])) if ok.any() else float('nan'),
                    'triangulated': float(ok.mean()) if ok.size else float('nan'),
+                   'filtered_frames': len(filt),
+                   'filtered_median_mm': float(np.nanmedian(filt)) if np.isfinite(filt).any()
+                   else float('nan'),
+                   'filtered_mean_mm': float(np.nanmean(filt)) if np.isfinite(filt).any()
+                   else float('nan'),
                    'swapped': float(np.nanmean(swapped)) if swapped.size else float('nan'),
                    'keypoint_median_mm': np.array([np.median(e[np.isfinite(e)])
                                                    if np.isfinite(e).any() else np.nan
@@ -176,8 +190,12 @@ class GroundTruthScore:
         f = self.figures()
         if not f['frames']:
             return 'vs ground truth: no frame yet'
-        return (f'vs ground truth: 3D error median {f["median_mm"]:.0f} mm (mean '
-                f'{f["mean_mm"]:.0f}), {f["triangulated"]:.0%} triangulated, 2D PCK@'
+        filtered = ''
+        if f['filtered_frames']:
+            filtered = (f'; filtered (keypoints3d, {f["filtered_frames"]} frames) median '
+                        f'{f["filtered_median_mm"]:.0f} mm (mean {f["filtered_mean_mm"]:.0f})')
+        return (f'vs ground truth: raw 3D error median {f["median_mm"]:.0f} mm (mean '
+                f'{f["mean_mm"]:.0f}){filtered}, {f["triangulated"]:.0%} triangulated, 2D PCK@'
                 + '/'.join(str(px) for px in PCK_PX) + ' px '
                 + '/'.join(f'{100 * f[f"pck{px}"]:.0f}' for px in PCK_PX)
                 + f'%, left/right swapped {f["swapped"]:.0%}')
@@ -185,7 +203,8 @@ class GroundTruthScore:
     def table(self):
         """Per keypoint: median 3D error (mm) and 2D PCK@5 px over the frames fused."""
         f = self.figures()
-        lines = ['accuracy against the synthetic ground truth (reprojection error measures '
+        lines = ['accuracy (raw fusion result) against the synthetic ground truth '
+                 '(reprojection error measures '
                  'agreement between the views, not accuracy):',
                  f'  {"keypoint":<16}{"3D median mm":>14}{"PCK@5 px":>10}']
         for c, name in enumerate(self.keypoints):

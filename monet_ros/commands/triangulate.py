@@ -21,7 +21,6 @@ import sys
 import numpy as np
 
 HELP = '3D keypoints from 2D detections of other tools (DeepLabCut, SLEAP, anipose, CSV)'
-_CHUNK = 16384          # keypoint columns per batched triangulation (bounded memory)
 
 
 def add_arguments(parser):
@@ -56,30 +55,6 @@ def add_arguments(parser):
     add_filter_arguments(parser)
 
 
-def fuse_all(points, score, cameras, config):
-    """Frame-by-frame fusion of every frame at once: points (T, V, C, 2), score (T, V, C)
-    -> dict X (T, C, 3), error, ncams, score (T, C), inliers (T, V, C), points2d (T, V, C,
-    2) as fused (NaN below the confidence threshold). Columns are independent, so this is
-    fuse_points per frame, batched in chunks of _CHUNK keypoints."""
-    from monet_ros.fusion import fuse_points
-    T, V, C = score.shape
-    p = points.transpose(1, 0, 2, 3).reshape(V, T * C, 2)
-    s = np.nan_to_num(score.transpose(1, 0, 2).reshape(V, T * C), nan=0.0)
-    X = np.full((T * C, 3), np.nan)
-    error, conf = np.full(T * C, np.nan), np.zeros(T * C)
-    ncams = np.zeros(T * C, np.uint32)
-    inliers = np.zeros((V, T * C), bool)
-    fused = np.full((V, T * C, 2), np.nan)
-    for a in range(0, T * C, _CHUNK):
-        b = min(a + _CHUNK, T * C)
-        r = fuse_points(p[:, a:b], s[:, a:b], cameras, config)
-        X[a:b], error[a:b], conf[a:b], ncams[a:b] = (r.X, r.reprojection_error,
-                                                     r.confidence, r.num_views)
-        inliers[:, a:b], fused[:, a:b] = r.inliers, r.points2d
-    return dict(X=X.reshape(T, C, 3), error=error.reshape(T, C), score=conf.reshape(T, C),
-                ncams=ncams.reshape(T, C),
-                inliers=inliers.reshape(V, T, C).transpose(1, 0, 2),
-                points2d=fused.reshape(V, T, C, 2).transpose(1, 0, 2, 3))
 
 
 def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, camera_map=None,
@@ -92,7 +67,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     Raises ValueError / LabelError / ConfigError / OSError naming the file or option."""
     from monet_ros.commands.common import atomic_output_dir, check_new_output
     from monet_ros.config import ConfigError
-    from monet_ros.fusion import FusionConfig
+    from monet_ros.fusion import FusionConfig, fuse_frames
     from monet_ros.geometry import load_rig
     from monet_ros.io.export_results import write_results
     from monet_ros.labels_import.points2d import read_points2d
@@ -129,7 +104,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     T, V, C = score.shape
     present = np.isfinite(points).all(-1)
     low = present & ~(np.nan_to_num(score, nan=-1.0) >= fusion_config.confidence_threshold)
-    a = fuse_all(points, score, cameras, fusion_config)
+    a = fuse_frames(points, score, cameras, fusion_config)
     frames = pts.frames - pts.frames[0]
     a['stamps'] = np.round(frames * (1e9 / fps)).astype(np.int64)
     a['conf2d'] = score

@@ -168,7 +168,9 @@ class FusionNode(Node):
         self.fusion_seconds = []
         self.last_result = None
         self.last_stamp_ns = None
-        self.listeners = []       # callables(stamp_ns, result) (the pipeline's summary)
+        # callables(stamp_ns, result, filtered) (the pipeline's summary and score):
+        # filtered (C, 3) m the live filter's keypoints3d, None with the filter off
+        self.listeners = []
         self.first_heard = None   # monotonic time of the first heatmap (of any camera)
         self.sync = StampSynchronizer(self.names, slop_ns=int(config.slop_ms * 1e6),
                                       timeout_s=config.timeout_s, min_keys=config.min_views)
@@ -383,7 +385,7 @@ class FusionNode(Node):
                 names=self.skeleton.keypoints if self.config.marker_labels else None))
         self.timer.add('publish', time.perf_counter() - start)
         for listener in self.listeners:
-            listener(group.stamp_ns, result)
+            listener(group.stamp_ns, result, X if self.live_filter is not None else None)
 
     def publish_rig_tf(self):
         """The rig on /tf_static (latched), or one log line saying why not."""

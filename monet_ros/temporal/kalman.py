@@ -19,9 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monet_ros.temporal import cv_kalman
 from monet_ros.temporal.gaps import bridgeable, frames_for
-
-_V0 = 2.0          # m/s: prior standard deviation of a joint's velocity at initialisation
 
 
 @dataclass
@@ -58,45 +57,31 @@ def kalman_smooth(X, stamps_ns, config, noise_scale=None):
     gate2 = config.gate_sigma ** 2
     max_gap = frames_for(config.max_gap_s, stamps)
     dts = np.diff(stamps) / 1e9
-    x = np.zeros((C, 2, 3))
-    P = np.tile(np.eye(2), (C, 1, 1))
+    # the forward pass is the live filter's step (temporal.cv_kalman), per-point noise
+    p, v, P = np.zeros((C, 3)), np.zeros((C, 3)), np.zeros((3, C))
     init = np.zeros(C, bool)
     unseen = np.zeros(C, np.int64)         # frames since the last accepted measurement
-    xf, Pf = np.zeros((T, C, 2, 3)), np.zeros((T, C, 2, 2))
-    xp, Pp = np.zeros((T, C, 2, 3)), np.zeros((T, C, 2, 2))
+    xf, Pf = np.zeros((T, C, 2, 3)), np.zeros((T, 3, C))
+    xp, Pp = np.zeros((T, C, 2, 3)), np.zeros((T, 3, C))
     accepted = np.zeros((T, C), bool)
     rejected = np.zeros((T, C), bool)
     restart = np.zeros((T, C), bool)
-    valid_all = np.isfinite(X).all(-1)
-    prior = np.array([[r2, 0.0], [0.0, _V0 ** 2]])
     for k in range(T):
         if k:
-            dt = dts[k - 1]
-            F = np.array([[1.0, dt], [0.0, 1.0]])
-            Q = q * np.array([[dt ** 4 / 4, dt ** 3 / 2], [dt ** 3 / 2, dt ** 2]])
-            x = F @ x
-            P = F @ P @ F.T + Q
-        xp[k], Pp[k] = x, P
-        z, valid = X[k], valid_all[k]
+            p, P = cv_kalman.predict(p, v, P, dts[k - 1], q)
+        xp[k, :, 0], xp[k, :, 1], Pp[k] = p, v, P
         rk = r2 * scale2[k]
-        S = P[:, 0, 0] + rk
-        y = np.where(valid[:, None], z - x[:, 0], 0.0)
-        d2 = (y ** 2).sum(-1) / S
+        y, S, d2, valid = cv_kalman.innovation(p, P, X[k], rk)
         ok = valid & init & (d2 <= gate2)
         new = valid & (~init | (unseen > max_gap)) & ~ok
-        gain = P[:, :, 0] / S[:, None]                         # (C, 2)
-        x = np.where(ok[:, None, None], x + gain[:, :, None] * y[:, None, :], x)
-        P = np.where(ok[:, None, None], P - gain[:, :, None] * gain[:, None, :] * S[:, None,
-                                                                                  None], P)
-        if new.any():
-            x[new, 0], x[new, 1] = z[new], 0.0
-            P[new] = prior
-            P[new, 0, 0] = rk[new]
+        p, v, P = cv_kalman.update(p, v, P, y, S, ok)
+        cv_kalman.start(p, v, P, X[k], new, rk)
         init |= new
         used = ok | new
         accepted[k], rejected[k], restart[k] = used, valid & ~used, new
         unseen = np.where(used, 0, unseen + 1)
-        xf[k], Pf[k] = x, P
+        xf[k, :, 0], xf[k, :, 1], Pf[k] = p, v, P
+    Pf, Pp = cv_kalman.as_matrices(Pf), cv_kalman.as_matrices(Pp)     # (T, C, 2, 2)
     seen = np.cumsum(accepted, axis=0) > 0                      # initialised
     xs, Ps = xf.copy(), Pf.copy()
     for k in range(T - 2, -1, -1):

@@ -61,6 +61,31 @@ def test_swapped_sides_and_noise_are_measured(synth):
     assert score.unmatched == 1
 
 
+def test_raw_and_filtered_keypoints_are_scored_apart(synth):
+    """With the fusion node's live filter on, the listener gets the filtered keypoints too:
+    both are scored (brute force here) and the line says which figure is which; with the
+    filter off only the raw one."""
+    out, stamps, truth, cameras = synth
+    score = GroundTruthScore(out / 'ground_truth.npz', out / 'rig.yaml')
+    offset = np.array([0.0, 0.03, 0.04])                    # a filter 50 mm off
+    for t, stamp in enumerate(stamps):
+        result = fused(truth[t], cameras, noise=2.0, seed=t)
+        score.on_fused(int(stamp), result, truth[t] + offset)
+    f = score.figures()
+    raw = np.stack([np.linalg.norm(fused(truth[t], cameras, noise=2.0, seed=t).X - truth[t],
+                                   axis=1) for t in range(len(stamps))]) * 1000
+    assert f['median_mm'] == pytest.approx(np.median(raw))
+    assert f['filtered_frames'] == len(stamps)
+    assert f['filtered_median_mm'] == pytest.approx(50.0)
+    assert f['filtered_mean_mm'] == pytest.approx(50.0)
+    line = score.line()
+    assert f'raw 3D error median {np.median(raw):.0f} mm' in line
+    assert f'filtered (keypoints3d, {len(stamps)} frames) median 50 mm (mean 50)' in line
+    plain = GroundTruthScore(out / 'ground_truth.npz', out / 'rig.yaml')
+    plain.on_fused(int(stamps[0]), fused(truth[0], cameras))
+    assert 'filtered' not in plain.line() and plain.figures()['filtered_frames'] == 0
+
+
 def test_demo_recipe_is_sparse_distinct_sided_and_the_default_recipe():
     assert '--distinct-sides' in SYNTH_ARGS
     fraction = float(SYNTH_ARGS[SYNTH_ARGS.index('--label-fraction') + 1])

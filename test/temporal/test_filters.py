@@ -5,7 +5,7 @@ frame-by-frame robust triangulation of the same 2D (fusion.fuse_points)."""
 import numpy as np
 import pytest
 
-from monet_ros.fusion import FusionConfig, fuse_points
+from monet_ros.fusion import FusionConfig, fuse_frames
 from monet_ros.skeleton import load_skeleton
 from monet_ros.synth import RigConfig, Subject, make_rig
 from monet_ros.synth.noisy2d import noisy_detections
@@ -27,12 +27,9 @@ def scene():
 
 
 def frame_by_frame(points2d, score, cameras):
-    """fuse_points of every frame (T, V, C, ...) -> X (T, C, 3), confidence, error."""
-    Tn, V, C = score.shape
-    r = fuse_points(points2d.transpose(1, 0, 2, 3).reshape(V, Tn * C, 2),
-                    score.transpose(1, 0, 2).reshape(V, Tn * C), cameras, FusionConfig())
-    return (r.X.reshape(Tn, C, 3), r.confidence.reshape(Tn, C),
-            r.reprojection_error.reshape(Tn, C))
+    """fuse_frames (fuse_points of every frame) -> X (T, C, 3), confidence, error."""
+    r = fuse_frames(points2d, score, cameras, FusionConfig())
+    return r['X'], r['score'], r['error']
 
 
 def errors_mm(X, truth):
