@@ -88,7 +88,9 @@ def kalman_smooth(X, stamps_ns, config, noise_scale=None):
         dt = dts[k]
         F = np.array([[1.0, dt], [0.0, 1.0]])
         chain = seen[k] & ~restart[k + 1]                     # same stretch as k + 1
-        G = Pf[k] @ F.T @ np.linalg.inv(Pp[k + 1])             # (C, 2, 2)
+        # a joint not yet started has only process noise (rank 1): no gain there
+        Pp_k = np.where(chain[:, None, None], Pp[k + 1], np.eye(2))
+        G = Pf[k] @ F.T @ np.linalg.inv(Pp_k)                  # (C, 2, 2)
         xs_k = xf[k] + G @ (xs[k + 1] - xp[k + 1])
         Ps_k = Pf[k] + G @ (Ps[k + 1] - Pp[k + 1]) @ G.transpose(0, 2, 1)
         xs[k] = np.where(chain[:, None, None], xs_k, xf[k])

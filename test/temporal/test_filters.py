@@ -140,3 +140,19 @@ def test_filter_config_rejects_bad_values():
         FilterConfig(max_gap_s=-1.0)
     with pytest.raises(ConfigError, match='acceleration_m_s2'):
         FilterConfig(acceleration_m_s2=0.0)
+
+
+def test_a_joint_never_triangulated_or_started_late_is_no_error():
+    """A keypoint with no 3D point until late in the recording (or never: a joint no view
+    saw) has only process noise before its start, a rank-1 covariance (exactly singular at
+    4 Hz: powers of two); the smoother must leave it NaN there and smooth the rest (it
+    raised LinAlgError: singular matrix)."""
+    stamps = np.arange(40, dtype=np.int64) * 250_000_000       # 4 Hz
+    t = stamps / 1e9
+    X = np.stack([np.stack([t, np.sin(t), np.zeros_like(t) + 2.0], -1)] * 3, axis=1)
+    X[:, 1] = np.nan                        # never measured
+    X[:25, 2] = np.nan                      # measured from frame 25 on
+    result = kalman_smooth(X, stamps, FilterConfig())
+    assert np.isnan(result.X[:, 1]).all() and np.isnan(result.X[:25, 2]).all()
+    assert np.allclose(result.X[25:, 2], X[25:, 2], atol=0.01)
+    assert np.allclose(result.X[:, 0], X[:, 0], atol=0.01)
