@@ -259,7 +259,7 @@ def run(args):
                    filter_config=filter_config)
     if len(args.bag) > 1:         # several recordings: worker processes (process_many.py)
         from monet_ros.commands.process_many import run_many
-        return run_many(args, options)
+        return run_many(args, options, process_recording)
     args.bag = args.bag[0]
     figures = process_recording(args.bag, out=args.out, device=device,
                                 progress=not args.quiet, threads=args.threads, **options)

@@ -79,18 +79,19 @@ def _worker_signals():
     signal.signal(signal.SIGTERM, _stop)
 
 
-def process_job(job, options):
-    """Worker body: process one recording; returns a dict (bag, out, frames, seconds,
-    mean_error, error: None or the one-line reason). Never raises for a bad recording."""
+def process_job(job, options, work):
+    """Worker body: process one recording with `work` (process.process_recording, passed
+    in so that this module does not import the command that imports it; pickled by name);
+    returns a dict (bag, out, frames, seconds, mean_error, error: None or the one-line
+    reason). Never raises for a bad recording."""
     from monet_ros.cli import bad_input_errors, error_line
     from monet_ros.commands.common import check_threads
-    from monet_ros.commands.process import process_recording
 
     result = dict(bag=job.bag, out=job.out, frames=0, seconds=0.0, mean_error=float('nan'),
                   error=None)
     try:
         check_threads('monet process', job.threads)
-        figures = process_recording(job.bag, out=job.out, device=job.device,
+        figures = work(job.bag, out=job.out, device=job.device,
                                     threads=job.threads, progress=False, **options)
         result.update(frames=figures['frames'], seconds=figures['seconds'],
                       mean_error=figures['mean_error'],
@@ -119,9 +120,10 @@ def summary_table(results):
     return ['  '.join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
 
 
-def run_many(args, options):
-    """Process args.bag (several recordings) with args.jobs workers. options: the keyword
-    arguments of process_recording shared by every recording (model, rig, config, ...).
+def run_many(args, options, work):
+    """Process args.bag (several recordings) with args.jobs workers. work:
+    process.process_recording; options: its keyword arguments shared by every recording
+    (model, rig, config, ...).
     Returns the exit code: 0, or 2 if any recording failed."""
     from tqdm import tqdm
 
@@ -144,7 +146,7 @@ def run_many(args, options):
     pool = ProcessPoolExecutor(max_workers=min(args.jobs, len(jobs)), mp_context=context,
                                initializer=_worker_signals)
     try:
-        futures = {pool.submit(process_job, job, options): job for job in jobs}
+        futures = {pool.submit(process_job, job, options, work): job for job in jobs}
         done = tqdm(as_completed(futures), total=len(futures), desc='monet process',
                     unit='recording', disable=args.quiet, file=sys.stderr)
         for future in done:
