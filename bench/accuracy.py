@@ -97,6 +97,7 @@ COLUMNS = (('error2d_mean', '2D err. (px)', '.2f', True),
            ('reprojection', 'reproj. (px)', '.2f', True))
 
 _DATA = {}          # rig -> TrainingData inputs, filled before forking
+_ORACLE = []        # [True]: --pseudo-oracle (a diagnostic control, see oracle_pseudo_labels)
 EVAL_FRACTION = 0.2  # the held-out tail of every recording (evaluation only, never trained)
 
 
@@ -151,6 +152,10 @@ def train_and_evaluate(job):
         summary = {'steps': 0, 'pseudo_labels': 0, 'last': {}}
     else:
         trainer = Trainer(config, data, Path(out) / 'runs' / rig / label)
+        if trainer.pseudo_label_count and recording.gt3d is not None:
+            extra['pseudo_label_precision'] = pseudo_label_precision(trainer, recording)
+        if _ORACLE:
+            oracle_pseudo_labels(trainer, recording)
         extra['pseudo_labels_initial'] = trainer.pseudo_label_count
         # share of the unlabeled train views x keypoints pseudo-labelled at the start
         extra['pseudo_label_coverage'] = trainer.pseudo_label_coverage
@@ -190,6 +195,39 @@ def train_and_evaluate(job):
           f'{result.extra["error2d_mean"]:.2f} px, PCK@0.1 {result.pck.at(0.1):.3f}, '
           f'reproj {result.reprojection_mean:.2f} px', file=sys.stderr, flush=True)
     return result.to_json()
+
+
+def pseudo_label_truth(trainer, recording):
+    """((T, V, C) bool cells holding a pseudo-label (not a label), (T, V, C, 2) projected
+    ground truth): the cells L_B trains on and their true positions."""
+    from monet_ros.learning.pseudo_labels import project_to_views
+
+    T, V, C = recording.num_instants, recording.num_views, recording.num_keypoints
+    truth = project_to_views(recording.gt3d.reshape(-1, 3), recording.cameras)
+    truth = truth.reshape(V, T, C, 2).transpose(1, 0, 2, 3)
+    cells = np.isfinite(trainer.pseudo[..., 0]) & ~np.isfinite(trainer.data.labels[..., 0])
+    return cells, truth
+
+
+def pseudo_label_precision(trainer, recording):
+    """Pseudo-labels against the ground truth: cells, error median (px), share beyond 10 and
+    20 px (cells whose truth projects outside the image are left out)."""
+    cells, truth = pseudo_label_truth(trainer, recording)
+    err = np.linalg.norm(trainer.pseudo - truth, axis=-1)[cells & np.isfinite(truth[..., 0])]
+    if not err.size:
+        return {'cells': 0}
+    return {'cells': int(cells.sum()), 'median_px': float(np.median(err)),
+            'beyond10': float((err > 10).mean()), 'beyond20': float((err > 20).mean())}
+
+
+def oracle_pseudo_labels(trainer, recording):
+    """Diagnostic control (--pseudo-oracle): every pseudo-label replaced by the projected
+    ground truth of the same (instant, view, keypoint) cell: the same cells, crops and batch
+    plans, what L_B would give with noise-free labels."""
+    cells, truth = pseudo_label_truth(trainer, recording)
+    keep = cells & np.isfinite(truth[..., 0])
+    trainer.pseudo = np.where(keep[..., None], truth, trainer.pseudo)
+    trainer._update_pools()
 
 
 def value(summary, key):
@@ -366,6 +404,9 @@ def main(argv=None):
                         'with --merge')
     parser.add_argument('--merge', action='store_true',
                         help='keep the (mode, dataset) results of OUT/results.json not rerun now')
+    parser.add_argument('--pseudo-oracle', action='store_true',
+                        help='diagnostic control: pseudo-labels replaced by the projected '
+                        'ground truth on the same cells (use with --tag oracle)')
     parser.add_argument('--report', action='store_true',
                         help='train nothing: the tables again from OUT/results.json (and the '
                         'rigs and seeds of OUT/bench_meta.json)')
@@ -385,6 +426,8 @@ def main(argv=None):
     from monet_ros.learning.trainer import split_instants
 
     overrides = parse_overrides(args.overrides)
+    if args.pseudo_oracle:
+        _ORACLE.append(True)
     # the held-out tail every mode is evaluated on (base below): labelled instants in it are
     # not trained, and the counts printed here are those trained
     eval_fraction = overrides.get('eval_fraction', EVAL_FRACTION)

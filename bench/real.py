@@ -6,21 +6,21 @@ half resolution; cameras from its own CameraInfo + /tf_static). The reference is
 reprojects 4-10 px from OpenPose's 2D at half resolution, the floor of every figure here),
 trc (X, Y, Z) = world (Y, Z, X), its 14 human14 joints (head = Pose2Sim's Head marker).
 
-For each count N in --labels (2, 3, 5, 10) the labelled instants are N instants spread over the
-recording (one drawn with each of --seeds in each of N equal strata: one label set per seed,
-also the training seed); their labels are the reference
-projected into all 4 views (project_to_views: none outside an image). Each mode (supervised,
-bootstrap2, monet) then trains the same network from the same initialisation with the same
-wall-time budget (--budget-s per run: the step count of each mode is set from a short timing
-probe of its step cost; the table gives the wall times actually spent), with the default
-TrainConfig recipe (no held-out tail: every instant is in the training split, and the scores
-below are on the instants without labels, which L_E and bootstrapping see unlabelled). Each
-model is saved as a checkpoint and scored through the code a user runs: `monet process`'s
-core (commands.process.process_recording on the recording's bag: the live detector's
-tracked crop rule, crop_rule.TrackedCrops, and fusion.fuse_heatmaps), and, beside it, for
-detection quality, on ground-truth crops (boxes of the reference projected into each view,
-square, 25% margin; detections fused by fusion.fuse_points). Both are scored on the
-unlabelled instants against the reference:
+For each count N in --labels (2, 3, 5, 10) the labelled instants are N instants spread over
+the recording (one drawn with each of --seeds in each of N equal strata: one label set per
+seed, also the training seed); their labels are the reference projected into all 4 views
+(project_to_views: none outside an image). Each mode (default supervised, spatiotemporal,
+monet; any `monet train --mode`) then trains the same network from the same initialisation
+with the same wall-time budget (--budget-s per run: the step count of each mode is set from
+a short timing probe of its step cost; the table gives the wall times actually spent), with
+the default TrainConfig recipe (no held-out tail: every instant is in the training split,
+and the scores below are on the instants without labels, which L_E and bootstrapping see
+unlabelled). Each model is saved as a checkpoint and scored through the code a user runs:
+`monet process`'s core (commands.process.process_recording on the recording's bag: the live
+detector's tracked crop rule, crop_rule.TrackedCrops, and fusion.fuse_heatmaps), and,
+beside it, for detection quality, on ground-truth crops (boxes of the reference projected
+into each view, square, 25% margin; detections fused by fusion.fuse_points). Both are
+scored on the unlabelled instants against the reference:
 
   3D error (mm): median / mean / p90 over the triangulated joints; `tri` = share triangulated;
   PCK@5/10/20 px: share of the detections (every view, every joint the reference projects
@@ -53,6 +53,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from monet_ros.commands.demo import default_data_root  # noqa: E402
+from monet_ros.learning.config import MODES as TRAIN_MODES  # noqa: E402
 from monet_ros.learning.config import TrainConfig  # noqa: E402
 
 BAG = Path('derived_pose2sim_4cam_mcap/pose2sim_balancing_4cam')
@@ -62,7 +63,7 @@ MARKERS = {'head': 'Head', 'neck': 'Neck', 'r_shoulder': 'RShoulder', 'r_elbow':
            'r_wrist': 'RWrist', 'l_shoulder': 'LShoulder', 'l_elbow': 'LElbow',
            'l_wrist': 'LWrist', 'r_hip': 'RHip', 'r_knee': 'RKnee', 'r_ankle': 'RAnkle',
            'l_hip': 'LHip', 'l_knee': 'LKnee', 'l_ankle': 'LAnkle'}
-MODES = ('supervised', 'bootstrap2', 'monet')
+MODES = ('supervised', 'spatiotemporal', 'monet')        # the default rows
 PCK_PX = (5, 10, 20)
 _STATE = {}             # recording and reference, loaded before forking workers
 _PREPARED = {}          # (labels, seed, config of the crops) -> TrainingData, per process
@@ -358,12 +359,13 @@ def plot(rows, path, counts):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for mode in (*MODES, 'nearest labelled pose'):
+    for mode in (*dict.fromkeys(r['mode'] for r in rows if r['mode'] in TRAIN_MODES),
+                 'nearest labelled pose'):
         pts = sorted((r['labels'], r['median_mm'], r.get('pck10')) for r in rows
                      if r['mode'] == mode and r['median_mm'] is not None)
         if not pts:
             continue
-        style = '--s' if mode not in MODES else '-o'
+        style = '--s' if mode not in TRAIN_MODES else '-o'
         axes[0].plot([p[0] for p in pts], [p[1] for p in pts], style, label=mode)
         axes[1].plot([p[0] for p in pts], [100 * p[2] for p in pts], style, label=mode)
     for r in rows:
@@ -388,7 +390,7 @@ def main(argv=None):
                         'bench/results/real, or bench/results/real_quick with --quick)')
     parser.add_argument('--labels', nargs='+', type=int, default=[2, 3, 5, 10],
                         help='numbers of labelled instants')
-    parser.add_argument('--modes', nargs='+', default=list(MODES), choices=MODES)
+    parser.add_argument('--modes', nargs='+', default=list(MODES), choices=TRAIN_MODES)
     parser.add_argument('--budget-s', type=float, default=300.0,
                         help='training wall time per run (s), the same for every mode')
     parser.add_argument('--steps', type=int, default=0,
