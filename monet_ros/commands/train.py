@@ -81,6 +81,7 @@ def run(args):
     from monet_ros.learning import distributed
     from monet_ros.learning.distributed import DistributedTrainer as Trainer
     from monet_ros.learning.recording import load_recording
+    from monet_ros.learning.trainer import check_training_precision, pick_device
     from monet_ros.models import build_model
     from monet_ros.models.device import check_device
 
@@ -89,6 +90,8 @@ def run(args):
     check_device('monet train', None if config.device == 'auto' else config.device)
     check_threads('monet train', options.threads)
     world, device = distributed.init_from_env(config.device)     # a torchrun job, if any
+    # bfloat16 only where native: refused before the recording is read
+    check_training_precision(config.precision, device or pick_device(config.device))
     if world.distributed and args.holdout_labelled:
         raise ValueError('--holdout-labelled is not supported under torchrun (train, then '
                          'score the held-out labels with `monet eval`)')

@@ -9,6 +9,7 @@ import math
 from monet_ros.config import ConfigError, config_from_mapping, setting, validate_config
 from monet_ros.learning.dataset import AugmentConfig
 from monet_ros.learning.pseudo_labels import TrackingConfig
+from monet_ros.models.detector import PRECISIONS
 
 # Bounds that keep a typo from asking for an absurd allocation (input side in px, channel
 # width, crops per step); far above anything the architectures are meant for.
@@ -93,6 +94,10 @@ class TrainConfig:
     checkpoint_every: int = setting(500, 'steps between checkpoints', minimum=1)
     seed: int = setting(0, 'random seed (sampling, augmentation, initialisation)', minimum=0)
     device: str = setting('auto', 'torch device: auto (CUDA when present), cpu, cuda, cuda:N')
+    precision: str = setting('float32', 'training arithmetic: float32, or bfloat16 (the '
+                             'network forward under torch.autocast; losses, weights and '
+                             'checkpoints stay float32; only where the CPU (AVX512-BF16 / AMX) '
+                             'or GPU runs bfloat16 natively)', choices=PRECISIONS)
     eval_fraction: float = setting(0.0, 'held-out tail of the recording, never trained on '
                                    '(0 = train on everything, for real use; e.g. 0.2 to keep '
                                    'a tail to measure generalisation on)', minimum=0.0,

@@ -176,7 +176,8 @@ class DistributedTrainer(Trainer):
                              f'{self.world.world_size} ranks (raise --batch-labelled)')
         rank = self.world.rank
         stages = self._wrap()(images[bounds[rank]:bounds[rank + 1]])
-        return [_GatherShares.apply(s, bounds) for s in stages]
+        # gathered in float32 (bfloat16 autocast outputs too: the losses are float32 anyway)
+        return [_GatherShares.apply(s.float(), bounds) for s in stages]
 
     def bootstrap(self):
         """A bootstrapping round computed by rank 0 and broadcast to every rank."""

@@ -175,7 +175,12 @@ class OnlineLearner:
     def __init__(self, config, log=print):
         import torch
 
-        from monet_ros.learning.trainer import Trainer, TrainingData
+        from monet_ros.learning.trainer import (
+            Trainer,
+            TrainingData,
+            check_training_precision,
+            pick_device,
+        )
         from monet_ros.models import build_model, load_checkpoint
         from monet_ros.skeleton import load_skeleton
 
@@ -185,6 +190,7 @@ class OnlineLearner:
         self.log = log
         if config.threads:
             torch.set_num_threads(config.threads)
+        check_training_precision(config.precision, pick_device(config.device))
         self.out = Path(config.out)
         self.out.mkdir(parents=True, exist_ok=True)
         for stale in self.out.rglob('.*.tmp'):          # temporaries of a killed write

@@ -19,6 +19,11 @@ the same number of images per step, and the batch plan never depends on lambda_e
 lambda_p: a run with a weight of 0 is that term's exact control (see _batch_plan).
 State (weights, Adam, schedule, step, RNG, pseudo-labels) is checkpointed atomically and
 resumes exactly.
+Precision (config.precision): bfloat16 runs the network forward under torch.autocast
+(about 2x the steps/s on a CPU with AVX512-BF16 / AMX, bench/train_recipe.py); the stages are
+cast to float32 before the losses, and weights, Adam and checkpoints stay float32. It is
+refused (ConfigError naming precision) where bfloat16 is not native: the inference rule,
+models.detector.check_precision.
 
 Problems that make a run quietly useless are warned about loudly (stderr by default, and in
 `warnings` of the run summary): a semi-supervised term with no data (no pseudo-labels, a
@@ -38,6 +43,7 @@ import torch
 from tqdm import tqdm
 
 from monet_ros.atomic import atomic_write, write_error
+from monet_ros.config import ConfigError
 from monet_ros.crop_rule import recording_boxes
 from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.learning.config import TrainConfig
@@ -55,6 +61,7 @@ from monet_ros.learning.pseudo_labels import (
     spatiotemporal_pseudo_labels,
 )
 from monet_ros.models import build_model, decode_heatmaps, save_checkpoint
+from monet_ros.models.detector import check_precision
 
 STATE_FORMAT = 'monet_ros.trainer_state/1'
 LOG_FIELDS = ('step', 'loss', 'L', 'E', 'B', 'lr', 'pseudo_labels', 'seconds')
@@ -78,6 +85,16 @@ def pick_device(name):
     if name == 'auto':
         return torch.device('cuda' if torch.cuda.is_available() else 'cpu')
     return torch.device(name)
+
+
+def check_training_precision(precision, device):
+    """ConfigError naming TrainConfig.precision unless it runs well on `device` (torch device
+    or string): the inference rule, models.detector.check_precision (bfloat16 only where the
+    CPU has AVX512-BF16 / AMX or the GPU bfloat16; elsewhere it is emulated, slower)."""
+    try:
+        check_precision(precision, 'torch', device)
+    except ValueError as error:
+        raise ConfigError('TrainConfig', 'precision', str(error)) from None
 
 
 def split_instants(num_instants, eval_fraction):
@@ -200,6 +217,7 @@ class Trainer:
         self.spec = config.spec
         self.data = data
         self.device = torch.device(device) if device is not None else pick_device(config.device)
+        check_training_precision(config.precision, self.device)
         self.out_dir = Path(out_dir) if out_dir is not None else None
         torch.manual_seed(config.seed)
         self.keypoints = list(data.recording.keypoints)
@@ -316,7 +334,9 @@ class Trainer:
         per instant for 'E'], kind in 'L' (labels), 'B' (pseudo-labels), 'E' (epipolar)."""
         pairs = np.concatenate([p[1] for p in parts])
         batch = self.data.cache.views(pairs[:, 0], pairs[:, 1], rng, augment)
-        stages = self.forward_batch(batch.images.to(self.device, non_blocking=True))
+        with self.autocast():
+            stages = self.forward_batch(batch.images.to(self.device, non_blocking=True))
+        stages = [s.float() for s in stages]     # the losses in float32 (no-op in float32)
         terms = {}
         start = 0
         for kind, p, *rest in parts:
@@ -340,6 +360,13 @@ class Trainer:
                 self.last_pair_share = float(e['pair_used'].sum()) / max(1, e['pairs_possible'])
             start += n
         return terms
+
+    def autocast(self):
+        """The context of the training forward: torch.autocast to bfloat16 when
+        config.precision is bfloat16 (weights, gradients and Adam stay float32), else none.
+        Detections (detect: bootstrapping, fit_error) run in float32."""
+        return torch.autocast(self.device.type, dtype=torch.bfloat16,
+                              enabled=self.config.precision == 'bfloat16')
 
     def forward_batch(self, images):
         """The network's stages on a batch of crops (B, 3, H, W); learning.distributed
@@ -539,8 +566,8 @@ class Trainer:
     @classmethod
     def resume(cls, out_dir, data, config=None, device=None, model=None):
         """A trainer continuing from out_dir/trainer_state.pt (config: the saved one unless
-        given; only `steps` and `checkpoint_every` may differ; model: the network to load the
-        saved weights into, default one built from the config)."""
+        given; only `steps`, `checkpoint_every`, `device` and `precision` may differ; model:
+        the network to load the saved weights into, default one built from the config)."""
         path = Path(out_dir) / 'trainer_state.pt'
         try:
             state = torch.load(path, map_location='cpu', weights_only=True)
@@ -555,7 +582,7 @@ class Trainer:
             config = saved
         else:
             for name, value in saved.to_dict().items():
-                if name not in ('steps', 'checkpoint_every', 'device') and \
+                if name not in ('steps', 'checkpoint_every', 'device', 'precision') and \
                         getattr(config, name) != value:
                     raise ValueError(f'{path}: config field {name} is {value!r} in the saved '
                                      f'state but {getattr(config, name)!r} now')

@@ -32,16 +32,16 @@ def without_batchnorm(model):
     return model
 
 
-def train_rank(rank, world_size, port, out, result, batchnorm=True):
-    """Train CONFIG on the blob recording as rank `rank` of `world_size` (1 = no process
-    group); writes {'losses': [...], 'params': [...]} to `result`_<rank>.json."""
+def train_rank(rank, world_size, port, out, result, batchnorm=True, precision='float32'):
+    """Train CONFIG (in `precision`) on the blob recording as rank `rank` of `world_size`
+    (1 = no process group); writes {'losses': [...], 'params': [...]} to `result`_<rank>.json."""
     if world_size > 1:
         os.environ.update(RANK=str(rank), WORLD_SIZE=str(world_size), LOCAL_RANK=str(rank),
                           MASTER_ADDR='127.0.0.1', MASTER_PORT=str(port))
     torch.set_num_threads(1)
     distributed.init_from_env('cpu')
     recording = blob_recording(num_views=4, T=24, C=3, labelled=(2, 9), label_views=(0, 1))
-    config = TrainConfig(**CONFIG)
+    config = TrainConfig(**CONFIG, precision=precision)
     torch.manual_seed(config.seed)
     model = build_model('small', 3, **config.model_options())
     if not batchnorm:
