@@ -32,6 +32,7 @@ no GPU lent), `monet synth --frames 150 --cameras 8 --layout ring --width 320 --
 """
 import argparse
 import json
+import os
 from pathlib import Path
 import sys
 import time
@@ -67,7 +68,8 @@ def make_data(args):
         if not (folder / 'ground_truth.npz').exists():
             code = monet_main(['synth', '--out', str(folder), '--frames', str(args.frames),
                                '--cameras', '8', '--layout', 'ring', '--width', '320',
-                               '--height', '240', '--label-fraction', '0.008', '--seed', '0',
+                               '--height', '240', '--label-fraction',
+                               str(args.label_fraction), '--seed', '0',
                                '--quiet'])
             if code:
                 raise SystemExit('monet synth failed')
@@ -126,40 +128,91 @@ def fused_errors(checkpoint, data, instants, fusion=None):
     return float(np.nanmean(reproj)), float(np.nanmean(e3)), float(ok.mean())
 
 
-def evaluate(checkpoint, data, label):
+def evaluate(checkpoint, data, label, instants):
+    """Ground-truth figures of a checkpoint on `instants`: the live core's fused keypoints
+    (fused_reproj_px, fused_3d_mm, triangulated) and evaluation.evaluate_detector (gt_2d_px:
+    detections vs projected ground truth; pck@0.1; gt_reproj_px). n/a without ground truth
+    (real data: the held-out labelled error is then the accuracy figure)."""
     model, meta = load_checkpoint(checkpoint)
-    held = data.held_out
-    fused_px, fused_mm, fraction = fused_errors(checkpoint, data, held)
-    row = {'model': label, 'step': meta['step'], 'fused_reproj_px': fused_px,
-           'fused_3d_mm': fused_mm, 'triangulated': fraction}
+    fused_px, fused_mm, fraction = fused_errors(checkpoint, data, instants)
+    row = {'fused_reproj_px': fused_px, 'triangulated': fraction,
+           'fused_3d_mm': fused_mm if data.recording.gt3d is not None else None}
     if data.recording.gt3d is not None:
-        summary = evaluate_detector(Detector(model, meta, device='cpu'), data.recording, held,
-                                    data.boxes, mode=label)
-        row.update({'allview_reproj_px': summary.reprojection_mean,
+        summary = evaluate_detector(Detector(model, meta, device='cpu'), data.recording,
+                                    instants, data.boxes, mode=label)
+        row.update({'gt_2d_px': summary.extra['error2d_mean'],
                     'gt_reproj_px': summary.gt_reprojection_mean,
                     'pck@0.1': summary.pck.at(0.1)})
     return row
 
 
-def online(folder, skeleton, start, out, mode, minutes, every, data, device):
-    """Run OnlineLearner for `minutes` from `start`; print each announcement live."""
+def online(folder, skeleton, start, out, mode, minutes, every, device, validation):
+    """Run OnlineLearner for `minutes` from `start`, keeping every checkpoint; print each
+    one live. Returns (learner, timeline rows: t_s, step, checkpoint path, the learner's own
+    metrics and verdict)."""
     config = LearnerConfig(bags=(str(folder),), out=str(out), skeleton=skeleton, model=str(start),
                            mode=mode, views_per_instant=8, checkpoint_every=every,
-                           device=device, resume=False, validate_instants=16, **SMALL, **BATCH)
+                           device=device, resume=False, validate_instants=16,
+                           keep_checkpoints=0, validation_labels=validation, **SMALL, **BATCH)
     learner = OnlineLearner(config, log=lambda *a: None)
+    s = learner.start_metrics
+    timeline = [{'mode': mode, 't_s': 0.0, 'step': 0, 'path': str(start), 'announced': 'start',
+                 'labelled_px': s.get('labelled_mean_px'),
+                 'labelled_median_px': s.get('labelled_median_px'),
+                 'reproj_px': s.get('reprojection_px')}]
+    print(f'  [{mode}] start: held-out labelled {_px(s.get("labelled_mean_px"))} px, held-out '
+          f'reprojection {_px(s.get("reprojection_px"))} px; announcing on {learner.metric}',
+          flush=True)
     t0 = time.monotonic()
-    print(f'  [{mode}] start: held-out reprojection (Trainer.validate) '
-          f'{learner.reference_px:.2f} px', flush=True)
     while time.monotonic() - t0 < 60 * minutes:
         learner.step()
         result = learner.checkpoint_due()
-        if result is not None and result.published:
-            fused_px, _, _ = fused_errors(result.path, data, data.held_out[::2])
-            print(f'  [{mode}] {time.monotonic() - t0:6.0f} s  step {result.step:5d}  '
-                  f'announced: held-out reprojection {result.metrics["reprojection_px"]:.2f} px'
-                  f', live core (fused) {fused_px:.2f} px', flush=True)
-    final = learner.published.path if learner.published else str(start)
-    return final, learner.step_count, learner.steps_per_s
+        if result is None:
+            continue
+        m = result.metrics
+        timeline.append({'mode': mode, 't_s': time.monotonic() - t0, 'step': result.step,
+                         'path': result.path, 'announced': 'yes' if result.published else 'no',
+                         'labelled_px': m.get('labelled_mean_px'),
+                         'labelled_median_px': m.get('labelled_median_px'),
+                         'reproj_px': m.get('reprojection_px')})
+        print(f'  [{mode}] {timeline[-1]["t_s"]:6.0f} s  step {result.step:5d}  '
+              f'{"announced" if result.published else "kept back"}: {result.reason}',
+              flush=True)
+    return learner, timeline
+
+
+def _px(value):
+    return 'n/a' if value is None else f'{value:.2f}'
+
+
+def plot_timeline(rows, path):
+    """4 panels over time of online learning (s): 3D error vs ground truth (mm), 2D error vs
+    ground truth (px), held-out labelled error (px), held-out reprojection error (px); one
+    line per mode, filled markers = announced (or the start), hollow = kept back."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    panels = [('fused_3d_mm', '3D error vs ground truth (mm, live core)'),
+              ('gt_2d_px', '2D error vs ground truth (px)'),
+              ('labelled_px', 'held-out labelled error (px, mean)'),
+              ('reproj_px', 'held-out reprojection error (px)')]
+    fig, axes = plt.subplots(1, 4, figsize=(18, 4))
+    for ax, (key, title) in zip(axes, panels):
+        for mode, colour in (('monet', 'C0'), ('supervised', 'C1')):
+            pts = [(r['t_s'], r[key], r['announced']) for r in rows
+                   if r['mode'] == mode and r.get(key) is not None]
+            if not pts:
+                continue
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], '-', color=colour, label=mode)
+            for t, v, a in pts:
+                ax.plot(t, v, 'o', color=colour, mfc=colour if a != 'no' else 'white')
+        ax.set(xlabel='online learning time (s)', title=title)
+    axes[0].legend()
+    fig.suptitle('online learning from one start; filled = announced, hollow = kept back')
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def table(rows, columns):
@@ -188,14 +241,25 @@ def main():
     parser.add_argument('--minutes', type=float, default=3.0, help='online learning time')
     parser.add_argument('--every', type=int, default=25, help='steps between checkpoints')
     parser.add_argument('--threads', type=int, default=1)
+    parser.add_argument('--label-fraction', type=float, default=0.04,
+                        help='monet synth: fraction of labelled instants (some are held out)')
+    parser.add_argument('--validation-labels', type=float, default=0.34,
+                        help="LearnerConfig.validation_labels (and the start model's)")
+    parser.add_argument('--supervised-every-factor', type=int, default=3,
+                        help='the supervised run checkpoints every --every x this steps '
+                        '(it steps about 3x faster)')
+    parser.add_argument('--eval-stride', type=int, default=2,
+                        help='evaluate every checkpoint on every n-th held-out instant')
     args = parser.parse_args()
+    args.load_at_start = [round(x, 2) for x in os.getloadavg()]
     torch.set_num_threads(args.threads)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     wall = time.monotonic()
     folder, skeleton = make_data(args)
     print(f'data: {folder} (skeleton {skeleton}); torch threads {args.threads}; machine shared '
-          f'with other jobs (2 cores): figures are indicative', flush=True)
+          f'with other jobs (2 cores): figures are indicative; load average '
+          f'{args.load_at_start}', flush=True)
 
     devices = ['cpu'] + (['cuda'] if torch.cuda.is_available() else [])
     speed = []
@@ -211,44 +275,70 @@ def main():
                                                            SMALL['input_size']))
     print(table(speed, ['device', 'mode', 'views', 'image', 'steps_per_s']), flush=True)
 
-    # 2. labels-only start, then online learning vs continued supervised training
+    # 2. labels-only start, then online learning vs continued supervised training; the
+    # start is trained with the learner's validation split (it never sees those labels)
     from monet_ros.learning.recording import load_recording
     from monet_ros.skeleton import load_skeleton
     keypoints = load_skeleton(skeleton).keypoints
     recording = load_recording(folder, skeleton=list(keypoints))
     cfg = TrainConfig(mode='supervised', steps=args.start_steps, checkpoint_every=10 ** 6,
-                      device='cpu', **{**SMALL, **BATCH})
-    probe_data = None
+                      device='cpu', validation_labels=args.validation_labels,
+                      **{**SMALL, **BATCH})
     start_dir = out / 'start'
     start = start_dir / 'model.pt'
+    probe = build_model('small', len(keypoints), **cfg.model_options())
+    data = TrainingData(recording, cfg, probe.input_size, probe.heatmap_size)
     if not start.exists():
         t = time.monotonic()
-        probe = build_model('small', len(keypoints), **cfg.model_options())
-        probe_data = TrainingData(recording, cfg, probe.input_size, probe.heatmap_size)
-        trainer = Trainer(cfg, probe_data, start_dir)
-        trainer.run(progress=False)
+        Trainer(cfg, data, start_dir).run(progress=False)
         print(f'\nstarting model: {args.start_steps} supervised steps (labels only) in '
               f'{time.monotonic() - t:.0f} s', flush=True)
-    meta = load_checkpoint(start)[1]
-    data = probe_data or TrainingData(recording, cfg, meta['input_size'], meta['heatmap_size'])
-    rows = [evaluate(start, data, 'start (labels only)')]
-    results = {}
+    print(f'labelled instants: {len(data.labelled_instants)} trained on, '
+          f'{len(data.validation_instants)} held out for validation '
+          f'({list(map(int, data.validation_instants))}); held-out tail '
+          f'{len(data.held_out)} instants', flush=True)
+    timeline = []
     for mode in ('monet', 'supervised'):
-        print(f'\n{args.minutes:g} min of online learning, mode {mode}:', flush=True)
-        final, steps, rate = online(folder, skeleton, start, out / f'online_{mode}', mode,
-                                    args.minutes, args.every, data, 'cpu')
-        results[mode] = (steps, rate)
-        row = evaluate(final, data, f'after {args.minutes:g} min {mode}')
-        row['online_steps'] = steps
-        rows.append(row)
-    print(f'\n2. held-out tail ({len(data.held_out)} instants x {recording.num_views} views): '
-          'the announced model of each run')
-    print(table(rows, ['model', 'step', 'online_steps', 'fused_reproj_px', 'fused_3d_mm',
-                       'triangulated', 'allview_reproj_px', 'gt_reproj_px', 'pck@0.1']))
-    (out / 'results.json').write_text(json.dumps({'speed': speed, 'before_after': rows},
-                                                 indent=1))
-    print(f'\nwall time {time.monotonic() - wall:.0f} s; results in {out / "results.json"}')
-
+        every = args.every if mode == 'monet' else args.every * args.supervised_every_factor
+        print(f'\n{args.minutes:g} min of online learning, mode {mode} (checkpoint every '
+              f'{every} steps):', flush=True)
+        learner, rows = online(folder, skeleton, start, out / f'online_{mode}', mode,
+                               args.minutes, every, 'cpu', args.validation_labels)
+        np.testing.assert_array_equal(learner.data.validation_instants,
+                                      data.validation_instants)
+        timeline += rows
+    # every checkpoint on the live path (models.Detector -> fusion) against the ground truth
+    t = time.monotonic()
+    sample = data.held_out[::args.eval_stride]
+    for row in timeline:
+        row.update(evaluate(row['path'], data, row['mode'], sample))
+    print(f'\nevaluated {len(timeline)} checkpoints on {len(sample)} held-out instants in '
+          f'{time.monotonic() - t:.0f} s', flush=True)
+    columns = ['mode', 't_s', 'step', 'announced', 'fused_3d_mm', 'gt_2d_px', 'labelled_px',
+               'reproj_px', 'fused_reproj_px', 'pck@0.1']
+    print(f'\n2. over time of online learning (held-out tail: {len(sample)} instants x '
+          f'{recording.num_views} views vs ground truth; held-out labelled: '
+          f'{len(data.validation_instants)} instants; reproj: Trainer.validate)')
+    text = table(timeline, columns)
+    print(text)
+    for mode in ('monet', 'supervised'):
+        rows = [r for r in timeline if r['mode'] == mode]
+        last = [r for r in rows if r['announced'] in ('yes', 'start')][-1]
+        print(f'  {mode}: announced model at the end: step {last["step"]}, 3D '
+              f'{_px(last.get("fused_3d_mm"))} mm (start {_px(rows[0].get("fused_3d_mm"))}), '
+              f'held-out labelled {_px(last["labelled_px"])} px, reprojection '
+              f'{_px(last["reproj_px"])} px')
+    load = os.getloadavg()
+    print(f'\nload average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} (at start '
+          f'{args.load_at_start})')
+    (out / 'timeline.md').write_text(text + '\n')
+    plot_timeline(timeline, out / 'timeline.png')
+    (out / 'results.json').write_text(json.dumps(
+        {'speed': speed, 'timeline': timeline, 'load_start': args.load_at_start,
+         'load_end': load, 'args': vars(args) | {'out': str(args.out)}}, indent=1,
+        default=str))
+    print(f'wall time {time.monotonic() - wall:.0f} s; {out / "timeline.md"}, '
+          f'{out / "timeline.png"}, {out / "results.json"}')
 
 if __name__ == '__main__':
     main()

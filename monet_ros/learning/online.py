@@ -12,8 +12,8 @@ looping stream of multiview instants: every step the Trainer samples labelled vi
 unlabeled instants (L_E) and pseudo-labelled views (L_B) at random, forever. The held-out
 slice (the tail of the recordings, `eval_fraction`) is never trained on, and neither are the
 validation labels (`validation_labels`: a fraction of the labelled instants, the tail's
-first, the rest drawn with the seed; Trainer.TrainingData keeps them out of L_L, L_B and
-L_E). Every checkpoint is validated (Trainer.validate) without ground truth: the mean
+first, the rest evenly spread; trainer.TrainingData keeps them out of L_L, L_B and L_E).
+Every checkpoint is validated (Trainer.validate) without ground truth: the mean
 epipolar divergence and reprojection error of the all-view triangulation of the detections
 on the tail (agreement between views), and the error of the detections against the held-out
 labels (`labelled_median_px`, `labelled_mean_px`: accuracy, in original image px).
@@ -29,8 +29,8 @@ accuracy: a detector can make the views agree on the wrong points (bench/learner
 last announcement is kept in out/published.json, so a restarted learner resumes with the
 same reference (an announcement written before `labelled_mean_px` existed is re-validated).
 A starting model must not have been trained on the validation labels: train it with the
-same --validation-labels, --eval-fraction and --seed (the learner warns when the model's
-metadata says otherwise).
+same --validation-labels and --eval-fraction (the learner warns when the model's metadata
+says otherwise).
 """
 from dataclasses import dataclass, fields
 import json
@@ -78,8 +78,8 @@ class LearnerConfig(TrainConfig):
         choices=('auto', 'labelled', 'reprojection'))
     validation_labels: float = setting(
         0.2, 'fraction of the labelled instants held out as validation labels (never trained '
-        'on; drawn with `seed`, the eval_fraction tail first; at least one, leaving one to '
-        'train on; 0 = none): the labelled publish_metric', minimum=0.0, maximum=0.9)
+        'on; the eval_fraction tail first, the rest evenly spread; at least one, leaving one '
+        'to train on; 0 = none): the labelled publish_metric', minimum=0.0, maximum=0.9)
     publish_tolerance_px: float = setting(0.0, "announce a checkpoint when its publish_metric "
                                           "is at most the last announced one's + this (px)",
                                           minimum=0.0)
@@ -311,7 +311,7 @@ class OnlineLearner:
         trained = meta.get('train_config') or {}
         if meta.get('recording') != self.recording.name or not trained:
             return
-        split = ('validation_labels', 'eval_fraction', 'seed')
+        split = ('validation_labels', 'eval_fraction')
         mine = self.trainer.config
         if any(trained.get(k, 0.0 if k == 'validation_labels' else None) != getattr(mine, k)
                for k in split):

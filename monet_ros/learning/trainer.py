@@ -89,14 +89,27 @@ def split_instants(num_instants, eval_fraction):
     return np.arange(num_instants - n_eval), np.arange(num_instants - n_eval, num_instants)
 
 
-def validation_split(labels, held_out, fraction, seed):
+def spread_instants(candidates, n):
+    """n of the `candidates` (sorted instant indices), evenly spread: the middle of each of n
+    equal runs (deterministic; the rule of validation_split and `monet train
+    --holdout-labelled`). n >= len(candidates) gives them all."""
+    candidates = np.asarray(candidates)
+    if n <= 0:
+        return candidates[:0]
+    if n >= len(candidates):
+        return candidates.copy()
+    picks = np.round((np.arange(n) + 0.5) * len(candidates) / n - 0.5).astype(int)
+    return candidates[np.unique(picks)]
+
+
+def validation_split(labels, held_out, fraction):
     """(K,) sorted instants whose labels are held out for validation (never trained on).
 
     labels (T, V, C, 2) px, NaN = none; held_out: the eval_fraction tail (already never
     trained on). fraction 0 -> none; else the target is max(1, round(fraction x labelled
-    instants)): the tail's labelled instants count first, the rest is drawn with `seed` from
+    instants)): the tail's labelled instants count first, the rest are spread_instants of
     the labelled instants before the tail, always leaving at least one of those to train on.
-    The same (labels, held_out, fraction, seed) gives the same split (a resumed run)."""
+    Deterministic: a resumed run (same labels, tail and fraction) gets the same split."""
     labelled = np.flatnonzero(np.isfinite(labels[..., 0]).any(axis=(1, 2)))
     if fraction <= 0 or labelled.size == 0:
         return np.zeros(0, dtype=np.int64)
@@ -104,9 +117,7 @@ def validation_split(labels, held_out, fraction, seed):
     tail = np.intersect1d(labelled, held_out)
     train = np.setdiff1d(labelled, held_out)
     extra = min(max(0, target - tail.size), max(0, train.size - 1))
-    rng = np.random.default_rng([seed, 0x7a11d])      # its own stream: not the trainer's RNG
-    drawn = rng.choice(train, size=extra, replace=False) if extra else train[:0]
-    return np.sort(np.concatenate([tail, drawn])).astype(np.int64)
+    return np.sort(np.concatenate([tail, spread_instants(train, extra)])).astype(np.int64)
 
 
 def crop_boxes(recording, source, aspect, margin, pseudo=None):
@@ -133,7 +144,7 @@ class TrainingData:
         self.config = config
         self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
         self.validation_instants = validation_split(recording.labels, self.held_out,
-                                                    config.validation_labels, config.seed)
+                                                    config.validation_labels)
         self.validation_labels = recording.labels[self.validation_instants].copy()
         self.labels = recording.labels.copy()
         self.labels[self.held_out] = np.nan

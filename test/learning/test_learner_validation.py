@@ -21,7 +21,13 @@ from monet_ros.learning.online import (
     publish_metric_key,
     should_publish,
 )
-from monet_ros.learning.trainer import Trainer, TrainingData, crop_boxes, validation_split
+from monet_ros.learning.trainer import (
+    Trainer,
+    TrainingData,
+    crop_boxes,
+    spread_instants,
+    validation_split,
+)
 from monet_ros.models import build_model, save_checkpoint
 
 TINY = dict(batch_labelled=4, batch_pseudo=4, batch_unlabeled=1, views_per_instant=3,
@@ -44,20 +50,21 @@ def test_validation_split_counts_the_tail_first_and_leaves_one_to_train():
     labels = np.full((30, 2, 1, 2), np.nan)
     labels[[3, 7, 11, 15, 26], 0] = 1.0
     tail = np.arange(24, 30)
-    assert validation_split(labels, tail, 0.0, 0).size == 0
-    # 5 labelled instants x 0.2 -> 1: the tail's instant 26, nothing drawn
-    np.testing.assert_array_equal(validation_split(labels, tail, 0.2, 0), [26])
-    # x 0.6 -> 3: 26 + two of the four before the tail, drawn with the seed
-    split = validation_split(labels, tail, 0.6, 0)
-    assert split.size == 3 and 26 in split and set(split) - {26} <= {3, 7, 11, 15}
-    np.testing.assert_array_equal(split, validation_split(labels, tail, 0.6, 0))
-    assert {tuple(validation_split(labels, tail, 0.6, s)) for s in range(8)} != {tuple(split)}
-    # x 0.9 -> 4 wanted: three drawn at most, one labelled instant is left to train on
-    assert validation_split(labels, tail, 0.9, 0).size == 4
-    assert validation_split(labels, np.arange(0), 0.9, 0).size == 4       # 5 - 1
+    assert validation_split(labels, tail, 0.0).size == 0
+    # 5 labelled instants x 0.2 -> 1: the tail's instant 26, nothing more
+    np.testing.assert_array_equal(validation_split(labels, tail, 0.2), [26])
+    # x 0.6 -> 3: 26 + two of the four before the tail, evenly spread (runs 3 7 | 11 15)
+    np.testing.assert_array_equal(validation_split(labels, tail, 0.6), [3, 11, 26])
+    # x 0.9 -> 4 wanted: three at most before the tail, one is left to train on
+    np.testing.assert_array_equal(validation_split(labels, tail, 0.9), [3, 11, 15, 26])
+    np.testing.assert_array_equal(validation_split(labels, np.arange(0), 0.9), [3, 7, 15, 26])
     one = np.full((30, 2, 1, 2), np.nan)
     one[4, 1] = 2.0
-    assert validation_split(one, np.arange(0), 0.5, 0).size == 0
+    assert validation_split(one, np.arange(0), 0.5).size == 0
+    # the rule of `monet train --holdout-labelled`
+    from monet_ros.commands.train_holdout import choose_holdout
+    np.testing.assert_array_equal(choose_holdout([3, 7, 11, 15, 26], 2), [7, 15])
+    np.testing.assert_array_equal(spread_instants(np.array([3, 7, 11, 15, 26]), 2), [7, 15])
 
 
 def test_validation_instants_are_in_no_training_pool(scene):
