@@ -231,3 +231,23 @@ def test_a_checkpoint_worse_on_held_out_labels_is_not_announced(scene, tmp_path)
     again = learner('reprojection', publish_metric='labelled')
     assert again.published.sha256 == published['sha256']
     assert again.reference_px == pytest.approx(after['labelled_mean_px'], rel=1e-9)
+
+
+def test_monet_train_holds_out_the_same_validation_labels(scene, tmp_path, capsys):
+    from monet_ros.cli import main as monet_main
+    folder, _, rec = scene
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text('name: blobs\nkeypoints: [k0, k1, k2]\n')
+    code = monet_main(['train', str(folder), '--out', str(tmp_path / 'run'), '--skeleton',
+                       str(skeleton), '--mode', 'supervised', '--steps', '5',
+                       '--validation-labels', '0.5', '--architecture', 'small',
+                       '--input-size', '48', '--width', '16', '--eval-fraction', '0.25',
+                       '--device', 'cpu', '--threads', '1', '--no-progress'])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    summary = json.loads(captured.out)
+    # 4 labelled instants x 0.5 -> 2 held out, 2 labelled views x 3 keypoints each
+    assert summary['validation']['count'] == 2 * 2 * 3
+    assert 'held-out validation labels' in captured.err
+    meta = torch.load(tmp_path / 'run' / 'model.pt', weights_only=True)['metadata']
+    assert meta['train_config']['validation_labels'] == 0.5
