@@ -1,37 +1,56 @@
-"""Online learner: training steps/s, and the reprojection error before / after online learning.
+"""Online learner: training steps/s, and accuracy over time of online learning.
 
 1. Steps/s of OnlineLearner.step (small net, all 8 views of an instant in L_E, CPU; CUDA
    too when present), mode monet (L_L + lambda_e L_E + lambda_p L_B) side by side with
    supervised (L_L only, the baseline), median of --repeats runs of --steps steps.
-2. Before / after: a starting model trained with labels only (mode supervised, Trainer,
-   --start-steps) on a synthetic 8-camera rig; then --minutes of online learning
-   (OnlineLearner, mode monet, checkpoints every --every steps, announced when the held-out
-   reprojection error is not worse). Each announcement prints a live line. The announced
-   models (what the detectors would load) are evaluated on the held-out tail with the
-   detector + fusion core the live pipeline runs (models.Detector -> fusion.fuse_heatmaps,
-   robust triangulation): mean reprojection error of the fused keypoints (px) and their 3D
-   error against the ground truth (mm); plus evaluation.evaluate_detector (all-view
-   triangulation without RANSAC, PCK@0.1). The baseline beside it: the same minutes of
-   supervised training continued from the same start.
+2. Over time: a starting model trained with labels only (mode supervised, Trainer,
+   --start-steps, with the learner's validation split: it never sees the held-out labels)
+   on a synthetic 8-camera rig; then --minutes of online learning (OnlineLearner, mode
+   monet, a checkpoint every --every steps, announced by the learner's own criterion:
+   publish_metric auto = the mean error on the held-out validation labels,
+   --validation-labels of the labelled instants) and, beside it, the same minutes of
+   supervised training continued from the same start (the baseline, checkpoints every
+   --every x --supervised-every-factor steps). Every checkpoint (kept, announced or not)
+   is then evaluated on the held-out tail on the path the live pipeline runs
+   (models.Detector -> fusion.fuse_heatmaps, robust triangulation): the 3D error of the
+   fused keypoints against the ground truth (mm) and their reprojection error (px); plus
+   evaluation.evaluate_detector (2D error of the detections against the projected ground
+   truth, px; PCK@0.1). The table (timeline.md), a PNG (timeline.png: 3D, 2D, held-out
+   labelled, reprojection error over time; filled = announced) and results.json go to
+   --out; the rank correlation of each criterion with the 3D error over the checkpoints
+   is printed. Without ground truth (--data of a real recording) the ground-truth columns
+   are empty and the held-out labelled error is the accuracy figure.
 
     .venv/bin/python bench/learner.py --out /tmp/monet_learner_bench [--minutes 2]
 
 Data: --data DIR (a `monet synth` folder), else `monet synth` (ring, 8 cameras, 14
-keypoints, <1% labelled) when the command exists, else the test suite's 8-camera blob scene.
+keypoints, --label-fraction 0.04 = 6 labelled instants, 2 of them held out) when the
+command exists, else the test suite's 8-camera blob scene.
 
-Measured 2026-11-23 on the shared 2-core CPU machine (other helpers' test suites running;
-no GPU lent), `monet synth --frames 150 --cameras 8 --layout ring --width 320 --height 240
---label-fraction 0.008 --seed 0` (1 labelled instant), --minutes 2 --start-steps 300
---every 25, wall 290 s:
-    steps/s (8 views, 1 torch thread): supervised 16.6, monet 5.1
-    held-out fused reprojection px: start 7.14 -> 2 min monet 4.61 (725 steps)
-                                    vs 2 min more supervised 6.79
-    but vs ground truth (gt reprojection px / PCK@0.1 / 3D mm): start 10.0 / 0.787 / 196,
-    monet 11.3 / 0.777 / 222, supervised 10.2 / 0.784 / 210: the views agree better, the
-    keypoints are not (yet) more accurate; the announcement criterion measures agreement.
+Measured 2026-12-01 on the shared 2-core CPU machine (the lead's and other helpers' jobs
+running: load average 5.1 at the start, 8.0 at the end; no GPU used), `monet synth --frames
+150 --cameras 8 --layout ring --width 320 --height 240 --label-fraction 0.04 --seed 0` (6
+labelled instants: 4 trained on, 2 held out = instants 65 and 140), --start-steps 400
+--minutes 2 --every 40 --eval-stride 1, wall 310 s (a short run: one seed, one start; the
+3D error moves by +-25 mm between neighbouring checkpoints):
+    steps/s (8 views, 1 torch thread): supervised 14.9, monet 14.3
+    start (labels only): 3D 244 mm, 2D vs ground truth 12.1 px, held-out labelled 11.5 px,
+      reprojection 8.8 px
+    2 min monet, last announced (labelled criterion, step 920 of 1120): 3D 205 mm, 2D 10.8
+      px, held-out labelled 9.0 px, reprojection 5.7 px
+      - the reprojection criterion replayed on the same checkpoints would have stopped at
+        step 160: 3D 262 mm (worse than the start), 2D 12.1 px, reprojection 5.5 px
+    2 min supervised, last announced (step 600 of 1080): 3D 213 mm, 2D 10.9 px, held-out
+      labelled 9.9 px, reprojection 7.4 px (reprojection criterion: step 1080, 214 mm)
+    rank correlation with the 3D error over the checkpoints: held-out labelled +0.83
+      (monet, 29), +0.93 (supervised, 10); reprojection +0.04 (monet), +0.56 (supervised)
+  The views agree better under monet from the first checkpoints (8.8 -> 5.5 px) while the
+  3D error first rises; the held-out labelled error follows the 3D error, the reprojection
+  error does not.
 """
 import argparse
 import json
+import os
 from pathlib import Path
 import sys
 import time
@@ -49,7 +68,7 @@ from monet_ros.cli import main as monet_main  # noqa: E402
 from monet_ros.evaluation.evaluate import evaluate_detector  # noqa: E402
 from monet_ros.fusion import FusionConfig, fuse_heatmaps  # noqa: E402
 from monet_ros.learning.config import TrainConfig  # noqa: E402
-from monet_ros.learning.online import LearnerConfig, OnlineLearner  # noqa: E402
+from monet_ros.learning.online import LearnerConfig, OnlineLearner, should_publish  # noqa: E402
 from monet_ros.learning.trainer import Trainer, TrainingData  # noqa: E402
 from monet_ros.models import Detector, build_model, load_checkpoint  # noqa: E402
 
@@ -67,7 +86,8 @@ def make_data(args):
         if not (folder / 'ground_truth.npz').exists():
             code = monet_main(['synth', '--out', str(folder), '--frames', str(args.frames),
                                '--cameras', '8', '--layout', 'ring', '--width', '320',
-                               '--height', '240', '--label-fraction', '0.008', '--seed', '0',
+                               '--height', '240', '--label-fraction',
+                               str(args.label_fraction), '--seed', '0',
                                '--quiet'])
             if code:
                 raise SystemExit('monet synth failed')
@@ -126,40 +146,108 @@ def fused_errors(checkpoint, data, instants, fusion=None):
     return float(np.nanmean(reproj)), float(np.nanmean(e3)), float(ok.mean())
 
 
-def evaluate(checkpoint, data, label):
+def evaluate(checkpoint, data, label, instants):
+    """Ground-truth figures of a checkpoint on `instants`: the live core's fused keypoints
+    (fused_reproj_px, fused_3d_mm, triangulated) and evaluation.evaluate_detector (gt_2d_px:
+    detections vs projected ground truth; pck@0.1; gt_reproj_px). n/a without ground truth
+    (real data: the held-out labelled error is then the accuracy figure)."""
     model, meta = load_checkpoint(checkpoint)
-    held = data.held_out
-    fused_px, fused_mm, fraction = fused_errors(checkpoint, data, held)
-    row = {'model': label, 'step': meta['step'], 'fused_reproj_px': fused_px,
-           'fused_3d_mm': fused_mm, 'triangulated': fraction}
+    fused_px, fused_mm, fraction = fused_errors(checkpoint, data, instants)
+    row = {'fused_reproj_px': fused_px, 'triangulated': fraction,
+           'fused_3d_mm': fused_mm if data.recording.gt3d is not None else None}
     if data.recording.gt3d is not None:
-        summary = evaluate_detector(Detector(model, meta, device='cpu'), data.recording, held,
-                                    data.boxes, mode=label)
-        row.update({'allview_reproj_px': summary.reprojection_mean,
+        summary = evaluate_detector(Detector(model, meta, device='cpu'), data.recording,
+                                    instants, data.boxes, mode=label)
+        row.update({'gt_2d_px': summary.extra['error2d_mean'],
                     'gt_reproj_px': summary.gt_reprojection_mean,
                     'pck@0.1': summary.pck.at(0.1)})
     return row
 
 
-def online(folder, skeleton, start, out, mode, minutes, every, data, device):
-    """Run OnlineLearner for `minutes` from `start`; print each announcement live."""
+def online(folder, skeleton, start, out, mode, minutes, every, device, validation):
+    """Run OnlineLearner for `minutes` from `start`, keeping every checkpoint; print each
+    one live. Returns (learner, timeline rows: t_s, step, checkpoint path, the learner's own
+    metrics and verdict)."""
     config = LearnerConfig(bags=(str(folder),), out=str(out), skeleton=skeleton, model=str(start),
                            mode=mode, views_per_instant=8, checkpoint_every=every,
-                           device=device, resume=False, validate_instants=16, **SMALL, **BATCH)
+                           device=device, resume=False, validate_instants=16,
+                           keep_checkpoints=0, validation_labels=validation, **SMALL, **BATCH)
     learner = OnlineLearner(config, log=lambda *a: None)
+    s = learner.start_metrics
+    timeline = [{'mode': mode, 't_s': 0.0, 'step': 0, 'path': str(start), 'announced': 'start',
+                 'labelled_px': s.get('labelled_mean_px'),
+                 'labelled_median_px': s.get('labelled_median_px'),
+                 'reproj_px': s.get('reprojection_px')}]
+    print(f'  [{mode}] start: held-out labelled {_px(s.get("labelled_mean_px"))} px, held-out '
+          f'reprojection {_px(s.get("reprojection_px"))} px; announcing on {learner.metric}',
+          flush=True)
     t0 = time.monotonic()
-    print(f'  [{mode}] start: held-out reprojection (Trainer.validate) '
-          f'{learner.reference_px:.2f} px', flush=True)
     while time.monotonic() - t0 < 60 * minutes:
         learner.step()
         result = learner.checkpoint_due()
-        if result is not None and result.published:
-            fused_px, _, _ = fused_errors(result.path, data, data.held_out[::2])
-            print(f'  [{mode}] {time.monotonic() - t0:6.0f} s  step {result.step:5d}  '
-                  f'announced: held-out reprojection {result.metrics["reprojection_px"]:.2f} px'
-                  f', live core (fused) {fused_px:.2f} px', flush=True)
-    final = learner.published.path if learner.published else str(start)
-    return final, learner.step_count, learner.steps_per_s
+        if result is None:
+            continue
+        m = result.metrics
+        timeline.append({'mode': mode, 't_s': time.monotonic() - t0, 'step': result.step,
+                         'path': result.path, 'announced': 'yes' if result.published else 'no',
+                         'labelled_px': m.get('labelled_mean_px'),
+                         'labelled_median_px': m.get('labelled_median_px'),
+                         'reproj_px': m.get('reprojection_px')})
+        print(f'  [{mode}] {timeline[-1]["t_s"]:6.0f} s  step {result.step:5d}  '
+              f'{"announced" if result.published else "kept back"}: {result.reason}',
+              flush=True)
+    return learner, timeline
+
+
+def replay_criteria(timeline, tolerance_px=0.0):
+    """{(mode, criterion): the timeline row of the model each criterion would have announced
+    last}: online.should_publish replayed over every checkpoint of each mode, with
+    the labelled (labelled_px) and the reprojection (reproj_px) criterion."""
+    out = {}
+    for mode in dict.fromkeys(r['mode'] for r in timeline):
+        rows = [r for r in timeline if r['mode'] == mode]
+        for name, key, metric in (('labelled', 'labelled_px', 'labelled_mean_px'),
+                                  ('reprojection', 'reproj_px', 'reprojection_px')):
+            last = rows[0]
+            for row in rows[1:]:
+                if should_publish({metric: row[key]}, last[key], tolerance_px, metric)[0]:
+                    last = row
+            out[mode, name] = last
+    return out
+
+
+def _px(value):
+    return 'n/a' if value is None else f'{value:.2f}'
+
+
+def plot_timeline(rows, path):
+    """4 panels over time of online learning (s): 3D error vs ground truth (mm), 2D error vs
+    ground truth (px), held-out labelled error (px), held-out reprojection error (px); one
+    line per mode, filled markers = announced (or the start), hollow = kept back."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    panels = [('fused_3d_mm', '3D error vs ground truth (mm, live core)'),
+              ('gt_2d_px', '2D error vs ground truth (px)'),
+              ('labelled_px', 'held-out labelled error (px, mean)'),
+              ('reproj_px', 'held-out reprojection error (px)')]
+    fig, axes = plt.subplots(1, 4, figsize=(18, 4))
+    for ax, (key, title) in zip(axes, panels):
+        for mode, colour in (('monet', 'C0'), ('supervised', 'C1')):
+            pts = [(r['t_s'], r[key], r['announced']) for r in rows
+                   if r['mode'] == mode and r.get(key) is not None]
+            if not pts:
+                continue
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], '-', color=colour, label=mode)
+            for t, v, a in pts:
+                ax.plot(t, v, 'o', color=colour, mfc=colour if a != 'no' else 'white')
+        ax.set(xlabel='online learning time (s)', title=title)
+    axes[0].legend()
+    fig.suptitle('online learning from one start; filled = announced, hollow = kept back')
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
 
 
 def table(rows, columns):
@@ -188,14 +276,25 @@ def main():
     parser.add_argument('--minutes', type=float, default=3.0, help='online learning time')
     parser.add_argument('--every', type=int, default=25, help='steps between checkpoints')
     parser.add_argument('--threads', type=int, default=1)
+    parser.add_argument('--label-fraction', type=float, default=0.04,
+                        help='monet synth: fraction of labelled instants (some are held out)')
+    parser.add_argument('--validation-labels', type=float, default=0.34,
+                        help="LearnerConfig.validation_labels (and the start model's)")
+    parser.add_argument('--supervised-every-factor', type=int, default=3,
+                        help='the supervised run checkpoints every --every x this steps '
+                        '(it steps about 3x faster)')
+    parser.add_argument('--eval-stride', type=int, default=2,
+                        help='evaluate every checkpoint on every n-th held-out instant')
     args = parser.parse_args()
+    args.load_at_start = [round(x, 2) for x in os.getloadavg()]
     torch.set_num_threads(args.threads)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     wall = time.monotonic()
     folder, skeleton = make_data(args)
     print(f'data: {folder} (skeleton {skeleton}); torch threads {args.threads}; machine shared '
-          f'with other jobs (2 cores): figures are indicative', flush=True)
+          f'with other jobs (2 cores): figures are indicative; load average '
+          f'{args.load_at_start}', flush=True)
 
     devices = ['cpu'] + (['cuda'] if torch.cuda.is_available() else [])
     speed = []
@@ -211,44 +310,86 @@ def main():
                                                            SMALL['input_size']))
     print(table(speed, ['device', 'mode', 'views', 'image', 'steps_per_s']), flush=True)
 
-    # 2. labels-only start, then online learning vs continued supervised training
+    # 2. labels-only start, then online learning vs continued supervised training; the
+    # start is trained with the learner's validation split (it never sees those labels)
     from monet_ros.learning.recording import load_recording
     from monet_ros.skeleton import load_skeleton
     keypoints = load_skeleton(skeleton).keypoints
     recording = load_recording(folder, skeleton=list(keypoints))
     cfg = TrainConfig(mode='supervised', steps=args.start_steps, checkpoint_every=10 ** 6,
-                      device='cpu', **{**SMALL, **BATCH})
-    probe_data = None
+                      device='cpu', validation_labels=args.validation_labels,
+                      **{**SMALL, **BATCH})
     start_dir = out / 'start'
     start = start_dir / 'model.pt'
+    probe = build_model('small', len(keypoints), **cfg.model_options())
+    data = TrainingData(recording, cfg, probe.input_size, probe.heatmap_size)
     if not start.exists():
         t = time.monotonic()
-        probe = build_model('small', len(keypoints), **cfg.model_options())
-        probe_data = TrainingData(recording, cfg, probe.input_size, probe.heatmap_size)
-        trainer = Trainer(cfg, probe_data, start_dir)
-        trainer.run(progress=False)
+        Trainer(cfg, data, start_dir).run(progress=False)
         print(f'\nstarting model: {args.start_steps} supervised steps (labels only) in '
               f'{time.monotonic() - t:.0f} s', flush=True)
-    meta = load_checkpoint(start)[1]
-    data = probe_data or TrainingData(recording, cfg, meta['input_size'], meta['heatmap_size'])
-    rows = [evaluate(start, data, 'start (labels only)')]
-    results = {}
+    print(f'labelled instants: {len(data.labelled_instants)} trained on, '
+          f'{len(data.validation_instants)} held out for validation '
+          f'({list(map(int, data.validation_instants))}); held-out tail '
+          f'{len(data.held_out)} instants', flush=True)
+    timeline = []
     for mode in ('monet', 'supervised'):
-        print(f'\n{args.minutes:g} min of online learning, mode {mode}:', flush=True)
-        final, steps, rate = online(folder, skeleton, start, out / f'online_{mode}', mode,
-                                    args.minutes, args.every, data, 'cpu')
-        results[mode] = (steps, rate)
-        row = evaluate(final, data, f'after {args.minutes:g} min {mode}')
-        row['online_steps'] = steps
-        rows.append(row)
-    print(f'\n2. held-out tail ({len(data.held_out)} instants x {recording.num_views} views): '
-          'the announced model of each run')
-    print(table(rows, ['model', 'step', 'online_steps', 'fused_reproj_px', 'fused_3d_mm',
-                       'triangulated', 'allview_reproj_px', 'gt_reproj_px', 'pck@0.1']))
-    (out / 'results.json').write_text(json.dumps({'speed': speed, 'before_after': rows},
-                                                 indent=1))
-    print(f'\nwall time {time.monotonic() - wall:.0f} s; results in {out / "results.json"}')
-
+        every = args.every if mode == 'monet' else args.every * args.supervised_every_factor
+        print(f'\n{args.minutes:g} min of online learning, mode {mode} (checkpoint every '
+              f'{every} steps):', flush=True)
+        learner, rows = online(folder, skeleton, start, out / f'online_{mode}', mode,
+                               args.minutes, every, 'cpu', args.validation_labels)
+        np.testing.assert_array_equal(learner.data.validation_instants,
+                                      data.validation_instants)
+        timeline += rows
+    # every checkpoint on the live path (models.Detector -> fusion) against the ground truth
+    t = time.monotonic()
+    sample = data.held_out[::args.eval_stride]
+    for row in timeline:
+        row.update(evaluate(row['path'], data, row['mode'], sample))
+    print(f'\nevaluated {len(timeline)} checkpoints on {len(sample)} held-out instants in '
+          f'{time.monotonic() - t:.0f} s', flush=True)
+    columns = ['mode', 't_s', 'step', 'announced', 'fused_3d_mm', 'gt_2d_px', 'labelled_px',
+               'reproj_px', 'fused_reproj_px', 'pck@0.1']
+    print(f'\n2. over time of online learning (held-out tail: {len(sample)} instants x '
+          f'{recording.num_views} views vs ground truth; held-out labelled: '
+          f'{len(data.validation_instants)} instants; reproj: Trainer.validate)')
+    text = table(timeline, columns)
+    print(text)
+    for mode in ('monet', 'supervised'):
+        rows = [r for r in timeline if r['mode'] == mode]
+        last = [r for r in rows if r['announced'] in ('yes', 'start')][-1]
+        print(f'  {mode}: announced by the learner at the end: step {last["step"]}, 3D '
+              f'{_px(last.get("fused_3d_mm"))} mm (start {_px(rows[0].get("fused_3d_mm"))}), '
+              f'held-out labelled {_px(last["labelled_px"])} px, reprojection '
+              f'{_px(last["reproj_px"])} px')
+        assert replay_criteria(rows)[mode, 'labelled'] is last       # the same criterion
+    for (mode, name), row in replay_criteria(timeline).items():
+        print(f'  {mode}, announcing on {name}: last announced step {row["step"]}, 3D '
+              f'{_px(row.get("fused_3d_mm"))} mm, 2D vs ground truth {_px(row.get("gt_2d_px"))} '
+              f'px, held-out labelled {_px(row["labelled_px"])} px, reprojection '
+              f'{_px(row["reproj_px"])} px')
+    if all(r.get('fused_3d_mm') is not None for r in timeline):
+        from scipy.stats import spearmanr
+        for mode in ('monet', 'supervised', 'both'):
+            rows = [r for r in timeline if mode in ('both', r['mode'])
+                    and not (mode == 'both' and r['mode'] == 'supervised' and r['step'] == 0)]
+            y = [r['fused_3d_mm'] for r in rows]
+            rho = {k: spearmanr([r[k] for r in rows], y)[0] for k in ('labelled_px', 'reproj_px')}
+            print(f'  rank correlation with the 3D error over the {len(rows)} checkpoints of '
+                  f'{mode}: held-out labelled {rho["labelled_px"]:+.2f}, reprojection '
+                  f'{rho["reproj_px"]:+.2f}')
+    load = os.getloadavg()
+    print(f'\nload average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} (at start '
+          f'{args.load_at_start})')
+    (out / 'timeline.md').write_text(text + '\n')
+    plot_timeline(timeline, out / 'timeline.png')
+    (out / 'results.json').write_text(json.dumps(
+        {'speed': speed, 'timeline': timeline, 'load_start': args.load_at_start,
+         'load_end': load, 'args': vars(args) | {'out': str(args.out)}}, indent=1,
+        default=str))
+    print(f'wall time {time.monotonic() - wall:.0f} s; {out / "timeline.md"}, '
+          f'{out / "timeline.png"}, {out / "results.json"}')
 
 if __name__ == '__main__':
     main()

@@ -53,10 +53,12 @@ class AnnouncementLog:
             errors = [e for t, e in self.summary.errors if t >= self.since]
         live = f'{np.mean(errors):.2f} px over {len(errors)} frames' if errors else 'no frames'
         held = result.metrics.get('reprojection_px')
+        labelled = result.metrics.get('labelled_mean_px')
         verdict = 'announced' if result.published else 'kept back'
         print(f'learner: step {result.step} {verdict} (held-out reprojection '
-              f'{held if held is None else round(held, 2)} px); live reprojection with the '
-              f'previous weights: {live}', flush=True)
+              f'{held if held is None else round(held, 2)} px, held-out labelled error '
+              f'{labelled if labelled is None else round(labelled, 2)} px: {result.reason}); '
+              f'live reprojection with the previous weights: {live}', flush=True)
         if result.published:
             self.since = now
 

@@ -155,6 +155,11 @@ def run(args):
     print(f'fit to the labelled views: median {fit["median_px"]:.2f} px '
           f'({fit["median_heat"]:.2f} heatmap px), mean {fit["mean_px"]:.2f} px, p90 '
           f'{fit["p90_px"]:.2f} px ({fit["count"]} keypoints)', file=sys.stderr)
+    if summary.get('validation'):
+        v = summary['validation']
+        print(f'error on the held-out validation labels (--validation-labels): median '
+              f'{v["median_px"]:.2f} px, mean {v["mean_px"]:.2f} px ({v["count"]} keypoints of '
+              f'{len(data.validation_instants)} instants, never trained on)', file=sys.stderr)
     for stats in summary['bootstrap']:
         print(f'bootstrapping round {stats["round"]} at step {stats["step"]}: '
               f'{stats["pseudo_labels"]} pseudo-labels (peak cut-off {stats["cutoff"]:.3g})',

@@ -1,5 +1,6 @@
 """Leave-instants-out check for `monet train --holdout-labelled N`: N labelled instants
-(spread over the labelled ones: every k-th, k = L / N) lose their labels before training;
+(spread over the labelled ones: learning.trainer.spread_instants, the rule of the online
+learner's validation labels too) lose their labels before training;
 after training, the saved model runs over the recording exactly as `monet process` runs
 it (tracked crops), and its 2D detections and 3D points are scored against those labels
 (pixels on the labelled views; mm against the labels' own triangulation) with
@@ -14,14 +15,12 @@ import numpy as np
 def choose_holdout(labelled, n):
     """n of the labelled instant indices, evenly spread (deterministic); ValueError when
     fewer than n + 1 are labelled (training needs one)."""
+    from monet_ros.learning.trainer import spread_instants
     labelled = np.asarray(labelled)
-    if n <= 0:
-        return labelled[:0]
-    if len(labelled) < n + 1:
+    if n > 0 and len(labelled) < n + 1:
         raise ValueError(f'--holdout-labelled {n} needs at least {n + 1} labelled instants, '
                          f'the recording has {len(labelled)}')
-    picks = np.round((np.arange(n) + 0.5) * len(labelled) / n - 0.5).astype(int)
-    return labelled[np.unique(picks)]
+    return spread_instants(labelled, n)
 
 
 def hold_out(recording, n, out):

@@ -102,6 +102,12 @@ class TrainConfig:
                                    '(0 = train on everything, for real use; e.g. 0.2 to keep '
                                    'a tail to measure generalisation on)', minimum=0.0,
                                    maximum=0.9)
+    validation_labels: float = setting(
+        0.0, 'fraction of the labelled instants held out as validation labels, never trained '
+        'on (no L_L, no pseudo-labels, no L_E on them; labelled instants of the '
+        'eval_fraction tail count first, the rest evenly spread; at least one when > 0, '
+        'always leaving one to train on): the held-out labelled error of Trainer.validate',
+        minimum=0.0, maximum=0.9)
     box_source: str = setting('auto', 'training crop boxes (monet_ros.crop_rule): auto = '
                               'pseudo_labels (labels + their spatiotemporal tracks), labels, '
                               'full, or ground_truth (benchmark option only)',

@@ -10,14 +10,27 @@
 The bags are decoded once into memory (learning.recording) and replayed as a shuffled,
 looping stream of multiview instants: every step the Trainer samples labelled views (L_L),
 unlabeled instants (L_E) and pseudo-labelled views (L_B) at random, forever. The held-out
-slice (the tail of the recordings, `eval_fraction`) is never trained on; every checkpoint is
-validated on it without ground truth (Trainer.validate: mean epipolar divergence and the
-reprojection error of the all-view triangulation of the detections).
+slice (the tail of the recordings, `eval_fraction`) is never trained on, and neither are the
+validation labels (`validation_labels`: a fraction of the labelled instants, the tail's
+first, the rest evenly spread; trainer.TrainingData keeps them out of L_L, L_B and L_E).
+Every checkpoint is validated (Trainer.validate) without ground truth: the mean
+epipolar divergence and reprojection error of the all-view triangulation of the detections
+on the tail (agreement between views), and the error of the detections against the held-out
+labels (`labelled_median_px`, `labelled_mean_px`: accuracy, in original image px).
 
-Publication criterion: a checkpoint is announced only when its held-out reprojection error
-is finite and not worse than that of the last announced model (initially: the starting
-model, validated at start) by more than `publish_tolerance_px`. The last announcement is
-kept in out/published.json, so a restarted learner resumes with the same reference.
+Publication criterion (`publish_metric`, resolved once by publish_metric_key): a checkpoint
+is announced only when its criterion is finite and not worse than that of the last
+announced model (initially: the starting model, validated at start) by more than
+`publish_tolerance_px`. The criterion is the mean held-out labelled error
+(`labelled_mean_px`; publish_metric labelled, or auto when validation labels exist) or the
+held-out reprojection error (`reprojection_px`; reprojection, or auto with a loud warning
+when no labelled instant can be held out). Lower reprojection error alone is agreement, not
+accuracy: a detector can make the views agree on the wrong points (bench/learner.py). The
+last announcement is kept in out/published.json, so a restarted learner resumes with the
+same reference (an announcement written before `labelled_mean_px` existed is re-validated).
+A starting model must not have been trained on the validation labels: train it with the
+same --validation-labels and --eval-fraction (the learner warns when the model's metadata
+says otherwise).
 """
 from dataclasses import dataclass, fields
 import json
@@ -32,6 +45,8 @@ from monet_ros.config import ConfigError, setting
 from monet_ros.learning.config import MODES, TrainConfig
 
 PUBLISHED = 'published.json'
+# publish_metric -> the Trainer.validate key it compares (lower is better, px)
+PUBLISH_METRICS = {'labelled': 'labelled_mean_px', 'reprojection': 'reprojection_px'}
 FOREVER = 100_000_000     # TrainConfig.steps of a learner that runs until stopped
 
 
@@ -55,9 +70,19 @@ class LearnerConfig(TrainConfig):
     max_instants: int = setting(0, 'read at most this many instants per bag (0 = all)',
                                 minimum=0)
     resume: bool = setting(True, 'continue from out/trainer_state.pt when it exists')
-    publish_tolerance_px: float = setting(0.0, 'announce a checkpoint when its held-out '
-                                          'reprojection error is at most the last announced '
-                                          "one's + this (px)", minimum=0.0)
+    publish_metric: str = setting(
+        'auto', 'criterion of an announcement: labelled (mean error of the detections on the '
+        'held-out validation labels, px: accuracy), reprojection (held-out reprojection '
+        'error, px: agreement between views only) or auto (labelled when validation_labels '
+        'holds out a labelled instant, else reprojection with a warning)',
+        choices=('auto', 'labelled', 'reprojection'))
+    validation_labels: float = setting(
+        0.2, 'fraction of the labelled instants held out as validation labels (never trained '
+        'on; the eval_fraction tail first, the rest evenly spread; at least one, leaving one '
+        'to train on; 0 = none): the labelled publish_metric', minimum=0.0, maximum=0.9)
+    publish_tolerance_px: float = setting(0.0, "announce a checkpoint when its publish_metric "
+                                          "is at most the last announced one's + this (px)",
+                                          minimum=0.0)
     validate_instants: int = setting(16, 'held-out instants used to validate a checkpoint',
                                      minimum=1)
     keep_checkpoints: int = setting(5, 'unannounced checkpoints kept besides the announced one '
@@ -81,6 +106,9 @@ class LearnerConfig(TrainConfig):
         super().__post_init__()
         if not self.out:
             raise ConfigError('LearnerConfig', 'out', 'is required (an output folder)')
+        if self.publish_metric == 'labelled' and not self.validation_labels:
+            raise ConfigError('LearnerConfig', 'publish_metric', 'labelled needs '
+                              'validation_labels > 0 (held-out labelled instants)')
         if self.epipolar_warmup and not self.steps:
             raise ConfigError('LearnerConfig', 'epipolar_warmup', 'needs steps > 0 (a '
                               'fraction of the steps); use 0 for a learner that runs until '
@@ -94,17 +122,45 @@ class LearnerConfig(TrainConfig):
         return TrainConfig(**values)
 
 
-def should_publish(metrics, reference_px, tolerance_px=0.0):
-    """(publish, reason): publish when the held-out reprojection error is finite and at most
-    reference_px + tolerance_px (reference None or inf = nothing announced yet)."""
-    err = metrics.get('reprojection_px', math.nan) if metrics else math.nan
+def publish_metric_key(publish_metric, validation_instants, warn=None):
+    """The metrics key the criterion compares: PUBLISH_METRICS[publish_metric]; 'auto' ->
+    labelled when `validation_instants` (the number of held-out labelled instants) > 0,
+    else reprojection, said through warn(message) (one line). Raises ConfigError naming
+    publish_metric / validation_labels when labelled is asked for and there is none."""
+    if publish_metric not in ('auto', *PUBLISH_METRICS):
+        raise ConfigError('LearnerConfig', 'publish_metric',
+                          f'expected auto, labelled or reprojection, got {publish_metric!r}')
+    if publish_metric == 'auto':
+        if validation_instants:
+            return PUBLISH_METRICS['labelled']
+        if warn is not None:
+            warn('publish_metric auto: no labelled instant can be held out for validation '
+                 '(validation_labels is 0, or only one labelled instant to train on): '
+                 'announcing on the held-out reprojection error, agreement between views, '
+                 'not accuracy')
+        return PUBLISH_METRICS['reprojection']
+    if publish_metric == 'labelled' and not validation_instants:
+        raise ConfigError('LearnerConfig', 'validation_labels', 'holds out no labelled '
+                          'instant (one is always left to train on: label at least two '
+                          'instants), but publish_metric is labelled')
+    return PUBLISH_METRICS[publish_metric]
+
+
+def should_publish(metrics, reference_px, tolerance_px=0.0, metric='reprojection_px'):
+    """(publish, reason): publish when metrics[metric] (a PUBLISH_METRICS value, px, lower
+    is better) is finite and at most reference_px + tolerance_px (reference None or inf =
+    nothing announced yet)."""
+    name = {'labelled_mean_px': 'held-out labelled error',
+            'reprojection_px': 'reprojection'}.get(metric, metric)
+    err = metrics.get(metric, math.nan) if metrics else math.nan
     if err is None or not math.isfinite(err):
-        return False, 'no finite held-out reprojection error (nothing triangulated)'
+        what = '(nothing triangulated)' if metric == 'reprojection_px' else '(no detection)'
+        return False, f'no finite {name} {what}'
     if reference_px is None or not math.isfinite(reference_px):
-        return True, f'reprojection {err:.3f} px (no reference yet)'
+        return True, f'{name} {err:.3f} px (no reference yet)'
     if err <= reference_px + tolerance_px:
-        return True, f'reprojection {err:.3f} px <= {reference_px:.3f} px + {tolerance_px:g}'
-    return False, f'reprojection {err:.3f} px worse than the announced {reference_px:.3f} px'
+        return True, f'{name} {err:.3f} px <= {reference_px:.3f} px + {tolerance_px:g}'
+    return False, f'{name} {err:.3f} px worse than the announced {reference_px:.3f} px'
 
 
 @dataclass(frozen=True)
@@ -219,18 +275,28 @@ class OnlineLearner:
         else:
             self.trainer = Trainer(train_config, data, self.out, model=model)
         self.data = data
+        self.metric = publish_metric_key(config.publish_metric, len(data.validation_instants),
+                                         self.trainer.warn)
+        if not resume and config.model:
+            self._check_start_model(meta)
         if not resume:             # a fresh run: an older run's announcement is no reference
             (self.out / PUBLISHED).unlink(missing_ok=True)
         self.published = self._load_published()
         if self.published is not None:
-            self.reference_px = self.published.metrics.get('reprojection_px')
-            log(f'last announced model: {self.published.path} (step {self.published.step})')
+            self.reference_px = self.published.metrics.get(self.metric)
+            if self.reference_px is None:      # written before this metric existed
+                self.reference_px = self.validate_checkpoint(self.published.path).get(
+                    self.metric)
+            log(f'last announced model: {self.published.path} (step {self.published.step}, '
+                f'{self.metric} {self.reference_px})')
         else:
             start = self.trainer.validate(max_instants=config.validate_instants)
             self.start_metrics = start
-            self.reference_px = start.get('reprojection_px')
-            log(f'starting model: held-out reprojection {self.reference_px} px, epipolar '
-                f'divergence {start.get("epipolar_divergence")}')
+            self.reference_px = start.get(self.metric)
+            log(f'starting model: held-out reprojection {start.get("reprojection_px")} px, '
+                f'held-out labelled error {start.get("labelled_mean_px")} px (mean; median '
+                f'{start.get("labelled_median_px")}), epipolar divergence '
+                f'{start.get("epipolar_divergence")}; announcing on {self.metric}')
         if self.reference_px is None:
             self.reference_px = math.inf
         self.checkpoints = 0
@@ -238,8 +304,41 @@ class OnlineLearner:
         self.step_times = []
         log(f'{self.recording.name}: {self.recording.num_instants} instants x '
             f'{self.recording.num_views} views, {len(data.labelled_instants)} labelled, '
-            f'{len(data.unlabeled_instants)} unlabeled, {len(data.held_out)} held out; '
+            f'{len(data.unlabeled_instants)} unlabeled, {len(data.held_out)} held out, '
+            f'{len(data.validation_instants)} labelled instants held out for validation; '
             f'mode {config.mode}, device {self.trainer.device}')
+
+    def _check_start_model(self, meta):
+        """Warn when the starting model's metadata says it was trained on this recording with
+        another validation split (it may have seen the validation labels: its held-out
+        labelled error, the first reference, is then optimistic)."""
+        if self.metric != PUBLISH_METRICS['labelled']:
+            return
+        trained = meta.get('train_config') or {}
+        if meta.get('recording') != self.recording.name or not trained:
+            return
+        split = ('validation_labels', 'eval_fraction')
+        mine = self.trainer.config
+        if any(trained.get(k, 0.0 if k == 'validation_labels' else None) != getattr(mine, k)
+               for k in split):
+            self.trainer.warn(
+                f'the starting model {self.config.model} was trained on {self.recording.name} '
+                f'with ' + ', '.join(f'{k}={trained.get(k)}' for k in split) + ', not '
+                + ', '.join(f'{k}={getattr(mine, k)}' for k in split) + ': it may have been '
+                'trained on the validation labels (its held-out labelled error is optimistic); '
+                'train it with the same settings')
+
+    def validate_checkpoint(self, path):
+        """Trainer.validate of the weights in the checkpoint at `path` (the trainer's own
+        weights are untouched)."""
+        from monet_ros.models import load_checkpoint
+        model, _ = load_checkpoint(path)
+        current = self.trainer.model
+        self.trainer.model = model.to(self.trainer.device)
+        try:
+            return _finite(self.trainer.validate(max_instants=self.config.validate_instants))
+        finally:
+            self.trainer.model = current
 
     def _load_published(self):
         path = self.out / PUBLISHED
@@ -296,23 +395,25 @@ class OnlineLearner:
 
     def evaluate(self, path):
         """Validate the checkpoint at `path` (the trainer's current weights) on the held-out
-        slice, decide whether to announce it, prune old checkpoints."""
+        slice and the validation labels, decide whether to announce it (should_publish on
+        self.metric against reference_px, the last announced value), prune old
+        checkpoints."""
         metrics = self.trainer.validate(max_instants=self.config.validate_instants)
         metrics.update({f'loss_{k}': v for k, v in self.trainer.last_terms.items()
                         if k in ('loss', 'L', 'E', 'B')})
         metrics = _finite(metrics)
         publish, reason = should_publish(metrics, self.reference_px,
-                                         self.config.publish_tolerance_px)
+                                         self.config.publish_tolerance_px, self.metric)
         result = CheckpointResult(str(Path(path).resolve()), self.step_count,
                                   sha256_file(path), metrics, publish, reason)
         self.checkpoints += 1
         self.last_result = result
         if publish:
             self.published = result
-            self.reference_px = metrics['reprojection_px']
+            self.reference_px = metrics[self.metric]
             _write_json_atomic(self.out / PUBLISHED, {
                 'path': result.path, 'step': result.step, 'sha256': result.sha256,
-                'metrics': result.metrics})
+                'metrics': result.metrics, 'publish_metric': self.metric})
         self.prune()
         return result
 

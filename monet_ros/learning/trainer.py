@@ -32,6 +32,7 @@ does not fit its own labelled views at the end (median error >
 fit_warning_heat_px heatmap pixels).
 """
 import csv
+from dataclasses import replace
 import json
 import os
 from pathlib import Path
@@ -105,6 +106,37 @@ def split_instants(num_instants, eval_fraction):
     return np.arange(num_instants - n_eval), np.arange(num_instants - n_eval, num_instants)
 
 
+def spread_instants(candidates, n):
+    """n of the `candidates` (sorted instant indices), evenly spread: the middle of each of n
+    equal runs (deterministic; the rule of validation_split and `monet train
+    --holdout-labelled`). n >= len(candidates) gives them all."""
+    candidates = np.asarray(candidates)
+    if n <= 0:
+        return candidates[:0]
+    if n >= len(candidates):
+        return candidates.copy()
+    picks = np.round((np.arange(n) + 0.5) * len(candidates) / n - 0.5).astype(int)
+    return candidates[np.unique(picks)]
+
+
+def validation_split(labels, held_out, fraction):
+    """(K,) sorted instants whose labels are held out for validation (never trained on).
+
+    labels (T, V, C, 2) px, NaN = none; held_out: the eval_fraction tail (already never
+    trained on). fraction 0 -> none; else the target is max(1, round(fraction x labelled
+    instants)): the tail's labelled instants count first, the rest are spread_instants of
+    the labelled instants before the tail, always leaving at least one of those to train on.
+    Deterministic: a resumed run (same labels, tail and fraction) gets the same split."""
+    labelled = np.flatnonzero(np.isfinite(labels[..., 0]).any(axis=(1, 2)))
+    if fraction <= 0 or labelled.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    target = max(1, int(round(fraction * labelled.size)))
+    tail = np.intersect1d(labelled, held_out)
+    train = np.setdiff1d(labelled, held_out)
+    extra = min(max(0, target - tail.size), max(0, train.size - 1))
+    return np.sort(np.concatenate([tail, spread_instants(train, extra)])).astype(np.int64)
+
+
 def crop_boxes(recording, source, aspect, margin, pseudo=None):
     """(T, V, 4) training crop boxes (crop_rule.recording_boxes). 'auto' = 'pseudo_labels'
     when `pseudo` (spatiotemporal tracks of the labels) is given, else 'labels': boxes a
@@ -118,24 +150,38 @@ class TrainingData:
     """A recording prepared for training: train / held-out split, crops, label arrays.
 
     labels (T, V, C, 2) are the recording's labels on the train split (NaN on the held-out
-    split); every index below is an instant of the full recording."""
+    split and on the validation instants); validation_instants (K,) (validation_split of
+    config.validation_labels) and validation_labels (K, V, C, 2) px: held-out labelled views,
+    in no training pool (no L_L, no pseudo-label, not an unlabeled instant of L_E), and their
+    crop boxes do not come from their own labels. Every index is an instant of the full
+    recording."""
 
     def __init__(self, recording, config, input_size, heatmap_size, tracked=None):
         self.recording = recording
         self.config = config
         self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
+        self.validation_instants = validation_split(recording.labels, self.held_out,
+                                                    config.validation_labels)
+        self.validation_labels = recording.labels[self.validation_instants].copy()
         self.labels = recording.labels.copy()
         self.labels[self.held_out] = np.nan
+        self.labels[self.validation_instants] = np.nan
         labelled = np.isfinite(self.labels[..., 0]).any(axis=2)             # (T, V)
         self.labelled_instants = np.flatnonzero(labelled.any(axis=1))
-        self.unlabeled_instants = np.setdiff1d(self.train, self.labelled_instants)
+        self.unlabeled_instants = np.setdiff1d(self.train, np.union1d(
+            self.labelled_instants, self.validation_instants))
         if self.labelled_instants.size == 0:
             raise ValueError(f'{recording.name}: no labelled instant in the training split')
         h_in, w_in = input_size
         self._tracked = tracked       # tracked_labels() given (rank 0's, in a torchrun job)
         pseudo = (self.tracked_labels() if config.box_source in ('auto', 'pseudo_labels')
                   else None)
-        self.boxes = crop_boxes(recording, config.box_source, w_in / h_in, config.box_margin,
+        boxed = recording
+        if self.validation_instants.size:      # validation views framed without their labels
+            masked = recording.labels.copy()
+            masked[self.validation_instants] = np.nan
+            boxed = replace(recording, labels=masked)
+        self.boxes = crop_boxes(boxed, config.box_source, w_in / h_in, config.box_margin,
                                 pseudo)
         self.cache = CropCache(recording, self.boxes, input_size, heatmap_size,
                                config.cache_scale)
@@ -174,6 +220,7 @@ class TrainingData:
                                  "data's config")
             points = np.where(np.isnan(points), self.tracked_labels(), points)
         points[self.held_out] = np.nan
+        points[self.validation_instants] = np.nan
         return points
 
 
@@ -426,17 +473,28 @@ class Trainer:
 
     @torch.no_grad()
     def validate(self, instants=None, max_instants=16):
-        """Unsupervised validation on some instants (default: the held-out split, at most
-        max_instants evenly spread): mean epipolar divergence over all views and the
-        reprojection error (px) of the all-view triangulation of the detections. Needs no
-        ground truth (for the online learner's model selection)."""
+        """Validation of the current weights, for the online learner's model selection.
+
+        On some instants (default: the held-out split, at most max_instants evenly spread),
+        without labels: mean epipolar divergence over all views (`epipolar_divergence`) and
+        the reprojection error (px) of the all-view triangulation of the detections
+        (`reprojection_px`, `reprojection_std_px`): agreement between views, not accuracy.
+        When the data holds validation labels (config.validation_labels): the error of the
+        detections on every validation instant against those labels (label_error, original
+        image px): `labelled_median_px`, `labelled_mean_px`, `labelled_keypoints`. Returns
+        {} when there is no instant to validate on."""
+        labelled = {}
+        if len(self.data.validation_instants):
+            err = self.label_error(self.data.validation_instants, self.data.validation_labels)
+            labelled = {'labelled_median_px': err['median_px'],
+                        'labelled_mean_px': err['mean_px'], 'labelled_keypoints': err['count']}
         if instants is None:
             held = self.data.held_out
             instants = held[np.linspace(0, len(held) - 1, min(max_instants, len(held)))
                             .round().astype(int)] if len(held) else held
         instants = np.asarray(instants, dtype=np.int64)
         if instants.size == 0:
-            return {}
+            return labelled
         points, _ = self.detect(instants)
         reproj = multiview_reprojection(points, self.data.cameras).consistency_stats
         V = self.data.recording.num_views
@@ -446,7 +504,7 @@ class Trainer:
         terms = self._terms([('E', pairs, V)], None, None)
         self.model.train(was_training)
         return {'epipolar_divergence': float(terms['E']), 'reprojection_px': reproj.mean,
-                'reprojection_std_px': reproj.std, 'instants': int(instants.size)}
+                'reprojection_std_px': reproj.std, 'instants': int(instants.size), **labelled}
 
     # ----------------------------------------------------------------- bootstrapping
     def bootstrap_steps(self):
@@ -639,15 +697,24 @@ class Trainer:
         os.replace(tmp, path)
 
     def fit_error(self):
-        """How well the detector fits its own labelled views (no augmentation): dict of the
-        median, mean and 90th percentile of the distance between detections and labels, over
-        every labelled keypoint of every labelled view, in original image pixels (`*_px`) and
-        in heatmap pixels (`*_heat`: the network's output grid, independent of the image
-        resolution; a lost keypoint counts as infinitely far)."""
+        """How well the detector fits its own labelled views (no augmentation): label_error
+        over every labelled keypoint of every labelled view of the training split."""
         inst = self.data.labelled_instants
-        points, _ = self.detect(inst)
-        labels = self.data.labels[inst]
+        return self.label_error(inst, self.data.labels[inst])
+
+    def label_error(self, instants, labels):
+        """Distance between the detections (detect: cached crops, no augmentation) of every
+        view of `instants` (N,) and `labels` (N, V, C, 2) original image px, NaN = not
+        labelled: dict of `count` (labelled keypoints) and the median, mean and 90th
+        percentile in original image pixels (`*_px`) and in heatmap pixels (`*_heat`: the
+        network's output grid, independent of the image resolution); a lost keypoint counts
+        as infinitely far. Raises ValueError when `labels` holds no label."""
+        inst = np.asarray(instants, dtype=np.int64)
+        labels = np.asarray(labels, dtype=np.float64)
         ok = np.isfinite(labels[..., 0])                                     # (N, V, C)
+        if not ok.any():
+            raise ValueError('label_error: no label at the given instants')
+        points, _ = self.detect(inst)
         V = self.data.recording.num_views
         pairs = np.stack(np.meshgrid(inst, np.arange(V), indexing='ij'), -1).reshape(-1, 2)
         A = self.data.cache.views(pairs[:, 0], pairs[:, 1]).A[:, :2, :2]
@@ -695,9 +762,13 @@ class Trainer:
             self.save()
         seconds = time.monotonic() - start
         fit = self.check_fit()
+        validation = (self.label_error(self.data.validation_instants,
+                                       self.data.validation_labels)
+                      if len(self.data.validation_instants) else None)
         return {'mode': self.config.mode, 'steps': self.step_count, 'seconds': seconds,
                 'steps_per_s': (self.step_count - first) / max(seconds, 1e-9),
                 'pseudo_labels': self.pseudo_label_count,
                 'pseudo_label_coverage': self.pseudo_label_coverage, 'last': self.last_terms,
-                'fit': fit, 'bootstrap': self.bootstrap_stats, 'warnings': list(self.warnings)}
+                'fit': fit, 'validation': validation, 'bootstrap': self.bootstrap_stats,
+                'warnings': list(self.warnings)}
 

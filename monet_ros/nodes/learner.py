@@ -7,9 +7,15 @@ background thread; the executor thread serves the services and timers:
   ~/save_checkpoint  std_srvs/Trigger   write, validate (and maybe announce) a checkpoint now
   ~/pause, ~/resume  std_srvs/Trigger   stop / continue training between steps
   /monet/model       std_msgs/String    JSON {path, step, sha256, metrics}, transient-local:
-                                        every checkpoint_every steps, when the held-out
-                                        reprojection error is not worse than the last one's
-  /diagnostics       DiagnosticArray    step, steps/s, loss terms, last validation, state
+                                        every checkpoint_every steps, when its publish_metric
+                                        (default: mean error on the held-out validation
+                                        labels; reprojection error when there are none) is
+                                        not worse than the last announced one's
+  /diagnostics       DiagnosticArray    step, steps/s, loss terms, last validation, state,
+                                        the criterion and its announced value
+
+The criterion and the validation split are the core's (OnlineLearner, should_publish): the
+same for `monet pipeline --learn` and any offline caller.
 """
 import sys
 import threading
@@ -129,7 +135,9 @@ class LearnerNode(Node):
                   ('training' if self.running.is_set() else 'paused'),
                   'checkpoints': learner.checkpoints, 'announced': self.announced,
                   'announced_step': learner.published.step if learner.published else '',
-                  'announced_reprojection_px': learner.reference_px}
+                  'publish_metric': learner.metric, 'announced_value_px': learner.reference_px,
+                  'announced_reprojection_px': learner.published.metrics.get('reprojection_px')
+                  if learner.published else ''}
         values.update({f'loss_{k}': f'{v:.6g}' for k, v in self.last_terms.items()
                        if k in ('loss', 'L', 'E', 'B', 'lr')})
         if last is not None:

@@ -79,13 +79,16 @@ def test_learner_announces_only_checkpoints_not_worse_and_resumes(folder, tmp_pa
             assert result.sha256 == hashlib.sha256(open(result.path, 'rb').read()).hexdigest()
             results.append(result)
     assert [r.step for r in results] == [5, 10, 15, 20, 25, 30]
+    # labels at instants 2 and 9: one of them is held out, the criterion is the error on it
+    assert learner.data.validation_instants.size == 1 and learner.metric == 'labelled_mean_px'
     reference = start
     for r in results:      # the criterion, recomputed here from the reported numbers
-        err = r.metrics['reprojection_px']
+        err = r.metrics['labelled_mean_px']
         assert r.published == (err is not None and err <= reference)
         if r.published:
             reference = err
-        assert set(r.metrics) >= {'epipolar_divergence', 'reprojection_px', 'loss_L'}
+        assert set(r.metrics) >= {'epipolar_divergence', 'reprojection_px', 'loss_L',
+                                  'labelled_mean_px', 'labelled_median_px'}
     assert learner.reference_px == reference
     published = [r for r in results if r.published]
     assert published, 'training from a random net improved nothing in 30 steps'
@@ -104,7 +107,7 @@ def test_learner_announces_only_checkpoints_not_worse_and_resumes(folder, tmp_pa
     # a restarted learner continues at step 30 with the last announcement as reference
     again = OnlineLearner(config, log=lambda *a: None)
     assert again.step_count == 30 and again.published.sha256 == last.sha256
-    assert again.reference_px == last.metrics['reprojection_px']
+    assert again.reference_px == last.metrics['labelled_mean_px']
     for name, value in learner.trainer.model.state_dict().items():
         assert torch.equal(value, again.trainer.model.state_dict()[name]), name
 
