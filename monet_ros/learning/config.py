@@ -51,9 +51,10 @@ MODE_SPECS = {
 
 @dataclass(frozen=True)
 class TrainConfig:
-    # supervised: the most accurate mode measured (bench/results/accuracy.md, issue 22)
-    mode: str = setting('supervised', "training mode (a row of the paper's Table 1; "
-                        'supervised is the most accurate measured)', choices=MODES)
+    # spatiotemporal (L_L + L_B on the labels' spatiotemporal tracks): the most accurate mode
+    # measured at the default 2000 steps (bench/results/accuracy.md, issue 22)
+    mode: str = setting('spatiotemporal', "training mode (a row of the paper's Table 1; "
+                        'spatiotemporal is the most accurate measured)', choices=MODES)
     architecture: str = setting('small', 'detector architecture',
                                 choices=('small', 'cpm', 'hourglass'))
     input_size: int = setting(0, "square network input side (px); 0 = the architecture's",

@@ -156,7 +156,8 @@ def test_learner_announces_detector_reloads_between_frames_and_services(scene, r
                 assert a['sha256'] == sha256(a['path'])
                 assert load_checkpoint(a['path'])[1]['step'] == a['step']
                 assert np.isfinite(a['metrics']['reprojection_px'])
-                assert set(a['metrics']) >= {'epipolar_divergence', 'loss_L', 'loss_E'}
+                # the default mode, spatiotemporal: L_L + L_B (the pseudo-labels' loss)
+                assert set(a['metrics']) >= {'epipolar_divergence', 'loss_L', 'loss_B'}
             # the new heatmaps are those of an announced checkpoint, not the start model's
             last = heats[-1]
             assert any(np.allclose(last, reference(a['path'], image, camera, box), atol=1e-4)
@@ -186,7 +187,7 @@ def test_learner_announces_detector_reloads_between_frames_and_services(scene, r
             status = learner_status(diagnostics)
             # steps went on (above); the rate is a figure (3 decimals), not checked here
             assert status['state'] == 'training' and float(status['steps_per_s']) >= 0
-            assert {'loss_L', 'loss_E', 'loss_B'} <= set(status)
+            assert {'loss_L', 'loss_B'} <= set(status)          # spatiotemporal: no L_E
             assert learner.stop(signal.SIGINT, timeout=60) == 0, learner.output()
         for _ in range(3):                     # the stream goes on without the learner
             assert frames.next() is not None
