@@ -7,6 +7,7 @@ over seeds and, paired per seed, the difference to --baseline (negative = better
 how many seeds the row beats it.
 
 usage: python bench/accuracy_paired.py OUT [--baseline supervised] [--control ROW=CONTROL]
+       [--plot PNG] [--rows ROW ...]     (PNG: per-seed bars of the first three columns)
 """
 import argparse
 import json
@@ -74,14 +75,43 @@ def table(rows, baseline, controls):
     return '\n'.join(lines)
 
 
+def plot(rows, path, names=None):
+    """PNG: one panel per column of FIELDS[:3], a bar per (row, seed)."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    names = names or [m for m in rows if m.split('+')[0] != 'null']
+    datasets = sorted({d for r in rows.values() for d in r})
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8))
+    width = 0.8 / len(datasets)
+    for ax, (title, get) in zip(axes, FIELDS[:3]):
+        for k, d in enumerate(datasets):
+            vals = [get(rows[m][d]) if d in rows[m] else np.nan for m in names]
+            ax.bar(np.arange(len(names)) + (k - (len(datasets) - 1) / 2) * width, vals, width,
+                   label=d)
+        ax.set_xticks(np.arange(len(names)), names, rotation=20, ha='right', fontsize=8)
+        ax.set_title(f'{title}, lower is better', fontsize=9)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('out')
     parser.add_argument('--baseline', default='supervised')
     parser.add_argument('--control', action='append', default=[], metavar='ROW=CONTROL')
+    parser.add_argument('--plot', default=None, metavar='PNG')
+    parser.add_argument('--rows', nargs='+', default=None, help='rows of the plot, in order')
     args = parser.parse_args(argv)
     controls = [tuple(c.split('=', 1)) for c in args.control]
-    print(table(load(args.out), args.baseline, controls))
+    rows = load(args.out)
+    print(table(rows, args.baseline, controls))
+    if args.plot:
+        plot(rows, args.plot, args.rows)
+        print(f'\nwritten {args.plot}')
     return 0
 
 
