@@ -86,9 +86,13 @@ def test_raw_and_filtered_keypoints_are_scored_apart(synth):
     assert 'filtered' not in plain.line() and plain.figures()['filtered_frames'] == 0
 
 
-def test_demo_recipe_is_sparse_distinct_sided_and_the_default_recipe():
+def test_demo_recipe_is_sparse_distinct_sided_and_the_default_recipe_at_a_short_budget():
     assert '--distinct-sides' in SYNTH_ARGS
     fraction = float(SYNTH_ARGS[SYNTH_ARGS.index('--label-fraction') + 1])
     frames = int(SYNTH_ARGS[SYNTH_ARGS.index('--frames') + 1])
     assert 2 <= round(fraction * frames) <= 5
-    assert '--mode' not in TRAIN_ARGS and '--lr' not in TRAIN_ARGS     # the default recipe
+    # the default recipe (learning rate, schedule, augmentation) at 600 steps, where
+    # supervised beats the default mode (pseudo-labels pay from ~2000 steps: issue 22)
+    assert TRAIN_ARGS[TRAIN_ARGS.index('--mode') + 1] == 'supervised'
+    assert int(TRAIN_ARGS[TRAIN_ARGS.index('--steps') + 1]) < 2000
+    assert '--lr' not in TRAIN_ARGS
