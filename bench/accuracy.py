@@ -15,8 +15,10 @@ For each synthetic rig (`monet synth`: a moving human, 14 keypoints, <1% labelle
      (tracked: around the previous instant's fused 3D; `--eval-crop ground_truth` is the
      explicit, labelled benchmark option). Columns, ground truth first: 2D error against
      the projected ground truth (px mean, median), PCK@0.05/0.1/0.2 against it (fraction of
-     the heatmap window), 3D error of the all-view triangulation (mm), reprojection error
-     (px, agreement of the views, not accuracy). A cell where a mode does not beat the null
+     the heatmap window), 3D error of the product's fusion (`monet process`'s fuse_heatmaps:
+     outlier views excluded; mean, median, p90 mm, and the share it left untriangulated),
+     3D error of the plain all-view triangulation (mm), reprojection error (px, agreement of
+     the views, not accuracy). A cell where a mode does not beat the null
      row is marked with a dagger.
   5. with several seeds: mean ± std over seeds, and MONET paired with every baseline (per-seed
      ratio baseline / MONET, and on how many seeds MONET is better).
@@ -92,8 +94,11 @@ COLUMNS = (('error2d_mean', '2D err. (px)', '.2f', True),
            ('error2d_median', '2D med. (px)', '.2f', True),
            ('pck@0.05', 'PCK@0.05', '.3f', False), ('pck@0.1', 'PCK@0.1', '.3f', False),
            ('pck@0.2', 'PCK@0.2', '.3f', False),
-           ('error3d_mm', '3D err. (mm)', '.0f', True),
-           ('error3d_median_mm', '3D med. (mm)', '.0f', True),
+           ('fused3d_mm', '3D fused (mm)', '.0f', True),
+           ('fused3d_median_mm', '3D fused med. (mm)', '.0f', True),
+           ('fused3d_p90_mm', '3D fused p90 (mm)', '.0f', True),
+           ('fused3d_missing', 'untriangulated', '.3f', True),
+           ('error3d_mm', '3D all-view DLT (mm)', '.0f', True),
            ('reprojection', 'reproj. (px)', '.2f', True))
 
 _DATA = {}          # rig -> TrainingData inputs, filled before forking
@@ -179,6 +184,8 @@ def train_and_evaluate(job):
                                crop='boxes')
         extra['gt_crop'] = {k: gt.extra[k] for k in ('error2d_mean', 'error2d_median',
                                                      'error3d_mean', 'error3d_median',
+                                                     'fused3d_mean', 'fused3d_median',
+                                                     'fused3d_p90', 'fused3d_missing',
                                                      'mean_confidence')}
         extra['gt_crop']['pck@0.1'] = gt.pck.at(0.1)
     if mode != 'null':
@@ -238,6 +245,9 @@ def value(summary, key):
         return 1000 * summary.extra['error3d_mean']
     if key == 'error3d_median_mm':
         return 1000 * summary.extra['error3d_median']
+    if key.startswith('fused3d_') and key.endswith('_mm'):
+        name = 'fused3d_' + (key[8:-3] or 'mean') if key != 'fused3d_mm' else 'fused3d_mean'
+        return 1000 * summary.extra.get(name, float('nan'))
     if key == 'reprojection':
         return summary.reprojection_mean
     return summary.extra[key]

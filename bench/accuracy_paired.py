@@ -1,7 +1,9 @@
 """Per-seed paired table of a bench/accuracy.py output: every row against a baseline row.
 
 For each (mode[+tag]) row and seed: 2D error against the ground truth (px mean) with the
-live tracked crops and with ground-truth crops, 3D error (mm mean, tracked crops), the
+live tracked crops and with ground-truth crops, 3D error of the product's fusion (mm mean and
+p90, tracked crops: `monet process`'s fuse_heatmaps; older results without it: '–'), of the
+plain all-view triangulation, and of the fusion on ground-truth crops, the
 detector's median heatmap peak on its labelled views and its fit to them; then the mean
 over seeds and, paired per seed, the difference to --baseline (negative = better) and on
 how many seeds the row beats it.
@@ -16,11 +18,19 @@ import sys
 
 import numpy as np
 
+
+def _mm(value):
+    return None if value is None else 1000 * value
+
+
+# the first PAIRED columns are also compared per seed
 FIELDS = (('tracked 2D (px)', lambda e: e['error2d_mean']),
           ('GT-crop 2D (px)', lambda e: e.get('gt_crop', {}).get('error2d_mean')),
-          ('3D (mm)', lambda e: 1000 * e['error3d_mean']),
-          ('GT-crop 3D (mm)', lambda e: 1000 * e['gt_crop']['error3d_mean']
-           if 'gt_crop' in e else None))
+          ('3D fused (mm)', lambda e: _mm(e.get('fused3d_mean'))),
+          ('3D fused p90 (mm)', lambda e: _mm(e.get('fused3d_p90'))),
+          ('3D all-view DLT (mm)', lambda e: 1000 * e['error3d_mean']),
+          ('GT-crop 3D fused (mm)', lambda e: _mm(e.get('gt_crop', {}).get('fused3d_mean'))))
+PAIRED = 4
 
 
 def load(out):
@@ -28,6 +38,10 @@ def load(out):
     for r in json.loads((Path(out) / 'results.json').read_text()):
         rows.setdefault(r['mode'], {})[r['dataset']] = r['extra']
     return rows
+
+
+def _diff(a, b):
+    return np.nan if a is None or b is None else a - b
 
 
 def cell(values):
@@ -40,7 +54,8 @@ def table(rows, baseline, controls):
     lines = [f'Seeds (datasets): {", ".join(datasets)}. Cells: per seed, then mean; '
              f'paired: mean of (row - {baseline}) per seed and seeds where the row is better.',
              '', '| row | ' + ' | '.join(name for name, _ in FIELDS) +
-             f' | paired vs {baseline}: tracked 2D, GT-crop 2D, 3D | labelled peak | '
+             f' | paired vs {baseline}: ' + ', '.join(n for n, _ in FIELDS[:PAIRED]) +
+             ' | labelled peak | '
              'fit (heat px) |',
              '|---' * (len(FIELDS) + 4) + '|']
     for mode in rows:
@@ -50,7 +65,7 @@ def table(rows, baseline, controls):
             known = [v for v in vals if v is not None]
             cells.append(f'{cell(vals)} (mean {np.mean(known):.1f})' if known else '–')
         paired = []
-        for _, get in FIELDS[:3]:
+        for _, get in FIELDS[:PAIRED]:
             diffs = [get(rows[mode][d]) - get(rows[baseline][d]) for d in datasets
                      if d in rows[mode] and d in rows.get(baseline, {})
                      and get(rows[mode][d]) is not None and get(rows[baseline][d]) is not None]
@@ -65,13 +80,13 @@ def table(rows, baseline, controls):
     for row, control in controls:
         if row not in rows or control not in rows:
             continue
-        diffs = [[get(rows[row][d]) - get(rows[control][d]) for _, get in FIELDS[:3]]
-                 for d in datasets if d in rows[row] and d in rows[control]]
-        diffs = np.array(diffs)
+        diffs = [[_diff(get(rows[row][d]), get(rows[control][d])) for _, get in
+                  FIELDS[:PAIRED]] for d in datasets if d in rows[row] and d in rows[control]]
+        diffs = np.array(diffs, dtype=float)
         lines.append(f'\n{row} vs its exact control {control} (same batch plan), paired: '
-                     + ', '.join(f'{name} {diffs[:, k].mean():+.1f} '
+                     + ', '.join(f'{name} {np.nanmean(diffs[:, k]):+.1f} '
                                  f'({int((diffs[:, k] < 0).sum())}/{len(diffs)} better)'
-                                 for k, (name, _) in enumerate(FIELDS[:3])))
+                                 for k, (name, _) in enumerate(FIELDS[:PAIRED])))
     return '\n'.join(lines)
 
 

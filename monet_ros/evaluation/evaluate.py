@@ -32,7 +32,9 @@ def detect_instants(detector, recording, instants, boxes, crop='tracked', rule=N
     crop='tracked' the fallback of the tracked rule (crop_rule.TrackedCrops with `rule`; the
     3D it follows is fused with `fusion_config`, as in `monet process`). Returns dict of
     peaks_heat (N, V, C, 2), confidence (N, V, C), points (N, V, C, 2) original pixels,
-    heat_K (N, V, 3, 3), used boxes (N, V, 4). Raises ValueError for an unknown crop."""
+    heat_K (N, V, 3, 3), used boxes (N, V, 4), fused (N, C, 3) m: the 3D keypoints fused from
+    the heatmaps as `monet process` fuses them (fusion.fuse_heatmaps with `fusion_config`: the
+    product's 3D; NaN where not triangulated). Raises ValueError for an unknown crop."""
     if crop not in CROPS:
         raise ValueError(f'crop must be one of {CROPS}, got {crop!r}')
     instants = np.asarray(instants, dtype=np.int64)
@@ -44,6 +46,7 @@ def detect_instants(detector, recording, instants, boxes, crop='tracked', rule=N
     out = {k: np.empty((len(instants), V) + s) for k, s in (
         ('peaks_heat', (C, 2)), ('confidence', (C,)), ('points', (C, 2)), ('heat_K', (3, 3)),
         ('boxes', (4,)))}
+    out['fused'] = np.empty((len(instants), C, 3))
     for n, t in enumerate(instants):
         stamp = int(recording.stamps[t])
         chosen = tracker.boxes(cams, stamp, boxes[t]) if crop == 'tracked' else boxes[t]
@@ -51,8 +54,10 @@ def detect_instants(detector, recording, instants, boxes, crop='tracked', rule=N
         heat, heat_cams = detector.predict(recording.images(int(t)), cams, used,
                                            keep_aspect=False)
         K_heat = np.stack([c.K for c in heat_cams])
+        fused = fuse_heatmaps(heat, K_heat, cams, fusion_config).X
         if crop == 'tracked':
-            tracker.update(fuse_heatmaps(heat, K_heat, cams, fusion_config).X, stamp)
+            tracker.update(fused, stamp)
+        out['fused'][n] = fused
         peaks, conf = decode_heatmaps(heat)
         S_inv = np.linalg.inv(np.stack([crop_transform(b, (w, h)) for b in used]))
         out['peaks_heat'][n] = peaks
@@ -71,7 +76,11 @@ def evaluate_detector(detector, recording, instants, boxes, mode='model', datase
 
     Ground-truth figures (in extra): error2d_mean / error2d_median, the detections' distance
     to the projected ground truth (original px, views where it is visible); error3d_mean /
-    error3d_median (m), the all-view triangulation (no RANSAC) against the ground-truth 3D.
+    error3d_median (m), the all-view triangulation (no RANSAC) against the ground-truth 3D;
+    fused3d_mean / fused3d_median / fused3d_p90 (m), the product's 3D (the keypoints
+    `monet process` fuses: outlier views excluded, top-k peaks) against the ground truth, over
+    the keypoints it triangulated, and fused3d_missing, the share it left untriangulated
+    (counted, never hidden in the mean).
     PCK is over (instant, view, keypoint) where the ground truth projects inside the
     original image, distances normalised by the side of the ground-truth subject box of the
     view (square, 25% margin; = the heatmap window of a ground-truth crop). Reprojection:
@@ -99,11 +108,18 @@ def evaluate_detector(detector, recording, instants, boxes, mode='model', datase
     reproj = multiview_reprojection(det['points'], recording.cameras, gt3d)
     cons, gt_err = reproj.consistency_stats, reproj.gt_stats
     e3d = reproj.error3d_stats
+    fused_err = np.linalg.norm(det['fused'] - gt3d, axis=-1)                 # (N, C)
+    has = np.isfinite(gt3d[..., 0])
+    scored = fused_err[has & np.isfinite(fused_err)]
     extra = {'error3d_mean': e3d.mean, 'error3d_std': e3d.std, 'error3d_median': e3d.median,
              'reprojection_median': cons.median,
              'error2d_mean': float(error2d.mean()) if error2d.size else float('nan'),
              'error2d_median': float(np.median(error2d)) if error2d.size else float('nan'),
              'mean_confidence': float(np.mean(det['confidence'])),
+             'fused3d_mean': float(scored.mean()) if scored.size else float('nan'),
+             'fused3d_median': float(np.median(scored)) if scored.size else float('nan'),
+             'fused3d_p90': float(np.percentile(scored, 90)) if scored.size else float('nan'),
+             'fused3d_missing': float(1 - scored.size / max(1, int(has.sum()))),
              'heatmap_size': [h, w], 'crop': crop}
     return EvalSummary(mode, dataset or recording.name, cons.mean, cons.std, gt_err.mean,
                        gt_err.std, result, len(instants), extra)

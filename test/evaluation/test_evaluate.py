@@ -92,3 +92,37 @@ def test_tracked_crops_follow_the_previous_instants_fused_3d():
         assert np.isfinite(X).all(axis=1).sum() >= 3           # the tracked branch is taken
         want = detector.boxes_for(cams, crop_boxes(cams, X.astype(np.float32), start[t]))
         np.testing.assert_allclose(det['boxes'][n], want, atol=1e-9)
+
+
+def test_fused_3d_is_what_monet_process_fuses():
+    """The product's 3D figures: the heatmaps of every instant fused as `monet process` fuses
+    them (fusion.fuse_heatmaps, default FusionConfig), against the ground-truth 3D; keypoints
+    left untriangulated are counted as missing, not averaged."""
+    from monet_ros.fusion import FusionConfig, fuse_heatmaps
+
+    torch.manual_seed(0)
+    rec = blob_recording(num_views=4, T=6, C=3, labelled=(0,))
+    model = build_model('small', 3, input_size=[48, 48], width=8)
+    detector = Detector(model, {'keypoints': list(rec.keypoints)}, device='cpu')
+    boxes = recording_boxes(rec, 'ground_truth', 1.0, 0.25)
+    instants = np.array([3, 4, 5])
+    summary = evaluate_detector(detector, rec, instants, boxes, 'supervised', 'blobs',
+                                crop='boxes')
+    errors, missing = [], 0
+    for t in instants:
+        heat, heat_cams = detector.predict(rec.images(t), rec.cameras,
+                                           detector.boxes_for(rec.cameras, boxes[t]),
+                                           keep_aspect=False)
+        X = fuse_heatmaps(heat, np.stack([c.K for c in heat_cams]), rec.cameras,
+                          FusionConfig()).X
+        for c in range(3):
+            if np.isfinite(X[c]).all():
+                errors.append(np.sqrt(((X[c] - rec.gt3d[t, c]) ** 2).sum()))
+            else:
+                missing += 1
+    assert errors, 'the random net should still triangulate some keypoints'
+    e = summary.extra
+    assert abs(e['fused3d_mean'] - np.mean(errors)) < 1e-9
+    assert abs(e['fused3d_median'] - np.median(errors)) < 1e-9
+    assert abs(e['fused3d_p90'] - np.percentile(errors, 90)) < 1e-9
+    assert abs(e['fused3d_missing'] - missing / 9) < 1e-12
