@@ -146,6 +146,11 @@ class TrainConfig:
     track_min_views: int = setting(3, 'spatiotemporal: minimum verified views', minimum=2)
     track_min_ncc: float = setting(0.7, 'spatiotemporal: minimum patch NCC', minimum=-1.0,
                                    maximum=1.0)
+    pseudo_max_frames: int = setting(
+        0, 'spatiotemporal: train L_B only on tracked pseudo-labels at most this many frames '
+        'from their seed (tracks drift: their error grows with the distance); 0 = every '
+        'tracked frame (up to track_horizon). Crop boxes still use the whole track',
+        minimum=0)
     fit_warning_heat_px: float = setting(
         1.0, 'warn when the median error of the final detector on its own labelled views is '
         'above this many heatmap pixels (the output grid: 1/64 of the crop side for the small '

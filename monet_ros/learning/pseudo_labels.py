@@ -20,9 +20,13 @@ from monet_ros.geometry import project_views, triangulate, triangulate_robust
 
 @dataclass(frozen=True)
 class PseudoLabels:
-    """points (T, V, C, 2) image pixels, NaN = no label; points3d (T, C, 3) NaN = none."""
+    """points (T, V, C, 2) image pixels, NaN = no label; points3d (T, C, 3) NaN = none;
+    frames_from_seed (T, C): for tracked labels, how many frames the kept track ran from its
+    seed (0 at a seed, inf where none; None for untracked kinds). Tracks drift: their error
+    grows with this distance (bench/results/accuracy.md, issue 22)."""
     points: np.ndarray
     points3d: np.ndarray
+    frames_from_seed: np.ndarray = None
 
     @property
     def count(self):
@@ -204,7 +208,7 @@ def spatiotemporal_pseudo_labels(frames, cameras, seeds3d, config=TrackingConfig
     seeds3d: (T, C, 3) 3D keypoints of the seed (labelled) instants, NaN elsewhere.
     Returns PseudoLabels over all T instants: at seed instants the projections of the seeds,
     elsewhere the verified tracked labels, from the nearest seed in time when several reach
-    an instant.
+    an instant; frames_from_seed (T, C) the length of the kept track.
     """
     seeds = np.asarray(seeds3d, dtype=np.float64)
     T, C, _ = seeds.shape
@@ -238,4 +242,4 @@ def spatiotemporal_pseudo_labels(frames, cameras, seeds3d, config=TrackingConfig
                 points3d[t_next, better] = X[better]
                 distance[t_next, better] = step
                 t = t_next
-    return PseudoLabels(points, points3d)
+    return PseudoLabels(points, points3d, distance)

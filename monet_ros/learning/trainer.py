@@ -173,7 +173,7 @@ class TrainingData:
         if self.labelled_instants.size == 0:
             raise ValueError(f'{recording.name}: no labelled instant in the training split')
         h_in, w_in = input_size
-        self._tracked = tracked       # tracked_labels() given (rank 0's, in a torchrun job)
+        self._tracked = tracked       # tracks() given (rank 0's, in a torchrun job)
         pseudo = (self.tracked_labels() if config.box_source in ('auto', 'pseudo_labels')
                   else None)
         boxed = recording
@@ -194,6 +194,11 @@ class TrainingData:
         """(T, V, C, 2) spatiotemporal pseudo-labels of the train split (labels triangulated,
         tracked config.tracking.horizon frames each way, verified), NaN elsewhere; computed
         once (crop boxes and the temporal modes share it)."""
+        return self.tracks().points
+
+    def tracks(self):
+        """pseudo_labels.PseudoLabels of tracked_labels over the whole recording (points
+        (T, V, C, 2) px, points3d (T, C, 3), frames_from_seed (T, C)); computed once."""
         if self._tracked is None:
             T, V, C, _ = self.labels.shape
             spatial = spatial_pseudo_labels(self.labels, self.cameras)
@@ -202,8 +207,13 @@ class TrainingData:
             frames = _Frames(self.recording, self.train)
             tracked = spatiotemporal_pseudo_labels(frames, self.cameras, seeds,
                                                    self.config.tracking)
-            self._tracked = np.full((T, V, C, 2), np.nan)
-            self._tracked[self.train] = tracked.points
+            points = np.full((T, V, C, 2), np.nan)
+            points3d = np.full((T, C, 3), np.nan)
+            distance = np.full((T, C), np.inf)
+            points[self.train] = tracked.points
+            points3d[self.train] = tracked.points3d
+            distance[self.train] = tracked.frames_from_seed
+            self._tracked = PseudoLabels(points, points3d, distance)
         return self._tracked
 
     def initial_pseudo_labels(self, spec, tracking):
@@ -218,7 +228,13 @@ class TrainingData:
             if tracking != self.config.tracking:
                 raise ValueError('initial_pseudo_labels: tracking settings differ from the '
                                  "data's config")
-            points = np.where(np.isnan(points), self.tracked_labels(), points)
+            tracks = self.tracks()
+            tracked = tracks.points
+            gate = self.config.pseudo_max_frames
+            if gate:      # drift: keep the tracks' first frames (the boxes keep all of them)
+                far = tracks.frames_from_seed > gate                              # (T, C)
+                tracked = np.where(far[:, None, :, None], np.nan, tracked)
+            points = np.where(np.isnan(points), tracked, points)
         points[self.held_out] = np.nan
         points[self.validation_instants] = np.nan
         return points

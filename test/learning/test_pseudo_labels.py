@@ -102,3 +102,27 @@ def test_patch_ncc_is_one_for_identical_patches_and_low_for_flat():
     shifted = np.roll(a, 3, axis=1)
     np.testing.assert_allclose(patch_ncc(a, p, shifted, p + [3, 0], 7), 1.0, atol=1e-6)
     assert patch_ncc(a, p, np.zeros_like(a), p, 7).max() == 0.0
+
+
+def test_tracks_say_how_far_they_ran_from_their_seed():
+    """frames_from_seed: 0 at the seed, |t - seed| along a track, the nearer seed's length
+    where two tracks reach an instant, inf where none does."""
+    cams = ring_rig(5, width=200, height=160, focal=180.0)
+    T = 9
+    base = np.array([[0.0, 0.0, 1.0], [0.35, 0.1, 0.8], [-0.3, -0.2, 1.3]])
+    X = base[None] + np.arange(T)[:, None, None] * np.array([0.02, -0.015, 0.01])
+    frames = render(cams, X, sizes=[3.0, 3.5, 4.0])
+    seeds = np.full_like(X, np.nan)
+    seeds[[1, 6]] = X[[1, 6]]
+    seeds[6, 2] = np.nan                           # keypoint 2 seeded at instant 1 only
+    result = spatiotemporal_pseudo_labels(frames, cams, seeds,
+                                          TrackingConfig(horizon=3, min_views=3))
+    d = result.frames_from_seed
+    t = np.arange(T)[:, None]
+    nearest = np.minimum(np.abs(t - 1), np.abs(t - 6))                      # keypoints 0, 1
+    np.testing.assert_array_equal(d[:, :2], np.where(nearest <= 3, nearest, np.inf)[:, [0, 0]])
+    np.testing.assert_array_equal(d[:, 2], np.where(np.abs(t[:, 0] - 1) <= 3,
+                                                    np.abs(t[:, 0] - 1), np.inf))
+    # a cell holds a label exactly where a track reached it
+    np.testing.assert_array_equal(np.isfinite(result.points[..., 0]).any(axis=1),
+                                  np.isfinite(d))

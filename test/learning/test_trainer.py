@@ -117,6 +117,30 @@ def test_monet_uses_the_spatiotemporal_pseudo_labels(recording):
     np.testing.assert_array_equal(pseudo('bootstrap2_epipolar'), spatial)
 
 
+def test_pseudo_max_frames_keeps_the_first_frames_of_each_track(recording):
+    """L_B trains on tracked labels at most pseudo_max_frames from their seed; the rest of
+    the track is dropped from L_B only (crop boxes are the same with and without the
+    gate)."""
+    def data_and_pseudo(**options):
+        config = TrainConfig(mode='spatiotemporal', steps=10, **options, **TINY)
+        data = TrainingData(recording, config, (48, 48), (12, 12))
+        return data, Trainer(config, data).pseudo
+
+    full_data, full = data_and_pseudo()
+    gated_data, gated = data_and_pseudo(pseudo_max_frames=2)
+    np.testing.assert_array_equal(gated_data.boxes, full_data.boxes)
+    frames = full_data.tracks().frames_from_seed                              # (T, C)
+    assert np.isfinite(frames).any() and (frames[np.isfinite(frames)] > 2).any()
+    near = (frames <= 2)[:, None, :] & np.ones(full.shape[1], bool)[None, :, None]
+    has_full, has_gated = np.isfinite(full[..., 0]), np.isfinite(gated[..., 0])
+    spatial = np.isfinite(TrainingData(recording, TrainConfig(mode='spatial', **TINY),
+                                       (48, 48), (12, 12)).initial_pseudo_labels(
+        TrainConfig(mode='spatial').spec, None)[..., 0])
+    np.testing.assert_array_equal(has_gated, has_full & (near | spatial))
+    np.testing.assert_array_equal(gated[has_gated], full[has_gated])
+    assert has_gated.sum() < has_full.sum()
+
+
 def test_every_mode_sees_the_same_number_of_images_per_step(recording):
     from monet_ros.learning.config import MODES
 
