@@ -151,6 +151,11 @@ class TrainConfig:
         'from their seed (tracks drift: their error grows with the distance); 0 = every '
         'tracked frame (up to track_horizon). Crop boxes still use the whole track',
         minimum=0)
+    pseudo_agreement_px: float = setting(
+        0.0, 'spatiotemporal, with pseudo_max_frames: beyond pseudo_max_frames, keep a tracked '
+        'label where the track of another seed reaching the same view and keypoint agrees '
+        'within this many px (two independent tracks verify each other); 0 = keep none '
+        'beyond', minimum=0.0)
     fit_warning_heat_px: float = setting(
         1.0, 'warn when the median error of the final detector on its own labelled views is '
         'above this many heatmap pixels (the output grid: 1/64 of the crop side for the small '
@@ -165,6 +170,9 @@ class TrainConfig:
         if self.views_per_instant == 1:
             raise ConfigError('TrainConfig', 'views_per_instant',
                               'must be 0 (all views) or >= 2 (L_E compares pairs), got 1')
+        if self.pseudo_agreement_px and not self.pseudo_max_frames:
+            raise ConfigError('TrainConfig', 'pseudo_agreement_px',
+                              'applies beyond pseudo_max_frames: set pseudo_max_frames > 0 too')
         if self.width and self.width < 4:
             raise ConfigError('TrainConfig', 'width', f'must be 0 or >= 4, got {self.width}')
         if self.device not in ('auto', 'cpu', 'cuda') and not (

@@ -23,10 +23,14 @@ class PseudoLabels:
     """points (T, V, C, 2) image pixels, NaN = no label; points3d (T, C, 3) NaN = none;
     frames_from_seed (T, C): for tracked labels, how many frames the kept track ran from its
     seed (0 at a seed, inf where none; None for untracked kinds). Tracks drift: their error
-    grows with this distance (bench/results/accuracy.md, issue 22)."""
+    grows with this distance (bench/results/accuracy.md, issue 22). agreement (T, V, C) px:
+    for tracked labels, the distance between the kept label and the label of the track of
+    another seed that reached the same cell (the next nearest; NaN where no second track):
+    two independent tracks that agree verify each other."""
     points: np.ndarray
     points3d: np.ndarray
     frames_from_seed: np.ndarray = None
+    agreement: np.ndarray = None
 
     @property
     def count(self):
@@ -208,7 +212,8 @@ def spatiotemporal_pseudo_labels(frames, cameras, seeds3d, config=TrackingConfig
     seeds3d: (T, C, 3) 3D keypoints of the seed (labelled) instants, NaN elsewhere.
     Returns PseudoLabels over all T instants: at seed instants the projections of the seeds,
     elsewhere the verified tracked labels, from the nearest seed in time when several reach
-    an instant; frames_from_seed (T, C) the length of the kept track.
+    an instant; frames_from_seed (T, C) the length of the kept track, agreement (T, V, C) px
+    its distance to the next nearest seed's track in the same cell.
     """
     seeds = np.asarray(seeds3d, dtype=np.float64)
     T, C, _ = seeds.shape
@@ -216,6 +221,8 @@ def spatiotemporal_pseudo_labels(frames, cameras, seeds3d, config=TrackingConfig
     points = np.full((T, V, C, 2), np.nan)
     points3d = np.full((T, C, 3), np.nan)
     distance = np.full((T, C), np.inf)
+    second = np.full((T, V, C, 2), np.nan)          # the next nearest track's labels
+    second_distance = np.full((T, C), np.inf)
     gray_cache = {}
 
     def grays(t):
@@ -237,9 +244,17 @@ def spatiotemporal_pseudo_labels(frames, cameras, seeds3d, config=TrackingConfig
                 if t_next < 0 or t_next >= T or not np.isfinite(X[:, 0]).any():
                     break
                 X, labels, _ = track_step(grays(t), grays(t_next), X, cameras, config)
-                better = np.isfinite(X[:, 0]) & (step < distance[t_next])
+                found = np.isfinite(X[:, 0])
+                better = found & (step < distance[t_next])
+                runner_up = found & ~better & (step < second_distance[t_next])
+                demoted = better & np.isfinite(distance[t_next])
+                second[t_next][:, demoted] = points[t_next][:, demoted]
+                second_distance[t_next, demoted] = distance[t_next, demoted]
+                second[t_next][:, runner_up] = labels[:, runner_up]
+                second_distance[t_next, runner_up] = step
                 points[t_next][:, better] = labels[:, better]
                 points3d[t_next, better] = X[better]
                 distance[t_next, better] = step
                 t = t_next
-    return PseudoLabels(points, points3d, distance)
+    agreement = np.linalg.norm(points - second, axis=-1)                   # (T, V, C)
+    return PseudoLabels(points, points3d, distance, agreement)

@@ -198,7 +198,8 @@ class TrainingData:
 
     def tracks(self):
         """pseudo_labels.PseudoLabels of tracked_labels over the whole recording (points
-        (T, V, C, 2) px, points3d (T, C, 3), frames_from_seed (T, C)); computed once."""
+        (T, V, C, 2) px, points3d (T, C, 3), frames_from_seed (T, C), agreement (T, V, C)
+        px); computed once."""
         if self._tracked is None:
             T, V, C, _ = self.labels.shape
             spatial = spatial_pseudo_labels(self.labels, self.cameras)
@@ -210,10 +211,12 @@ class TrainingData:
             points = np.full((T, V, C, 2), np.nan)
             points3d = np.full((T, C, 3), np.nan)
             distance = np.full((T, C), np.inf)
+            agreement = np.full((T, V, C), np.nan)
             points[self.train] = tracked.points
             points3d[self.train] = tracked.points3d
             distance[self.train] = tracked.frames_from_seed
-            self._tracked = PseudoLabels(points, points3d, distance)
+            agreement[self.train] = tracked.agreement
+            self._tracked = PseudoLabels(points, points3d, distance, agreement)
         return self._tracked
 
     def initial_pseudo_labels(self, spec, tracking):
@@ -232,8 +235,11 @@ class TrainingData:
             tracked = tracks.points
             gate = self.config.pseudo_max_frames
             if gate:      # drift: keep the tracks' first frames (the boxes keep all of them)
-                far = tracks.frames_from_seed > gate                              # (T, C)
-                tracked = np.where(far[:, None, :, None], np.nan, tracked)
+                far = np.broadcast_to((tracks.frames_from_seed > gate)[:, None],
+                                      tracked.shape[:3])                        # (T, V, C)
+                with np.errstate(invalid='ignore'):      # NaN agreement: a single track
+                    verified = tracks.agreement <= self.config.pseudo_agreement_px
+                tracked = np.where((far & ~verified)[..., None], np.nan, tracked)
             points = np.where(np.isnan(points), tracked, points)
         points[self.held_out] = np.nan
         points[self.validation_instants] = np.nan

@@ -126,3 +126,10 @@ def test_tracks_say_how_far_they_ran_from_their_seed():
     # a cell holds a label exactly where a track reached it
     np.testing.assert_array_equal(np.isfinite(result.points[..., 0]).any(axis=1),
                                   np.isfinite(d))
+    # agreement: where both seeds' tracks reach (instants 3, 4 of keypoints 0, 1; exact
+    # renderings, so they agree to a pixel), NaN where one track only
+    both = np.zeros((T, 3), bool)
+    both[[3, 4], :2] = True
+    agree = result.agreement                                                # (T, V, C)
+    assert np.isfinite(agree).any(axis=1).tolist() == both.tolist()
+    assert np.nanmax(agree) < 1.0
