@@ -136,7 +136,8 @@ def run(args):
         print(f'{recording.name}: {recording.num_instants} instants x {recording.num_views} '
               f'views, {len(data.labelled_instants)} labelled, {len(data.unlabeled_instants)} '
               f'unlabeled, {len(data.held_out)} held out; mode {config.mode}, '
-              f'{trainer.pseudo_label_count} pseudo-labels, device {trainer.device}'
+              f'{trainer.pseudo_label_count} pseudo-labels{_gate_text(data.pseudo_gate)}, '
+              f'device {trainer.device}'
               + (f', {world.world_size} ranks ({world.backend}), {trainer.per_rank_batch} '
                  'crops per rank per step' if world.distributed else ''), file=sys.stderr)
     try:
@@ -184,6 +185,16 @@ def run(args):
     print(json.dumps(summary, indent=1))
     distributed.shutdown()
     return 0
+
+
+def _gate_text(gate):
+    """' (of N tracked: D beyond --pseudo-max-frames dropped, K of those kept as confirmed)'
+    for the start-up line, '' without the gate."""
+    if not gate:
+        return ''
+    return (f' (of {gate["tracked"]} tracked view labels: {gate["dropped"]} beyond '
+            f'--pseudo-max-frames dropped, {gate["confirmed"]} beyond it kept as confirmed by '
+            'a second track)')
 
 
 if __name__ == '__main__':

@@ -174,6 +174,9 @@ class TrainingData:
             raise ValueError(f'{recording.name}: no labelled instant in the training split')
         h_in, w_in = input_size
         self._tracked = tracked       # tracks() given (rank 0's, in a torchrun job)
+        # pseudo_max_frames' counts of view x keypoint cells (initial_pseudo_labels): tracked,
+        # dropped (beyond the gate, unconfirmed), confirmed (beyond, kept by agreement)
+        self.pseudo_gate = None
         pseudo = (self.tracked_labels() if config.box_source in ('auto', 'pseudo_labels')
                   else None)
         boxed = recording
@@ -239,7 +242,13 @@ class TrainingData:
                                       tracked.shape[:3])                        # (T, V, C)
                 with np.errstate(invalid='ignore'):      # NaN agreement: a single track
                     verified = tracks.agreement <= self.config.pseudo_agreement_px
-                tracked = np.where((far & ~verified)[..., None], np.nan, tracked)
+                drop = far & ~verified & np.isfinite(tracked[..., 0])
+                has = np.isfinite(tracked[..., 0])
+                has[self.held_out] = drop[self.held_out] = False
+                has[self.validation_instants] = drop[self.validation_instants] = False
+                self.pseudo_gate = {'tracked': int(has.sum()), 'dropped': int(drop.sum()),
+                                    'confirmed': int((far & verified & has).sum())}
+                tracked = np.where(drop[..., None], np.nan, tracked)
             points = np.where(np.isnan(points), tracked, points)
         points[self.held_out] = np.nan
         points[self.validation_instants] = np.nan
@@ -791,6 +800,7 @@ class Trainer:
                 'steps_per_s': (self.step_count - first) / max(seconds, 1e-9),
                 'pseudo_labels': self.pseudo_label_count,
                 'pseudo_label_coverage': self.pseudo_label_coverage, 'last': self.last_terms,
+                'pseudo_label_gate': self.data.pseudo_gate,
                 'fit': fit, 'validation': validation, 'bootstrap': self.bootstrap_stats,
                 'warnings': list(self.warnings)}
 

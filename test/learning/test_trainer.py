@@ -139,13 +139,18 @@ def test_pseudo_max_frames_keeps_the_first_frames_of_each_track(recording):
     np.testing.assert_array_equal(has_gated, has_full & (near | spatial))
     np.testing.assert_array_equal(gated[has_gated], full[has_gated])
     assert has_gated.sum() < has_full.sum()
+    # nothing dropped silently: the run summary counts what the gate took away
+    assert full_data.pseudo_gate is None
+    assert gated_data.pseudo_gate['dropped'] == (has_full & ~has_gated).sum()
+    assert gated_data.pseudo_gate['confirmed'] == 0
     # beyond the gate, a label that another seed's track confirms is kept
     agreement = full_data.tracks().agreement
     with np.errstate(invalid='ignore'):
         confirmed = agreement <= 1.0
-    _, verified = data_and_pseudo(pseudo_max_frames=2, pseudo_agreement_px=1.0)
+    verified_data, verified = data_and_pseudo(pseudo_max_frames=2, pseudo_agreement_px=1.0)
     np.testing.assert_array_equal(np.isfinite(verified[..., 0]),
                                   has_full & (near | spatial | confirmed))
+    assert verified_data.pseudo_gate['confirmed'] == (has_full & ~near & confirmed).sum()
     assert (has_full & ~near & confirmed).any()         # the test sees both kinds
     with pytest.raises(ConfigError, match='pseudo_agreement_px'):
         TrainConfig(pseudo_agreement_px=4.0)
