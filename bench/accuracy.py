@@ -223,8 +223,18 @@ def pseudo_label_precision(trainer, recording):
     err = np.linalg.norm(trainer.pseudo - truth, axis=-1)[cells & np.isfinite(truth[..., 0])]
     if not err.size:
         return {'cells': 0}
-    return {'cells': int(cells.sum()), 'median_px': float(np.median(err)),
-            'beyond10': float((err > 10).mean()), 'beyond20': float((err > 20).mean())}
+    out = {'cells': int(cells.sum()), 'median_px': float(np.median(err)),
+           'beyond10': float((err > 10).mean()), 'beyond20': float((err > 20).mean())}
+    if trainer.spec.temporal:
+        # the 3D points the tracked labels project: their 2D errors are consistent across
+        # views, so a small 2D error can be a large 3D one
+        used = cells.any(axis=1)                                              # (T, C)
+        e3 = np.linalg.norm(trainer.data.tracks().points3d - recording.gt3d, axis=-1)
+        e3 = e3[used & np.isfinite(e3)]
+        if e3.size:
+            out.update(median3d_mm=1000 * float(np.median(e3)),
+                       mean3d_mm=1000 * float(e3.mean()))
+    return out
 
 
 def oracle_pseudo_labels(trainer, recording):

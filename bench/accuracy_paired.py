@@ -44,6 +44,14 @@ def _diff(a, b):
     return np.nan if a is None or b is None else a - b
 
 
+def _precision_text(p):
+    text = (f'{p["cells"]} cells, median {p["median_px"]:.2f} px, '
+            f'{100 * p["beyond10"]:.1f}% beyond 10 px')
+    if 'median3d_mm' in p:
+        text += f', their 3D points median {p["median3d_mm"]:.0f} mm'
+    return text
+
+
 def cell(values):
     v = [x for x in values if x is not None]
     return ' / '.join(f'{x:.1f}' for x in v) if v else '–'
@@ -77,6 +85,13 @@ def table(rows, baseline, controls):
         lines.append(f'| {mode} | ' + ' | '.join(cells) + f' | {", ".join(paired)} | '
                      f'{cell(peak and [p for p in peak if p is not None])} | '
                      f'{cell(fit and [f for f in fit if f is not None])} |')
+    for mode in rows:
+        precision = [rows[mode][d].get('pseudo_label_precision') for d in datasets
+                     if d in rows[mode]]
+        precision = [p for p in precision if p and p.get('cells')]
+        if precision:
+            lines.append(f'\n{mode}: pseudo-labels against the ground truth, per seed: '
+                         + '; '.join(_precision_text(p) for p in precision))
     for row, control in controls:
         if row not in rows or control not in rows:
             continue
