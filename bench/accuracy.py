@@ -199,8 +199,9 @@ def train_and_evaluate(job):
                          round(time.monotonic() - start - train_s, 1),
                          'last_terms': summary['last'], 'config': config.to_dict()})
     print(f'[{rig} {label}] {summary["steps"]} steps in {train_s:.0f} s, 2D error '
-          f'{result.extra["error2d_mean"]:.2f} px, PCK@0.1 {result.pck.at(0.1):.3f}, '
-          f'reproj {result.reprojection_mean:.2f} px', file=sys.stderr, flush=True)
+          f'{result.extra["error2d_mean"]:.2f} px, PCK@0.1 {result.pck.at(0.1):.3f}, 3D fused '
+          f'{1000 * result.extra["fused3d_mean"]:.1f} mm, reproj {result.reprojection_mean:.2f} '
+          'px', file=sys.stderr, flush=True)
     return result.to_json()
 
 
