@@ -146,8 +146,10 @@ class TrainConfig:
     track_min_views: int = setting(3, 'spatiotemporal: minimum verified views', minimum=2)
     track_min_ncc: float = setting(0.7, 'spatiotemporal: minimum patch NCC', minimum=-1.0,
                                    maximum=1.0)
+    # 10: measured (bench/results/accuracy.md, issue 22): the ungated tracks' drift taught
+    # a 3D bias (3D error +43% against supervised); the first 10 frames: -13%, 2D -35%
     pseudo_max_frames: int = setting(
-        0, 'spatiotemporal: train L_B only on tracked pseudo-labels at most this many frames '
+        10, 'spatiotemporal: train L_B only on tracked pseudo-labels at most this many frames '
         'from their seed (tracks drift: their error grows with the distance); 0 = every '
         'tracked frame (up to track_horizon). Crop boxes still use the whole track',
         minimum=0)

@@ -126,7 +126,7 @@ def test_pseudo_max_frames_keeps_the_first_frames_of_each_track(recording):
         data = TrainingData(recording, config, (48, 48), (12, 12))
         return data, Trainer(config, data).pseudo
 
-    full_data, full = data_and_pseudo()
+    full_data, full = data_and_pseudo(pseudo_max_frames=0)
     gated_data, gated = data_and_pseudo(pseudo_max_frames=2)
     np.testing.assert_array_equal(gated_data.boxes, full_data.boxes)
     frames = full_data.tracks().frames_from_seed                              # (T, C)
@@ -153,7 +153,7 @@ def test_pseudo_max_frames_keeps_the_first_frames_of_each_track(recording):
     assert verified_data.pseudo_gate['confirmed'] == (has_full & ~near & confirmed).sum()
     assert (has_full & ~near & confirmed).any()         # the test sees both kinds
     with pytest.raises(ConfigError, match='pseudo_agreement_px'):
-        TrainConfig(pseudo_agreement_px=4.0)
+        TrainConfig(pseudo_max_frames=0, pseudo_agreement_px=4.0)
 
 
 def test_every_mode_sees_the_same_number_of_images_per_step(recording):
