@@ -3,8 +3,8 @@
 What a lab would do, small: a synthetic 4-camera recording (`monet synth`) labelled at 3
 instants of 90 (the subject's left limbs in their own colour, so that left and right can be
 told apart), and a small detector trained on it with `monet train`'s recipe at a short
-budget (600 steps, mode supervised, the default: the labelled instants only; pseudo-labels
-need about 2000 steps to pay off, bench/results/accuracy.md), made
+budget (600 steps, mode supervised: the labelled instants only; pseudo-labels need about
+2000 steps to pay off, bench/results/accuracy.md), made
 once and cached in ~/.cache/monet_ros/demo/v3 (or --workdir / $MONET_DEMO_DIR); later runs
 start at once. The demo replays in lockstep (every frame fused before the next is
 published: crops follow the subject; at real-time pace the frames a busy CPU drops leave

@@ -9,9 +9,9 @@ import sys
 from monet_ros.config import setting, validate_config
 from monet_ros.learning.config import TrainConfig
 
-HELP = ('semi-supervised training from recordings + labels (modes: supervised, the default '
-        'and the most accurate measured, spatial, spatiotemporal, bootstrap1, bootstrap2, '
-        'monet, and the ablations bootstrap2_epipolar, epipolar)')
+HELP = ('semi-supervised training from recordings + labels (modes: spatiotemporal, the default '
+        'and the most accurate measured, supervised, spatial, bootstrap1, bootstrap2, monet, '
+        'and the ablations bootstrap2_epipolar, epipolar)')
 
 
 @dataclass(frozen=True)

@@ -92,7 +92,7 @@ def test_demo_recipe_is_sparse_distinct_sided_and_the_default_recipe_at_a_short_
     frames = int(SYNTH_ARGS[SYNTH_ARGS.index('--frames') + 1])
     assert 2 <= round(fraction * frames) <= 5
     # the default recipe (learning rate, schedule, augmentation) at 600 steps, where
-    # supervised beats the default mode (pseudo-labels pay from ~2000 steps: issue 22)
+    # supervised beats pseudo-labels (they pay from ~2000 steps: issue 22)
     assert TRAIN_ARGS[TRAIN_ARGS.index('--mode') + 1] == 'supervised'
     assert int(TRAIN_ARGS[TRAIN_ARGS.index('--steps') + 1]) < 2000
     assert '--lr' not in TRAIN_ARGS
