@@ -2,6 +2,7 @@
 import os
 from pathlib import Path
 import random
+import signal
 import sys
 
 import pytest
@@ -9,6 +10,12 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # test/helpers is importable as `helpers` from every test module.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+# A shell's background job (`cmd &`, nohup) starts with SIGINT ignored, and an ignored signal
+# stays ignored across exec: the commands and nodes the tests interrupt would never see it.
+# Python's own handler here makes every child start with the default disposition, so the
+# suite does not depend on how it was launched.
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def shared_data_root():
