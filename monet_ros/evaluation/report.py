@@ -16,7 +16,9 @@ MODE_TITLES = {'null': 'Null (mean pose in the crop)', 'supervised': 'Supervised
                'spatial': 'Spatial aug.', 'spatiotemporal': 'Spatiotemporal aug.',
                'bootstrap1': 'Bootstrapping I', 'bootstrap2': 'Bootstrapping II',
                'monet': 'MONET', 'bootstrap2_epipolar': 'Bootstrapping II + L_E (ablation)',
-               'epipolar': 'Supervised + L_E (ablation)'}
+               'epipolar': 'Supervised + L_E (ablation)',
+               'temporal_difference': 'Spatiotemporal + L_T (temporal difference)',
+               'reprojection': 'Spatiotemporal + L_R (reprojection consistency)'}
 REPORT_PCK = (0.05, 0.1, 0.2)
 
 

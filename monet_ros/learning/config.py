@@ -19,17 +19,25 @@ MAX_BATCH = 4096
 
 # The paper's rows (Table 1), then ablations.
 MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 'monet',
-         'bootstrap2_epipolar', 'epipolar')
+         'bootstrap2_epipolar', 'epipolar', 'temporal_difference', 'reprojection')
 
 
 @dataclass(frozen=True)
 class ModeSpec:
     """Which ingredients a mode uses: spatial / spatiotemporal pseudo-labels, bootstrapping
-    rounds, epipolar divergence on unlabeled instants."""
+    rounds, and the losses on unlabeled instants: epipolar divergence L_E, temporal difference
+    L_T (consecutive frames), reprojection consistency L_R (triangulate-reproject targets)."""
     spatial: bool
     temporal: bool
     bootstrap_rounds: int
     epipolar: bool
+    temporal_difference: bool = False
+    reprojection: bool = False
+
+    @property
+    def unlabeled(self):
+        """The mode trains on unlabeled instants (the batch plan's part for them)."""
+        return self.epipolar or self.temporal_difference or self.reprojection
 
 
 # As in the paper: Bootstrapping I / II start from the spatiotemporal augmentation, and
@@ -37,6 +45,8 @@ class ModeSpec:
 # bootstrap2_epipolar (ablation): Bootstrapping II's labels from the spatial augmentation
 # + L_E (this package's earlier `monet`). epipolar (ablation): L_L + lambda_e L_E only, the
 # measured row of L_E alone (its exact control: lambda_e = 0, the same batch plan).
+# temporal_difference / reprojection (issue 22 item 4): the default spatiotemporal recipe +
+# L_T or L_R on unlabeled instants (their exact controls: lambda_t / lambda_r = 0).
 MODE_SPECS = {
     'supervised': ModeSpec(False, False, 0, False),
     'spatial': ModeSpec(True, False, 0, False),
@@ -46,6 +56,8 @@ MODE_SPECS = {
     'monet': ModeSpec(True, True, 0, True),
     'bootstrap2_epipolar': ModeSpec(True, False, 2, True),
     'epipolar': ModeSpec(False, False, 0, True),
+    'temporal_difference': ModeSpec(True, True, 0, False, temporal_difference=True),
+    'reprojection': ModeSpec(True, True, 0, False, reprojection=True),
 }
 
 
@@ -76,8 +88,17 @@ class TrainConfig:
                                      maximum=64)
     lambda_e: float = setting(5.0, 'weight of the epipolar divergence L_E', minimum=0.0)
     lambda_p: float = setting(1.0, 'weight of the pseudo-label loss L_B', minimum=0.0)
-    epipolar_warmup: float = setting(0.3, 'monet: fraction of the steps trained without L_E '
-                                     '(L_L + L_B only) before the epipolar divergence starts',
+    lambda_t: float = setting(1.0, 'temporal_difference: weight of the temporal-difference '
+                              'loss L_T (frame-to-frame jumps of the soft-argmax beyond '
+                              'temporal_epsilon)', minimum=0.0)
+    temporal_epsilon: float = setting(1.0, 'temporal_difference: frame-to-frame motion '
+                                      '(heatmap px) L_T allows for free', minimum=0.0)
+    lambda_r: float = setting(1.0, 'reprojection: weight of the reprojection-consistency loss '
+                              "L_R (each view's heatmap towards the reprojection of the "
+                              "views' RANSAC triangulation)", minimum=0.0)
+    epipolar_warmup: float = setting(0.3, 'monet, epipolar, temporal_difference, reprojection: '
+                                     'fraction of the steps trained without the loss on '
+                                     'unlabeled instants (L_E, L_T or L_R) before it starts',
                                      minimum=0.0, maximum=0.95)
     lr: float = setting(1e-3, 'Adam learning rate (peak, after the warm-up)', minimum=0.0,
                         exclusive_minimum=True)
@@ -131,11 +152,14 @@ class TrainConfig:
                                           minimum=0.0)
     bootstrap_relative_confidence: float = setting(
         0.5, "bootstrapping: minimum heatmap peak as a fraction of the median peak of the "
-        "detector's own labelled views (its scale on data it fits); the cut-off is the larger "
-        'of this and bootstrap_confidence', minimum=0.0, maximum=1.0)
-    bootstrap_threshold_px: float = setting(8.0, 'bootstrapping: RANSAC inlier threshold (px)',
+        "detector's own labelled views (its scale on data it fits; for L_R the labelled views "
+        'of the same step); the cut-off is the larger of this and bootstrap_confidence',
+        minimum=0.0, maximum=1.0)
+    bootstrap_threshold_px: float = setting(8.0, 'bootstrapping and L_R (reprojection mode): '
+                                            'RANSAC inlier threshold (px)',
                                             minimum=0.0, exclusive_minimum=True)
-    bootstrap_min_views: int = setting(3, 'bootstrapping: minimum inlier views', minimum=2)
+    bootstrap_min_views: int = setting(3, 'bootstrapping and L_R: minimum inlier views',
+                                       minimum=2)
     monet_bootstrap_rounds: int = setting(
         0, 'monet: bootstrapping rounds added to L_B (0 = the paper: L_B on the '
         'spatiotemporal augmentation only)', minimum=0, maximum=3)

@@ -43,12 +43,14 @@ def masked_heatmap_mse(stages, points, sigma):
     return total
 
 
-def objective(terms, lambda_e, lambda_p):
-    """L_L + lambda_e L_E + lambda_p L_B from a dict of present terms ('L', 'E', 'B'). A term
-    of weight 0 is left out (not multiplied by 0: a non-finite value would still poison the
-    sum), so a run with a weight of 0 is the exact control of the run with that term."""
+def objective(terms, lambda_e, lambda_p, lambda_t=0.0, lambda_r=0.0):
+    """L_L + lambda_e L_E + lambda_p L_B + lambda_t L_T + lambda_r L_R from a dict of present
+    terms ('L', 'E', 'B', 'T', 'R'). A term of weight 0 is left out (not multiplied by 0: a
+    non-finite value would still poison the sum), so a run with a weight of 0 is the exact
+    control of the run with that term."""
     total = next(iter(terms.values())) * 0.0
-    for key, weight in (('L', 1.0), ('E', lambda_e), ('B', lambda_p)):
+    for key, weight in (('L', 1.0), ('E', lambda_e), ('B', lambda_p), ('T', lambda_t),
+                        ('R', lambda_r)):
         if key in terms and weight != 0:
             total = total + weight * terms[key]
     return total
@@ -93,6 +95,27 @@ def heatmap_moments(p):
     mean = torch.stack([mu + (w - 1) / 2, mv + (h - 1) / 2], -1)
     cov = torch.stack([torch.stack([cuu, cuv], -1), torch.stack([cuv, cvv], -1)], -2)
     return mean, cov
+
+
+def soft_argmax(heat, floor=HEAT_FLOOR):
+    """(..., h, w) heatmaps -> (..., 2) expected (u, v) heatmap px under
+    heatmap_distribution (scale free, the part above `floor` x the map's maximum);
+    differentiable, float64."""
+    return heatmap_moments(heatmap_distribution(heat, floor))[0]
+
+
+def temporal_difference_loss(points, points_next, epsilon):
+    """L_T, the temporal-difference loss of Lightning Pose (Biderman et al., Nature Methods
+    2024, "temporal loss"): mean over (N, C) of relu(|points_next - points| - epsilon), the
+    frame-to-frame jumps beyond the motion `epsilon` allowed for free.
+
+    points, points_next: (N, C, 2) of one view and keypoint at two consecutive frames, in
+    one pixel frame (heatmap px); epsilon in the same px. Returns a scalar."""
+    if points.shape != points_next.shape or points.shape[-1] != 2:
+        raise ValueError(f'temporal_difference_loss: points must both be (N, C, 2), got '
+                         f'{tuple(points.shape)} and {tuple(points_next.shape)}')
+    jump = ((points_next - points) ** 2).sum(-1).add(1e-12).sqrt()     # finite gradient at 0
+    return (jump - epsilon).clamp_min(0.0).mean()
 
 
 def fundamental_matrices(K_i, R_i, t_i, K_j, R_j, t_j):

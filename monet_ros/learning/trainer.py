@@ -54,6 +54,8 @@ from monet_ros.learning.losses import (
     masked_heatmap_mse,
     objective,
     reduce_epipolar_terms,
+    soft_argmax,
+    temporal_difference_loss,
 )
 from monet_ros.learning.pseudo_labels import (
     PseudoLabels,
@@ -65,7 +67,7 @@ from monet_ros.models import build_model, decode_heatmaps, save_checkpoint
 from monet_ros.models.detector import check_precision
 
 STATE_FORMAT = 'monet_ros.trainer_state/1'
-LOG_FIELDS = ('step', 'loss', 'L', 'E', 'B', 'lr', 'pseudo_labels', 'seconds')
+LOG_FIELDS = ('step', 'loss', 'L', 'E', 'B', 'T', 'R', 'lr', 'pseudo_labels', 'seconds')
 
 
 def nonnegative(heat):
@@ -268,6 +270,16 @@ class _Frames:
         return self.recording.images(int(self.instants[i]))
 
 
+def _labelled_peak(heat, points):
+    """Median heatmap peak (detached) of the labelled keypoints' maps (heat (N, C, h, w),
+    points (N, C, 2) with NaN where unlabelled): the detector's confidence scale on data it
+    fits, this step (L_R's cut-off is a share of it); None when nothing is labelled."""
+    labelled = torch.as_tensor(np.isfinite(points[..., 0]), device=heat.device)
+    if not bool(labelled.any()):
+        return None
+    return float(heat.detach().float().amax(dim=(-2, -1))[labelled].median())
+
+
 def _fmt(value):
     return 'n/a' if value is None else f'{value:.3g}'
 
@@ -338,6 +350,15 @@ class Trainer:
         if spec.epipolar and c.lambda_e > 0 and len(self.data.unlabeled_instants) == 0:
             self.warn(f'mode {c.mode}: no unlabeled instant in the training split: the '
                       'epipolar divergence L_E gets no data, this run is supervised only')
+        if spec.temporal_difference and c.lambda_t > 0 and len(self._consecutive()) == 0:
+            self.warn(f'mode {c.mode}: no two consecutive unlabeled instants in the training '
+                      'split: the temporal-difference loss L_T gets no data')
+        elif spec.temporal_difference and c.lambda_t > 0 and c.batch_unlabeled < 2:
+            self.warn(f'mode {c.mode}: batch_unlabeled {c.batch_unlabeled} < 2: L_T needs '
+                      'pairs of consecutive instants, it gets no data')
+        if spec.reprojection and c.lambda_r > 0 and len(self.data.unlabeled_instants) == 0:
+            self.warn(f'mode {c.mode}: no unlabeled instant in the training split: the '
+                      'reprojection-consistency loss L_R gets no data')
 
     # ----------------------------------------------------------------- sampling
     def _update_pools(self):
@@ -368,20 +389,46 @@ class Trainer:
         V = self.data.recording.num_views
         return V if self.config.views_per_instant == 0 else min(self.config.views_per_instant, V)
 
+    def _consecutive(self):
+        """(P,) unlabeled instants t whose next instant t + 1 is unlabeled too (L_T's pairs)."""
+        u = self.data.unlabeled_instants
+        return u[np.isin(u + 1, u)]
+
+    def _unlabeled_part(self, n_inst, k):
+        """The part of n_inst unlabeled instants x k views: (kind, (n_inst k, 2) pairs, k);
+        kind 'E' (L_E) or 'U' (L_T / L_R). For L_T the instants come as consecutive pairs (t,
+        t + 1, same views; an odd last one alone)."""
+        V = self.data.recording.num_views
+        unlabeled = self.data.unlabeled_instants
+        consecutive = self._consecutive() if self.spec.temporal_difference else unlabeled[:0]
+        if len(consecutive):
+            first = self.rng.choice(consecutive, size=n_inst // 2,
+                                    replace=len(consecutive) < n_inst // 2)
+            inst = np.stack([first, first + 1], axis=1).ravel()
+            if n_inst % 2:
+                inst = np.append(inst, self.rng.choice(unlabeled))
+            views = [self.rng.choice(V, size=k, replace=False) for _ in range(len(first))]
+            views = np.stack([v for v in views for _ in (0, 1)] +
+                             [self.rng.choice(V, size=k, replace=False)] * (n_inst % 2))
+        else:
+            inst = self.rng.choice(unlabeled, size=n_inst, replace=len(unlabeled) < n_inst)
+            views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
+        pairs = np.stack([np.repeat(inst, k), views.ravel()], axis=1)
+        return ('E' if self.spec.epipolar else 'U', pairs, k)
+
     def _batch_plan(self):
         """The (instant, view) crops of one step: parts ('L', pairs), ('B', pairs),
-        ('E', pairs, views per instant), pairs (N, 2) int (instant, view); each step's plan is
-        kept as `last_plan`. The plan depends on the mode, the batch sizes, the step and the
-        RNG only, never on lambda_e / lambda_p: a run with a term's weight 0 draws the same
-        crops (its exact control). Every mode sees the same number of images per step,
-        batch_labelled + batch_pseudo + batch_unlabeled x views: a part a mode does not use
-        (or cannot fill yet: no pseudo-labels, L_E in its warm-up) gives its share to
-        pseudo-labels when the mode has some, else to labels."""
+        ('E' or 'U', pairs, views per instant), pairs (N, 2) int (instant, view); each step's
+        plan is kept as `last_plan`. The plan depends on the mode, the batch sizes, the step
+        and the RNG only, never on the weights (lambda_e, lambda_p, lambda_t, lambda_r): a run
+        with a term's weight 0 draws the same crops (its exact control). Every mode sees the
+        same number of images per step, batch_labelled + batch_pseudo + batch_unlabeled x
+        views: a part a mode does not use (or cannot fill yet: no pseudo-labels, L_E in its
+        warm-up) gives its share to pseudo-labels when the mode has some, else to labels."""
         c = self.config
-        V = self.data.recording.num_views
         k = self.views_per_instant()
         total = c.batch_labelled + c.batch_pseudo + c.batch_unlabeled * k
-        n_inst = c.batch_unlabeled if (self.epipolar_active and
+        n_inst = c.batch_unlabeled if (self.unlabeled_active and
                                        len(self.data.unlabeled_instants)) else 0
         use_b = self.spec_uses_pseudo and c.batch_pseudo and len(self.pseudo_pool)
         n_b = (total - c.batch_labelled - n_inst * k) if use_b else 0
@@ -389,17 +436,14 @@ class Trainer:
         if n_b:
             parts.append(('B', self._sample(self.pseudo_pool, n_b)))
         if n_inst:
-            inst = self.rng.choice(self.data.unlabeled_instants, size=n_inst,
-                                   replace=len(self.data.unlabeled_instants) < n_inst)
-            views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
-            pairs = np.stack([np.repeat(inst, k), views.ravel()], axis=1)
-            parts.append(('E', pairs, k))
+            parts.append(self._unlabeled_part(n_inst, k))
         return parts
 
     @property
-    def epipolar_active(self):
-        """L_E is on: monet mode, past the warm-up (trained with L_L + L_B only)."""
-        return self.spec.epipolar and \
+    def unlabeled_active(self):
+        """The loss on unlabeled instants (L_E, L_T or L_R) is on: a mode with one, past the
+        warm-up (epipolar_warmup x steps trained with L_L + L_B only)."""
+        return self.spec.unlabeled and \
             self.step_count >= int(round(self.config.epipolar_warmup * self.config.steps))
 
     @property
@@ -417,6 +461,7 @@ class Trainer:
         stages = [s.float() for s in stages]     # the losses in float32 (no-op in float32)
         terms = {}
         start = 0
+        labelled_peak = None
         for kind, p, *rest in parts:
             n = len(p)
             sl = slice(start, start + n)
@@ -425,6 +470,11 @@ class Trainer:
                 heat_pts = batch.to_heatmap(source[p[:, 0], p[:, 1]], sl)
                 terms[kind] = masked_heatmap_mse([s[sl] for s in stages], heat_pts,
                                                  self.config.sigma)
+                if kind == 'L':
+                    labelled_peak = _labelled_peak(stages[-1][sl], heat_pts)
+            elif kind == 'U':
+                terms.update(self._unlabeled_terms([s[sl] for s in stages], batch, sl, p,
+                                                   rest[0], labelled_peak))
             else:
                 k = rest[0]
                 heat = stages[-1][sl]          # raw: epipolar_loss makes distributions
@@ -438,6 +488,58 @@ class Trainer:
                 self.last_pair_share = float(e['pair_used'].sum()) / max(1, e['pairs_possible'])
             start += n
         return terms
+
+    def _unlabeled_terms(self, stages, batch, sl, pairs, k, labelled_peak):
+        """L_T and / or L_R of the 'U' part: stages (N, C, h, w) of its crops, batch[sl] their
+        geometry, pairs (N, 2) (instant, view), k views per instant."""
+        spec, c = self.spec, self.config
+        terms = {}
+        heat = stages[-1]
+        if spec.temporal_difference:
+            # consecutive pairs (t, t + 1) of k views each: both frames' soft-argmax in the
+            # heatmap px of t's crop (the crops differ: their own box and augmentation)
+            n_inst = len(pairs) // k
+            n_pairs = n_inst // 2 if len(self._consecutive()) else 0
+            if n_pairs:
+                A = torch.as_tensor(batch.A[sl], dtype=torch.float64, device=heat.device)
+                mean = soft_argmax(heat)                                       # (N, C, 2)
+                grid = mean.reshape(n_inst, k, *mean.shape[1:])
+                A = A.reshape(n_inst, k, 3, 3)
+                now, nxt = grid[0:2 * n_pairs:2], grid[1:2 * n_pairs:2]
+                A_now, A_nxt = A[0:2 * n_pairs:2], A[1:2 * n_pairs:2]
+                M = A_now @ torch.linalg.inv(A_nxt)                # next crop -> this crop
+                nxt = (M[..., None, :2, :2] @ nxt[..., None])[..., 0] + M[..., None, :2, 2]
+                terms['T'] = temporal_difference_loss(now.flatten(0, 1), nxt.flatten(0, 1),
+                                                      c.temporal_epsilon).float()
+            else:
+                terms['T'] = heat.sum() * 0.0
+        if spec.reprojection:
+            terms['R'] = masked_heatmap_mse(stages, self._reprojection_targets(
+                heat, batch, sl, pairs, k, labelled_peak), c.sigma)
+        return terms
+
+    def _reprojection_targets(self, heat, batch, sl, pairs, k, labelled_peak):
+        """(N, C, 2) heatmap px targets of L_R (NaN: none): each instant's detections in its
+        k views (peaks of at least bootstrap_cutoff's share of the step's labelled peak),
+        RANSAC-triangulated (bootstrap_threshold_px, bootstrap_min_views) and reprojected into
+        each view (pseudo_labels.bootstrap_pseudo_labels, as a bootstrapping round, online)."""
+        c = self.config
+        peaks, conf = decode_heatmaps(heat.detach().float())
+        A_inv = np.linalg.inv(batch.A[sl])
+        points = np.einsum('nij,ncj->nci', A_inv[:, :2, :2], peaks.cpu().numpy()) + \
+            A_inv[:, None, :2, 2]
+        V, C = self.data.recording.num_views, heat.shape[1]
+        n_inst = len(pairs) // k
+        det = np.full((n_inst, V, C, 2), np.nan)
+        score = np.zeros((n_inst, V, C))
+        row = np.repeat(np.arange(n_inst), k)
+        det[row, pairs[:, 1]] = points
+        score[row, pairs[:, 1]] = conf.cpu().numpy()
+        cutoff = max(c.bootstrap_confidence, c.bootstrap_relative_confidence *
+                     (labelled_peak if labelled_peak is not None else 0.0))
+        boot = bootstrap_pseudo_labels(det, score, self.data.cameras, cutoff,
+                                       c.bootstrap_threshold_px, c.bootstrap_min_views)
+        return batch.to_heatmap(boot.points[row, pairs[:, 1]], sl)
 
     def autocast(self):
         """The context of the training forward: torch.autocast to bfloat16 when
@@ -459,7 +561,7 @@ class Trainer:
         parts = self._batch_plan()
         self.last_plan = parts
         terms = self._terms(parts, self.rng, c.augment)
-        loss = objective(terms, c.lambda_e, c.lambda_p)
+        loss = objective(terms, c.lambda_e, c.lambda_p, c.lambda_t, c.lambda_r)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
@@ -490,11 +592,16 @@ class Trainer:
             if len(self.pseudo_pool):
                 parts.append(('B', self._sample(self.pseudo_pool, num)))
             if len(self.data.unlabeled_instants):
-                V = self.data.recording.num_views
                 k = self.views_per_instant()
-                inst = self.rng.choice(self.data.unlabeled_instants, size=max(1, num // k))
-                views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
-                parts.append(('E', np.stack([np.repeat(inst, k), views.ravel()], axis=1), k))
+                n = max(2 if self.spec.temporal_difference else 1, num // k)
+                if self.spec.unlabeled and not self.spec.epipolar:
+                    parts.append(self._unlabeled_part(n, k))
+                else:     # L_E's value for every other mode (how epipolar its maps are)
+                    V = self.data.recording.num_views
+                    inst = self.rng.choice(self.data.unlabeled_instants, size=n)
+                    views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
+                    parts.append(('E', np.stack([np.repeat(inst, k), views.ravel()], axis=1),
+                                  k))
         finally:
             self.rng = saved
         self.model.eval()

@@ -1,9 +1,15 @@
-"""Heatmap MSE with masks and stages against a brute-force computation."""
+"""Heatmap MSE with masks and stages, the objective's weights, soft-argmax and the
+temporal-difference loss against brute-force computations."""
 import numpy as np
 import pytest
 import torch
 
-from monet_ros.learning.losses import masked_heatmap_mse, objective
+from monet_ros.learning.losses import (
+    masked_heatmap_mse,
+    objective,
+    soft_argmax,
+    temporal_difference_loss,
+)
 
 
 def gaussian(h, w, u, v, sigma):
@@ -44,3 +50,31 @@ def test_objective_weights():
     t = {'L': torch.tensor(1.0), 'E': torch.tensor(2.0), 'B': torch.tensor(3.0)}
     assert objective(t, 5.0, 1.0).item() == 14.0
     assert objective({'L': torch.tensor(1.0)}, 5.0, 1.0).item() == 1.0
+    t.update(T=torch.tensor(4.0), R=torch.tensor(5.0))
+    assert objective(t, 5.0, 1.0, 0.5, 2.0).item() == 14.0 + 2.0 + 10.0
+    t['R'] = torch.tensor(float('nan'))            # a weight of 0 leaves the term out
+    assert objective(t, 5.0, 1.0, 0.5, 0.0).item() == 16.0
+
+
+def test_soft_argmax_finds_the_centre_of_a_gaussian():
+    centres = [(3.3, 4.6), (7.0, 2.25), (5.5, 5.5)]
+    heat = torch.tensor(np.stack([gaussian(10, 12, u, v, 1.5) for u, v in centres]))
+    # within 1% of a heatmap pixel (the floor cuts the sampled Gaussian a little unevenly)
+    np.testing.assert_allclose(soft_argmax(heat * 0.3).numpy(), centres, atol=1e-2)
+
+
+def test_temporal_difference_loss_is_the_mean_jump_beyond_epsilon():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0, 10, size=(5, 3, 2))
+    b = a + rng.normal(scale=2.0, size=a.shape)
+    b[0, 0] = a[0, 0]                                   # a zero jump: finite gradient
+    jump = np.linalg.norm(b - a, axis=-1)
+    expected = np.maximum(jump - 1.5, 0.0).mean()
+    ta = torch.tensor(a, requires_grad=True)
+    loss = temporal_difference_loss(ta, torch.tensor(b), 1.5)
+    assert loss.item() == pytest.approx(expected, abs=1e-9)
+    loss.backward()
+    assert torch.isfinite(ta.grad).all()
+    assert (ta.grad[torch.tensor(jump <= 1.5)] == 0).all()       # free within epsilon
+    with pytest.raises(ValueError, match='temporal_difference_loss'):
+        temporal_difference_loss(ta, torch.tensor(b[:2]), 1.0)

@@ -169,6 +169,8 @@ def test_every_mode_sees_the_same_number_of_images_per_step(recording):
             counts[(mode, step)] = sum(len(part[1]) for part in plan)
             kinds = {part[0] for part in plan}
             assert ('E' in kinds) == (trainer.spec.epipolar and step == 6), (mode, step)
+            assert ('U' in kinds) == (trainer.spec.unlabeled and not trainer.spec.epipolar
+                                      and step == 6), (mode, step)
             assert ('B' in kinds) == trainer.spec_uses_pseudo, (mode, step)
     # batch_labelled + batch_pseudo + batch_unlabeled x views_per_instant = 4 + 4 + 1 x 3
     assert set(counts.values()) == {11}, counts
@@ -183,22 +185,30 @@ def plans(trainer, steps):
     return out
 
 
-@pytest.mark.parametrize('mode, field, weight', [('epipolar', 'lambda_e', 5.0),
-                                                 ('monet', 'lambda_e', 5.0),
-                                                 ('monet', 'lambda_p', 1.0)])
-def test_a_terms_exact_control_has_the_identical_batch_plan(recording, mode, field, weight):
+# temporal_epsilon 0: every jump counts (12x12 heatmaps move by less than the default 1 px)
+NEW_TERM = dict(batch_unlabeled=2, temporal_epsilon=0.0)
+
+
+@pytest.mark.parametrize('mode, field, weight, extra', [
+    ('epipolar', 'lambda_e', 5.0, {}), ('monet', 'lambda_e', 5.0, {}),
+    ('monet', 'lambda_p', 1.0, {}), ('temporal_difference', 'lambda_t', 1.0, NEW_TERM),
+    ('reprojection', 'lambda_r', 1.0, NEW_TERM)])
+def test_a_terms_exact_control_has_the_identical_batch_plan(recording, mode, field, weight,
+                                                            extra):
     """The run with a term's weight 0 draws the same instants and views at every step (and
     the same augmentation: the RNG does not depend on the weights), while the weights do
     change the training."""
     runs = {}
     for w in (weight, 0.0):
-        config = TrainConfig(mode=mode, steps=6, epipolar_warmup=0.5, **dict(TINY, **{field: w}))
+        config = TrainConfig(mode=mode, steps=6, epipolar_warmup=0.5,
+                             **dict(TINY, **extra, **{field: w}))
         trainer = Trainer(config, TrainingData(recording, config, (48, 48), (12, 12)))
         runs[w] = (plans(trainer, 6), trainer)
     (with_term, a), (control, b) = runs[weight], runs[0.0]
     kinds = [[kind for kind, _ in step] for step in with_term]
-    term = 'E' if field == 'lambda_e' else 'B'
-    assert sum(term in k for k in kinds) >= 3, kinds        # the term is in the plan
+    term = {'lambda_e': 'E', 'lambda_p': 'B', 'lambda_t': 'T', 'lambda_r': 'R'}[field]
+    part = {'T': 'U', 'R': 'U'}.get(term, term)
+    assert sum(part in k for k in kinds) >= 3, kinds        # the term is in the plan
     assert kinds == [[kind for kind, _ in step] for step in control]
     for step_a, step_b in zip(with_term, control):
         for (_, pairs_a), (_, pairs_b) in zip(step_a, step_b):
@@ -226,3 +236,78 @@ def test_validate_reports_divergence_and_reprojection(recording):
     assert before['instants'] == after['instants'] == 6
     assert after['reprojection_px'] < before['reprojection_px']
     assert after['epipolar_divergence'] >= 0.0
+
+
+def test_temporal_difference_pairs_consecutive_instants_in_the_same_views(recording):
+    config = TrainConfig(mode='temporal_difference', steps=4, epipolar_warmup=0.0,
+                         **dict(TINY, batch_unlabeled=3))
+    trainer = Trainer(config, TrainingData(recording, config, (48, 48), (12, 12)))
+    for _ in range(4):
+        trainer.step()
+        kind, pairs, k = trainer.last_plan[-1]
+        assert kind == 'U' and len(pairs) == 3 * k          # the images a step always has
+        inst, views = pairs[:, 0].reshape(3, k), pairs[:, 1].reshape(3, k)
+        assert (inst[1] == inst[0] + 1).all() and (views[1] == views[0]).all()
+        assert set(inst[:2].ravel()) <= set(trainer.data.unlabeled_instants)
+        assert 'T' in trainer.last_terms
+
+
+def ground_truth_part(trainer, recording):
+    """The 'U' part of a step (not augmented) and its projected ground truth: (batch, pairs,
+    k, truth (N, C, 2) image px, points (N, C, 2) heatmap px)."""
+    from monet_ros.learning.pseudo_labels import project_to_views
+
+    kind, pairs, k = trainer._batch_plan()[-1]
+    batch = trainer.data.cache.views(pairs[:, 0], pairs[:, 1])
+    T, V = recording.num_instants, recording.num_views
+    truth = project_to_views(recording.gt3d.reshape(-1, 3), recording.cameras).reshape(
+        V, T, -1, 2).transpose(1, 0, 2, 3)[pairs[:, 0], pairs[:, 1]]
+    return batch, pairs, k, truth, batch.to_heatmap(truth)
+
+
+def perfect_maps(points, shift=None):
+    """(N, C, 12, 12) Gaussians (sigma 1) at heatmap points (N, C, 2), optionally one
+    (row, keypoint, offset) moved: the maps of a perfect (or once wrong) detector."""
+    from monet_ros.models import render_heatmaps
+
+    moved = points.copy()
+    if shift is not None:
+        row, c, offset = shift
+        moved[row, c] += offset
+    return render_heatmaps(torch.as_tensor(moved, dtype=torch.float32), (12, 12), 1.0)
+
+
+def test_reprojection_targets_are_the_views_consensus(recording):
+    """L_R's targets: a perfect detector's maps give back the ground truth; one view moved by
+    6 heatmap px (about 14 image px, beyond bootstrap_threshold_px) is outvoted by the other
+    three and gets the truth as its target."""
+    config = TrainConfig(mode='reprojection', steps=4, epipolar_warmup=0.0,
+                         **dict(TINY, batch_unlabeled=2, views_per_instant=0))
+    trainer = Trainer(config, TrainingData(recording, config, (48, 48), (12, 12)))
+    batch, pairs, k, truth, points = ground_truth_part(trainer, recording)
+    assert k == recording.num_views == 4
+    target = trainer._reprojection_targets(perfect_maps(points), batch, slice(None), pairs, k,
+                                           1.0)
+    np.testing.assert_allclose(target, points, atol=1e-3)
+    heat = perfect_maps(points, shift=(1, 2, (6.0, 0.0)))
+    moved = trainer._reprojection_targets(heat, batch, slice(None), pairs, k, 1.0)
+    np.testing.assert_allclose(moved, points, atol=1e-3)          # the moved view included
+    # below the confidence cut-off (a share of the labelled peak) nothing is a target
+    low = trainer._reprojection_targets(heat * 0.2, batch, slice(None), pairs, k, 1.0)
+    assert np.isnan(low).all()
+
+
+def test_temporal_difference_term_is_the_ground_truth_motion_beyond_epsilon(recording):
+    """On a perfect detector's maps L_T is the frame-to-frame motion of the ground truth in
+    the first frame's heatmap px (an independent computation from the projected 3D truth)."""
+    config = TrainConfig(mode='temporal_difference', steps=4, epipolar_warmup=0.0,
+                         **dict(TINY, batch_unlabeled=4, temporal_epsilon=0.25))
+    trainer = Trainer(config, TrainingData(recording, config, (48, 48), (12, 12)))
+    batch, pairs, k, truth, points = ground_truth_part(trainer, recording)
+    terms = trainer._unlabeled_terms([perfect_maps(points)], batch, slice(None), pairs, k, 1.0)
+    rows = np.arange(len(pairs)).reshape(4, k)
+    now, nxt = rows[0::2].ravel(), rows[1::2].ravel()
+    motion = np.linalg.norm(batch.to_heatmap(truth[nxt], now) - points[now], axis=-1)
+    expected = np.maximum(motion - 0.25, 0.0).mean()
+    assert expected > 0.01                                   # the blobs move
+    assert terms['T'].item() == pytest.approx(expected, abs=0.02)
