@@ -20,6 +20,8 @@ MAX_BATCH = 4096
 # The paper's rows (Table 1), then ablations.
 MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 'monet',
          'bootstrap2_epipolar', 'epipolar', 'temporal_difference', 'reprojection')
+# The loss terms a step can have: L_L, L_E, L_B, L_T, L_R (learning.losses.objective).
+LOSS_TERMS = ('L', 'E', 'B', 'T', 'R')
 
 
 @dataclass(frozen=True)

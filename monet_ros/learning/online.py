@@ -42,7 +42,7 @@ import numpy as np
 
 from monet_ros.atomic import atomic_write, sha256_file
 from monet_ros.config import ConfigError, setting
-from monet_ros.learning.config import MODES, TrainConfig
+from monet_ros.learning.config import LOSS_TERMS, MODES, TrainConfig
 
 PUBLISHED = 'published.json'
 # publish_metric -> the Trainer.validate key it compares (lower is better, px)
@@ -369,7 +369,8 @@ class OnlineLearner:
         return bool(self.config.steps) and self.trainer.step_count >= self.config.steps
 
     def step(self):
-        """One training step; returns the loss terms ({'loss', 'L', 'E', 'B', 'lr', 'step'})."""
+        """One training step; returns the loss terms ({'loss', 'lr', 'step'} and those of
+        learning.config.LOSS_TERMS the mode has)."""
         start = time.perf_counter()
         terms = self.trainer.step()
         self.step_times = (self.step_times + [time.perf_counter() - start])[-50:]
@@ -403,7 +404,7 @@ class OnlineLearner:
         checkpoints."""
         metrics = self.trainer.validate(max_instants=self.config.validate_instants)
         metrics.update({f'loss_{k}': v for k, v in self.trainer.last_terms.items()
-                        if k in ('loss', 'L', 'E', 'B')})
+                        if k == 'loss' or k in LOSS_TERMS})
         metrics = _finite(metrics)
         publish, reason = should_publish(metrics, self.reference_px,
                                          self.config.publish_tolerance_px, self.metric)

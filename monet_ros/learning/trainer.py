@@ -47,7 +47,7 @@ from monet_ros.atomic import atomic_write, write_error
 from monet_ros.config import ConfigError
 from monet_ros.crop_rule import recording_boxes
 from monet_ros.evaluation.reprojection import multiview_reprojection
-from monet_ros.learning.config import TrainConfig
+from monet_ros.learning.config import LOSS_TERMS, TrainConfig
 from monet_ros.learning.dataset import CropCache
 from monet_ros.learning.losses import (
     epipolar_loss_terms,
@@ -67,7 +67,7 @@ from monet_ros.models import build_model, decode_heatmaps, save_checkpoint
 from monet_ros.models.detector import check_precision
 
 STATE_FORMAT = 'monet_ros.trainer_state/1'
-LOG_FIELDS = ('step', 'loss', 'L', 'E', 'B', 'T', 'R', 'lr', 'pseudo_labels', 'seconds')
+LOG_FIELDS = ('step', 'loss', *LOSS_TERMS, 'lr', 'pseudo_labels', 'seconds')
 
 
 def nonnegative(heat):

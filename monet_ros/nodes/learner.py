@@ -26,6 +26,7 @@ from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from monet_ros.error_text import error_line
+from monet_ros.learning.config import LOSS_TERMS
 from monet_ros.learning.online import LearnerConfig, OnlineLearner
 from monet_ros.nodes.names import DIAGNOSTICS, MODEL, node_namespace
 from monet_ros.nodes.params import declare_config
@@ -139,7 +140,7 @@ class LearnerNode(Node):
                   'announced_reprojection_px': learner.published.metrics.get('reprojection_px')
                   if learner.published else ''}
         values.update({f'loss_{k}': f'{v:.6g}' for k, v in self.last_terms.items()
-                       if k in ('loss', 'L', 'E', 'B', 'lr')})
+                       if k in ('loss', 'lr', *LOSS_TERMS)})
         if last is not None:
             values.update({f'last_{k}': v for k, v in last.metrics.items()
                            if not k.startswith('loss_')})
