@@ -1,12 +1,13 @@
 """Online learner: training steps/s, and accuracy over time of online learning.
 
 1. Steps/s of OnlineLearner.step (small net, all 8 views of an instant in L_E, CPU; CUDA
-   too when present), mode monet (L_L + lambda_e L_E + lambda_p L_B) side by side with
-   supervised (L_L only, the baseline), median of --repeats runs of --steps steps.
+   too when present), --mode (default: the learner's default, reprojection; the figures
+   below are of mode monet, L_L + lambda_e L_E + lambda_p L_B) side by side with supervised
+   (L_L only, the baseline), median of --repeats runs of --steps steps.
 2. Over time: a starting model trained with labels only (mode supervised, Trainer,
    --start-steps, with the learner's validation split: it never sees the held-out labels)
-   on a synthetic 8-camera rig; then --minutes of online learning (OnlineLearner, mode
-   monet, a checkpoint every --every steps, announced by the learner's own criterion:
+   on a synthetic 8-camera rig; then --minutes of online learning (OnlineLearner, --mode,
+   a checkpoint every --every steps, announced by the learner's own criterion:
    publish_metric auto = the mean error on the held-out validation labels,
    --validation-labels of the labelled instants) and, beside it, the same minutes of
    supervised training continued from the same start (the baseline, checkpoints every
@@ -49,6 +50,7 @@ labelled instants: 4 trained on, 2 held out = instants 65 and 140), --start-step
   error does not.
 """
 import argparse
+from dataclasses import fields
 import json
 import os
 from pathlib import Path
@@ -67,11 +69,12 @@ from monet_ros.cli import SUBCOMMANDS  # noqa: E402
 from monet_ros.cli import main as monet_main  # noqa: E402
 from monet_ros.evaluation.evaluate import evaluate_detector  # noqa: E402
 from monet_ros.fusion import FusionConfig, fuse_heatmaps  # noqa: E402
-from monet_ros.learning.config import TrainConfig  # noqa: E402
+from monet_ros.learning.config import MODES, TrainConfig  # noqa: E402
 from monet_ros.learning.online import LearnerConfig, OnlineLearner, should_publish  # noqa: E402
 from monet_ros.learning.trainer import Trainer, TrainingData  # noqa: E402
 from monet_ros.models import Detector, build_model, load_checkpoint  # noqa: E402
 
+LEARNER_MODE = next(f.default for f in fields(LearnerConfig) if f.name == 'mode')
 SMALL = dict(architecture='small', input_size=96, width=24)
 BATCH = dict(batch_labelled=8, batch_pseudo=8, batch_unlabeled=1, lr=1e-3, eval_fraction=0.2,
              sigma=1.5)
@@ -234,7 +237,7 @@ def plot_timeline(rows, path):
               ('reproj_px', 'held-out reprojection error (px)')]
     fig, axes = plt.subplots(1, 4, figsize=(18, 4))
     for ax, (key, title) in zip(axes, panels):
-        for mode, colour in (('monet', 'C0'), ('supervised', 'C1')):
+        for mode, colour in zip(dict.fromkeys(r['mode'] for r in rows), ('C0', 'C1')):
             pts = [(r['t_s'], r[key], r['announced']) for r in rows
                    if r['mode'] == mode and r.get(key) is not None]
             if not pts:
@@ -283,6 +286,9 @@ def main():
     parser.add_argument('--supervised-every-factor', type=int, default=3,
                         help='the supervised run checkpoints every --every x this steps '
                         '(it steps about 3x faster)')
+    parser.add_argument('--mode', default=LEARNER_MODE, choices=MODES,
+                        help="the online learner's mode (default: the learner's default, "
+                        'LearnerConfig.mode)')
     parser.add_argument('--eval-stride', type=int, default=2,
                         help='evaluate every checkpoint on every n-th held-out instant')
     args = parser.parse_args()
@@ -299,7 +305,7 @@ def main():
     devices = ['cpu'] + (['cuda'] if torch.cuda.is_available() else [])
     speed = []
     for device in devices:
-        for mode in ('supervised', 'monet'):
+        for mode in ('supervised', args.mode):
             rate, rec = steps_per_s(folder, skeleton, mode, device, args.steps, args.repeats,
                                     out / f'speed_{mode}_{device}')
             speed.append({'device': device, 'mode': mode, 'views': rec.num_views,
@@ -333,8 +339,8 @@ def main():
           f'({list(map(int, data.validation_instants))}); held-out tail '
           f'{len(data.held_out)} instants', flush=True)
     timeline = []
-    for mode in ('monet', 'supervised'):
-        every = args.every if mode == 'monet' else args.every * args.supervised_every_factor
+    for mode in (args.mode, 'supervised'):
+        every = args.every if mode == args.mode else args.every * args.supervised_every_factor
         print(f'\n{args.minutes:g} min of online learning, mode {mode} (checkpoint every '
               f'{every} steps):', flush=True)
         learner, rows = online(folder, skeleton, start, out / f'online_{mode}', mode,
@@ -356,7 +362,7 @@ def main():
           f'{len(data.validation_instants)} instants; reproj: Trainer.validate)')
     text = table(timeline, columns)
     print(text)
-    for mode in ('monet', 'supervised'):
+    for mode in (args.mode, 'supervised'):
         rows = [r for r in timeline if r['mode'] == mode]
         last = [r for r in rows if r['announced'] in ('yes', 'start')][-1]
         print(f'  {mode}: announced by the learner at the end: step {last["step"]}, 3D '
@@ -371,7 +377,7 @@ def main():
               f'{_px(row["reproj_px"])} px')
     if all(r.get('fused_3d_mm') is not None for r in timeline):
         from scipy.stats import spearmanr
-        for mode in ('monet', 'supervised', 'both'):
+        for mode in (args.mode, 'supervised', 'both'):
             rows = [r for r in timeline if mode in ('both', r['mode'])
                     and not (mode == 'both' and r['mode'] == 'supervised' and r['step'] == 0)]
             y = [r['fused_3d_mm'] for r in rows]

@@ -156,8 +156,9 @@ def test_learner_announces_detector_reloads_between_frames_and_services(scene, r
                 assert a['sha256'] == sha256(a['path'])
                 assert load_checkpoint(a['path'])[1]['step'] == a['step']
                 assert np.isfinite(a['metrics']['reprojection_px'])
-                # the default mode, spatiotemporal: L_L + L_B (the pseudo-labels' loss)
-                assert set(a['metrics']) >= {'epipolar_divergence', 'loss_L', 'loss_B'}
+                # the default mode, reprojection: L_L + L_B (the pseudo-labels' loss) + L_R
+                assert set(a['metrics']) >= {'epipolar_divergence', 'loss_L', 'loss_B',
+                                             'loss_R'}
             # the new heatmaps are those of an announced checkpoint, not the start model's
             last = heats[-1]
             assert any(np.allclose(last, reference(a['path'], image, camera, box), atol=1e-4)
@@ -187,7 +188,7 @@ def test_learner_announces_detector_reloads_between_frames_and_services(scene, r
             status = learner_status(diagnostics)
             # steps went on (above); the rate is a figure (3 decimals), not checked here
             assert status['state'] == 'training' and float(status['steps_per_s']) >= 0
-            assert {'loss_L', 'loss_B'} <= set(status)          # spatiotemporal: no L_E
+            assert {'loss_L', 'loss_B', 'loss_R'} <= set(status)     # reprojection: no L_E
             assert learner.stop(signal.SIGINT, timeout=60) == 0, learner.output()
         for _ in range(3):                     # the stream goes on without the learner
             assert frames.next() is not None
