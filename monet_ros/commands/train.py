@@ -9,9 +9,10 @@ import sys
 from monet_ros.config import setting, validate_config
 from monet_ros.learning.config import TrainConfig
 
-HELP = ('semi-supervised training from recordings + labels (modes: spatiotemporal, the default '
-        'and the most accurate measured, supervised, spatial, bootstrap1, bootstrap2, monet, '
-        'and the ablations bootstrap2_epipolar, epipolar)')
+HELP = ('semi-supervised training from recordings + labels (modes: reprojection, the default '
+        'and the most accurate measured: L_L + L_B + L_R; supervised, spatial, spatiotemporal, '
+        'bootstrap1, bootstrap2, monet, temporal_difference, and the ablations '
+        'bootstrap2_epipolar, epipolar)')
 
 
 @dataclass(frozen=True)
@@ -131,11 +132,15 @@ def run(args):
         if world.writer:
             print(f'resumed at step {trainer.step_count}', file=sys.stderr)
     else:
+        if args.resume and world.writer:
+            print(f'nothing to resume: no {out / "trainer_state.pt"} (a checkpoint is written '
+                  f'every {config.checkpoint_every} steps); starting at step 0', file=sys.stderr)
         trainer = Trainer(config, data, out, device=device)
     if world.writer:
         print(f'{recording.name}: {recording.num_instants} instants x {recording.num_views} '
               f'views, {len(data.labelled_instants)} labelled, {len(data.unlabeled_instants)} '
-              f'unlabeled, {len(data.held_out)} held out; mode {config.mode}, '
+              f'unlabeled, {len(data.held_out)} held out; mode {config.mode} '
+              f'({trainer.objective_text()}), '
               f'{trainer.pseudo_label_count} pseudo-labels{_gate_text(data.pseudo_gate)}, '
               f'device {trainer.device}'
               + (f', {world.world_size} ranks ({world.backend}), {trainer.per_rank_batch} '

@@ -85,11 +85,11 @@ class TrainConfig:
                                   maximum=MAX_BATCH)
     batch_pseudo: int = setting(8, 'pseudo-labelled view crops per step', minimum=0,
                                 maximum=MAX_BATCH)
-    batch_unlabeled: int = setting(2, 'unlabeled instants per step (L_E)', minimum=0,
+    batch_unlabeled: int = setting(2, 'unlabeled instants per step (L_E, L_T, L_R)', minimum=0,
                                    maximum=MAX_BATCH)
     views_per_instant: int = setting(0, 'views of each unlabeled instant (L_E: all their '
-                                     'pairs); 0 = every view of the rig', minimum=0,
-                                     maximum=64)
+                                     'pairs; L_R: their consensus); 0 = every view of the rig',
+                                     minimum=0, maximum=64)
     lambda_e: float = setting(5.0, 'weight of the epipolar divergence L_E', minimum=0.0)
     lambda_p: float = setting(1.0, 'weight of the pseudo-label loss L_B', minimum=0.0)
     lambda_t: float = setting(1.0, 'temporal_difference: weight of the temporal-difference '
@@ -201,7 +201,8 @@ class TrainConfig:
                               f'must be 0 or a multiple of 8 >= 32, got {self.input_size}')
         if self.views_per_instant == 1:
             raise ConfigError('TrainConfig', 'views_per_instant',
-                              'must be 0 (all views) or >= 2 (L_E compares pairs), got 1')
+                              'must be 0 (all views) or >= 2 (L_E compares pairs, L_R '
+                              'triangulates), got 1')
         if self.pseudo_agreement_px and not self.pseudo_max_frames:
             raise ConfigError('TrainConfig', 'pseudo_agreement_px',
                               'applies beyond pseudo_max_frames: set pseudo_max_frames > 0 too')

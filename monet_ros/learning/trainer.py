@@ -342,23 +342,54 @@ class Trainer:
 
     def _warn_missing_data(self):
         spec, c = self.spec, self.config
+        others = spec.unlabeled and (c.lambda_e or c.lambda_t or c.lambda_r)
         if (spec.spatial or spec.temporal) and spec.bootstrap_rounds == 0 and \
                 c.lambda_p > 0 and len(self.pseudo_pool) == 0:
-            self.warn(f'mode {c.mode}: no pseudo-labels (no keypoint is labelled in 2 views '
-                      'of an instant to triangulate): L_B gets no data, this run is '
-                      'supervised only')
-        if spec.epipolar and c.lambda_e > 0 and len(self.data.unlabeled_instants) == 0:
-            self.warn(f'mode {c.mode}: no unlabeled instant in the training split: the '
-                      'epipolar divergence L_E gets no data, this run is supervised only')
-        if spec.temporal_difference and c.lambda_t > 0 and len(self._consecutive()) == 0:
-            self.warn(f'mode {c.mode}: no two consecutive unlabeled instants in the training '
-                      'split: the temporal-difference loss L_T gets no data')
-        elif spec.temporal_difference and c.lambda_t > 0 and c.batch_unlabeled < 2:
-            self.warn(f'mode {c.mode}: batch_unlabeled {c.batch_unlabeled} < 2: L_T needs '
-                      'pairs of consecutive instants, it gets no data')
-        if spec.reprojection and c.lambda_r > 0 and len(self.data.unlabeled_instants) == 0:
-            self.warn(f'mode {c.mode}: no unlabeled instant in the training split: the '
-                      'reprojection-consistency loss L_R gets no data')
+            self.warn(f'mode {c.mode}: no pseudo-labels (spatial: no keypoint labelled in 2 '
+                      'views of an instant that has another view to label; spatiotemporal: no '
+                      f'track verified in track_min_views {c.track_min_views} views): L_B gets '
+                      'no data' + ('' if others else ', this run is supervised only'))
+        unlabeled = len(self.data.unlabeled_instants)
+        for on, weight, term, name in (
+                (spec.epipolar, c.lambda_e, 'L_E', 'the epipolar divergence'),
+                (spec.temporal_difference, c.lambda_t, 'L_T', 'the temporal-difference loss'),
+                (spec.reprojection, c.lambda_r, 'L_R', 'the reprojection-consistency loss')):
+            if not (on and weight > 0):
+                continue
+            if unlabeled == 0:
+                self.warn(f'mode {c.mode}: no unlabeled instant in the training split: {name} '
+                          f'{term} gets no data')
+            elif c.batch_unlabeled == 0:
+                self.warn(f'mode {c.mode}: batch_unlabeled 0: {name} {term} gets no data')
+        if spec.temporal_difference and c.lambda_t > 0 and unlabeled and c.batch_unlabeled:
+            if len(self._consecutive()) == 0:
+                self.warn(f'mode {c.mode}: no two consecutive unlabeled instants in the '
+                          'training split: the temporal-difference loss L_T gets no data')
+            elif c.batch_unlabeled < 2:
+                self.warn(f'mode {c.mode}: batch_unlabeled {c.batch_unlabeled} < 2: L_T needs '
+                          'pairs of consecutive instants, it gets no data')
+        k = self.views_per_instant()
+        if spec.reprojection and c.lambda_r > 0 and unlabeled and c.batch_unlabeled and \
+                k < c.bootstrap_min_views:
+            self.warn(f'mode {c.mode}: L_R triangulates from bootstrap_min_views '
+                      f'{c.bootstrap_min_views} inlier views but gets {k} views of each '
+                      f'unlabeled instant (views_per_instant {c.views_per_instant}, '
+                      f'{self.data.recording.num_views} cameras): it gets no data')
+
+    def objective_text(self):
+        """The loss of this run in words, e.g. 'L_L + 1 L_B + 1 L_R from step 600' (terms of
+        weight 0 left out)."""
+        spec, c = self.spec, self.config
+        parts = ['L_L']
+        if self.spec_uses_pseudo and c.lambda_p:
+            parts.append(f'{c.lambda_p:g} L_B')
+        start = int(round(c.epipolar_warmup * c.steps))
+        for on, weight, term in ((spec.epipolar, c.lambda_e, 'L_E'),
+                                 (spec.temporal_difference, c.lambda_t, 'L_T'),
+                                 (spec.reprojection, c.lambda_r, 'L_R')):
+            if on and weight:
+                parts.append(f'{weight:g} {term}' + (f' from step {start}' if start else ''))
+        return ' + '.join(parts)
 
     # ----------------------------------------------------------------- sampling
     def _update_pools(self):

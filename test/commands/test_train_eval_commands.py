@@ -103,3 +103,18 @@ def test_bad_arguments_are_named(folder, repo_root, tmp_path):
     # the data's labels name keypoints k0..k2, not human14's: one line naming the file
     assert proc.returncode == 2 and "labels.csv:2: field keypoint: 'k0'" in stderr
     assert 'Traceback' not in stderr and len(stderr.strip().splitlines()) == 1
+
+
+def test_resume_without_a_state_says_so_and_the_start_line_names_the_loss(folder, repo_root,
+                                                                          tmp_path):
+    data, _ = folder
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text('name: blobs\nkeypoints: [k0, k1, k2]\n')
+    out = tmp_path / 'run'
+    proc = monet(repo_root, 'train', data, '--out', out, '--skeleton', skeleton, '--steps', 4,
+                 '--epipolar-warmup', '0.5', *TRAIN, '--resume')
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    assert f'nothing to resume: no {out / "trainer_state.pt"}' in stderr
+    assert 'mode reprojection (L_L + 1 L_B + 1 L_R from step 2)' in stderr     # the default
+    assert json.loads(stdout)['last']['step'] == 4

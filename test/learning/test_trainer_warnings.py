@@ -49,6 +49,38 @@ def test_spatial_mode_without_two_labelled_views_warns_at_start():
     assert trainer.warnings == said
 
 
+@pytest.mark.parametrize('options, expected', [
+    (dict(mode='reprojection', batch_unlabeled=0), 'batch_unlabeled 0: the reprojection'),
+    (dict(mode='monet', batch_unlabeled=0), 'batch_unlabeled 0: the epipolar divergence'),
+    (dict(mode='reprojection', views_per_instant=2), 'gets 2 views of each unlabeled instant'),
+    (dict(mode='reprojection', views_per_instant=0, bootstrap_min_views=5),
+     'bootstrap_min_views 5 inlier views but gets 4 views'),
+    (dict(mode='temporal_difference', batch_unlabeled=1), 'L_T needs pairs'),
+    (dict(mode='temporal_difference', batch_unlabeled=0), 'batch_unlabeled 0: the temporal')])
+def test_a_term_on_unlabeled_instants_without_data_warns_at_start(recording, options,
+                                                                   expected):
+    """L_E / L_T / L_R configured but unable to get data (no unlabeled instant per step, fewer
+    views than RANSAC's inliers): said once at the start, never trained on silently."""
+    said = []
+    config = TrainConfig(**{**TINY, 'steps': 2, **options})
+    Trainer(config, TrainingData(recording, config, (48, 48), (12, 12)), warn=said.append)
+    assert len(said) == 1 and expected in said[0], said
+    said.clear()                    # the same settings with that term's weight 0: no warning
+    weight = {'reprojection': 'lambda_r', 'monet': 'lambda_e',
+              'temporal_difference': 'lambda_t'}[options['mode']]
+    config = TrainConfig(**{**TINY, 'steps': 2, **options, weight: 0.0})
+    Trainer(config, TrainingData(recording, config, (48, 48), (12, 12)), warn=said.append)
+    assert said == []
+
+
+def test_the_objective_in_words_names_each_weighted_term(recording):
+    assert trainer_for(recording, mode='reprojection', steps=10, epipolar_warmup=0.3,
+                       lambda_r=2.0).objective_text() == 'L_L + 1 L_B + 2 L_R from step 3'
+    assert trainer_for(recording, mode='supervised', steps=10).objective_text() == 'L_L'
+    assert trainer_for(recording, mode='monet', steps=10, epipolar_warmup=0.0,
+                       lambda_p=0.0).objective_text() == 'L_L + 5 L_E'
+
+
 def test_underfit_detector_warns_and_a_fitted_one_does_not(recording):
     said = []
     config = TrainConfig(**{**TINY, 'mode': 'supervised', 'steps': 2, 'lr': 1e-6})
