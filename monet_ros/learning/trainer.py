@@ -31,12 +31,15 @@ bootstrapping round that keeps nothing, no unlabeled instant for L_E) and a dete
 does not fit its own labelled views at the end (median error >
 fit_warning_heat_px heatmap pixels).
 """
+from contextlib import contextmanager
 import csv
 from dataclasses import replace
 import json
 import os
 from pathlib import Path
+import signal
 import sys
+import threading
 import time
 
 import numpy as np
@@ -911,6 +914,32 @@ class Trainer:
                       'learning rate (--steps, --lr)')
         return fit
 
+    @contextmanager
+    def _stop_between_steps(self):
+        """While run() trains: SIGINT / SIGTERM end the current step, then run() writes a
+        checkpoint and raises KeyboardInterrupt (nothing trained is lost); a second signal
+        stops at once. Yields a list that holds the signal's name once one came. Only in
+        the main thread of a single process (the ranks of a torchrun job stop together, by
+        the signal torchrun forwards)."""
+        stop = []
+        world = getattr(self, 'world', None)             # learning.distributed's
+        if threading.current_thread() is not threading.main_thread() or \
+                (world is not None and world.distributed):
+            yield stop
+            return
+
+        def handler(signum, frame):
+            if stop:
+                raise KeyboardInterrupt
+            stop.append(signal.Signals(signum).name)
+
+        previous = {s: signal.signal(s, handler) for s in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield stop
+        finally:
+            for s, h in previous.items():
+                signal.signal(s, h)
+
     def run(self, steps=None, progress=True):
         """Train until `steps` (default config.steps); tqdm bar on stderr; returns a summary
         (with `fit`, the fit to the labelled views, and `warnings`)."""
@@ -919,13 +948,21 @@ class Trainer:
                    desc=f'train {self.config.mode}', dynamic_ncols=True)
         start = time.monotonic()
         first = self.step_count
-        try:
-            while self.step_count < total:
-                t = self.step()
-                bar.update(1)
-                bar.set_postfix({k: f'{t[k]:.4g}' for k in ('L', 'E', 'B') if k in t})
-        finally:
-            bar.close()
+        with self._stop_between_steps() as stop:
+            try:
+                while self.step_count < total and not stop:
+                    t = self.step()
+                    bar.update(1)
+                    bar.set_postfix({k: f'{t[k]:.4g}' for k in LOSS_TERMS if k in t})
+            finally:
+                bar.close()
+            if stop:             # a signal: keep what was trained, then stop (exit 0)
+                if self.out_dir is not None:
+                    path = self.save()
+                    print(f'stopped by {stop[0]} after step {self.step_count}: wrote {path} '
+                          f'and {self.out_dir / "trainer_state.pt"} (--resume continues)',
+                          file=sys.stderr, flush=True)
+                raise KeyboardInterrupt
         if self.out_dir is not None and self.step_count % self.config.checkpoint_every and \
                 self.step_count != self.config.steps:
             self.save()

@@ -118,3 +118,38 @@ def test_resume_without_a_state_says_so_and_the_start_line_names_the_loss(folder
     assert f'nothing to resume: no {out / "trainer_state.pt"}' in stderr
     assert 'mode reprojection (L_L + 1 L_B + 1 L_R from step 2)' in stderr     # the default
     assert json.loads(stdout)['last']['step'] == 4
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_keeps_every_step_trained_and_resume_continues(folder, repo_root, tmp_path,
+                                                               signum):
+    """SIGINT / SIGTERM mid-training: exit 0 with a checkpoint of the last finished step
+    (not the last scheduled one: --checkpoint-every is far away), and --resume goes on
+    from it."""
+    data, _ = folder
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text('name: blobs\nkeypoints: [k0, k1, k2]\n')
+    out = tmp_path / 'run'
+    args = ['train', data, '--out', out, '--skeleton', skeleton, '--steps', 100000,
+            '--checkpoint-every', 50000, *TRAIN]
+    proc = monet(repo_root, *args)
+    log = out / 'train_log.csv'
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline and \
+            (not log.exists() or len(log.read_text().splitlines()) < 4):
+        time.sleep(0.1)
+    assert proc.poll() is None, proc.communicate()
+    proc.send_signal(signum)
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    state = torch.load(out / 'trainer_state.pt', weights_only=True)
+    rows = log.read_text().splitlines()[1:]
+    assert state['step'] == len(rows) >= 3            # every logged step is in the state
+    assert load_checkpoint(out / 'model.pt')[1]['step'] == state['step']
+    assert f'after step {state["step"]}: wrote' in stderr and 'Traceback' not in stderr
+    args[args.index('--steps') + 1] = state['step'] + 2
+    proc = monet(repo_root, *args, '--resume')
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 0, stderr
+    assert f'resumed at step {state["step"]}' in stderr
+    assert json.loads(stdout)['last']['step'] == state['step'] + 2
