@@ -504,7 +504,7 @@ class Trainer:
                 heat_pts = batch.to_heatmap(source[p[:, 0], p[:, 1]], sl)
                 terms[kind] = masked_heatmap_mse([s[sl] for s in stages], heat_pts,
                                                  self.config.sigma)
-                if kind == 'L':
+                if kind == 'L' and self.spec.reprojection:     # L_R's cut-off (a host sync)
                     labelled_peak = _labelled_peak(stages[-1][sl], heat_pts)
             elif kind == 'U':
                 terms.update(self._unlabeled_terms([s[sl] for s in stages], batch, sl, p,
