@@ -8,7 +8,8 @@ detector micro-benchmarks, side by side in one run.
 End to end (`--cameras`, default 4 and 8 at `--rate` 30 Hz, plus `--extra` 4@60): V
 camera streams (640x480 rgb8 + camera_info, stamped with the wall clock) go through a real
 detector node (all cameras batched, small net, CPU) and a real fusion node, timed from each
-image stamp to the arrival of its /monet/keypoints3d, in three layouts:
+image stamp to the arrival of its /monet/keypoints3d (and of each heatmap: the detector's
+share of that latency), in three layouts:
   three-process: the camera publisher (this bench, as the player or a camera driver would),
       the detector and the fusion each in their own process, over DDS with the Fast DDS
       shared-memory profile (config/fastdds_profile.xml) given to every publisher;
@@ -353,7 +354,9 @@ class Feeder:
         from monet_ros.nodes.qos import IMAGE_OUT, STREAM_IN
 
         self.node, self.rig = node, rig
-        self.latencies, self.heat_count, self.diagnostics = [], [0], {}
+        # ns from image stamp to this process: each keypoints3d, each heatmap (the
+        # detector's share of the latency)
+        self.latencies, self.heat_latencies, self.diagnostics = [], [], {}
         self.callback_errors = {}    # source -> 'count x last error'
         # serialized subscriptions (raw=True): this bench shares the CPUs with the nodes it
         # times, so it neither converts images to Python messages nor decodes more than the
@@ -368,9 +371,10 @@ class Feeder:
                 node.create_subscription(Image, f'/monet/{cam.name}/debug_image',
                                          lambda m: self.debug_count.__setitem__(
                                              0, self.debug_count[0] + 1), STREAM_IN, raw=True)
-            node.create_subscription(Image, f'/monet/{cam.name}/heatmaps',
-                                     lambda m: self.heat_count.__setitem__(
-                                         0, self.heat_count[0] + 1), STREAM_IN, raw=True)
+            node.create_subscription(
+                Image, f'/monet/{cam.name}/heatmaps',
+                lambda m: self.heat_latencies.append(
+                    time.time_ns() - stamp_to_ns(decode_header(m).stamp)), STREAM_IN, raw=True)
         node.create_subscription(DiagnosticArray, '/diagnostics', self.on_diagnostics,
                                  STREAM_IN)
         self.pubs = [(node.create_publisher(Image, cam.topic, IMAGE_OUT),
@@ -416,7 +420,8 @@ class Feeder:
                     self.pubs[v][0].publish(image)
                 published += 1
                 if measured_from is None and now - start >= warmup:
-                    measured_from = (now, len(self.latencies), self.heat_count[0], published,
+                    measured_from = (now, len(self.latencies), len(self.heat_latencies),
+                                     published,
                                      cpu_seconds())
             spin_once(max(0.0, min(0.005, next_tick - time.monotonic())))
         end, cpu_end, fused_end = time.monotonic(), cpu_seconds(), len(self.latencies)
@@ -426,10 +431,14 @@ class Feeder:
         t0, n0, h0, p0, c0 = measured_from
         window = end - t0
         lat = np.array(self.latencies[n0:], float) / 1e6
+        heat_lat = np.array(self.heat_latencies[h0:], float) / 1e6
         return dict(published=(published - p0) / window,
                     cpu_ms=1e3 * (cpu_end - c0) / max(1, fused_end - n0),
                     fused=(len(self.latencies) - n0) / window,
-                    heat=(self.heat_count[0] - h0) / window,
+                    heat=(len(self.heat_latencies) - h0) / window,
+                    heat_median=float(np.median(heat_lat)) if heat_lat.size else float('nan'),
+                    heat_p95=(float(np.percentile(heat_lat, 95)) if heat_lat.size
+                              else float('nan')),
                     median=float(np.median(lat)) if lat.size else float('nan'),
                     p95=float(np.percentile(lat, 95)) if lat.size else float('nan'),
                     diagnostics=self.diagnostics, callback_errors=self.callback_errors)
@@ -461,13 +470,17 @@ def worker(spec):
     from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
     from rclpy.node import Node
 
+    from monet_ros.commands.pipeline import detector_threads, pipeline_executor
     from monet_ros.geometry import load_rig
     from monet_ros.nodes import heap_for_large_buffers, short_gil_switch
     from monet_ros.nodes.runner import stop_executor
 
     rig = load_rig(spec['rig'])
     detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
-                           threads=spec['threads'], backend=spec['backend'],
+                           threads=detector_threads(spec['threads'] or 0,
+                                                    spec.get('detector_processes', 1),
+                                                    len(os.sched_getaffinity(0))),
+                           backend=spec['backend'],
                            precision=spec['precision'], debug_image=spec['viewable'])
     fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
                          camera_markers=spec['viewable'])
@@ -505,7 +518,9 @@ def worker(spec):
             nodes = [FusionNode(overrides=fusion_params)]
             if spec['layout'] == 'in-process':
                 nodes.append(DetectorNode(overrides=detector_params))
-            executor = MultiThreadedExecutor(num_threads=4)
+            # the pipeline layout: `monet pipeline`'s own executor
+            executor = (pipeline_executor() if spec['layout'] == 'pipeline'
+                        else MultiThreadedExecutor(num_threads=4))
         else:
             executor = SingleThreadedExecutor()
         for node in nodes:
@@ -592,7 +607,8 @@ def median_result(results):
     good = [r for r in results if 'error' not in r]
     if not good:
         return results[0]
-    keys = ('published', 'fused', 'heat', 'median', 'p95', 'cpu_ms')
+    keys = ('published', 'fused', 'heat', 'median', 'p95', 'heat_median', 'heat_p95',
+            'cpu_ms')
     out = {k: float(np.median([r[k] for r in good])) for k in keys}
     out['diagnostics'] = good[-1]['diagnostics']
     out['callback_errors'] = {k: v for r in good for k, v in r['callback_errors'].items()}
@@ -606,11 +622,12 @@ def print_live_row(views, rate, layout, viewable, r):
     shown = 'on' if viewable else 'off'
     if 'error' in r:
         print(f'| {views} @ {rate:.0f} | {layout} | {shown} | failed: {r["error"]} '
-              f'||||||||| {load:.1f} |', flush=True)
+              f'|||||||||| {load:.1f} |', flush=True)
         return
     d = r['diagnostics']
     print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
           f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | {r["p95"]:.0f} | '
+          f'{r["heat_median"]:.0f} / {r["heat_p95"]:.0f} | '
           f'{r["cpu_ms"]:.1f} | {stage_text(d, "detector", DETECTOR_STAGES)} | '
           f'{stage_text(d, "fusion", FUSION_STAGES)} | '
           f'{"; ".join(f"{k}: {v}" for k, v in r["callback_errors"].items()) or "none"} | '
@@ -638,7 +655,10 @@ def main():
     parser.add_argument('--seconds', type=float, default=10.0, help='measured seconds per run')
     parser.add_argument('--warmup', type=float, default=3.0, help='seconds before measuring')
     parser.add_argument('--runs', type=int, default=20, help='micro-benchmark repetitions')
-    parser.add_argument('--threads', type=int, default=2, help='network CPU threads')
+    parser.add_argument('--threads', type=int, default=None,
+                        help='network CPU threads (default: the cores; in the live runs as '
+                        '`monet pipeline`: the backend default with one detector process, '
+                        'the cores shared out with several)')
     parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
                         help='detector backend of the end-to-end runs')
     parser.add_argument('--precision', choices=('float32', 'bfloat16'), nargs='+',
@@ -683,7 +703,7 @@ def main():
         args.receive = min(args.receive, 1)
     print(f'# machine: {os.cpu_count()} CPUs, load average '
           f'{" ".join(f"{x:.1f}" for x in os.getloadavg())} at start; network threads '
-          f'{args.threads}; small net ({HEIGHT}x{WIDTH} images cropped to '
+          f'{args.threads or "as monet pipeline"}; small net ({HEIGHT}x{WIDTH} images cropped to '
           f'{args.input_size or 256}x{args.input_size or 256}); end-to-end precision '
           f'{" and ".join(args.precision)}')
 
@@ -703,11 +723,12 @@ def main():
     print('(errors: reprojection errors of the inlier views; the exclusion search has them '
           'already, so they cost ~0 beyond triangulate)')
 
+    micro_threads = args.threads or len(os.sched_getaffinity(0))
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
         if args.detector_views:
             print(f'\n## Detector images/s (Detector.predict of V 640x480 views in one '
-                  f'batch, {args.threads} thread(s), median of {args.runs} calls; another '
+                  f'batch, {micro_threads} thread(s), median of {args.runs} calls; another '
                   f'job on the machine swings these several-fold)')
             print('| network | views | baseline: torch NCHW float32 | torch float32 '
                   '(channels-last) | torch bfloat16 | onnxruntime | float32 / bfloat16 / '
@@ -715,7 +736,7 @@ def main():
             print('|---|---|---|---|---|---|---|')
         for arch in args.architectures:
             for views in args.detector_views:
-                r = detector_micro(views, args.runs, args.threads, arch, workdir,
+                r = detector_micro(views, args.runs, micro_threads, arch, workdir,
                                    args.input_size if arch == 'small' else None)
                 cells = [f'{r[k]:.1f}' if isinstance(r[k], float) else r[k] for k in r]
                 ratios = ' / '.join(f'{r[k] / r["baseline"]:.2f}x' if isinstance(r[k], float)
@@ -754,11 +775,12 @@ def main():
                  'every run)' if args.second_job else ''))
         print('| cameras @ Hz | layout | viewable | published frames/s | keypoints3d/s | '
               'detector images/s'
-              ' | latency median ms | latency p95 ms | node CPU ms per keypoints3d | '
+              ' | latency median ms | latency p95 ms | heatmaps latency median / p95 ms'
+              ' | node CPU ms per keypoints3d | '
               'detector ms/batch: convert, crop, '
               'forward, publish | fusion ms: receive (per view), decode, undistort, '
               'triangulate, errors, publish | node callback errors | load |')
-        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
         costs = []
         with second_job(args.second_job):
             if args.second_job:

@@ -5,9 +5,10 @@ processes.
     monet pipeline --bag REC --model CKPT [--rig RIG] [--rate 0.5] [--loop] [--lockstep]
     monet pipeline --bag REC --model CKPT --loop --learn    # + online learner (hot reload)
 
-This process runs the fusion node (and the learner) in one MultiThreadedExecutor; the
-player (replaying REC) and the detector (every camera in one batched forward; or
---detector-processes N, each a share of the cameras) each run in a child process
+This process runs the fusion node (and the learner, which trains in its own thread) in
+one SingleThreadedExecutor (pipeline_executor); the player (replaying REC) and the detector
+(every camera in one batched forward; or --detector-processes N, each a share of the
+cameras, the CPU cores shared out between them: detector_threads) each run in a child process
 (monet_ros.nodes.child: with its own interpreter lock each is as fast as its executable;
 sharing this process, the detector's short GIL-free calls waited behind the other nodes'
 Python, 3-4x slower, and the player's publishing put a tail on fusion's latency: p95 106 /
@@ -24,6 +25,7 @@ mean reprojection error; a final summary when the recording ends (or Ctrl-C, or
 from collections import deque
 from dataclasses import dataclass
 import math
+import os
 import sys
 import threading
 import time
@@ -74,7 +76,8 @@ def add_arguments(parser):
                         help='detector inference backend (onnxruntime: exported once, cached '
                         'beside the checkpoint)')
     parser.add_argument('--threads', type=int, default=0,
-                        help='CPU threads of the network (0 = the backend default)')
+                        help='CPU threads of the network in each detector process (0 = the '
+                        'backend default with one process, the cores shared out with several)')
     parser.add_argument('--precision', choices=('float32', 'bfloat16'), default='float32',
                         help='network arithmetic (bfloat16: torch backend, 2-3x faster on '
                         'CPUs with AVX512-BF16 / AMX and on CUDA)')
@@ -258,6 +261,17 @@ def detector_groups(slots, processes):
     return [names[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
 
+def detector_threads(threads, processes, cores):
+    """CPU threads of each detector process's network: `threads` when given (> 0); with
+    one process 0 (the backend's default: every core); with several, the cores shared out
+    (at least 1 each): two processes of two threads each on 2 cores oversubscribe them
+    (bench/pipeline.py, 16 cameras @ 30 Hz, 2 detector processes, 128 px bfloat16: 1 thread
+    each gave 26.5 keypoints3d/s, see bench/results/pipeline.md)."""
+    if threads > 0 or processes <= 1:
+        return threads
+    return max(1, cores // processes)
+
+
 def frames_listener(node, summary):
     """Subscribe `node` to the player's played_frames: each [stamp ns, wall ns] is the
     frame's publish time for the latency (wall clock, mapped to this process's monotonic
@@ -279,6 +293,17 @@ def frames_listener(node, summary):
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                      reliability=ReliabilityPolicy.RELIABLE)
     return node.create_subscription(Int64MultiArray, PLAYED_FRAMES, on_frame, qos)
+
+
+def pipeline_executor():
+    """The executor of this process's nodes (fusion, the played_frames listener, the
+    learner's services and timers): single-threaded, as every node executable
+    (nodes.runner.run_node). A MultiThreadedExecutor costs more Python per callback here
+    (its task futures and thread hand-offs, under one interpreter lock) and gave fusion a
+    tail: bench/pipeline.py, 8 cameras @ 30 Hz, 128 px bfloat16, p95 418 ms against 135 ms
+    single-threaded (three-process 133-232 ms in the same runs)."""
+    from rclpy.executors import SingleThreadedExecutor
+    return SingleThreadedExecutor()
 
 
 def run(args):
@@ -325,7 +350,6 @@ def run(args):
         raise ConfigError('monet pipeline', 'precision', str(error)) from None
     use_large_data_profile()
     import rclpy
-    from rclpy.executors import MultiThreadedExecutor
     from rclpy.node import Node
 
     from monet_ros.models import read_checkpoint
@@ -387,9 +411,12 @@ def run(args):
             for i, group in enumerate(groups):
                 # several detector processes: each its cameras, its own node name
                 rename = ['-r', f'__node:=detector_{i}'] if len(groups) > 1 else []
-                detectors.append(ChildNode('detector', dict(detector_params, cameras=group),
+                threads = detector_threads(args.threads, len(groups),
+                                           len(os.sched_getaffinity(0)))
+                detectors.append(ChildNode('detector', dict(detector_params, cameras=group,
+                                                            threads=threads),
                                            ros_args + rename))
-            executor = MultiThreadedExecutor(num_threads=4)
+            executor = pipeline_executor()
             for node in nodes:
                 node.callback_guard = CallbackGuard(node)  # a bad message costs only itself
                 executor.add_node(node)

@@ -173,8 +173,9 @@ def test_player_and_two_detectors_run_in_child_processes_and_lockstep_fuses_ever
         ros_env, tmp_path):
     """The player runs in its own process (its pid is not the pipeline's: fusion's
     interpreter lock is not shared with it), as does each of --detector-processes 2
-    detectors (2 cameras each); lockstep across processes still fuses every frame of two
-    loop passes, in order, and SIGTERM to the pipeline stops them all (exit 0)."""
+    detectors (2 cameras each, half the cores each); lockstep across processes still fuses
+    every frame of two loop passes, in order, and SIGTERM to the pipeline stops them all
+    (exit 0)."""
     _, stamps = noise_recording(tmp_path / 'rec', cameras=4, frames=4)
     model = small_checkpoint(tmp_path / 'model.pt')
     span = stamps[-1] - stamps[0] + (stamps[1] - stamps[0])     # the loop's stamp shift
@@ -194,4 +195,7 @@ def test_player_and_two_detectors_run_in_child_processes_and_lockstep_fuses_ever
     assert len(detectors) == 2 and not any(alive(pid) for pid in detectors), found
     groups = sorted(re.search(r'cameras:=(\[[^]]*\])', cmd).group(1) for cmd in detectors.values())
     assert [json.loads(g) for g in groups] == [['cam0', 'cam1'], ['cam2', 'cam3']], detectors
+    # the cores shared out between the two (not 2 x all cores: oversubscribed)
+    share = max(1, len(os.sched_getaffinity(0)) // 2)
+    assert all(f'threads:={share}' in cmd.split() for cmd in detectors.values()), detectors
     assert [header_stamp_ns(c) for c in clouds[:len(expected)]] == expected, proc.output()

@@ -3,7 +3,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from monet_ros.commands.pipeline import TWO_DETECTORS_FROM, detector_groups
+from monet_ros.commands.pipeline import TWO_DETECTORS_FROM, detector_groups, detector_threads
 from monet_ros.config import ConfigError
 
 
@@ -29,3 +29,16 @@ def test_auto_is_two_processes_from_the_measured_camera_count():
 def test_more_processes_than_cameras_is_an_error_naming_the_option():
     with pytest.raises(ConfigError, match='detector_processes.*3 detector processes for 2'):
         detector_groups(slots(2), 3)
+
+
+@pytest.mark.parametrize('threads,processes,cores,expected', [
+    (0, 1, 2, 0),      # one process: the backend default (every core)
+    (0, 2, 2, 1),      # two on 2 cores: one each, not 2 x 2
+    (0, 2, 16, 8),
+    (0, 3, 16, 5),
+    (0, 4, 2, 1),      # never 0 (which would mean every core again)
+    (3, 2, 2, 3),      # --threads given: as given
+])
+def test_detector_threads_share_the_cores_between_processes(threads, processes, cores,
+                                                            expected):
+    assert detector_threads(threads, processes, cores) == expected
