@@ -372,6 +372,9 @@ def run(args):
             try:
                 fusion = FusionNode(overrides=dict(rig=str(rig), cameras=cameras,
                                                    skeleton=args.skeleton, threads=0,
+                                                   # lockstep: every frame, however late
+                                                   **({'max_queue_ms': 0.0}
+                                                      if args.lockstep else {}),
                                                    threshold_px=args.threshold_px,
                                                    confidence_threshold=args.confidence_threshold))
                 nodes.append(fusion)

@@ -13,10 +13,16 @@ jump): the filtered ones on keypoints3d (and the skeleton markers), the raw ones
 keypoints3d_raw. A bridged joint (predicted, no accepted measurement this frame) keeps
 num_views of the raw fusion (0 when not triangulated), so it stays recognisable.
 
+When the node falls behind (more heatmaps arrive than it fuses, e.g. 16 cameras on 2 cores),
+it keeps its outputs fresh instead of queueing: a frame any of whose heatmaps or camera_info
+waited longer than `max_queue_ms` in the input queue (from its reception by the middleware,
+MessageInfo received_timestamp, to its callback) is not decoded or fused but counted stale,
+and the newer frames behind it are fused in time (0 = fuse every frame however late).
+
 Every heatmap received ends in exactly one per-camera counter of /diagnostics and of the
 stop summary (OUTCOMES): received = fused + bad_messages + unpaired + repeated + late +
-dropped + waiting. A heatmap or camera_info whose partner (same stamp) has not come within
-`silent_after_s` is unpaired and let go.
+dropped + stale + waiting. A heatmap or camera_info whose partner (same stamp) has not come
+within `silent_after_s` is unpaired and let go.
 """
 from collections import OrderedDict
 import copy
@@ -65,16 +71,19 @@ from monet_ros.timing import StageTimer
 
 # Parameters that may change while running (`ros2 param set`), effective next frame.
 FILTER_PARAMETERS = tuple(f for f in LiveFilterConfig.__dataclass_fields__)
-LIVE = ('confidence_threshold', 'threshold_px', 'min_views', 'peaks_per_view',
+LIVE = ('confidence_threshold', 'threshold_px', 'min_views', 'peaks_per_view', 'max_queue_ms',
         *FILTER_PARAMETERS)
 # Unpaired heatmaps / camera_info kept per camera while waiting for their partner.
 _PAIR_BACKLOG = 30
 # Where a received heatmap ends (one per heatmap): in a fused frame; rejected (decoding,
 # validation, or the fusion core refused the view); no camera_info of its stamp came;
 # its stamp repeated one the camera gave; its instant was already released; its frame had
-# fewer than min_views views or its fusion failed; still waiting (for a camera_info or for
-# the other cameras).
-OUTCOMES = ('fused', 'bad_messages', 'unpaired', 'repeated', 'late', 'dropped', 'waiting')
+# fewer than min_views views or its fusion failed; its frame was stale (the node was behind,
+# max_queue_ms); still waiting (for a camera_info or for the other cameras).
+OUTCOMES = ('fused', 'bad_messages', 'unpaired', 'repeated', 'late', 'dropped', 'stale',
+            'waiting')
+# The item a stale view holds in the synchroniser (not decoded): its frame is not fused.
+STALE = object()
 
 
 @dataclass(frozen=True)
@@ -96,6 +105,10 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
                                      'reliable only reliable ones, but a lost view is sent again',
                                      choices=('best_effort', 'reliable'))
     slop_ms: float = setting(0.0, 'stamp tolerance between cameras (0 = exact)', minimum=0.0)
+    max_queue_ms: float = setting(
+        100.0, 'a frame any of whose heatmaps or camera_info waited longer than this (ms) in '
+        'the input queue (the node fell behind) is skipped and counted stale, so that the '
+        'outputs stay fresh (0 = fuse every frame however late)', minimum=0.0)
     timeout_s: float = setting(0.3, 'wait this long for missing cameras of a frame, then '
                                'fuse the others', minimum=0.0)
     silent_after_s: float = setting(2.0, 'a camera without heatmaps this long is silent: '
@@ -126,6 +139,7 @@ class CameraStats:
         self.unpaired = 0         # heatmaps whose camera_info never came
         self.repeated = 0         # heatmaps replaced, before pairing, by one of the same stamp
         self.dropped = 0          # views of frames whose fusion failed
+        self.stale = 0            # views of frames skipped as stale (max_queue_ms)
         self.fused = 0
         self.info_received = 0
         self.info_paired = 0
@@ -165,6 +179,7 @@ class FusionNode(Node):
         self.stats = {name: CameraStats() for name in self.names}
         self.frames = 0
         self.partial_frames = 0
+        self.stale_frames = 0
         self.fusion_seconds = []
         self.last_result = None
         self.last_stamp_ns = None
@@ -181,10 +196,10 @@ class FusionNode(Node):
         for name in self.names:
             self.create_subscription(
                 Image, config.heatmap_topic.format(camera=name),
-                lambda msg, n=name: self.on_message(n, 0, msg), inputs)
+                lambda msg, info, n=name: self.on_message(n, 0, msg, info), inputs)
             self.create_subscription(
                 CameraInfo, config.camera_info_topic.format(camera=name),
-                lambda msg, n=name: self.on_message(n, 1, msg), inputs)
+                lambda msg, info, n=name: self.on_message(n, 1, msg, info), inputs)
         self.pub_points = self.create_publisher(PointCloud2, KEYPOINTS3D, STREAM_OUT)
         self.pub_raw = self.create_publisher(PointCloud2, KEYPOINTS3D_RAW, STREAM_OUT)
         self.pub_skeleton = self.create_publisher(MarkerArray, SKELETON, STREAM_OUT)
@@ -223,12 +238,22 @@ class FusionNode(Node):
                 self.filter_counts[key] += getattr(self.live_filter, key)
 
     # ------------------------------------------------------------------ input
-    def on_message(self, name, kind, msg):
-        """kind 0 = heatmaps, 1 = camera_info: pair the two by exact stamp, then sync."""
+    def queued_too_long(self, info):
+        """True when the message of MessageInfo `info` (rclpy's dict) waited longer than
+        max_queue_ms between its reception by the middleware and its callback (the node is
+        behind). False when off (0) or when the middleware gives no reception time (0)."""
+        received = (info or {}).get('received_timestamp') or 0
+        limit_ns = self.config.max_queue_ms * 1e6
+        return bool(limit_ns and received) and time.time_ns() - received > limit_ns
+
+    def on_message(self, name, kind, msg, info=None):
+        """kind 0 = heatmaps, 1 = camera_info: pair the two by exact stamp, then sync.
+        info: the subscription's MessageInfo (received_timestamp, ns, system clock)."""
         stats = self.stats[name]
         stamp = header_stamp_ns(msg)
         mine, other = self.pending[name][kind], self.pending[name][1 - kind]
         now = time.monotonic()
+        stale = self.queued_too_long(info)
         if kind == 0:
             stats.received += 1
             stats.last_seen = now
@@ -236,15 +261,15 @@ class FusionNode(Node):
         else:
             stats.info_received += 1
         if stamp in other:
-            partner, _ = other.pop(stamp)
+            partner, _, partner_stale = other.pop(stamp)
             heat_msg, info_msg = (msg, partner) if kind == 0 else (partner, msg)
             stats.info_paired += 1
-            self.on_pair(name, stamp, heat_msg, info_msg)
+            self.on_pair(name, stamp, heat_msg, info_msg, stale or partner_stale)
         else:
             if stamp in mine:               # a second message of this stamp replaces the first
                 self.let_go(stats, kind, repeated=True)
                 del mine[stamp]
-            mine[stamp] = (msg, now)
+            mine[stamp] = (msg, now, stale)
             while len(mine) > _PAIR_BACKLOG:
                 mine.popitem(last=False)
                 self.let_go(stats, kind)
@@ -279,6 +304,7 @@ class FusionNode(Node):
                 'repeated': stats.repeated + sync.repeated_by_key[name],
                 'late': sync.late_by_key[name],
                 'dropped': stats.dropped + sync.dropped_by_key[name],
+                'stale': stats.stale,
                 'waiting': len(self.pending[name][0]) + self.sync.open_items(name)}
 
     def camera_info_counts(self, name):
@@ -288,7 +314,11 @@ class FusionNode(Node):
                 'camera_info_unpaired': stats.info_unpaired,
                 'camera_info_waiting': len(self.pending[name][1])}
 
-    def on_pair(self, name, stamp, heat_msg, info_msg):
+    def on_pair(self, name, stamp, heat_msg, info_msg, stale=False):
+        if stale:       # not decoded: its frame is skipped (fuse), the view counted there
+            for group in self.sync.add(name, stamp, STALE):
+                self.fuse(group)
+            return
         start = time.perf_counter()
         try:
             heat = image_msg_to_heatmaps(heat_msg)
@@ -332,6 +362,9 @@ class FusionNode(Node):
     # ------------------------------------------------------------------ fusion
     def fuse(self, group):
         views = [i for i, name in enumerate(self.names) if name in group.items]
+        if any(group.items[self.names[i]] is STALE for i in views):
+            self.skip_stale(group, views)
+            return
         cameras = [self.cameras[i] for i in views]
         heat = [group.items[self.names[i]][0] for i in views]
         K_heat = np.stack([group.items[self.names[i]][1] for i in views])
@@ -387,6 +420,18 @@ class FusionNode(Node):
         for listener in self.listeners:
             listener(group.stamp_ns, result, X if self.live_filter is not None else None)
 
+    def skip_stale(self, group, views):
+        """A frame with a view that waited too long in the input queue: not fused, each of
+        its views counted stale; logged once."""
+        self.stale_frames += 1
+        for i in views:
+            self.stats[self.names[i]].stale += 1
+        if self.stale_frames == 1:
+            self.get_logger().warning(
+                f'falling behind: frame {group.stamp_ns} had input queued longer than '
+                f'max_queue_ms {self.config.max_queue_ms:g} ms and is skipped to keep the '
+                'outputs fresh; further ones are counted (stale) in /diagnostics')
+
     def publish_rig_tf(self):
         """The rig on /tf_static (latched), or one log line saying why not."""
         TFMessage = tf_message_class()
@@ -439,7 +484,8 @@ class FusionNode(Node):
             message=f'{self.frames} frames fused ({self.partial_frames} with missing cameras)',
             values=[KeyValue(key=k, value=str(v)) for k, v in (
                 ('frames', self.frames), ('partial_frames', self.partial_frames),
-                ('dropped_frames', self.sync.stats.dropped), ('late_views', self.sync.stats.late),
+                ('dropped_frames', self.sync.stats.dropped), ('stale_frames', self.stale_frames),
+                ('late_views', self.sync.stats.late),
                 ('time_resets', self.sync.stats.resets),
                 ('repeated_stamps', dict(self.sync.stats.repeated_by_key)),
                 ('fusion_ms_median', f'{fusion_ms:.3f}'),

@@ -11,6 +11,7 @@ and reports the counts in /diagnostics ('monet <node>: callback errors').
 """
 from collections import Counter
 from contextlib import contextmanager
+import functools
 import os
 import re
 import signal
@@ -115,6 +116,10 @@ class CallbackGuard:
         node.create_timer(1.0, self.publish)
 
     def wrap(self, source, callback):
+        # functools.wraps keeps the callback's signature (inspect.signature follows
+        # __wrapped__): rclpy passes a subscription's MessageInfo only to a callback that
+        # takes two arguments
+        @functools.wraps(callback)
         def guarded(*args):
             try:
                 return callback(*args)
@@ -123,7 +128,6 @@ class CallbackGuard:
                     raise
                 self.record(source, error)
                 return None
-        guarded.__name__ = getattr(callback, '__name__', 'callback')
         return guarded
 
     def record(self, source, error):

@@ -1,6 +1,8 @@
 """Heatmap + camera_info frames of a known 3D subject for fusion tests (a wrong view
 included), and the publish-until-fused loop."""
 import numpy as np
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from sensor_msgs.msg import CameraInfo, Image
 
 from helpers.scenes import cv2_project, gaussian_heatmaps, subject_box, to_crop
@@ -80,3 +82,22 @@ def run_frames(ros, node, pubs, frames, clouds, timeout=30.0):
                 break
         assert arrived(), f'no keypoints3d for stamp {frame.stamp}\n{node.output()}'
     return got
+
+
+def set_parameters(ros, node, **values):
+    """SetParameters on /monet/fusion (what `ros2 param set` sends) -> the results."""
+    params = []
+    for name, value in values.items():
+        if isinstance(value, bool):
+            pv = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
+        else:
+            pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
+        params.append(Parameter(name=name, value=pv))
+    client = ros.node.create_client(SetParameters, '/monet/fusion/set_parameters')
+    assert ros.spin_until(client.service_is_ready, timeout=30, process=node)
+    for _ in range(3):   # a response sent before the client's reader matched is lost
+        future = client.call_async(SetParameters.Request(parameters=params))
+        if ros.spin_until(future.done, timeout=10, process=node):
+            return future.result().results
+        client.remove_pending_request(future)
+    raise AssertionError('set_parameters: no response')

@@ -36,8 +36,11 @@ def test_every_received_message_ends_in_one_counter(ros_env, tmp_path):
     rng = np.random.default_rng(3)
     X = rng.uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))
     frames = [Frame(rig, X, i, rng, noise=0.0) for i in range(FRAMES)]
+    # max_queue_ms 0: every frame fused however long the burst below waits in the queue
+    # (a loaded machine); the stale outcome has its own test (test_fusion_stale.py)
     params = dict(rig=str(path), skeleton='human14', input_reliability='reliable',
-                  timeout_s=60.0, silent_after_s=1.0, diagnostics_period_s=0.2)
+                  timeout_s=60.0, silent_after_s=1.0, diagnostics_period_s=0.2,
+                  max_queue_ms=0.0)
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
@@ -99,6 +102,6 @@ def test_every_received_message_ends_in_one_counter(ros_env, tmp_path):
     # the stop summary: one line per camera, the same counts
     output = node.output()
     assert (f'cam0: {FRAMES} heatmaps received: fused 0, bad_messages 0, unpaired {FRAMES}, '
-            'repeated 0, late 0, dropped 0, waiting 0; 0 camera_info received') in output
+            'repeated 0, late 0, dropped 0, stale 0, waiting 0; 0 camera_info received') in output
     assert (f'cam2: {FRAMES + 1} heatmaps received: fused {FRAMES}, bad_messages 0, '
             'unpaired 0, repeated 1') in output

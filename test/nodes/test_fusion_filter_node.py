@@ -1,12 +1,10 @@
 """The fusion executable's live filter: switched on with a parameter service call, filtered
 keypoints on keypoints3d and the raw ones on keypoints3d_raw, reset on a stamp jump."""
-from helpers.fusion_frames import Frame, publishers, run_frames
+from helpers.fusion_frames import Frame, publishers, run_frames, set_parameters
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import ring_rig
 import numpy as np
 import pytest
-from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
-from rcl_interfaces.srv import SetParameters
 from sensor_msgs.msg import PointCloud2
 
 from monet_ros.geometry import save_rig
@@ -21,25 +19,6 @@ def rig_file(tmp_path):
     path = tmp_path / 'rig.yaml'
     save_rig(path, rig, frame_id='world')
     return rig, path
-
-
-def set_parameters(ros, node, **values):
-    """SetParameters on /monet/fusion (what `ros2 param set` sends) -> the results."""
-    params = []
-    for name, value in values.items():
-        if isinstance(value, bool):
-            pv = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
-        else:
-            pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
-        params.append(Parameter(name=name, value=pv))
-    client = ros.node.create_client(SetParameters, '/monet/fusion/set_parameters')
-    assert ros.spin_until(client.service_is_ready, timeout=30, process=node)
-    for _ in range(3):   # a response sent before the client's reader matched is lost
-        future = client.call_async(SetParameters.Request(parameters=params))
-        if ros.spin_until(future.done, timeout=10, process=node):
-            return future.result().results
-        client.remove_pending_request(future)
-    raise AssertionError('set_parameters: no response')
 
 
 def by_stamp(clouds):
