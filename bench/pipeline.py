@@ -62,6 +62,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from monet_ros.cores import usable_cores  # noqa: E402
 from monet_ros.fusion import FusionConfig, fuse_heatmaps  # noqa: E402
 from monet_ros.geometry import save_rig, triangulate, undistort_views  # noqa: E402
 from monet_ros.models import Detector, build_model, save_checkpoint  # noqa: E402
@@ -454,14 +455,6 @@ def process_cpu_seconds(pid):
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
-def camera_groups(rig, processes):
-    """The rig's camera names in `processes` contiguous groups (as `monet pipeline
-    --detector-processes`: commands.pipeline.detector_groups)."""
-    names = [cam.name for cam in rig]
-    bounds = np.linspace(0, len(names), processes + 1).round().astype(int)
-    return [names[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
-
-
 def worker(spec):
     """Body of one live run (in its own process): see live(). Layout 'feed': only the
     camera publisher and stopwatch (the player of the pipeline layout, in a child process),
@@ -470,7 +463,7 @@ def worker(spec):
     from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
     from rclpy.node import Node
 
-    from monet_ros.commands.pipeline import detector_threads, pipeline_executor
+    from monet_ros.commands.pipeline import detector_groups, detector_threads, pipeline_executor
     from monet_ros.geometry import load_rig
     from monet_ros.nodes import heap_for_large_buffers, short_gil_switch
     from monet_ros.nodes.runner import stop_executor
@@ -479,12 +472,12 @@ def worker(spec):
     detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
                            threads=detector_threads(spec['threads'] or 0,
                                                     spec.get('detector_processes', 1),
-                                                    len(os.sched_getaffinity(0))),
+                                                    usable_cores()),
                            backend=spec['backend'],
                            precision=spec['precision'], debug_image=spec['viewable'])
     fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
                          camera_markers=spec['viewable'])
-    groups = camera_groups(rig, spec.get('detector_processes', 1))
+    groups = detector_groups(rig, spec.get('detector_processes', 1))
     procs, nodes, children, feeder_proc = [], [], [], None
     if spec['layout'] == 'pipeline':
         from monet_ros.nodes.child import ChildNode
@@ -622,16 +615,24 @@ def print_live_row(views, rate, layout, viewable, r):
     shown = 'on' if viewable else 'off'
     if 'error' in r:
         print(f'| {views} @ {rate:.0f} | {layout} | {shown} | failed: {r["error"]} '
-              f'|||||||||| {load:.1f} |', flush=True)
+              f'||||||||||| {load:.1f} |', flush=True)
         return
     d = r['diagnostics']
     print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
           f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | {r["p95"]:.0f} | '
           f'{r["heat_median"]:.0f} / {r["heat_p95"]:.0f} | '
-          f'{r["cpu_ms"]:.1f} | {stage_text(d, "detector", DETECTOR_STAGES)} | '
+          f'{r["cpu_ms"]:.1f} | {frame_counts(d)} | '
+          f'{stage_text(d, "detector", DETECTOR_STAGES)} | '
           f'{stage_text(d, "fusion", FUSION_STAGES)} | '
           f'{"; ".join(f"{k}: {v}" for k, v in r["callback_errors"].items()) or "none"} | '
           f'{load:.1f} |', flush=True)
+
+
+def frame_counts(diagnostics):
+    """'fused / partial (fewer views) / stale (skipped: fusion fell behind)' frames of the
+    fusion node's last /diagnostics (since it started, warm-up included)."""
+    values = diagnostics.get('fusion', {})
+    return ' / '.join(values.get(k, '?') for k in ('frames', 'partial_frames', 'stale_frames'))
 
 
 def stage_text(diagnostics, kind, stages):
@@ -723,7 +724,7 @@ def main():
     print('(errors: reprojection errors of the inlier views; the exclusion search has them '
           'already, so they cost ~0 beyond triangulate)')
 
-    micro_threads = args.threads or len(os.sched_getaffinity(0))
+    micro_threads = args.threads or usable_cores()
     with tempfile.TemporaryDirectory() as tmp:
         workdir = Path(tmp)
         if args.detector_views:
@@ -776,11 +777,11 @@ def main():
         print('| cameras @ Hz | layout | viewable | published frames/s | keypoints3d/s | '
               'detector images/s'
               ' | latency median ms | latency p95 ms | heatmaps latency median / p95 ms'
-              ' | node CPU ms per keypoints3d | '
-              'detector ms/batch: convert, crop, '
+              ' | node CPU ms per keypoints3d | fusion frames fused / partial / stale '
+              '(whole run) | detector ms/batch: convert, crop, '
               'forward, publish | fusion ms: receive (per view), decode, undistort, '
               'triangulate, errors, publish | node callback errors | load |')
-        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
         costs = []
         with second_job(args.second_job):
             if args.second_job:

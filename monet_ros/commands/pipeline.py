@@ -25,7 +25,6 @@ mean reprojection error; a final summary when the recording ends (or Ctrl-C, or
 from collections import deque
 from dataclasses import dataclass
 import math
-import os
 import sys
 import threading
 import time
@@ -34,6 +33,7 @@ import numpy as np
 
 from monet_ros.commands.pipeline_learn import add_learn_arguments, learner_node
 from monet_ros.config import ConfigError, setting, validate_config
+from monet_ros.cores import threads_each, usable_cores
 
 # --detector-processes 0 (auto): two detector processes from this many cameras on, else
 # one. bench/pipeline.py --detector-processes 1 2, 128 px bfloat16 (loaded 2-core machine,
@@ -269,7 +269,7 @@ def detector_threads(threads, processes, cores):
     each gave 26.5 keypoints3d/s, see bench/results/pipeline.md)."""
     if threads > 0 or processes <= 1:
         return threads
-    return max(1, cores // processes)
+    return threads_each(processes, cores)
 
 
 def frames_listener(node, summary):
@@ -414,8 +414,7 @@ def run(args):
             for i, group in enumerate(groups):
                 # several detector processes: each its cameras, its own node name
                 rename = ['-r', f'__node:=detector_{i}'] if len(groups) > 1 else []
-                threads = detector_threads(args.threads, len(groups),
-                                           len(os.sched_getaffinity(0)))
+                threads = detector_threads(args.threads, len(groups), usable_cores())
                 detectors.append(ChildNode('detector', dict(detector_params, cameras=group,
                                                             threads=threads),
                                            ros_args + rename))

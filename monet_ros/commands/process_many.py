@@ -12,12 +12,12 @@ reported (one line naming it) and the others go on; the command ends with a summ
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 import multiprocessing
-import os
 from pathlib import Path
 import signal
 import sys
 
 from monet_ros.config import ConfigError
+from monet_ros.cores import threads_each, usable_cores
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,7 @@ def plan_jobs(bags, out, jobs, device=None, threads=0, cuda_devices=0, cores=1):
     job gets max(1, cores // min(jobs, len(bags))) threads (the cores split between the
     workers running at once), else `threads` per job."""
     running = max(1, min(jobs, len(bags)))
-    per_job = threads or max(1, cores // running)
+    per_job = threads or threads_each(running, cores)
     devices = [None] * len(bags)
     if device is None and cuda_devices > 1:
         devices = [f'cuda:{i % cuda_devices}' for i in range(len(bags))]
@@ -139,7 +139,7 @@ def run_many(args, options, work):
         cuda_devices = torch.cuda.device_count() if torch.cuda.is_available() else 0
     device = None if args.device in (None, '', 'auto') else args.device
     jobs = plan_jobs(args.bag, out, args.jobs, device, args.threads, cuda_devices,
-                     len(os.sched_getaffinity(0)))
+                     usable_cores())
     out.mkdir(parents=True, exist_ok=True)
     results = {}
     context = multiprocessing.get_context('spawn')

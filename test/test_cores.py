@@ -1,0 +1,24 @@
+"""CPU cores shared out between workers (monet process --jobs, monet pipeline's detector
+processes): the affinity mask counts, not the machine's cores."""
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+from monet_ros.cores import threads_each
+
+
+@pytest.mark.parametrize('workers, cores, expected', [
+    (1, 16, 16), (2, 16, 8), (3, 16, 5), (2, 2, 1), (3, 2, 1), (0, 4, 4)])
+def test_threads_each_shares_the_cores_out_at_least_one_each(workers, cores, expected):
+    assert threads_each(workers, cores) == expected
+
+
+@pytest.mark.skipif(shutil.which('taskset') is None, reason='taskset (util-linux) missing')
+def test_usable_cores_is_the_affinity_mask():
+    code = 'from monet_ros.cores import threads_each, usable_cores; ' \
+        'print(usable_cores(), threads_each(2))'
+    out = subprocess.run(['taskset', '-c', '0', sys.executable, '-c', code],
+                         capture_output=True, text=True, check=True).stdout.split()
+    assert out == ['1', '1']
