@@ -135,6 +135,7 @@ class Summary:
         self.joint_fused = None   # (C,) frames in which each joint was triangulated
         self.joint_views = None   # (C,) sum of its inlier views over those frames
         self.names = None         # keypoint names (the fusion node's skeleton)
+        self.stale_frames = None  # callable: frames fusion skipped as stale (max_queue_ms)
 
     def on_image(self, topic, stamp_ns, wall):
         with self.lock:
@@ -182,6 +183,9 @@ class Summary:
             error_mean = self.error_sum / self.error_count if self.error_count else math.nan
         lat = [s for _, s in recent]
         parts = [f'frames {self.frames} fused of {self.frames_published} played']
+        stale = self.stale_frames() if self.stale_frames is not None else 0
+        if stale:
+            parts[0] += f' ({stale} skipped as stale: fusion fell behind, max_queue_ms)'
         if window is not None:
             parts.append(f'{len(recent) / window:5.1f} fps')
         elif timed > 1 and last > first:
@@ -408,6 +412,7 @@ def run(args):
             if score is not None:
                 fusion.listeners.append(score.on_fused)
             summary.names = list(fusion.skeleton.keypoints)
+            summary.stale_frames = lambda: fusion.stale_frames
             listener = Node('pipeline', **node_namespace({}))
             frames_listener(listener, summary)
             nodes.append(listener)

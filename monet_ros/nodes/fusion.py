@@ -315,7 +315,9 @@ class FusionNode(Node):
                 'camera_info_waiting': len(self.pending[name][1])}
 
     def on_pair(self, name, stamp, heat_msg, info_msg, stale=False):
-        if stale:       # not decoded: its frame is skipped (fuse), the view counted there
+        # not decoded: its frame is skipped (fuse), the view counted there; a limit switched
+        # off (0) since its first half arrived applies at once
+        if stale and self.config.max_queue_ms:
             for group in self.sync.add(name, stamp, STALE):
                 self.fuse(group)
             return
@@ -429,8 +431,8 @@ class FusionNode(Node):
         if self.stale_frames == 1:
             self.get_logger().warning(
                 f'falling behind: frame {group.stamp_ns} had input queued longer than '
-                f'max_queue_ms {self.config.max_queue_ms:g} ms and is skipped to keep the '
-                'outputs fresh; further ones are counted (stale) in /diagnostics')
+                'max_queue_ms and is skipped to keep the outputs fresh; further ones are '
+                'counted (stale) in /diagnostics')
 
     def publish_rig_tf(self):
         """The rig on /tf_static (latched), or one log line saying why not."""

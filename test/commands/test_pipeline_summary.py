@@ -23,3 +23,15 @@ def test_summary_reports_dropout_and_inlier_views():
     assert f'mean inlier views {(16 + 12 + 2) / 9:.2f}' in line
     assert 'reprojection error is agreement between views, not accuracy' in line
     assert summary.joint_fused.tolist() == [4, 4, 1]
+
+
+def test_summary_says_how_many_frames_fusion_skipped_as_stale():
+    summary = Summary()
+    summary.on_image('/cam0/image_raw', 1, 0.0)
+    assert summary.line().startswith('frames 0 fused of 1 played') and 'stale' not in \
+        summary.line()
+    summary.stale_frames = lambda: 0
+    assert 'stale' not in summary.line()
+    summary.stale_frames = lambda: 1
+    assert summary.line().startswith('frames 0 fused of 1 played (1 skipped as stale: '
+                                     'fusion fell behind, max_queue_ms)')
