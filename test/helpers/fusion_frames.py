@@ -3,6 +3,7 @@ included), and the publish-until-fused loop."""
 import numpy as np
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image
 
 from helpers.scenes import cv2_project, gaussian_heatmaps, subject_box, to_crop
@@ -44,6 +45,19 @@ class Frame:
 def publishers(ros, names):
     return {n: (ros.publisher(f'/monet/{n}/heatmaps', Image),
                 ros.publisher(f'/monet/{n}/camera_info', CameraInfo)) for n in names}
+
+
+def reliable_publishers(ros, names, node):
+    """{name: (heatmaps, camera_info)} reliable publishers (100 deep: a burst is neither
+    dropped nor merged), returned once the fusion node `node` subscribes to each."""
+    qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                     reliability=ReliabilityPolicy.RELIABLE)
+    pubs = {n: (ros.publisher(f'/monet/{n}/heatmaps', Image, qos),
+                ros.publisher(f'/monet/{n}/camera_info', CameraInfo, qos)) for n in names}
+    for heat_pub, info_pub in pubs.values():
+        ros.wait_for_subscribers(heat_pub, process=node)
+        ros.wait_for_subscribers(info_pub, process=node)
+    return pubs
 
 
 def send(pubs, frame):

@@ -5,19 +5,16 @@ unpaired camera_info, and the stop summary says the same as /diagnostics."""
 import signal
 
 from diagnostic_msgs.msg import DiagnosticArray
-from helpers.fusion_frames import Frame, fusion_statuses
+from helpers.fusion_frames import Frame, fusion_statuses, reliable_publishers
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import ring_rig
 import numpy as np
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from sensor_msgs.msg import PointCloud2
 
 from monet_ros.geometry import save_rig
 from monet_ros.io import header_stamp_ns
 from monet_ros.nodes.fusion import OUTCOMES
 
-RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                      reliability=ReliabilityPolicy.RELIABLE)
 FRAMES = 7
 
 
@@ -44,12 +41,7 @@ def test_every_received_message_ends_in_one_counter(ros_env, tmp_path):
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
-        pubs = {c.name: (ros.publisher(f'/monet/{c.name}/heatmaps', Image, RELIABLE),
-                         ros.publisher(f'/monet/{c.name}/camera_info', CameraInfo, RELIABLE))
-                for c in rig}
-        for heat_pub, info_pub in pubs.values():
-            ros.wait_for_subscribers(heat_pub, process=node)
-            ros.wait_for_subscribers(info_pub, process=node)
+        pubs = reliable_publishers(ros, [c.name for c in rig], node)
         # cam0: heatmaps only, never a camera_info; they are let go as unpaired once
         # silent_after_s passed (cam0 is silent then, the others' frames do not wait for it)
         for frame in frames:

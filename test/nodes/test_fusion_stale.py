@@ -10,19 +10,22 @@ Python callback, so every frame is stale; 0 switches the check off."""
 import signal
 
 from diagnostic_msgs.msg import DiagnosticArray
-from helpers.fusion_frames import Frame, fusion_statuses, run_frames, set_parameters
+from helpers.fusion_frames import (
+    Frame,
+    fusion_statuses,
+    reliable_publishers,
+    run_frames,
+    set_parameters,
+)
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import ring_rig
 import numpy as np
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+from sensor_msgs.msg import PointCloud2
 
 from monet_ros.geometry import save_rig
 from monet_ros.io import header_stamp_ns
 from monet_ros.nodes.fusion import OUTCOMES
 
-RELIABLE = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
-                      reliability=ReliabilityPolicy.RELIABLE)
 STALE_FRAMES = 5
 
 
@@ -43,12 +46,7 @@ def test_frames_queued_too_long_are_skipped_and_counted_stale(ros_env, tmp_path)
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
-        pubs = {c.name: (ros.publisher(f'/monet/{c.name}/heatmaps', Image, RELIABLE),
-                         ros.publisher(f'/monet/{c.name}/camera_info', CameraInfo, RELIABLE))
-                for c in rig}
-        for heat_pub, info_pub in pubs.values():
-            ros.wait_for_subscribers(heat_pub, process=node)
-            ros.wait_for_subscribers(info_pub, process=node)
+        pubs = reliable_publishers(ros, [c.name for c in rig], node)
         for frame in frames[:STALE_FRAMES]:
             for name, heat, info in frame.messages:
                 pubs[name][1].publish(info)
