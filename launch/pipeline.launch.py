@@ -33,7 +33,7 @@ ARGUMENTS = {
     'debug_image': ('false', 'publish <cam>/debug_image (bgr8 source image with crop box, '
                     'peaks and fused keypoints)'),
     'use_sim_time': ('false', 'nodes follow /clock (the player publishes the bag time)'),
-    'slop_ms': ('0.0', 'fusion: stamp tolerance between cameras (ms)'),
+    'slop_ms': ('0.0', 'detector and fusion: stamp tolerance between cameras (ms)'),
     'rate': ('1.0', 'player: playback speed (0 = as fast as possible)'),
     'precision': ('float32', 'detector: network arithmetic, float32 or bfloat16 (CPUs with '
                   'AVX512-BF16 / AMX, CUDA)'),
@@ -69,6 +69,7 @@ def generate_launch_description():
                  'precision': ParameterValue(arg['precision'], value_type=str),
                  'backend': ParameterValue(arg['backend'], value_type=str),
                  'device': ParameterValue(arg['device'], value_type=str),
+                 'slop_ms': ParameterValue(arg['slop_ms'], value_type=float),
                  'use_sim_time': sim_time}], **common),
         Node(executable='fusion', name='fusion',
              parameters=[os.path.join(config, 'fusion.yaml'), {

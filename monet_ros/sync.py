@@ -24,11 +24,47 @@ Pure Python (no rclpy; message_filters is not in the pip wheels). The rule:
 Every item added ends in exactly one place, counted per key: a released group, a dropped
 group (`stats.dropped_by_key`), late (`late_by_key`), repeated (`repeated_by_key`), or an
 open group (`open_items`).
+
+`newest_common_instant` is the same idea for a consumer that runs behind its streams (the
+detector's batch): of the few items each stream has pending, the newest instant that every
+stream has, with the same tolerance (stamps within `slop_ns` of one another are one instant).
 """
 from collections import Counter, deque
 from dataclasses import dataclass, field
 import math
 import time
+
+import numpy as np
+
+
+def newest_common_instant(stamps, slop_ns=0):
+    """Which pending item of each stream to take so that all are one instant, the newest one.
+
+    stamps: sequence (V streams) of sequences of int stamps (ns) of each stream's pending
+    items in arrival order (any stamps: repeats, backwards). An instant is a stamp T of one
+    of the items such that every stream has an item within slop_ns of T (0 = the exact
+    stamp); the newest such T wins. Returns V indices into the streams' sequences (per
+    stream its newest-arriving item within slop_ns of T), or None when no instant is common
+    to every stream (a stream has no item, or their stamps never meet).
+    Raises ValueError when slop_ns < 0.
+    """
+    if slop_ns < 0:
+        raise ValueError(f'slop_ns must be >= 0, got {slop_ns}')
+    if not stamps or not all(len(s) for s in stamps):
+        return None
+    depth = max(len(s) for s in stamps)
+    # (V, K) stamps padded with the stream's first stamp; `valid` masks the padding
+    table = np.array([list(s) + [s[0]] * (depth - len(s)) for s in stamps], dtype=np.int64)
+    valid = np.arange(depth)[None, :] < np.array([len(s) for s in stamps])[:, None]
+    candidates = np.unique(table[valid])[::-1]                        # newest first
+    # (T, V, K): item k of stream v is within slop of candidate t (int64: ns stay exact)
+    near = (np.abs(table[None] - candidates[:, None, None]) <= slop_ns) & valid[None]
+    common = near.any(axis=2).all(axis=1)
+    if not common.any():
+        return None
+    first = int(np.argmax(common))                                    # the newest common T
+    # the newest-arriving near item of each stream: last True along K
+    return (depth - 1 - np.argmax(near[first][:, ::-1], axis=1)).tolist()
 
 
 @dataclass

@@ -1,5 +1,9 @@
 """Stamp synchroniser: exact and slop matching, partial groups on timeout, order, late items."""
-from monet_ros.sync import StampSynchronizer
+from hypothesis import given, settings
+from hypothesis import strategies as st
+import pytest
+
+from monet_ros.sync import StampSynchronizer, newest_common_instant
 
 
 class FakeClock:
@@ -104,3 +108,38 @@ def test_every_item_is_counted_once_per_key():
     assert sync.stats.late_by_key == {'c': 1}
     assert sync.stats.dropped_by_key == {'c': 1, 'a': 1}   # 20 (c) and 30 (a) timed out
     assert {k: sync.open_items(k) for k in 'abc'} == {'a': 0, 'b': 1, 'c': 0}
+
+
+# ------------------------------------------------------------- newest_common_instant
+def brute_force_instant(stamps, slop):
+    """The rule written out: every candidate stamp, newest first; each stream's last item
+    within slop."""
+    for t in sorted({s for stream in stamps for s in stream}, reverse=True):
+        near = [[k for k, s in enumerate(stream) if abs(s - t) <= slop] for stream in stamps]
+        if all(near):
+            return [ks[-1] for ks in near]
+    return None
+
+
+def test_newest_common_instant_cases():
+    # one camera a frame ahead: the instant both have, not the newest frame of each
+    assert newest_common_instant([[100, 133], [100]]) == [0, 0]
+    assert newest_common_instant([[100, 133], [100, 133]]) == [1, 1]
+    assert newest_common_instant([[100], [133]]) is None          # never mixed
+    assert newest_common_instant([[100], [103]], slop_ns=3) == [0, 0]
+    assert newest_common_instant([[100], [104]], slop_ns=3) is None
+    assert newest_common_instant([[100], []]) is None             # a camera without a frame
+    assert newest_common_instant([]) is None
+    assert newest_common_instant([[0, 0, 0], [0]]) == [2, 0]      # repeats: the newest arrival
+    assert newest_common_instant([[200, 100], [100, 200]]) == [0, 1]   # arrival order free
+    big = 1_700_000_000_123_456_789                                # ns stay exact (int64)
+    assert newest_common_instant([[big, big + 1], [big + 1]]) == [1, 0]
+    with pytest.raises(ValueError, match='slop_ns'):
+        newest_common_instant([[1]], slop_ns=-1)
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.lists(st.integers(0, 40), max_size=4), min_size=1, max_size=5),
+       st.integers(0, 6))
+def test_newest_common_instant_equals_the_rule_written_out(stamps, slop):
+    assert newest_common_instant(stamps, slop) == brute_force_instant(stamps, slop)

@@ -1,14 +1,21 @@
 """detector node: camera images -> /monet/<cam>/heatmaps + /monet/<cam>/camera_info.
 
-One or several cameras per node; the newest frame of every camera with a new frame is run
-through the network in one batched forward pass (monet_ros.models.Detector). The crop
+One or several cameras per node; the cameras' frames of one instant (the same stamp, or
+within `slop_ms`: monet_ros.sync.newest_common_instant, the newest instant every camera has
+among its last PENDING_FRAMES) are run through the network in one batched forward pass
+(monet_ros.models.Detector), so that a detector running behind its cameras skips whole
+instants and never mixes two in one batch; a camera whose frame of that instant did not
+come within `batch_wait_ms` is left out (the newest frame of each camera, counted as an
+incomplete batch). The crop
 follows the subject (projection of the latest /monet/keypoints3d, when the rig gives the
 extrinsics; monet_ros.crop_rule, the one crop rule), else `box`, else the full frame.
 The outputs keep the source stamp; the camera_info is the heatmap's virtual camera
-(K_heat = S K). A frame replaced before it was processed is counted as dropped; a bad
+(K_heat = S K). A frame skipped (an older instant than the one processed, or pushed
+out of the PENDING_FRAMES) is counted as dropped; a bad
 message is counted and logged, never fatal.
 The checkpoint is hot-reloaded from /monet/model (std_msgs/String JSON {path, sha256}).
 """
+from collections import deque
 from dataclasses import dataclass
 import json
 from pathlib import Path
@@ -53,10 +60,15 @@ from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.rig_select import load_node_rig, select_cameras
+from monet_ros.sync import newest_common_instant
 from monet_ros.timing import StageTimer
 
 # Parameters that may change while running (`ros2 param set`), effective next frame.
-LIVE = ('track', 'track_margin', 'track_timeout_s', 'min_track_keypoints')
+LIVE = ('track', 'track_margin', 'track_timeout_s', 'min_track_keypoints', 'batch_wait_ms',
+        'slop_ms')
+# Unprocessed frames kept per camera: the newest instant common to every camera is looked
+# for among these (a camera one or two frames ahead of another still meets it).
+PENDING_FRAMES = 3
 
 
 @dataclass(frozen=True)
@@ -91,8 +103,12 @@ class DetectorConfig:
     min_track_keypoints: int = setting(TrackedRule.min_points, 'fewest projected keypoints '
                                        'for a tracked crop', minimum=1)
     batch_wait_ms: float = setting(15.0, 'with several cameras: wait this long for the other '
-                                   "cameras' frames before running a partial batch",
+                                   "cameras' frames of an instant before running an "
+                                   "incomplete batch (each camera's newest frame)",
                                    minimum=0.0)
+    slop_ms: float = setting(0.0, "stamp tolerance between cameras (0 = exact), as fusion's "
+                             'slop_ms: frames within it are one instant, batched together',
+                             minimum=0.0)
     debug_image: bool = setting(False, 'also publish <cam>/debug_image (bgr8: the source image '
                                 'with the crop box, detected peaks and fused keypoints '
                                 'reprojected) and its camera_info, when subscribed')
@@ -130,7 +146,8 @@ class CameraSlot:
         self.rig_camera = rig_camera
         self.image_topic = image_topic
         self.info_topic = info_topic
-        self.pending = None          # (msg, arrival monotonic)
+        # unprocessed frames in arrival order: (stamp ns, msg, arrival monotonic)
+        self.frames = deque(maxlen=PENDING_FRAMES)
         self.info_key = None
         self.camera = None           # Camera from the latest camera_info (rig extrinsics)
         self.received = self.processed = self.dropped = self.bad = 0
@@ -211,9 +228,9 @@ class DetectorNode(Node):
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
         self.unpublished = set()      # image topics already reported as without publisher
         self.started = time.monotonic()
-        self.create_timer(max(config.batch_wait_ms, 1.0) / 1e3, self.flush)
+        self.flush_timer = self.create_timer(self.flush_period_s(config), self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
-        self.batches = 0
+        self.batches = self.incomplete_batches = 0
         self.awaiting_keypoints = None    # lockstep: stamp of the frame whose 3D is awaited
         self.lockstep_timeouts = 0
         self.forward_seconds = []
@@ -233,10 +250,17 @@ class DetectorNode(Node):
                            trim=config.track_trim,
                            timeout_ns=int(round(config.track_timeout_s * 1e9)))
 
+    @staticmethod
+    def flush_period_s(config):
+        """Period of the timer that runs incomplete batches: batch_wait_ms, at least 1 ms and
+        at most 20 ms (a longer wait is still checked often enough to be kept to ~20 ms)."""
+        return min(max(config.batch_wait_ms, 1.0), 20.0) / 1e3
+
     def apply_live(self, config):
-        """Use a changed config (a live tracking parameter was set) from the next frame."""
+        """Use a changed config (a live parameter was set) from the next frame."""
         self.config = config
         self.tracker.rule = self.tracked_rule(config)
+        self.flush_timer.timer_period_ns = int(self.flush_period_s(config) * 1e9)
 
     def load_detector(self, path):
         if not Path(path).is_file():
@@ -267,11 +291,10 @@ class DetectorNode(Node):
 
     def on_image(self, slot, msg):
         slot.received += 1
-        if slot.pending is not None:
-            slot.dropped += 1          # a newer frame replaces the unprocessed one
-        slot.pending = (msg, time.monotonic())
-        if all(s.pending is not None for s in self.slots):
-            self.process()
+        if len(slot.frames) == slot.frames.maxlen:
+            slot.dropped += 1          # the oldest unprocessed frame gives way
+        slot.frames.append((header_stamp_ns(msg), msg, time.monotonic()))
+        self.process()
 
     def on_keypoints(self, msg):
         try:
@@ -284,14 +307,40 @@ class DetectorNode(Node):
             return
         if self.awaiting_keypoints is not None and stamp >= self.awaiting_keypoints:
             self.awaiting_keypoints = None
-            if all(s.pending is not None for s in self.slots):
-                self.process()        # the next frame arrived first and waited for this
+            self.process()        # the next frame arrived first and waited for this
+
+    def oldest_arrival(self):
+        """Monotonic arrival time of the oldest unprocessed frame, or None."""
+        return min((s.frames[0][2] for s in self.slots if s.frames), default=None)
 
     def flush(self):
-        """Run a partial batch when a frame waited longer than batch_wait_ms."""
-        oldest = min((s.pending[1] for s in self.slots if s.pending is not None), default=None)
+        """Run an incomplete batch when a frame waited longer than batch_wait_ms."""
+        oldest = self.oldest_arrival()
         if oldest is not None and time.monotonic() - oldest >= self.config.batch_wait_ms / 1e3:
-            self.process()
+            self.process(incomplete=True)
+
+    def take_batch(self, incomplete):
+        """The (slot, msg) pairs of the next batch, taken out of the slots (each camera's
+        frames that arrived before the taken one are counted as dropped), or [] to wait.
+        The newest instant every camera has; with `incomplete` (batch_wait_ms passed) and
+        no such instant, the newest frame of each camera that has one."""
+        chosen = newest_common_instant([[f[0] for f in s.frames] for s in self.slots],
+                                       int(round(self.config.slop_ms * 1e6)))
+        if chosen is None:
+            if not incomplete:
+                return []
+            chosen = [len(s.frames) - 1 if s.frames else None for s in self.slots]
+            self.incomplete_batches += 1
+        batch = []
+        for slot, index in zip(self.slots, chosen):
+            if index is None:
+                continue
+            msg = slot.frames[index][1]
+            slot.dropped += index
+            for _ in range(index + 1):
+                slot.frames.popleft()
+            batch.append((slot, msg))
+        return batch
 
     def waiting_for_keypoints(self):
         """Lockstep: True while the 3D of the last processed frame has not arrived and the
@@ -299,7 +348,7 @@ class DetectorNode(Node):
         in /diagnostics as lockstep_timeouts, and the frame goes on without it)."""
         if not self.config.lockstep or self.awaiting_keypoints is None:
             return False
-        oldest = min((s.pending[1] for s in self.slots if s.pending is not None), default=None)
+        oldest = self.oldest_arrival()
         if oldest is not None and time.monotonic() - oldest > self.config.lockstep_timeout_s:
             self.awaiting_keypoints = None
             self.lockstep_timeouts += 1
@@ -344,16 +393,16 @@ class DetectorNode(Node):
             return TrackedCrops(self.tracker.rule).boxes(cameras, None, self.config.box or None)
         return self.tracker.boxes(cameras, stamp_ns, self.config.box or None)
 
-    def process(self):
+    def process(self, incomplete=False):
+        """Run the next batch (take_batch) unless lockstep holds it back."""
         if self.waiting_for_keypoints():
+            return
+        batch = self.take_batch(incomplete)
+        if not batch:
             return
         work = []
         with self.timer('convert'):
-            for slot in self.slots:
-                if slot.pending is None:
-                    continue
-                msg, _ = slot.pending
-                slot.pending = None
+            for slot, msg in batch:
                 decoded = self.decode(slot, msg)
                 if decoded is not None:
                     work.append((slot, msg, *decoded))
@@ -498,7 +547,8 @@ class DetectorNode(Node):
                     ('model_rejects', self.model_rejects), ('last_bad_message', slot.last_bad),
                     ('backend', self.detector.backend),
                     ('precision', self.detector.precision),
-                    ('lockstep_timeouts', self.lockstep_timeouts), *stages.items())]))
+                    ('lockstep_timeouts', self.lockstep_timeouts), ('batches', self.batches),
+                    ('incomplete_batches', self.incomplete_batches), *stages.items())]))
         self.pub_diag.publish(msg)
 
 

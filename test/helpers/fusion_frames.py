@@ -98,8 +98,8 @@ def run_frames(ros, node, pubs, frames, clouds, timeout=30.0):
     return got
 
 
-def set_parameters(ros, node, **values):
-    """SetParameters on /monet/fusion (what `ros2 param set` sends) -> the results."""
+def set_parameters(ros, node, target='/monet/fusion', **values):
+    """SetParameters on the node `target` (what `ros2 param set` sends) -> the results."""
     params = []
     for name, value in values.items():
         if isinstance(value, bool):
@@ -107,7 +107,7 @@ def set_parameters(ros, node, **values):
         else:
             pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
         params.append(Parameter(name=name, value=pv))
-    client = ros.node.create_client(SetParameters, '/monet/fusion/set_parameters')
+    client = ros.node.create_client(SetParameters, f'{target}/set_parameters')
     assert ros.spin_until(client.service_is_ready, timeout=30, process=node)
     for _ in range(3):   # a response sent before the client's reader matched is lost
         future = client.call_async(SetParameters.Request(parameters=params))

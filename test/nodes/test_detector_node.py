@@ -79,6 +79,12 @@ class Stream:
                      for c in rig}
         self.ros = ros
 
+    def wait_matched(self, node):
+        """Until the detector subscribes every image and camera_info topic."""
+        for image_pub, info_pub in self.pubs.values():
+            self.ros.wait_for_subscribers(image_pub, timeout=120, process=node)
+            self.ros.wait_for_subscribers(info_pub, process=node)
+
     def send(self, stamp, images):
         for cam, image in zip(self.rig, images):
             self.pubs[cam.name][1].publish(camera_info_from_camera(cam, stamp, cam.name))
@@ -121,9 +127,7 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
         stream = Stream(ros, rig)
         overlays = ros.collect('/monet/cam1/debug_image', Image, 100)
         overlay_infos = ros.collect('/monet/cam1/debug_image/camera_info', CameraInfo, 100)
-        for heat_pub, info_pub in stream.pubs.values():
-            ros.wait_for_subscribers(heat_pub, process=node)
-            ros.wait_for_subscribers(info_pub, process=node)
+        stream.wait_matched(node)
 
         # 1. the configured box (grown to the network's aspect)
         got = stream.roundtrip(T0, images, node)
@@ -284,9 +288,7 @@ def test_backend_and_precision_give_the_core_frame_and_report_stages(ros_env, se
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = Stream(ros, rig)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
-        for heat_pub, info_pub in stream.pubs.values():
-            ros.wait_for_subscribers(heat_pub, timeout=120, process=node)
-            ros.wait_for_subscribers(info_pub, process=node)
+        stream.wait_matched(node)
         for _ in range(20):  # the same frames as bgr8 messages
             for cam, image in zip(rig, images):
                 stream.pubs[cam.name][1].publish(camera_info_from_camera(cam, T0, cam.name))
@@ -337,9 +339,7 @@ def test_lockstep_waits_for_the_previous_frames_keypoints3d(ros_env, setup):
         stream = Stream(ros, rig)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
         cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
-        for heat_pub, info_pub in stream.pubs.values():
-            ros.wait_for_subscribers(heat_pub, timeout=120, process=node)
-            ros.wait_for_subscribers(info_pub, process=node)
+        stream.wait_matched(node)
         ros.wait_for_subscribers(cloud_pub, process=node)
         stream.roundtrip(T0, images, node)          # the first frame waits for nothing
 
@@ -367,4 +367,88 @@ def test_lockstep_waits_for_the_previous_frames_keypoints3d(ros_env, setup):
                       for kv in status.values if kv.key == 'lockstep_timeouts']
             return max(counts, default=0)
         assert ros.spin_until(lambda: timeouts() == 1, timeout=30, process=node), node.output()
+        assert node.stop(signal.SIGINT) == 0, node.output()
+
+
+def test_batches_one_instant_and_skips_whole_instants(ros_env, setup):
+    """A camera a frame ahead of another: its frames wait until the other camera has the
+    same instant, then that instant is batched (never two instants in one batch: fusion
+    would get half of each) and the older frame is dropped, counted; with batch_wait_ms set
+    live, a camera whose frame of the instant does not come is left out of an incomplete
+    batch, counted."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from helpers.fusion_frames import set_parameters
+
+    rig, rig_path, first, _, images = setup
+    a, b = (c.name for c in rig)
+    params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
+                  track=False, device='cpu', threads=1, batch_wait_ms=1e9)  # never, at first
+    other = np.random.default_rng(5).integers(0, 255, images.shape, dtype=np.uint8)
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = Stream(ros, rig)
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        stream.wait_matched(node)
+        stream.roundtrip(T0, images, node)
+
+        def counts():
+            """Per camera the latest /diagnostics counters, and the node's batch counts."""
+            latest = {}
+            for msg in diagnostics:
+                for status in msg.status:
+                    if status.name.startswith('monet detector: '):
+                        latest[status.hardware_id] = {kv.key: kv.value for kv in status.values}
+            return latest
+
+        def settled():
+            """Every frame received so far processed or dropped (no warm-up retry left)."""
+            c = counts()
+            return len(c) == 2 and all(
+                int(v['received']) == int(v['processed']) + int(v['dropped_stale'])
+                for v in c.values())
+        assert ros.spin_until(settled, timeout=30, process=node), node.output()
+        ros.spin_for(1.5)        # a later /diagnostics: nothing more came in
+        assert settled()
+        before = counts()
+
+        def send(name, stamp, image):
+            cam = rig[[c.name for c in rig].index(name)]
+            stream.pubs[name][1].publish(camera_info_from_camera(cam, stamp, name))
+            stream.pubs[name][0].publish(numpy_to_image_msg(image, stamp, name))
+
+        def received(name, n):
+            return lambda: int(counts().get(name, {}).get('received', 0)) >= \
+                int(before[name]['received']) + n
+        t1, t2, t3 = T0 + 33_000_000, T0 + 66_000_000, T0 + 99_000_000
+        send(a, t1, other[0])                     # camera a at t1, b not yet
+        assert ros.spin_until(received(a, 1), timeout=30, process=node), node.output()
+        send(b, t2, images[1])                    # b already at t2: no instant both have
+        assert ros.spin_until(received(b, 1), timeout=30, process=node), node.output()
+        assert not any(stream.result(n, t) for n in (a, b) for t in (t1, t2))
+        send(a, t2, images[0])                    # a reaches t2: the instant is batched
+        assert ros.spin_until(lambda: stream.result(a, t2) and stream.result(b, t2),
+                              timeout=30, process=node), node.output()
+        ros.spin_for(0.5)
+        assert stream.result(a, t1) is None       # skipped, not run with b's t2
+        expected = reference(first, images, rig, detector_boxes(
+            first, rig, [[100.0, 50.0, 400.0, 450.0]] * 2))
+        for v, name in enumerate((a, b)):         # a's t2 frame, not its t1 frame
+            np.testing.assert_allclose(image_msg_to_heatmaps(stream.result(name, t2)[0]),
+                                       expected[v], atol=1e-4)
+
+        assert all(r.successful for r in set_parameters(ros, node, target='/monet/detector',
+                                                        batch_wait_ms=50.0))
+        send(a, t3, images[0])                    # b's t3 never comes
+        assert ros.spin_until(lambda: stream.result(a, t3), timeout=30, process=node)
+        assert stream.result(b, t3) is None
+
+        def after():
+            c = counts()
+            return (int(c[a]['processed']) == int(before[a]['processed']) + 2
+                    and int(c[b]['processed']) == int(before[b]['processed']) + 1)
+        assert ros.spin_until(after, timeout=30, process=node), node.output()
+        c = counts()
+        assert int(c[a]['dropped_stale']) - int(before[a]['dropped_stale']) == 1
+        assert int(c[b]['dropped_stale']) == int(before[b]['dropped_stale'])
+        assert int(c[a]['batches']) - int(before[a]['batches']) == 2
+        assert int(c[a]['incomplete_batches']) - int(before[a]['incomplete_batches']) == 1
         assert node.stop(signal.SIGINT) == 0, node.output()

@@ -92,16 +92,16 @@ def test_tracking_parameters_are_live_the_rest_read_only(ros_env, tmp_path):
                               timeout=60, process=node), node.output()
         results = []
         for param in (double('track_margin', 0.5), double('track_margin', -1.0),
-                      double('batch_wait_ms', 5.0)):
+                      double('debug_image_rate_hz', 5.0)):
             future = setter.call_async(SetParameters.Request(parameters=[param]))
             assert ros.spin_until(future.done, timeout=30, process=node)
             results.append(future.result().results[0])
         future = getter.call_async(GetParameters.Request(names=['track_margin',
-                                                               'batch_wait_ms']))
+                                                               'debug_image_rate_hz']))
         assert ros.spin_until(future.done, timeout=30, process=node)
         values = [v.double_value for v in future.result().values]
         assert node.stop() == 0, node.output()
     assert results[0].successful, results[0].reason
     assert not results[1].successful                      # out of range (>= 0)
     assert not results[2].successful                      # read-only
-    assert values == [0.5, 15.0]
+    assert values == [0.5, 2.0]
