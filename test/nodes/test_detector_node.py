@@ -382,13 +382,15 @@ def test_batches_one_instant_and_skips_whole_instants(ros_env, setup):
     rig, rig_path, first, _, images = setup
     a, b = (c.name for c in rig)
     params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
-                  track=False, device='cpu', threads=1, batch_wait_ms=1e9)  # never, at first
+                  track=False, device='cpu', threads=1)
     other = np.random.default_rng(5).integers(0, 255, images.shape, dtype=np.uint8)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = Stream(ros, rig)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
         stream.wait_matched(node)
-        stream.roundtrip(T0, images, node)
+        stream.roundtrip(T0, images, node)    # (a warm-up view lost: batch_wait_ms runs it)
+        assert all(r.successful for r in set_parameters(ros, node, target='/monet/detector',
+                                                        batch_wait_ms=1e9))   # never, now
 
         def counts():
             """Per camera the latest /diagnostics counters, and the node's batch counts."""
@@ -405,9 +407,9 @@ def test_batches_one_instant_and_skips_whole_instants(ros_env, setup):
             return len(c) == 2 and all(
                 int(v['received']) == int(v['processed']) + int(v['dropped_stale'])
                 for v in c.values())
-        assert ros.spin_until(settled, timeout=30, process=node), node.output()
+        assert ros.spin_until(settled, timeout=30, process=node), (counts(), node.output())
         ros.spin_for(1.5)        # a later /diagnostics: nothing more came in
-        assert settled()
+        assert settled(), counts()
         before = counts()
 
         def send(name, stamp, image):
@@ -445,10 +447,64 @@ def test_batches_one_instant_and_skips_whole_instants(ros_env, setup):
             c = counts()
             return (int(c[a]['processed']) == int(before[a]['processed']) + 2
                     and int(c[b]['processed']) == int(before[b]['processed']) + 1)
-        assert ros.spin_until(after, timeout=30, process=node), node.output()
+        assert ros.spin_until(after, timeout=30, process=node), (counts(), node.output())
         c = counts()
         assert int(c[a]['dropped_stale']) - int(before[a]['dropped_stale']) == 1
         assert int(c[b]['dropped_stale']) == int(before[b]['dropped_stale'])
         assert int(c[a]['batches']) - int(before[a]['batches']) == 2
         assert int(c[a]['incomplete_batches']) - int(before[a]['incomplete_batches']) == 1
+        assert node.stop(signal.SIGINT) == 0, node.output()
+
+
+def test_follows_the_instant_another_detector_started(ros_env, setup):
+    """Two detectors of one rig, each running behind: the one that starts later runs the
+    instant the other announced on /monet/detector_batches, even when it holds a newer
+    one, so both skip the same instants; with no newer announcement it takes its newest."""
+    from diagnostic_msgs.msg import DiagnosticArray
+    from std_msgs.msg import Header
+
+    from monet_ros.io import header_msg
+
+    rig, rig_path, first, _, images = setup
+    params = dict(rig=str(rig_path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
+                  track_timeout_s=3600.0, device='cpu', threads=1, lockstep=True,
+                  lockstep_timeout_s=600.0)
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = Stream(ros, rig)
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)
+        announce = ros.publisher('/monet/detector_batches', Header)
+        cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
+        stream.wait_matched(node)
+        ros.wait_for_subscribers(cloud_pub, process=node)
+        ros.wait_for_subscribers(announce, process=node)
+        stream.roundtrip(T0, images, node)     # lockstep now waits for the 3D of T0
+
+        def latest(key, camera=rig[0].name):
+            values = [kv.value for msg in diagnostics for status in msg.status
+                      if status.hardware_id == camera for kv in status.values if kv.key == key]
+            return values[-1] if values else None
+
+        def received():
+            return [int(latest('received', c.name) or 0) for c in rig]
+        t1, t2 = T0 + 33_000_000, T0 + 66_000_000
+        assert ros.spin_until(lambda: min(received()) >= 1, timeout=30, process=node)
+        before = received()
+        stream.send(t1, images)
+        stream.send(t2, images)              # both instants wait: lockstep holds them
+        assert ros.spin_until(lambda: all(n >= b + 2 for n, b in zip(received(), before)),
+                              timeout=30, process=node), node.output()
+        announce.publish(header_msg(t1, '/monet/other_detector'))
+        assert ros.spin_until(lambda: latest('other_detector_instant_ns') == str(t1),
+                              timeout=30, process=node), node.output()
+        X = np.random.default_rng(4).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))
+        cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))      # release: t1, not t2
+        assert ros.spin_until(lambda: all(stream.result(c.name, t1) for c in rig),
+                              timeout=30, process=node), node.output()
+        assert not any(stream.result(c.name, t2) for c in rig)
+        cloud_pub.publish(keypoints3d_to_cloud(t1, 'world', X))      # nothing newer announced
+        assert ros.spin_until(lambda: all(stream.result(c.name, t2) for c in rig),
+                              timeout=30, process=node), node.output()
+        assert ros.spin_until(lambda: latest('followed_batches') == '1', timeout=30,
+                              process=node), node.output()
+        assert [latest('dropped_stale', c.name) for c in rig] == ['0', '0']
         assert node.stop(signal.SIGINT) == 0, node.output()
