@@ -359,6 +359,7 @@ class Feeder:
         # detector's share of the latency)
         self.latencies, self.heat_latencies, self.diagnostics = [], [], {}
         self.callback_errors = {}    # source -> 'count x last error'
+        self.detector_nodes = {}     # first camera -> that detector node's batch counters
         # serialized subscriptions (raw=True): this bench shares the CPUs with the nodes it
         # times, so it neither converts images to Python messages nor decodes more than the
         # stamp it needs
@@ -396,6 +397,12 @@ class Feeder:
             elif status.name.startswith('monet detector') or status.name == 'monet fusion':
                 kind = 'detector' if status.name.startswith('monet detector') else 'fusion'
                 self.diagnostics[kind] = {kv.key: kv.value for kv in status.values}
+        cams = [{kv.key: kv.value for kv in status.values} for status in msg.status
+                if status.name.startswith('monet detector: ')]
+        if cams:    # one detector node's message: its batch counters, its cameras' drops
+            self.detector_nodes[msg.status[0].hardware_id] = dict(
+                {k: int(cams[0].get(k, 0)) for k in ('batches', 'incomplete_batches')},
+                dropped=sum(int(c.get('dropped_stale', 0)) for c in cams))
 
     def run(self, spin_once, rate, seconds, warmup, cpu_seconds=time.process_time):
         """Publish for warmup + seconds; figures over the measured window. cpu_seconds():
@@ -442,7 +449,9 @@ class Feeder:
                               else float('nan')),
                     median=float(np.median(lat)) if lat.size else float('nan'),
                     p95=float(np.percentile(lat, 95)) if lat.size else float('nan'),
-                    diagnostics=self.diagnostics, callback_errors=self.callback_errors)
+                    diagnostics=self.diagnostics, callback_errors=self.callback_errors,
+                    detector_batches={k: sum(n[k] for n in self.detector_nodes.values())
+                                      for k in ('batches', 'incomplete_batches', 'dropped')})
 
 
 def process_cpu_seconds(pid):
@@ -604,6 +613,7 @@ def median_result(results):
             'cpu_ms')
     out = {k: float(np.median([r[k] for r in good])) for k in keys}
     out['diagnostics'] = good[-1]['diagnostics']
+    out['detector_batches'] = good[-1].get('detector_batches')
     out['callback_errors'] = {k: v for r in good for k, v in r['callback_errors'].items()}
     out['runs'] = len(good)
     out['fused_runs'] = [r['fused'] for r in good]
@@ -621,7 +631,7 @@ def print_live_row(views, rate, layout, viewable, r):
     print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
           f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | {r["p95"]:.0f} | '
           f'{r["heat_median"]:.0f} / {r["heat_p95"]:.0f} | '
-          f'{r["cpu_ms"]:.1f} | {frame_counts(d)} | '
+          f'{r["cpu_ms"]:.1f} | {frame_counts(d)} | {batch_counts(r)} | '
           f'{stage_text(d, "detector", DETECTOR_STAGES)} | '
           f'{stage_text(d, "fusion", FUSION_STAGES)} | '
           f'{"; ".join(f"{k}: {v}" for k, v in r["callback_errors"].items()) or "none"} | '
@@ -633,6 +643,15 @@ def frame_counts(diagnostics):
     fusion node's last /diagnostics (since it started, warm-up included)."""
     values = diagnostics.get('fusion', {})
     return ' / '.join(values.get(k, '?') for k in ('frames', 'partial_frames', 'stale_frames'))
+
+
+def batch_counts(result):
+    """'batches (incomplete) / frames dropped' of every detector node since it started
+    (warm-up included), from their last /diagnostics."""
+    b = result.get('detector_batches')
+    if not b:
+        return '?'
+    return f'{b["batches"]} ({b["incomplete_batches"]}) / {b["dropped"]}'
 
 
 def stage_text(diagnostics, kind, stages):
@@ -778,10 +797,11 @@ def main():
               'detector images/s'
               ' | latency median ms | latency p95 ms | heatmaps latency median / p95 ms'
               ' | node CPU ms per keypoints3d | fusion frames fused / partial / stale '
+              '(whole run) | detector batches (incomplete) / frames dropped '
               '(whole run) | detector ms/batch: convert, crop, '
               'forward, publish | fusion ms: receive (per view), decode, undistort, '
               'triangulate, errors, publish | node callback errors | load |')
-        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
         costs = []
         with second_job(args.second_job):
             if args.second_job:

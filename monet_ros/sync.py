@@ -37,16 +37,15 @@ import time
 import numpy as np
 
 
-def newest_common_instant(stamps, slop_ns=0, candidates=None):
+def newest_common_instant(stamps, slop_ns=0):
     """Which pending item of each stream to take so that all are one instant, the newest one.
 
     stamps: sequence (V streams) of sequences of int stamps (ns) of each stream's pending
     items in arrival order (any stamps: repeats, backwards). An instant is a stamp T of one
     of the items such that every stream has an item within slop_ns of T (0 = the exact
-    stamp); the newest such T wins. candidates: the instants T allowed (default: every
-    item's stamp), e.g. the one another consumer chose. Returns V indices into the streams'
-    sequences (per stream its newest-arriving item within slop_ns of T), or None when no
-    instant is common to every stream (a stream has no item, or their stamps never meet).
+    stamp); the newest such T wins. Returns V indices into the streams' sequences (per
+    stream its newest-arriving item within slop_ns of T), or None when no instant is common
+    to every stream (a stream has no item, or their stamps never meet).
     Raises ValueError when slop_ns < 0.
     """
     if slop_ns < 0:
@@ -57,8 +56,7 @@ def newest_common_instant(stamps, slop_ns=0, candidates=None):
     # (V, K) stamps padded with the stream's first stamp; `valid` masks the padding
     table = np.array([list(s) + [s[0]] * (depth - len(s)) for s in stamps], dtype=np.int64)
     valid = np.arange(depth)[None, :] < np.array([len(s) for s in stamps])[:, None]
-    candidates = np.unique(table[valid] if candidates is None
-                           else np.asarray(candidates, dtype=np.int64))[::-1]  # newest first
+    candidates = np.unique(table[valid])[::-1]                        # newest first
     # (T, V, K): item k of stream v is within slop of candidate t (int64: ns stay exact)
     near = (np.abs(table[None] - candidates[:, None, None]) <= slop_ns) & valid[None]
     common = near.any(axis=2).all(axis=1)

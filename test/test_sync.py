@@ -111,11 +111,10 @@ def test_every_item_is_counted_once_per_key():
 
 
 # ------------------------------------------------------------- newest_common_instant
-def brute_force_instant(stamps, slop, candidates=None):
+def brute_force_instant(stamps, slop):
     """The rule written out: every candidate stamp, newest first; each stream's last item
     within slop."""
-    every = {s for stream in stamps for s in stream} if candidates is None else candidates
-    for t in sorted(set(every), reverse=True):
+    for t in sorted({s for stream in stamps for s in stream}, reverse=True):
         near = [[k for k, s in enumerate(stream) if abs(s - t) <= slop] for stream in stamps]
         if all(near):
             return [ks[-1] for ks in near]
@@ -135,10 +134,6 @@ def test_newest_common_instant_cases():
     assert newest_common_instant([[200, 100], [100, 200]]) == [0, 1]   # arrival order free
     big = 1_700_000_000_123_456_789                                # ns stay exact (int64)
     assert newest_common_instant([[big, big + 1], [big + 1]]) == [1, 0]
-    # candidates: only the instant another consumer chose, even when a newer one is common
-    assert newest_common_instant([[100, 133], [100, 133]], candidates=[100]) == [0, 0]
-    assert newest_common_instant([[133], [100, 133]], candidates=[100]) is None
-    assert newest_common_instant([[100]], candidates=[]) is None
     with pytest.raises(ValueError, match='slop_ns'):
         newest_common_instant([[1]], slop_ns=-1)
 
@@ -148,6 +143,3 @@ def test_newest_common_instant_cases():
        st.integers(0, 6))
 def test_newest_common_instant_equals_the_rule_written_out(stamps, slop):
     assert newest_common_instant(stamps, slop) == brute_force_instant(stamps, slop)
-    chosen = [3, 17, 30]
-    assert (newest_common_instant(stamps, slop, candidates=chosen)
-            == brute_force_instant(stamps, slop, chosen))

@@ -31,8 +31,7 @@ from .markers import skeleton_marker_specs
 __all__ = [
     'any_image_to_numpy', 'camera_from_camera_info', 'camera_info_from_camera',
     'cloud_to_keypoints3d', 'compressed_image_msg', 'compressed_image_to_numpy',
-    'header_msg', 'header_stamp_ns', 'heatmaps_to_image_msg', 'image_msg_to_heatmaps',
-    'image_to_numpy',
+    'header_stamp_ns', 'heatmaps_to_image_msg', 'image_msg_to_heatmaps', 'image_to_numpy',
     'delete_all_markers', 'keypoints3d_to_cloud', 'marker_array', 'numpy_to_image_msg',
     'skeleton_marker_array',
 ]
@@ -45,9 +44,8 @@ def _stamp_ns(stamp):
     return int(stamp)
 
 
-def header_msg(stamp, frame_id):
-    """std_msgs/Header with `stamp` (int ns or a Time-like, kept as is, before 1970 too).
-    Raises ValueError outside the int32 seconds of a ROS time."""
+def _header(stamp, frame_id):
+    """std_msgs/Header with `stamp` (int ns or a Time-like, kept as is, before 1970 too)."""
     from builtin_interfaces.msg import Time
     from std_msgs.msg import Header
 
@@ -68,7 +66,7 @@ def numpy_to_image_msg(image, stamp, frame_id, encoding='rgb8'):
     from sensor_msgs.msg import Image
 
     f = image_fields(image, encoding)
-    msg = Image(header=header_msg(stamp, frame_id), height=f['height'], width=f['width'],
+    msg = Image(header=_header(stamp, frame_id), height=f['height'], width=f['width'],
                 encoding=f['encoding'], is_bigendian=f['is_bigendian'], step=f['step'])
     msg.data = _bytes_array(f['data'])
     return msg
@@ -79,7 +77,7 @@ def compressed_image_msg(image, stamp, frame_id, fmt='jpeg', quality=90):
     from sensor_msgs.msg import CompressedImage
 
     fmt, data = encode_compressed(image, fmt, quality)
-    msg = CompressedImage(header=header_msg(stamp, frame_id), format=fmt)
+    msg = CompressedImage(header=_header(stamp, frame_id), format=fmt)
     msg.data = _bytes_array(data)
     return msg
 
@@ -89,7 +87,7 @@ def camera_info_from_camera(camera, stamp, frame_id):
     from sensor_msgs.msg import CameraInfo
 
     f = camera_info_fields(camera)
-    return CameraInfo(header=header_msg(stamp, frame_id), height=f['height'], width=f['width'],
+    return CameraInfo(header=_header(stamp, frame_id), height=f['height'], width=f['width'],
                       distortion_model=f['distortion_model'], d=f['d'].tolist(), k=f['k'],
                       r=f['r'], p=f['p'])
 
@@ -100,7 +98,7 @@ def heatmaps_to_image_msg(heatmaps, stamp, frame_id):
     from sensor_msgs.msg import Image
 
     f = heatmap_image_fields(heatmaps)
-    msg = Image(header=header_msg(stamp, frame_id), height=f['height'], width=f['width'],
+    msg = Image(header=_header(stamp, frame_id), height=f['height'], width=f['width'],
                 encoding=f['encoding'], is_bigendian=0, step=f['step'])
     msg.data = _bytes_array(f['data'])
     return msg
@@ -114,7 +112,7 @@ def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error
     from sensor_msgs.msg import PointCloud2, PointField
 
     f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views)
-    msg = PointCloud2(header=header_msg(stamp, frame_id), height=f['height'], width=f['width'],
+    msg = PointCloud2(header=_header(stamp, frame_id), height=f['height'], width=f['width'],
                       fields=[PointField(name=n, offset=o, datatype=d, count=c)
                               for n, o, d, c in f['fields']],
                       is_bigendian=f['is_bigendian'], point_step=f['point_step'],
@@ -141,7 +139,7 @@ def marker_array(stamp, frame_id, specs, lifetime_ns=0):
     from std_msgs.msg import ColorRGBA
     from visualization_msgs.msg import Marker, MarkerArray
 
-    header = header_msg(stamp, frame_id)
+    header = _header(stamp, frame_id)
     markers = []
     for spec in specs:
         position = spec.get('position', (0.0, 0.0, 0.0))
@@ -164,5 +162,4 @@ def marker_array(stamp, frame_id, specs, lifetime_ns=0):
 def delete_all_markers(stamp, frame_id):
     """A MarkerArray with one DELETEALL marker: viewers drop every marker of the topic."""
     from visualization_msgs.msg import Marker, MarkerArray
-    return MarkerArray(markers=[Marker(header=header_msg(stamp, frame_id),
-                                       action=Marker.DELETEALL)])
+    return MarkerArray(markers=[Marker(header=_header(stamp, frame_id), action=Marker.DELETEALL)])

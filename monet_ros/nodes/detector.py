@@ -26,7 +26,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
-from std_msgs.msg import Header, String
+from std_msgs.msg import String
 
 from monet_ros.atomic import sha256_file
 from monet_ros.config import ConfigError, setting, validate_config
@@ -37,13 +37,11 @@ from monet_ros.io import (
     camera_info_from_camera,
     cloud_to_keypoints3d,
     compressed_image_to_numpy,
-    header_msg,
     header_stamp_ns,
     heatmaps_to_image_msg,
     numpy_to_image_msg,
 )
 from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
-from monet_ros.io.fields import stamp_to_ns
 from monet_ros.io.images import image_for_crop, raw_to_rgb8, to_rgb8
 from monet_ros.models import CheckpointError, Detector
 from monet_ros.models.detector import PRECISIONS
@@ -51,7 +49,6 @@ from monet_ros.models.device import check_device
 from monet_ros.nodes.names import (
     DEBUG_CAMERA_INFO,
     DEBUG_IMAGE,
-    DETECTOR_BATCHES,
     DIAGNOSTICS,
     HEATMAP_CAMERA_INFO,
     HEATMAPS,
@@ -72,9 +69,6 @@ LIVE = ('track', 'track_margin', 'track_timeout_s', 'min_track_keypoints', 'batc
 # Unprocessed frames kept per camera: the newest instant common to every camera is looked
 # for among these (a camera one or two frames ahead of another still meets it).
 PENDING_FRAMES = 3
-# Another detector's instant this far (ns) before this node's last one: the stamps jumped
-# back (a restarted recording or driver), follow it again.
-RESTART_NS = 1_000_000_000
 
 
 @dataclass(frozen=True)
@@ -231,16 +225,12 @@ class DetectorNode(Node):
         self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
         self.create_subscription(String, MODEL, self.on_model, LATCHED)
-        # the instant each detector of the rig starts (followed by the others: take_batch)
-        self.pub_batches = self.create_publisher(Header, DETECTOR_BATCHES, STREAM_OUT)
-        self.create_subscription(Header, DETECTOR_BATCHES, self.on_batch_announced, STREAM_IN)
-        self.announced = self.last_instant = None
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
         self.unpublished = set()      # image topics already reported as without publisher
         self.started = time.monotonic()
         self.flush_timer = self.create_timer(self.flush_period_s(config), self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
-        self.batches = self.incomplete_batches = self.followed_batches = 0
+        self.batches = self.incomplete_batches = 0
         self.awaiting_keypoints = None    # lockstep: stamp of the frame whose 3D is awaited
         self.lockstep_timeouts = 0
         self.forward_seconds = []
@@ -323,56 +313,24 @@ class DetectorNode(Node):
         """Monotonic arrival time of the oldest unprocessed frame, or None."""
         return min((s.frames[0][2] for s in self.slots if s.frames), default=None)
 
-    def on_batch_announced(self, msg):
-        if msg.frame_id != self.get_fully_qualified_name():     # not this node's own
-            self.announced = stamp_to_ns(msg.stamp)
-
     def flush(self):
         """Run an incomplete batch when a frame waited longer than batch_wait_ms."""
         oldest = self.oldest_arrival()
         if oldest is not None and time.monotonic() - oldest >= self.config.batch_wait_ms / 1e3:
             self.process(incomplete=True)
 
-    def followed_instant(self, slop_ns):
-        """The instant another detector started last (DETECTOR_BATCHES), when this node has
-        not run it or a newer one (or the stamps jumped back: a restarted source), else
-        None."""
-        if self.announced is None or self.last_instant is None:
-            return self.announced
-        if (self.announced > self.last_instant + slop_ns
-                or self.announced < self.last_instant - RESTART_NS):
-            return self.announced
-        return None
-
     def take_batch(self, incomplete):
         """The (slot, msg) pairs of the next batch, taken out of the slots (each camera's
         frames that arrived before the taken one are counted as dropped), or [] to wait.
-
-        The instant another detector of the rig started last (followed_instant), so that
-        detectors that each skip instants skip the same ones and fusion gets whole frames;
-        while a camera's frame of it may still come, [] (wait). Else the newest instant
-        every camera has. With `incomplete` (batch_wait_ms passed) and no such instant, the
-        newest frame of each camera that has one."""
-        stamps = [[f[0] for f in s.frames] for s in self.slots]
-        slop = int(round(self.config.slop_ms * 1e6))
-        chosen, lead = None, self.followed_instant(slop)
-        if lead is not None:
-            chosen = newest_common_instant(stamps, slop, candidates=[lead])
-            self.followed_batches += chosen is not None
-            if chosen is None and not incomplete and any(
-                    not s or max(s) < lead - slop for s in stamps):
-                return []           # a camera's frame of that instant is still on its way
-        if chosen is None:
-            chosen = newest_common_instant(stamps, slop)
+        The newest instant every camera has; with `incomplete` (batch_wait_ms passed) and
+        no such instant, the newest frame of each camera that has one."""
+        chosen = newest_common_instant([[f[0] for f in s.frames] for s in self.slots],
+                                       int(round(self.config.slop_ms * 1e6)))
         if chosen is None:
             if not incomplete:
                 return []
             chosen = [len(s.frames) - 1 if s.frames else None for s in self.slots]
             self.incomplete_batches += 1
-        else:
-            self.last_instant = max(s[i] for s, i in zip(stamps, chosen))
-            self.pub_batches.publish(header_msg(self.last_instant,
-                                                self.get_fully_qualified_name()))
         batch = []
         for slot, index in zip(self.slots, chosen):
             if index is None:
@@ -590,10 +548,7 @@ class DetectorNode(Node):
                     ('backend', self.detector.backend),
                     ('precision', self.detector.precision),
                     ('lockstep_timeouts', self.lockstep_timeouts), ('batches', self.batches),
-                    ('incomplete_batches', self.incomplete_batches),
-                    ('followed_batches', self.followed_batches),
-                    ('other_detector_instant_ns',
-                     '' if self.announced is None else self.announced), *stages.items())]))
+                    ('incomplete_batches', self.incomplete_batches), *stages.items())]))
         self.pub_diag.publish(msg)
 
 

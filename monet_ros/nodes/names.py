@@ -19,10 +19,7 @@ DEBUG_IMAGE = '{camera}/debug_image'
 DEBUG_CAMERA_INFO = '{camera}/debug_image/camera_info'
 DIAGNOSTICS = '/diagnostics'
 TF_STATIC = '/tf_static'
-PLAYED_FRAMES = 'played_frames'
-# std_msgs/Header per batch a detector starts: the instant (stamp) and the node (frame_id);
-# the rig's other detectors follow it, so that they skip the same instants
-DETECTOR_BATCHES = 'detector_batches'   # the player's [stamp, wall time] per frame
+PLAYED_FRAMES = 'played_frames'   # the player's [stamp, wall time] per frame
 
 
 def node_namespace(kwargs):
