@@ -204,8 +204,9 @@ def run_env(workdir):
 
 
 def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewable=False,
-         input_size=None, precision='float32', detector_processes=1):
-    """One end-to-end run in a fresh process (clean DDS state); returns its figures."""
+         input_size=None, precision='float32', detector_processes=1, batch_wait_ms=None):
+    """One end-to-end run in a fresh process (clean DDS state); returns its figures.
+    batch_wait_ms: the detectors' parameter (None: the node's default)."""
     rig = make_rig(RigConfig(num_cameras=views))
     rig_path = workdir / f'rig{views}.yaml'
     save_rig(rig_path, rig)
@@ -213,7 +214,7 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
     spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
                 threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
                 workdir=str(workdir), viewable=viewable, precision=precision,
-                detector_processes=detector_processes)
+                detector_processes=detector_processes, batch_wait_ms=batch_wait_ms)
     proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
                           env=run_env(workdir), capture_output=True, text=True,
                           timeout=300 + seconds + warmup)
@@ -360,6 +361,7 @@ class Feeder:
         self.latencies, self.heat_latencies, self.diagnostics = [], [], {}
         self.callback_errors = {}    # source -> 'count x last error'
         self.detector_nodes = {}     # first camera -> that detector node's batch counters
+        self.fusion_counts = []      # (arrival monotonic s, frames, partial_frames) of fusion
         # serialized subscriptions (raw=True): this bench shares the CPUs with the nodes it
         # times, so it neither converts images to Python messages nor decodes more than the
         # stamp it needs
@@ -397,6 +399,10 @@ class Feeder:
             elif status.name.startswith('monet detector') or status.name == 'monet fusion':
                 kind = 'detector' if status.name.startswith('monet detector') else 'fusion'
                 self.diagnostics[kind] = {kv.key: kv.value for kv in status.values}
+                if kind == 'fusion':
+                    values = self.diagnostics[kind]
+                    self.fusion_counts.append((time.monotonic(), int(values['frames']),
+                                               int(values['partial_frames'])))
         cams = [{kv.key: kv.value for kv in status.values} for status in msg.status
                 if status.name.startswith('monet detector: ')]
         if cams:    # one detector node's message: its batch counters, its cameras' drops
@@ -444,6 +450,7 @@ class Feeder:
                     cpu_ms=1e3 * (cpu_end - c0) / max(1, fused_end - n0),
                     fused=(len(self.latencies) - n0) / window,
                     heat=(len(self.heat_latencies) - h0) / window,
+                    complete=complete_rate(self.fusion_counts, t0, end),
                     heat_median=float(np.median(heat_lat)) if heat_lat.size else float('nan'),
                     heat_p95=(float(np.percentile(heat_lat, 95)) if heat_lat.size
                               else float('nan')),
@@ -452,6 +459,18 @@ class Feeder:
                     diagnostics=self.diagnostics, callback_errors=self.callback_errors,
                     detector_batches={k: sum(n[k] for n in self.detector_nodes.values())
                                       for k in ('batches', 'incomplete_batches', 'dropped')})
+
+
+def complete_rate(counts, start, end):
+    """Frames fused with every camera per second between start and end (monotonic s), from
+    the fusion node's cumulative counters: counts is [(arrival s, frames, partial_frames)]
+    of its /diagnostics; the rate over the first and last arrivals inside the window
+    (exact for that interval), NaN with fewer than two."""
+    inside = [c for c in counts if start <= c[0] <= end]
+    if len(inside) < 2 or inside[-1][0] <= inside[0][0]:
+        return float('nan')
+    (t_a, f_a, p_a), (t_b, f_b, p_b) = inside[0], inside[-1]
+    return ((f_b - p_b) - (f_a - p_a)) / (t_b - t_a)
 
 
 def process_cpu_seconds(pid):
@@ -484,6 +503,8 @@ def worker(spec):
                                                     usable_cores()),
                            backend=spec['backend'],
                            precision=spec['precision'], debug_image=spec['viewable'])
+    if spec.get('batch_wait_ms') is not None:
+        detector_params['batch_wait_ms'] = float(spec['batch_wait_ms'])
     fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
                          camera_markers=spec['viewable'])
     groups = detector_groups(rig, spec.get('detector_processes', 1))
@@ -595,7 +616,7 @@ def run_cases(args, runs, workdir, costs):
                                                       args.warmup, args.threads,
                                                       args.backend, workdir, viewable,
                                                       args.input_size, precision,
-                                                      processes))
+                                                      processes, args.batch_wait_ms))
                 combined = {viewable: median_result(rs) for viewable, rs in results.items()}
                 for viewable, r in combined.items():
                     print_live_row(views, rate, label, viewable, r)
@@ -609,7 +630,7 @@ def median_result(results):
     good = [r for r in results if 'error' not in r]
     if not good:
         return results[0]
-    keys = ('published', 'fused', 'heat', 'median', 'p95', 'heat_median', 'heat_p95',
+    keys = ('published', 'fused', 'complete', 'heat', 'median', 'p95', 'heat_median', 'heat_p95',
             'cpu_ms')
     out = {k: float(np.median([r[k] for r in good])) for k in keys}
     out['diagnostics'] = good[-1]['diagnostics']
@@ -625,11 +646,12 @@ def print_live_row(views, rate, layout, viewable, r):
     shown = 'on' if viewable else 'off'
     if 'error' in r:
         print(f'| {views} @ {rate:.0f} | {layout} | {shown} | failed: {r["error"]} '
-              f'||||||||||| {load:.1f} |', flush=True)
+              f'|||||||||||| {load:.1f} |', flush=True)
         return
     d = r['diagnostics']
     print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
-          f'{r["fused"]:.1f} | {r["heat"]:.1f} | {r["median"]:.0f} | {r["p95"]:.0f} | '
+          f'{r["fused"]:.1f} | {r["complete"]:.1f} | {r["heat"]:.1f} | '
+          f'{r["median"]:.0f} | {r["p95"]:.0f} | '
           f'{r["heat_median"]:.0f} / {r["heat_p95"]:.0f} | '
           f'{r["cpu_ms"]:.1f} | {frame_counts(d)} | {batch_counts(r)} | '
           f'{stage_text(d, "detector", DETECTOR_STAGES)} | '
@@ -708,6 +730,10 @@ def main():
     parser.add_argument('--detector-processes', type=int, nargs='+', default=[1],
                         help='detector processes of the three-process and pipeline layouts '
                         '(several: each case with each; cameras split between them)')
+    parser.add_argument('--batch-wait-ms', type=float, default=None,
+                        help="the detectors' batch_wait_ms (default: the node's); 0 runs a "
+                        'batch of the newest frame of every camera at once when no instant is '
+                        'common to all')
     parser.add_argument('--worker', help=argparse.SUPPRESS)
     parser.add_argument('--receive-worker', help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -725,7 +751,8 @@ def main():
           f'{" ".join(f"{x:.1f}" for x in os.getloadavg())} at start; network threads '
           f'{args.threads or "as monet pipeline"}; small net ({HEIGHT}x{WIDTH} images cropped to '
           f'{args.input_size or 256}x{args.input_size or 256}); end-to-end precision '
-          f'{" and ".join(args.precision)}')
+          f'{" and ".join(args.precision)}; detector batch_wait_ms '
+          f'{"default" if args.batch_wait_ms is None else args.batch_wait_ms}')
 
     print('\n## Fusion per frame (fuse_heatmaps of V separate 14x64x64 heatmaps, as the node '
           'holds them, to 3D; torch threads 1 as the fusion node)')
@@ -794,14 +821,14 @@ def main():
               + (f', with a second job ({args.second_job} CPU-bound process(es) beside '
                  'every run)' if args.second_job else ''))
         print('| cameras @ Hz | layout | viewable | published frames/s | keypoints3d/s | '
-              'detector images/s'
+              'of them with every camera /s | detector images/s'
               ' | latency median ms | latency p95 ms | heatmaps latency median / p95 ms'
               ' | node CPU ms per keypoints3d | fusion frames fused / partial / stale '
               '(whole run) | detector batches (incomplete) / frames dropped '
               '(whole run) | detector ms/batch: convert, crop, '
               'forward, publish | fusion ms: receive (per view), decode, undistort, '
               'triangulate, errors, publish | node callback errors | load |')
-        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+        print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
         costs = []
         with second_job(args.second_job):
             if args.second_job:
