@@ -646,7 +646,7 @@ def print_live_row(views, rate, layout, viewable, r):
     shown = 'on' if viewable else 'off'
     if 'error' in r:
         print(f'| {views} @ {rate:.0f} | {layout} | {shown} | failed: {r["error"]} '
-              f'|||||||||||| {load:.1f} |', flush=True)
+              f'{"|" * 13} {load:.1f} |', flush=True)    # the 17 columns
         return
     d = r['diagnostics']
     print(f'| {views} @ {rate:.0f} | {layout} | {shown} | {r["published"]:.1f} | '
@@ -743,6 +743,8 @@ def main():
         return receive_worker(json.loads(args.receive_worker))
     if args.repeat < 1:
         parser.error(f'--repeat must be >= 1, got {args.repeat}')
+    if args.batch_wait_ms is not None and not args.batch_wait_ms >= 0:
+        parser.error(f'--batch-wait-ms must be >= 0, got {args.batch_wait_ms}')
     if args.quick:
         args.cameras, args.extra, args.seconds, args.warmup = [2], ['2@60'], 2.0, 2.0
         args.runs, args.fusion_views, args.detector_views = 3, [4, 35], [2]
