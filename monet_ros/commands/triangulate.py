@@ -1,7 +1,8 @@
 """`monet triangulate`: 3D keypoints from another tool's 2D detections and a calibration.
 
-    monet triangulate POINTS2D... --rig CAL --out OUT [--format auto|dlc|sleap|anipose|
-        frames] [--filter none|kalman|optim] [--fps F] [--skeleton human14]
+    monet triangulate POINTS2D... --rig CAL [--rig-units m|cm|mm] --out OUT
+        [--format auto|dlc|sleap|anipose|frames] [--filter none|kalman|optim] [--fps F]
+        [--skeleton human14]
         [--camera-map SRC=DST] [--threshold-px 15] [--confidence-threshold 0.1]
         [--min-views 2] [--method exclusion|ransac] [--export csv,trc,nwb,npz]
 
@@ -13,7 +14,9 @@ views below --confidence-threshold, NaN and missing views left out, confidence-w
 robust DLT with worst-view exclusion or RANSAC, cheirality-checked), batched over all
 frames at once. Writes into OUT (atomically) the files of `monet process`:
 keypoints3d.csv (anipose's layout), keypoints3d.trc, keypoints.nwb (monet_ros.io.
-export_results), and with --filter the filtered points (monet_ros.temporal).
+export_results), and with --filter the filtered points (monet_ros.temporal). The 3D
+points are in the rig's length unit (--rig-units, the file's, or the rule of
+monet_ros.geometry.units), stated in every output.
 """
 from pathlib import Path
 import sys
@@ -24,6 +27,7 @@ HELP = '3D keypoints from 2D detections of other tools (DeepLabCut, SLEAP, anipo
 
 
 def add_arguments(parser):
+    from monet_ros.commands.common import add_rig_units_argument
     from monet_ros.commands.filter_options import add_filter_arguments
     from monet_ros.labels_import.points2d import FORMATS
     parser.add_argument('points2d', nargs='+', help='2D tables: per-camera DeepLabCut / '
@@ -31,6 +35,7 @@ def add_arguments(parser):
                         'u,v[,score] CSV')
     parser.add_argument('--rig', required=True, help='calibration (rig YAML, Pose2Sim / '
                         'anipose TOML, ...)')
+    add_rig_units_argument(parser)
     parser.add_argument('--out', required=True, help='output folder (must not exist)')
     parser.add_argument('--format', choices=FORMATS, default='auto',
                         help='2D table format (default: detected from the files)')
@@ -59,10 +64,12 @@ def add_arguments(parser):
 
 def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, camera_map=None,
                        fusion_config=None, filter_config=None, exports=('csv', 'trc', 'nwb'),
-                       trc_axes='xyz', progress=False):
-    """Triangulate (and filter) 2D tables; write `out`. Returns a dict of figures: frames,
-    cameras, keypoints, rows, counts (cells, missing, low_score, triangulated, per-joint
-    not triangulated), exports {format: path}, filter (temporal.Smoothed or None), notes.
+                       trc_axes='xyz', progress=False, rig_units=None):
+    """Triangulate (and filter) 2D tables; write `out`. rig_units: the length unit of a rig
+    file that states none (None: the rule of geometry.units). Returns a dict of figures:
+    frames, cameras, keypoints, rows, counts (cells, missing, low_score, triangulated,
+    per-joint not triangulated), exports {format: path}, filter (temporal.Smoothed or
+    None), notes, units (the rig's length unit, that of arrays['X']).
     progress: optim's iterations as a tqdm bar.
     Raises ValueError / LabelError / ConfigError / OSError naming the file or option."""
     from monet_ros.commands.common import atomic_output_dir, check_new_output
@@ -86,7 +93,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
         fps = 30.0
         notes.append('--fps not given: times in the outputs assume 30 frames/s')
     check_new_output(out, 'monet triangulate')
-    rig_cameras = load_rig(rig)
+    rig_cameras = load_rig(rig, units=rig_units)
     names = [c.name for c in rig_cameras]
     sk = load_skeleton(skeleton) if skeleton else None
     pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,
@@ -127,6 +134,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     return dict(frames=T, first_frame=int(pts.frames[0]), cameras=[c.name for c in cameras],
                 keypoints=pts.keypoints, rows=pts.rows, nan_rows=pts.nan_rows, fmt=pts.fmt,
                 counts=counts, filter=smoothed, notes=notes, arrays=a,
+                units=rig_cameras[0].units,
                 exports={f: Path(out) / Path(p).relative_to(staging)
                          for f, p in written.items()})
 
@@ -146,13 +154,15 @@ def run(args):
                              skeleton=args.skeleton,
                              camera_map=dict(parse_name_map(args.camera_map)),
                              fusion_config=fusion, filter_config=filt, exports=exports,
-                             trc_axes=args.trc_axes, progress=not args.quiet)
+                             trc_axes=args.trc_axes, progress=not args.quiet,
+                             rig_units=args.rig_units)
     n = fig['counts']
     name = 'monet triangulate'
     print(f'{name}: {fig["frames"]} frames (from frame {fig["first_frame"]}) x '
           f'{len(fig["cameras"])} cameras ({", ".join(fig["cameras"])}) x '
           f'{len(fig["keypoints"])} keypoints from {fig["rows"]} {fig["fmt"]} rows; '
-          f'{n["triangulated"]} of {n["points"]} points triangulated')
+          f'{n["triangulated"]} of {n["points"]} points triangulated (3D in '
+          f'{fig["units"]}, the rig\'s unit)')
     nan = f', {fig["nan_rows"]} of them NaN' if fig['nan_rows'] else ''
     print(f'{name}: skipped views: {n["missing"]} of {n["cells"]} missing (no detection'
           f'{nan}), '

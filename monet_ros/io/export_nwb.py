@@ -3,7 +3,8 @@
 write_nwb(path, result) writes one NWBFile holding, in processing module 'behavior':
 - Skeletons with one Skeleton (nodes = keypoints, edges = the skeleton's bones when given);
 - MultiCameraPoseEstimation 'monet_pose': one PoseEstimationSeries per keypoint with the
-  3D points (T, 3) in the rig's world frame (metres), confidence = mean peak value of the
+  3D points (T, 3) in the rig's world frame and unit (unit 'meters', 'centimeters' or
+  'millimeters', Camera.units), confidence = mean peak value of the
   inlier views, timestamps = seconds from the first instant (export_tables.TIME_BASE: the
   TRC Time of the same instant); and one
   PoseEstimation per camera ('<camera>_2d', device = a CalibratedCamera with K, R, t, dist
@@ -28,7 +29,8 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
               edges=None, description='monet_ros multiview keypoints', filtered=None):
     """keypoints (C,); stamps_ns (T,); X (T, C, 3); score (T, C); cameras: V Camera;
     points2d (T, V, C, 2) source px; confidence2d (T, V, C); filtered: None or dict(method,
-    change_mm (T, C), bridged (T, C)) when X is a filter's output. Atomic (tmp +
+    change_mm (T, C), bridged (T, C)) when X is a filter's output. X and the cameras' t are
+    in the cameras' length unit (Camera.units), stated as the 3D series' unit. Atomic (tmp +
     os.replace)."""
     from ndx_pose import (
         CalibratedCamera,
@@ -41,6 +43,7 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
     from pynwb import NWBHDF5IO, NWBFile, TimeSeries
 
     import monet_ros
+    from monet_ros.geometry.units import NWB_NAMES, rig_units
     from monet_ros.io.export_tables import export_times
 
     stamps = np.asarray(stamps_ns, dtype=np.int64)
@@ -75,7 +78,7 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
             source_software='monet_ros', source_software_version=str(version),
             skeleton=skeleton))
     series3d = [PoseEstimationSeries(
-        name=k, data=np.asarray(X[:, c], float), unit='meters',
+        name=k, data=np.asarray(X[:, c], float), unit=NWB_NAMES[rig_units(cameras)],
         reference_frame='rig world frame', confidence=np.asarray(score[:, c], float),
         confidence_definition='mean heatmap peak value of the inlier views',
         timestamps=times) for c, k in enumerate(keypoints)]

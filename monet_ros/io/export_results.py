@@ -110,9 +110,13 @@ def write_results(folder, formats, cameras, keypoints, a, edges=None, trc_axes='
     (stamps (T,), X (T, C, 3), error, ncams, score (T, C), points2d (T, V, C, 2), conf2d,
     inliers (T, V, C), K_heat (T, V, 3, 3)); smoothed: a temporal.Smoothed of the same
     frames: csv, trc and nwb then hold the filtered points (with their confidence, change
-    and bridged flags); npz always holds the 2D detections."""
+    and bridged flags); npz always holds the 2D detections. Every file states the length
+    unit of the cameras (Camera.units), that of X: TRC Units, NWB unit, the CSV's sidecar
+    keypoints3d.units.json."""
+    from monet_ros.geometry.units import rig_units
     from monet_ros.io.export_tables import write_anipose_csv, write_trc
     folder = Path(folder)
+    units = rig_units(cameras)
     names = [c.name for c in cameras]
     X, error, ncams, score = a['X'], a['error'], a['ncams'], a['score']
     extra = filtered = None
@@ -124,10 +128,10 @@ def write_results(folder, formats, cameras, keypoints, a, edges=None, trc_axes='
     out = {}
     if 'csv' in formats:
         out['csv'] = write_anipose_csv(folder / FILE_NAMES['csv'], keypoints, a['stamps'], X,
-                                       error, ncams, score, extra=extra)
+                                       error, ncams, score, extra=extra, units=units)
     if 'trc' in formats:
         out['trc'] = write_trc(folder / FILE_NAMES['trc'], keypoints, a['stamps'], X,
-                               axes=trc_axes)
+                               axes=trc_axes, units=units)
     if 'npz' in formats:
         path = folder / FILE_NAMES['npz']
         tmp = folder / ('.tmp_' + FILE_NAMES['npz'])

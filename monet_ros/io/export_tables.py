@@ -2,7 +2,8 @@
 (writers and readers; no ROS).
 
 anipose CSV (what `anipose triangulate` writes, one row per frame): for every keypoint K
-the columns K_x, K_y, K_z (world units of the rig, metres here), K_error (mean
+the columns K_x, K_y, K_z (the rig's length unit, stated in the sidecar file
+<name>.units.json: csv_units_path), K_error (mean
 reprojection error of the inlier views, px), K_ncams (inlier views), K_score (mean peak
 confidence), then fnum (frame number); monet adds stamp_ns (header stamp, ns) at the end.
 With a filter (`--filter kalman|optim`) the points are the filtered ones, K_score their
@@ -18,7 +19,8 @@ TRC (OpenSim's marker file, the layout Pose2Sim writes; tab separated):
     Frame#  Time  <marker 1>  ''  ''  <marker 2> ...
     ''  ''  X1 Y1 Z1 X2 ...
     then one row per frame: Frame# (1-based), Time (s), X Y Z per marker.
-monet writes the rig's world frame as it is (Units m); Pose2Sim's demo .trc is Y-up
+monet writes the rig's world frame as it is (Units: the rig's unit, m / cm / mm);
+Pose2Sim's demo .trc is Y-up
 (trc(X, Y, Z) = world(Y, Z, X)): pass axes='yzx' for OpenSim's convention. Frame numbers
 count instants from the first processed one at the median frame period, so a gap in the
 recording is a gap in Frame#; the rate is the median stamp period's, snapped to 0.001 Hz
@@ -76,9 +78,34 @@ def _atomic_writer(path):
     return path, path.with_name(path.name + '.tmp')
 
 
-def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=None):
-    """Write anipose's 3D CSV. X (T, C, 3); error, ncams, score (T, C); extra: None or
+def csv_units_path(path):
+    """The sidecar of a 3D CSV that states its units: keypoints3d.csv -> keypoints3d.units.json
+    (anipose's CSV layout has no place for them)."""
+    path = Path(path)
+    return path.with_name(path.stem + '.units.json')
+
+
+def read_csv_units(path):
+    """The length unit ('m', 'cm', 'mm') a 3D CSV's sidecar states, or None without one.
+    ExportError naming the sidecar when it is unreadable or states another unit."""
+    import json
+
+    from monet_ros.geometry.units import check_units
+    side = csv_units_path(path)
+    if not side.is_file():
+        return None
+    try:
+        return check_units(json.loads(side.read_text())['length_unit'])
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ExportError(f'{side}: field length_unit: unreadable ({error})') from None
+
+
+def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=None,
+                      units='m'):
+    """Write anipose's 3D CSV. X (T, C, 3) in `units` (the rig's length unit, written to
+    the sidecar csv_units_path(path)); error, ncams, score (T, C); extra: None or
     {field: (T, C)} for fields of EXTRA_FIELDS (module docstring). Atomic."""
+    import json
     extra = {f: np.asarray(v, float) for f, v in (extra or {}).items()}
     bad = [f for f in extra if f not in EXTRA_FIELDS]
     if bad:
@@ -100,6 +127,12 @@ def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=
             for field, values in extra.items():
                 row += [_cell(values[t, c], field == 'bridged') for c in range(C)]
             w.writerow(row + [int(fnum[t]), int(stamps_ns[t])])
+    side, side_tmp = _atomic_writer(csv_units_path(path))
+    side_tmp.write_text(json.dumps({
+        'file': path.name, 'length_unit': units,
+        'columns': {'<keypoint>_x, _y, _z': units, '<keypoint>_error': 'px',
+                    '<keypoint>_change_mm': 'mm', 'stamp_ns': 'ns'}}, indent=1) + '\n')
+    os.replace(side_tmp, side)
     os.replace(tmp, path)
     return path
 
@@ -156,8 +189,9 @@ def read_anipose_csv(path):
 
 
 def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m'):
-    """Write a TRC marker file (module docstring). X (T, C, 3) world; axes 'xyz' (as is) or
-    'yzx' (Y-up as Pose2Sim / OpenSim: trc = world(Y, Z, X)). Atomic."""
+    """Write a TRC marker file (module docstring). X (T, C, 3) world in `units` (the
+    rig's, the header's Units); axes 'xyz' (as is) or 'yzx' (Y-up as Pose2Sim / OpenSim:
+    trc = world(Y, Z, X)). Atomic."""
     if axes not in AXES:
         raise ExportError(f'axes must be one of {sorted(AXES)}, got {axes!r}')
     X = np.asarray(X, float)[..., list(AXES[axes])]

@@ -32,6 +32,7 @@ from monet_ros.atomic import sha256_file
 from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.crop_rule import TrackedCrops, TrackedRule
 from monet_ros.error_text import error_line
+from monet_ros.geometry.units import UNITS
 from monet_ros.io import (
     camera_from_camera_info,
     camera_info_from_camera,
@@ -78,6 +79,9 @@ class DetectorConfig:
                                        'several cameras are batched in one forward pass')
     rig: str = setting('', 'rig file or recording: camera names, image topics and the '
                        'extrinsics used to crop around /monet/keypoints3d (optional)')
+    rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
+                             "'' = the file's, else the rule of geometry.units); must match "
+                             "the fusion node's", choices=('',) + UNITS)
     image_topic: str = setting('', 'image topic template, {camera} = name (default: the rig '
                                'camera topic, else /{camera}/image_raw)',
                                template_fields=('camera',))
@@ -160,7 +164,7 @@ def camera_slots(config, owner='detector'):
     camera_info topics; no network is loaded), as the detector node subscribes them.
     Raises ConfigError (no rig and no cameras, unknown camera) or OSError (rig file)."""
     if config.rig:
-        rig, _ = load_node_rig(config.rig)
+        rig, _ = load_node_rig(config.rig, config.rig_units)
         rig_cameras = select_cameras(owner, rig, config.cameras)
         names = [c.name for c in rig_cameras]
     elif not config.cameras:

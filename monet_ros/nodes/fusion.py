@@ -40,6 +40,7 @@ from visualization_msgs.msg import MarkerArray
 
 from monet_ros.config import ConfigError, config_subset, setting
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
+from monet_ros.geometry.units import UNITS, from_m, rig_units
 from monet_ros.io import (
     header_stamp_ns,
     image_msg_to_heatmaps,
@@ -90,6 +91,10 @@ STALE = object()
 class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     rig: str = setting('', 'rig file (any format load_rig reads) or a recording whose '
                        'camera_info + /tf_static give the rig; required')
+    rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
+                             "'' = the file's, else the rule of geometry.units): keypoints3d, "
+                             'the markers and /tf_static are in the rig unit',
+                             choices=('',) + UNITS)
     cameras: tuple[str, ...] = setting((), 'rig cameras to fuse (default: all of the rig)')
     skeleton: str = setting('human14', 'skeleton preset or YAML path: heatmap channel order '
                             'and bones of /monet/skeleton')
@@ -121,7 +126,8 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     marker_labels: bool = setting(False, 'also label the skeleton joints with their names')
     camera_markers: bool = setting(True, 'publish the rig cameras as frustums on rig_markers '
                                    '(latched)')
-    camera_marker_depth: float = setting(0.2, 'frustum depth of the camera markers (m)',
+    camera_marker_depth: float = setting(0.2, 'frustum depth of the camera markers (m, '
+                                         'whatever the rig unit)',
                                          minimum=0.0, exclusive_minimum=True)
     publish_tf: bool = setting(True, 'publish the rig on /tf_static (frame_id -> '
                                '<camera>_optical) when tf2_msgs is installed')
@@ -159,8 +165,6 @@ class FusionNode(Node):
         self.config = config = declare_config(self, FusionNodeConfig, overrides, live=LIVE,
                                               on_change=self.apply_live)
         self.core_config = config_subset(config, FusionConfig)
-        self.live_filter = LiveFilter(config_subset(config, LiveFilterConfig)) \
-            if config.filter else None
         self.filter_counts = dict(resets=0, restarts=0, gated=0)  # of replaced filters
         self.timer = StageTimer()  # per-stage wall time, reported in /diagnostics
         if config.threads:
@@ -168,8 +172,11 @@ class FusionNode(Node):
             torch.set_num_threads(config.threads)
         if not config.rig:
             raise ConfigError(self.get_name(), 'rig', 'is required (a rig file or recording)')
-        rig, rig_frame = load_node_rig(config.rig)
+        rig, rig_frame = load_node_rig(config.rig, config.rig_units)
         self.cameras = select_cameras(self.get_name(), rig, config.cameras, minimum=2)
+        self.units = rig_units(self.cameras)
+        self.live_filter = LiveFilter(config_subset(config, LiveFilterConfig), self.units) \
+            if config.filter else None
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
@@ -211,12 +218,15 @@ class FusionNode(Node):
             self.pub_rig = self.create_publisher(MarkerArray, RIG_MARKERS, LATCHED)
             self.pub_rig.publish(marker_array(
                 self.get_clock().now().nanoseconds, self.frame_id,
-                frustum_marker_specs(self.cameras, config.camera_marker_depth)))
+                frustum_marker_specs(self.cameras, from_m(config.camera_marker_depth,
+                                                          self.units),
+                                     scale=from_m(0.005, self.units))))
         self.create_timer(0.02, self.on_poll)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
-            f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}')
+            f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}, '
+            f'3D in {self.units} (the rig unit)')
 
     def apply_live(self, config):
         """Use a changed config (a live parameter was set) from the next frame on."""
@@ -229,7 +239,7 @@ class FusionNode(Node):
         if self.live_filter is None or self.live_filter.config != filter_config:
             # switched on, off or retuned: a fresh state from the next frame
             self.keep_filter_counts()
-            self.live_filter = LiveFilter(filter_config) if config.filter else None
+            self.live_filter = LiveFilter(filter_config, self.units) if config.filter else None
         self.config = config
 
     def keep_filter_counts(self):
@@ -417,6 +427,7 @@ class FusionNode(Node):
             self.pub_skeleton.publish(skeleton_marker_array(
                 group.stamp_ns, self.frame_id, X, self.skeleton.bone_indices,
                 ns=self.marker_ns, lifetime_ns=int(self.config.marker_lifetime_s * 1e9),
+                scale=from_m(0.03, self.units),
                 names=self.skeleton.keypoints if self.config.marker_labels else None))
         self.timer.add('publish', time.perf_counter() - start)
         for listener in self.listeners:
@@ -486,6 +497,7 @@ class FusionNode(Node):
             message=f'{self.frames} frames fused ({self.partial_frames} with missing cameras)',
             values=[KeyValue(key=k, value=str(v)) for k, v in (
                 ('frames', self.frames), ('partial_frames', self.partial_frames),
+                ('units', self.units),
                 ('dropped_frames', self.sync.stats.dropped), ('stale_frames', self.stale_frames),
                 ('late_views', self.sync.stats.late),
                 ('time_resets', self.sync.stats.resets),

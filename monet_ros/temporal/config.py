@@ -4,8 +4,11 @@ its synthetic set (human14 subject, 8-camera ring, 1 px noise, 10% gross outlier
 dropped views, 30 frames/s); the figures are in README.md (3D filters).
 """
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 from monet_ros.config import setting, validate_config
+from monet_ros.geometry.units import from_m, from_mm
+from monet_ros.temporal.cv_kalman import V0
 
 METHODS = ('none', 'kalman', 'optim')
 LOSSES = ('soft_l1', 'huber', 'cauchy', 'linear')
@@ -51,3 +54,13 @@ class FilterConfig:
 
     def __post_init__(self):
         validate_config(self)
+
+    def in_units(self, units):
+        """The physical settings in a rig's length unit ('m', 'cm', 'mm'; the one place
+        they are converted): noise (measurement_noise_mm), acceleration
+        (acceleration_m_s2, units/s^2), bone (bone_mm), v0 (cv_kalman.V0, units/s),
+        step (optim's projection-derivative step, 10 um)."""
+        return SimpleNamespace(noise=from_mm(self.measurement_noise_mm, units),
+                               acceleration=from_m(self.acceleration_m_s2, units),
+                               bone=from_mm(self.bone_mm, units), v0=from_m(V0, units),
+                               step=from_mm(0.01, units))

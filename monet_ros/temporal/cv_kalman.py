@@ -8,10 +8,12 @@ and axis a state (position p, velocity v); p' = p + v dt, v' = v + a dt with whi
 acceleration a of variance q ((m/s^2)^2); a measurement is the triangulated point with
 isotropic noise variance r2 (m^2). The three axes share one 2x2 covariance per joint, kept
 as its three entries P = (P00, P01, P11), shape (3, J) (m^2, m^2/s, m^2/s^2).
+Lengths are in the rig's unit (m above; callers convert their settings, geometry.units).
 """
 import numpy as np
 
-V0 = 2.0     # m/s: velocity standard deviation of a joint when it (re)starts
+V0 = 2.0     # m/s: velocity standard deviation of a joint when it (re)starts (callers
+             # pass it in rig units: geometry.units.from_m(V0, units))
 
 
 def predict(p, v, P, dt, q):
@@ -44,8 +46,8 @@ def update(p, v, P, y, S, accept):
 
 def start(p, v, P, X, which, r2, v0=V0):
     """Start the joints `which` (J,) bool at their measurement X (J, 3): p = X, v = 0,
-    P = (r2, 0, v0^2) (measurement noise; a wide but bounded velocity prior, m/s). In
-    place; r2 scalar or (J,)."""
+    P = (r2, 0, v0^2) (measurement noise; a wide but bounded velocity prior, rig units/s,
+    V0 m/s by default). In place; r2 scalar or (J,)."""
     p[which], v[which] = X[which], 0.0
     P[0, which] = np.broadcast_to(r2, which.shape)[which]
     P[1, which], P[2, which] = 0.0, v0 ** 2

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from monet_ros.config import setting, validate_config
+from monet_ros.geometry.units import from_m, from_mm
 from monet_ros.temporal import cv_kalman
 
 # Consecutive gated measurements (that do not agree with each other: two that agree
@@ -90,17 +91,22 @@ class LiveFilterConfig:
 class LiveFilter:
     """Per-joint constant-velocity Kalman filter with gating (see the module docstring).
 
-    update(stamp_ns, X) with X (J, 3) metres (NaN = not triangulated) -> (filtered (J, 3),
-    measured (J,) bool: an accepted measurement this frame; False where the output is a
-    prediction or NaN). Counters: resets (time jumps), restarts (joints restarted after a
-    gap, LOST_AFTER gated measurements or from a pair), gated (measurements rejected as
-    outliers), frames.
+    update(stamp_ns, X) with X (J, 3) in `units` (the rig's length unit 'm', 'cm' or 'mm';
+    NaN = not triangulated) -> (filtered (J, 3), measured (J,) bool: an accepted
+    measurement this frame; False where the output is a prediction or NaN). The settings
+    keep their units (filter_noise_mm mm, filter_acceleration m/s^2, filter_max_speed m/s)
+    whatever the rig's: converted here, once. Counters: resets (time jumps), restarts
+    (joints restarted after a gap, LOST_AFTER gated measurements or from a pair), gated
+    (measurements rejected as outliers), frames. ValueError for an unknown unit.
     """
 
-    def __init__(self, config=LiveFilterConfig()):
+    def __init__(self, config=LiveFilterConfig(), units='m'):
         self.config = config
-        self.r2 = (config.filter_noise_mm * 1e-3) ** 2
-        self.q = config.filter_acceleration ** 2
+        self.units = units
+        self.r2 = from_mm(config.filter_noise_mm, units) ** 2
+        self.q = from_m(config.filter_acceleration, units) ** 2
+        self.max_speed = from_m(config.filter_max_speed, units)
+        self.v0 = from_m(cv_kalman.V0, units)
         self.gate2 = config.filter_gate ** 2
         self.joints = None
         self.last_ns = None
@@ -109,8 +115,8 @@ class LiveFilter:
     def reset(self, joints):
         """Forget every joint (the next measurement of each starts it again)."""
         self.joints = joints
-        self.p = np.zeros((joints, 3))            # position (m)
-        self.v = np.zeros((joints, 3))            # velocity (m/s)
+        self.p = np.zeros((joints, 3))            # position (rig units)
+        self.v = np.zeros((joints, 3))            # velocity (rig units/s)
         self.P = np.zeros((3, joints))            # covariance P00, P01, P11 per joint
         self.live = np.zeros(joints, bool)        # started
         self.fresh = np.zeros(joints, bool)       # started from one measurement only
@@ -123,7 +129,7 @@ class LiveFilter:
     def within_reach(self, X, origin, origin_ns, stamp_ns):
         """(J,) bool: X within filter_max_speed x the elapsed time + gate x sqrt(2 r2) of
         origin (J, 3) measured at origin_ns (J,) (False where either is NaN)."""
-        reach = self.config.filter_max_speed * (stamp_ns - origin_ns) * 1e-9 \
+        reach = self.max_speed * (stamp_ns - origin_ns) * 1e-9 \
             + self.config.filter_gate * np.sqrt(2 * self.r2)
         with np.errstate(invalid='ignore'):
             return np.linalg.norm(X - origin, axis=1) <= reach
@@ -151,7 +157,7 @@ class LiveFilter:
         # off: there the update may not make the joint faster than filter_max_speed
         speed = np.linalg.norm(self.v + (P[1] / S)[:, None] * y, axis=1)
         accept = live & z & (d2 <= self.gate2) & agrees \
-            & ((speed <= self.config.filter_max_speed) | ~self.missed)
+            & ((speed <= self.max_speed) | ~self.missed)
         # gated twice in a row by two measurements that agree with each other: the joint
         # is elsewhere (or a fresh joint's first measurement was the outlier): restart
         # from the pair
@@ -181,7 +187,7 @@ class LiveFilter:
         self.restarts += int(stale.sum())
         live &= ~stale
         start = z & ~live
-        cv_kalman.start(self.p, self.v, P, X, start, self.r2)
+        cv_kalman.start(self.p, self.v, P, X, start, self.r2, self.v0)
         self.seen_ns[start] = stamp_ns
         self.gated_run[start] = 0
         self.fresh |= start
