@@ -43,6 +43,8 @@ def add_arguments(parser):
     imp.add_argument('--rec', required=True, help='recording (rosbag2 folder, .mcap or '
                      '`monet synth` folder) whose instants and cameras the labels refer to')
     imp.add_argument('--rig', help="rig file (default: the recording's)")
+    from monet_ros.commands.common import add_rig_units_argument
+    add_rig_units_argument(imp)
     imp.add_argument('--out', required=True, help='output labels CSV (stamp_ns,camera,...)')
     imp.add_argument('--skeleton', default=None, help='skeleton preset or YAML (default: the '
                      'keypoints found in the labels, in their order)')
@@ -63,7 +65,8 @@ def run(args):
 
     try:
         options = label_options_from_args(args)
-        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map)
+        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map,
+                                rig_units=args.rig_units)
         cameras = [c.name for c in index.cameras]
         result = import_labels(args.format, args.path, cameras=cameras, camera=args.camera,
                                min_score=args.min_score, camera_map=dict(options.camera_map))
