@@ -8,7 +8,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from monet_ros.geometry.units import UNITS
+from monet_ros.geometry.units import UNITS, per_metre, rig_units
 
 # Accepted distortion vector lengths (OpenCV: 4, 5, 8, 12; 14 = tilted sensor, unsupported).
 DIST_LENGTHS = (0, 4, 5, 8, 12)
@@ -335,7 +335,8 @@ _STACK_CACHE = {}  # id-tuple -> (cameras tuple, stacked dict); cameras are immu
 def stack_cameras(cameras):
     """Stacked parameters of a rig: dict of K (V, 3, 3), R (V, 3, 3), t (V, 3), P (V, 3, 4),
     Rt (V, 3, 4) = [R | t], K_inv (V, 3, 3), d12 (V, 12) (distortion padded to 12
-    coefficients), model (d12 as _model_terms gives it).
+    coefficients), model (d12 as _model_terms gives it), per_metre (float: the cameras'
+    length unit per metre, geometry.units; ValueError when their units differ).
     The last few rigs are cached (Cameras are immutable): do not modify the arrays."""
     cameras = tuple(cameras)
     key = tuple(id(c) for c in cameras)
@@ -350,6 +351,7 @@ def stack_cameras(cameras):
     for array in stacked.values():
         array.setflags(write=False)
     stacked['model'] = _model_terms(stacked['d12'])  # (coefficients, flags) of _distort
+    stacked['per_metre'] = per_metre(rig_units(cameras))
     if len(_STACK_CACHE) >= 16:
         _STACK_CACHE.pop(next(iter(_STACK_CACHE)))
     _STACK_CACHE[key] = (cameras, stacked)

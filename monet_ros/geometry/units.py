@@ -15,7 +15,7 @@ Parameters named with a unit (`_mm`, `_m_s2`, `_m`) mean that unit whatever the 
 code that uses them converts them into rig units with from_mm / from_m (one factor,
 per_metre).
 """
-import logging
+import sys
 
 import numpy as np
 
@@ -26,7 +26,6 @@ NWB_NAMES = {'m': 'meters', 'cm': 'centimeters', 'mm': 'millimeters'}
 # camera-centre spread (file units) from which a calibration without a unit is taken as mm
 INFER_MM_SPREAD = 50.0
 
-_log = logging.getLogger('monet_ros.units')
 _noted = set()
 
 
@@ -79,14 +78,14 @@ def infer_units(cameras):
 
 
 def note_inferred(path, units, reason):
-    """One line on stderr (logging, 'monet_ros.units') saying which unit a rig file without
-    one was taken in; once per file and unit in a process."""
+    """One line on stderr saying which unit a rig file without one was taken in; once per
+    file and unit in a process."""
     if (str(path), units) in _noted:
         return
     _noted.add((str(path), units))
-    _log.warning(f'note: rig {path} states no length unit; {reason}: taken as {units} '
-                 f'(rule: >= {INFER_MM_SPREAD:g} -> mm, else m; state it with --rig-units '
-                 'm|mm|cm or the rig_units parameter)')
+    print(f'monet: note: rig {path} states no length unit; {reason}: taken as {units} '
+          f'(rule: >= {INFER_MM_SPREAD:g} -> mm, else m; state it with --rig-units '
+          'm|mm|cm or the rig_units parameter)', file=sys.stderr, flush=True)
 
 
 def rig_units(cameras):

@@ -289,6 +289,8 @@ class DetectorNode(Node):
             R = slot.rig_camera.R if slot.rig_camera is not None else None
             t = slot.rig_camera.t if slot.rig_camera is not None else None
             slot.camera = camera_from_camera_info(msg, slot.name, R, t)
+            if slot.rig_camera is not None:        # the rig's extrinsics: its length unit
+                slot.camera = slot.camera.replace(units=slot.rig_camera.units)
             slot.info_key = key
         except ValueError as error:
             self.bad_message(slot, slot.info_topic, error)
