@@ -167,10 +167,10 @@ def run_reference(args):
     two_d = (f', {rows[0].get("views_2d")} labelled views' if ref.kind == '2d' else
              f'; 2D: its projection into the {len(index.cameras)} cameras '
              f'({rows[0].get("views_2d")} points inside the images, occlusion unknown)')
-    print(f'reference: {args.reference} ({ref.kind}, {rows[0]["joints_3d"]} joints in 3D; rig '
-          f'in {ref.units}, 3D errors in mm'
+    print(f'reference: {args.reference} ({ref.kind}, {rows[0]["joints_3d"]} joints in 3D'
           + two_d + (f'; not in the model: {", ".join(ref.unused)}' if ref.unused else '')
           + ')')
+    print(f'3D errors in mm (the rig and the 3D in {ref.units}, converted)')
     if ref.alignment:
         print(f'reference time: {alignment_text(ref.alignment)}')
     from monet_ros.commands.info import _ranges
