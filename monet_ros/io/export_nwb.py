@@ -64,7 +64,8 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
                                   rotation_matrix=np.asarray(cam.R),
                                   translation_vector=np.asarray(cam.t),
                                   distortion_coefficients=np.asarray(cam.dist),
-                                  description=f'{cam.width}x{cam.height} px')
+                                  description=f'{cam.width}x{cam.height} px; '
+                                  f'translation in {NWB_NAMES[cam.units]}')
         nwb.add_device(device)
         series = [PoseEstimationSeries(
             name=k, data=np.asarray(points2d[:, v, c], float), unit='pixels',
