@@ -221,7 +221,8 @@ def read_rig(path, image_size=None, units=None):
         units = stated
     elif units is None:
         units, reason = infer_units(cameras)
-        note_inferred(path, units, reason)
+        if reason is not None:
+            note_inferred(path, units, reason)
     return with_units(cameras, units), frame_id
 
 

@@ -9,7 +9,8 @@ or from the stated rule (infer_units):
 
     the largest distance between two camera centres, in file units: >= INFER_MM_SPREAD
     (50) -> mm, else m. A lab rig is 0.1-20 m across: 100-20000 in mm, 0.1-20 in m. cm is
-    never inferred (10-2000 overlaps both): state it. One camera (no spread): m.
+    never inferred (10-2000 overlaps both): state it. One camera (no spread, no 3D): m,
+    without a note.
 
 Parameters named with a unit (`_mm`, `_m_s2`, `_m`) mean that unit whatever the rig's; the
 code that uses them converts them into rig units with from_mm / from_m (one factor,
@@ -71,7 +72,10 @@ def camera_spread(cameras):
 
 def infer_units(cameras):
     """(units, reason) by the rule of the module docstring: 'mm' when the camera centres
-    spread >= INFER_MM_SPREAD file units, else 'm'; reason is a short text with the spread."""
+    spread >= INFER_MM_SPREAD file units, else 'm'; reason is a short text with the spread
+    (None for a single camera: nothing to tell, it triangulates nothing)."""
+    if len(cameras) < 2:
+        return 'm', None
     spread = camera_spread(cameras)
     units = 'mm' if spread >= INFER_MM_SPREAD else 'm'
     return units, f'camera centres up to {spread:.4g} apart'

@@ -47,7 +47,7 @@ def test_rule_picks_mm_from_the_camera_spread_and_says_so():
     assert camera_spread(two) == pytest.approx(INFER_MM_SPREAD)
     assert infer_units(ring_rig(2, radius=INFER_MM_SPREAD / 2 * 0.99))[0] == 'm'
     assert infer_units(ring_rig(2, radius=INFER_MM_SPREAD / 2 * 1.01))[0] == 'mm'
-    assert infer_units(rig[:1]) == ('m', 'camera centres up to 0 apart')
+    assert infer_units(rig[:1]) == ('m', None)            # one camera: nothing to note
 
 
 def test_sleap_anipose_toml_is_taken_as_mm_with_a_note(shared_data, tmp_path, capsys):
