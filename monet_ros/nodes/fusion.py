@@ -13,6 +13,10 @@ jump): the filtered ones on keypoints3d (and the skeleton markers), the raw ones
 keypoints3d_raw. A bridged joint (predicted, no accepted measurement this frame) keeps
 num_views of the raw fusion (0 when not triangulated), so it stays recognisable.
 
+Units: keypoints3d, the markers and /tf_static are in the rig's length unit (`rig_units`,
+the rig file's `units`, else the rule of geometry.units), stated in /diagnostics (`units`)
+and the start log; the filter's mm and m/s^2 parameters are converted into it.
+
 When the node falls behind (more heatmaps arrive than it fuses, e.g. 16 cameras on 2 cores),
 it keeps its outputs fresh instead of queueing: a frame any of whose heatmaps or camera_info
 waited longer than `max_queue_ms` in the input queue (from its reception by the middleware,
