@@ -13,7 +13,10 @@ views below --confidence-threshold, NaN and missing views left out, confidence-w
 robust DLT with worst-view exclusion or RANSAC, cheirality-checked), batched over all
 frames at once. Writes into OUT (atomically) the files of `monet process`:
 keypoints3d.csv (anipose's layout), keypoints3d.trc, keypoints.nwb (monet_ros.io.
-export_results), and with --filter the filtered points (monet_ros.temporal).
+export_results), and with --filter the filtered points (monet_ros.temporal). The rows are
+the source's frames from the first to the last one seen, numbered as the source numbers
+them: CSV fnum = source frame (anipose's meaning), TRC Frame# = frame + 1, TRC Time and
+NWB timestamps = frame / --fps (a table that starts at frame 10 starts at 10 / fps s).
 """
 from pathlib import Path
 import sys
@@ -91,6 +94,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     sk = load_skeleton(skeleton) if skeleton else None
     pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,
                         camera_map=camera_map)
+    notes += pts.notes
     used = [v for v in range(len(names)) if np.isfinite(pts.points[:, v]).any()]
     if len(used) < max(2, fusion_config.min_views):
         raise ValueError(f'{", ".join(map(str, paths))}: detections in '
@@ -105,8 +109,8 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     present = np.isfinite(points).all(-1)
     low = present & ~(np.nan_to_num(score, nan=-1.0) >= fusion_config.confidence_threshold)
     a = fuse_frames(points, score, cameras, fusion_config)
-    frames = pts.frames - pts.frames[0]
-    a['stamps'] = np.round(frames * (1e9 / fps)).astype(np.int64)
+    # source time: frame / fps from the source's frame 0 (export_tables TIME_BASE)
+    a['stamps'] = np.round(pts.frames * (1e9 / fps)).astype(np.int64)
     a['conf2d'] = score
     a['K_heat'] = np.broadcast_to(np.stack([c.K for c in cameras]), (T, V, 3, 3))
     missing_points = ~np.isfinite(a['X']).all(-1)
@@ -119,12 +123,13 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
         staging.mkdir(parents=True, exist_ok=True)
         written = write_results(staging, exports, cameras, pts.keypoints, a,
                                 edges=sk.bone_indices if sk else None, trc_axes=trc_axes,
-                                smoothed=smoothed)
+                                smoothed=smoothed, fnum=pts.frames, origin_ns=0, rate_hz=fps)
     counts = dict(cells=T * V * C, missing=int((~present).sum()), low_score=int(low.sum()),
                   points=T * C, triangulated=int((~missing_points).sum()),
                   not_triangulated=dict(zip(pts.keypoints,
                                             missing_points.sum(axis=0).tolist())))
-    return dict(frames=T, first_frame=int(pts.frames[0]), cameras=[c.name for c in cameras],
+    return dict(frames=T, first_frame=int(pts.frames[0]), last_frame=int(pts.frames[-1]),
+                fps=fps, cameras=[c.name for c in cameras],
                 keypoints=pts.keypoints, rows=pts.rows, nan_rows=pts.nan_rows, fmt=pts.fmt,
                 counts=counts, filter=smoothed, notes=notes, arrays=a,
                 exports={f: Path(out) / Path(p).relative_to(staging)
@@ -153,6 +158,9 @@ def run(args):
           f'{len(fig["cameras"])} cameras ({", ".join(fig["cameras"])}) x '
           f'{len(fig["keypoints"])} keypoints from {fig["rows"]} {fig["fmt"]} rows; '
           f'{n["triangulated"]} of {n["points"]} points triangulated')
+    print(f'{name}: source frames {fig["first_frame"]}..{fig["last_frame"]} kept in the '
+          f'exports: keypoints3d.csv fnum = frame, TRC Frame# = frame + 1, TRC Time and NWB '
+          f'timestamps = frame / {fig["fps"]:g} s')
     nan = f', {fig["nan_rows"]} of them NaN' if fig['nan_rows'] else ''
     print(f'{name}: skipped views: {n["missing"]} of {n["cells"]} missing (no detection'
           f'{nan}), '

@@ -6,7 +6,7 @@ import_labels(fmt, paths, cameras=..., camera=None, min_score=0.0, camera_map=No
 -> ImportResult(rows, keypoints, note). Errors are monet_ros.labels.LabelError naming the
 file and the row / field.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from monet_ros.labels import LabelError
@@ -15,10 +15,13 @@ from monet_ros.labels import LabelError
 @dataclass
 class ImportResult:
     """rows: LabelRow list; keypoints: names in the source's order; note: what was left
-    out on purpose (e.g. points below --min-score), '' when nothing."""
+    out on purpose (e.g. points below --min-score), '' when nothing; frame_counts:
+    {source: frames} for the files that declare their length (a SLEAP analysis file's
+    frame axis, a prediction table's rows), whatever their last detection."""
     rows: list
     keypoints: tuple
     note: str = ''
+    frame_counts: dict = field(default_factory=dict)
 
 
 def camera_for(source_name, cameras=(), camera=None, camera_map=None):

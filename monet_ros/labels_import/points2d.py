@@ -3,9 +3,13 @@
 Reads any 2D table `monet labels import` reads (the same readers): DeepLabCut / Lightning
 Pose prediction CSV / H5 (likelihood = score), SLEAP analysis H5 (point_scores = score),
 anipose pose-2d folders, and the frame-indexed points table frame,camera,keypoint,u,v
-[,score] (monet_ros.labels, read_label_rows(points=True)). A source without scores gets
-score 1. Frames are the tables' frame indices (0-based video frames); the arrays cover
-every frame from the first to the last one seen.
+[,score] (monet_ros.labels, read_label_rows(points=True)). A detection without a score (a
+source without scores, an empty / NaN likelihood or score cell beside a point) gets score
+1, counted in the notes. Frames are the tables' frame indices (0-based video frames, kept
+as numbered: a table that starts at frame 10 starts there); the arrays cover every frame
+from the first to the last one seen. Per-camera files of one recording must have one
+length: a file's declared frame count (a SLEAP file's frame axis, a prediction table's
+rows), else its last frame + 1.
 """
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -20,9 +24,11 @@ FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'frames')
 
 @dataclass
 class Points2D:
-    """frames (T,) int frame indices; cameras (V,) names; keypoints (C,); points (T, V, C,
-    2) px (NaN = missing); score (T, V, C) (NaN = missing); fmt: the format read;
-    rows: detections read; nan_rows: rows with NaN u / v (missing)."""
+    """frames (T,) int frame indices (the source's numbers); cameras (V,) names; keypoints
+    (C,); points (T, V, C, 2) px (NaN = missing); score (T, V, C) (NaN = missing); fmt: the
+    format read; rows: detections read; nan_rows: rows with NaN u / v (missing);
+    unscored: detections without a score (given score 1); notes: what the reader left out
+    or decided, one line each."""
     frames: np.ndarray
     cameras: tuple
     keypoints: tuple
@@ -31,6 +37,8 @@ class Points2D:
     fmt: str
     rows: int
     nan_rows: int
+    unscored: int = 0
+    notes: tuple = ()
 
 
 def _h5_is_sleap(path):
@@ -109,7 +117,7 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
         if r.keypoint not in kindex:
             raise LabelError(f'{r.place}: field keypoint: {r.keypoint!r} is not a keypoint '
                              f'of the skeleton ({", ".join(names)})')
-    _check_lengths(rows)
+    _check_lengths(rows, result.frame_counts)
     frame = np.array([r.frame for r in rows], np.int64)
     first, last = int(frame.min()), int(frame.max())
     T, V, C = last - first + 1, len(cameras), len(names)
@@ -127,17 +135,29 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
     points = np.full((T, V, C, 2), np.nan)
     score = np.full((T, V, C), np.nan)
     uv = np.array([(r.u, r.v) for r in rows], np.float64)
-    s = np.array([1.0 if r.score is None else r.score for r in rows], np.float64)
+    s = np.array([np.nan if r.score is None else r.score for r in rows], np.float64)
+    present = np.isfinite(uv).all(-1)
+    unscored = present & np.isnan(s)
+    s[unscored] = 1.0                   # no score: as a source without scores
     points[t, v, c] = uv
     score[t, v, c] = s
-    nan_rows = int((~np.isfinite(uv).all(-1)).sum())
+    nan_rows = int((~present).sum())
+    notes = [result.note] if result.note else []
+    if unscored.any():
+        notes.append(f'{int(unscored.sum())} of {int(present.sum())} detections have no score '
+                     '(no score column, or an empty / NaN likelihood or score cell): score 1 '
+                     'used')
     return Points2D(frames=np.arange(first, last + 1), cameras=cameras, keypoints=names,
-                    points=points, score=score, fmt=fmt, rows=len(rows), nan_rows=nan_rows)
+                    points=points, score=score, fmt=fmt, rows=len(rows), nan_rows=nan_rows,
+                    unscored=int(unscored.sum()), notes=tuple(notes))
 
 
-def _check_lengths(rows):
+def _check_lengths(rows, frame_counts=None):
     """Per-camera files (each file one camera) must cover the same frames: LabelError
-    naming two files whose frame counts (last frame + 1) differ."""
+    naming two files whose frame counts differ. A file's count is its declared one
+    (frame_counts {source: frames}: a SLEAP file's frame axis, a prediction table's rows),
+    else its last frame + 1."""
+    frame_counts = frame_counts or {}
     by_source = {}
     for r in rows:
         entry = by_source.setdefault(r.source, [set(), -1])
@@ -145,7 +165,7 @@ def _check_lengths(rows):
         entry[1] = max(entry[1], r.frame)
     if len(by_source) < 2 or any(len(cams) > 1 for cams, _ in by_source.values()):
         return
-    lengths = {src: last + 1 for src, (_, last) in by_source.items()}
+    lengths = {src: frame_counts.get(src, last + 1) for src, (_, last) in by_source.items()}
     if len(set(lengths.values())) > 1:
         (a, na), (b, nb) = sorted(lengths.items(), key=lambda kv: kv[1])[::len(lengths) - 1]
         raise LabelError(f'{a}: {na} frames but {b}: {nb} frames; the per-camera files of '
