@@ -1,12 +1,14 @@
 """`monet triangulate`: 3D keypoints from another tool's 2D detections and a calibration.
 
     monet triangulate POINTS2D... --rig CAL --out OUT [--format auto|dlc|sleap|anipose|
-        frames] [--filter none|kalman|optim] [--fps F] [--skeleton human14]
+        openpose|frames] [--pose-model BODY_25B] [--filter none|kalman|optim] [--fps F]
+        [--skeleton human14]
         [--camera-map SRC=DST] [--threshold-px 15] [--confidence-threshold 0.1]
         [--min-views 2] [--method exclusion|ransac] [--export csv,trc,nwb,npz]
 
 POINTS2D: what `monet labels import` reads (DeepLabCut / Lightning Pose prediction CSV or
-H5 per camera, SLEAP analysis H5 per camera, an anipose pose-2d folder) or a frame-indexed
+H5 per camera, SLEAP analysis H5 per camera, an anipose pose-2d folder, OpenPose /
+Pose2Sim JSON folders: monet_ros.labels_import.openpose) or a frame-indexed
 table frame,camera,keypoint,u,v[,score] (monet_ros.labels_import.points2d); the score /
 likelihood is the detection confidence. Triangulation is the fusion's (fusion.fuse_points:
 views below --confidence-threshold, NaN and missing views left out, confidence-weighted
@@ -28,15 +30,19 @@ HELP = '3D keypoints from 2D detections of other tools (DeepLabCut, SLEAP, anipo
 
 def add_arguments(parser):
     from monet_ros.commands.filter_options import add_filter_arguments
+    from monet_ros.geometry.pose2sim import POSE_MODELS
     from monet_ros.labels_import.points2d import FORMATS
     parser.add_argument('points2d', nargs='+', help='2D tables: per-camera DeepLabCut / '
-                        'SLEAP files, an anipose pose-2d folder, or a frame,camera,keypoint,'
-                        'u,v[,score] CSV')
+                        'SLEAP files, an anipose pose-2d folder, OpenPose / Pose2Sim JSON '
+                        'folders (one per camera), or a frame,camera,keypoint,u,v[,score] CSV')
     parser.add_argument('--rig', required=True, help='calibration (rig YAML, Pose2Sim / '
                         'anipose TOML, ...)')
     parser.add_argument('--out', required=True, help='output folder (must not exist)')
     parser.add_argument('--format', choices=FORMATS, default='auto',
                         help='2D table format (default: detected from the files)')
+    parser.add_argument('--pose-model', choices=tuple(POSE_MODELS), default=None,
+                        help="keypoint names of OpenPose JSON (default: the --skeleton's "
+                        'names when it has as many, else the one model with that many)')
     parser.add_argument('--fps', type=float, default=None,
                         help='frame rate (Hz) of the 2D frames: their times (needed by '
                         '--filter; default 30 without a filter)')
@@ -62,8 +68,9 @@ def add_arguments(parser):
 
 def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, camera_map=None,
                        fusion_config=None, filter_config=None, exports=('csv', 'trc', 'nwb'),
-                       trc_axes='xyz', progress=False):
-    """Triangulate (and filter) 2D tables; write `out`. Returns a dict of figures: frames,
+                       trc_axes='xyz', progress=False, pose_model=None):
+    """Triangulate (and filter) 2D tables; write `out`. pose_model: keypoint names of
+    OpenPose JSON (read_points2d). Returns a dict of figures: frames,
     cameras, keypoints, rows, counts (cells, missing, low_score, triangulated, per-joint
     not triangulated), exports {format: path}, filter (temporal.Smoothed or None), notes.
     progress: optim's iterations as a tqdm bar.
@@ -93,7 +100,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     names = [c.name for c in rig_cameras]
     sk = load_skeleton(skeleton) if skeleton else None
     pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,
-                        camera_map=camera_map)
+                        camera_map=camera_map, pose_model=pose_model)
     notes += pts.notes
     used = [v for v in range(len(names)) if np.isfinite(pts.points[:, v]).any()]
     if len(used) < max(2, fusion_config.min_views):
@@ -151,7 +158,8 @@ def run(args):
                              skeleton=args.skeleton,
                              camera_map=dict(parse_name_map(args.camera_map)),
                              fusion_config=fusion, filter_config=filt, exports=exports,
-                             trc_axes=args.trc_axes, progress=not args.quiet)
+                             trc_axes=args.trc_axes, progress=not args.quiet,
+                             pose_model=args.pose_model)
     n = fig['counts']
     name = 'monet triangulate'
     print(f'{name}: {fig["frames"]} frames (from frame {fig["first_frame"]}) x '

@@ -64,15 +64,18 @@ FORMATS = {
     'anipose': _load('anipose', 'import_anipose'),
     'sleap': _load('sleap', 'import_sleap'),
     'dannce': _load('dannce', 'import_dannce'),
+    'openpose': _load('openpose', 'import_openpose'),   # OpenPose / Pose2Sim JSON folders
     'frames': _frames_csv,
     'stamps': _frames_csv,
 }
 
 
-def import_labels(fmt, paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
+def import_labels(fmt, paths, cameras=(), camera=None, min_score=0.0, camera_map=None,
+                  options=None):
     """ImportResult of labels files in format `fmt` (see FORMATS). paths: a path or a list
     (files, or folders searched for the format's files); cameras: the recording's camera
-    names (to match file / video names to cameras)."""
+    names (to match file / video names to cameras); options: the format's own keyword
+    arguments (openpose: pose_model, keypoints)."""
     if fmt not in FORMATS:
         raise LabelError(f'unknown labels format {fmt!r}; one of {", ".join(sorted(FORMATS))}')
     paths = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)]
@@ -80,4 +83,5 @@ def import_labels(fmt, paths, cameras=(), camera=None, min_score=0.0, camera_map
         if not p.exists():
             raise LabelError(f'{p}: no such file or folder')
     return FORMATS[fmt](paths, cameras=tuple(cameras), camera=camera,
-                        min_score=float(min_score), camera_map=camera_map or {})
+                        min_score=float(min_score), camera_map=camera_map or {},
+                        **(options or {}))

@@ -2,7 +2,8 @@
 
 Reads any 2D table `monet labels import` reads (the same readers): DeepLabCut / Lightning
 Pose prediction CSV / H5 (likelihood = score), SLEAP analysis H5 (point_scores = score),
-anipose pose-2d folders, and the frame-indexed points table frame,camera,keypoint,u,v
+anipose pose-2d folders, OpenPose / Pose2Sim JSON folders (c = score; labels_import.
+openpose), and the frame-indexed points table frame,camera,keypoint,u,v
 [,score] (monet_ros.labels, read_label_rows(points=True)). A detection without a score (a
 source without scores, an empty / NaN likelihood or score cell beside a point) gets score
 1, counted in the notes. Frames are the tables' frame indices (0-based video frames, kept
@@ -19,7 +20,10 @@ import numpy as np
 from monet_ros.labels import LabelError, read_label_rows
 from monet_ros.labels_import import ImportResult, import_labels
 
-FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'frames')
+FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'openpose', 'frames')
+READ = ('DeepLabCut / Lightning Pose prediction .csv or .h5 per camera, SLEAP analysis .h5 '
+        'per camera, an anipose pose-2d folder, OpenPose / Pose2Sim JSON folders (one per '
+        'camera), or a frame,camera,keypoint,u,v[,score] .csv')
 
 
 @dataclass
@@ -51,15 +55,23 @@ def _h5_is_sleap(path):
 
 
 def detect_format(paths):
-    """The format of 2D table paths (list of Path): dlc, sleap, anipose or frames.
-    Raises LabelError naming the file when it is none of them."""
+    """The format of 2D table paths (list of Path): dlc, sleap, anipose, openpose or
+    frames. Raises LabelError naming the file and the formats read when it is none."""
     first = paths[0]
     if first.is_dir():
         h5 = sorted(first.rglob('*.h5'))
         if h5:
             return 'sleap' if _h5_is_sleap(h5[0]) else 'anipose'
-        return 'dlc'
+        if any(f.suffix.lower() == '.csv' and ('DLC' in f.name or
+                                               f.name.startswith('CollectedData'))
+               for f in first.rglob('*')):
+            return 'dlc'
+        if next(first.rglob('*.json'), None) is not None:
+            return 'openpose'
+        raise LabelError(f'{first}: no 2D tables found in the folder; read: {READ}')
     suffix = first.suffix.lower()
+    if suffix == '.json':
+        return 'openpose'
     if suffix in ('.h5', '.hdf5'):
         return 'sleap' if _h5_is_sleap(first) else 'dlc'
     if suffix == '.csv':
@@ -74,17 +86,19 @@ def detect_format(paths):
             return 'frames'
         raise LabelError(f'{first}:1: first field {head!r}: neither a DeepLabCut table '
                          "('scorer') nor a points table ('frame,camera,keypoint,u,v[,score]')")
-    raise LabelError(f'{first}: not a 2D table (.csv, .h5 or an anipose pose-2d folder)')
+    raise LabelError(f'{first}: not a 2D table; read: {READ}')
 
 
-def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
+def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
+                  pose_model=None):
     """Points2D of 2D tables.
 
     paths: a path or list (files, or a folder); cameras: the rig's camera names (V, in
     rig order: the output's order; cameras with no detection stay NaN); fmt: one of
     FORMATS; keypoints: names fixing the output's keypoints and order (a detection of
     another keypoint is an error), None = the sources' keypoints in their order;
-    camera_map: {source camera: rig camera}.
+    camera_map: {source camera: rig camera}; pose_model: the keypoint names of OpenPose
+    JSON (a name of geometry.pose2sim.POSE_MODELS; labels_import.openpose).
     Raises LabelError (one line naming the file and field) for an unknown camera or
     keypoint, a wrong column set, a (frame, camera, keypoint) given twice, per-camera
     files of different lengths, or nothing to read."""
@@ -103,7 +117,10 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
         rows = [replace(r, camera=camera_map.get(r.camera, r.camera)) for r in rows]
         result = ImportResult(rows, tuple(dict.fromkeys(r.keypoint for r in rows)))
     else:
-        result = import_labels(fmt, paths, cameras=cameras, camera_map=camera_map)
+        options = dict(pose_model=pose_model, keypoints=keypoints) if fmt == 'openpose' \
+            else None
+        result = import_labels(fmt, paths, cameras=cameras, camera_map=camera_map,
+                               options=options)
     rows = result.rows
     if not rows:
         raise LabelError(f'{", ".join(map(str, paths))}: no 2D detections found')
