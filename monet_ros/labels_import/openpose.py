@@ -6,7 +6,8 @@ Layout: one folder per camera (e.g. cam01_json/) of one JSON file per video fram
 the pose model. Read as:
 - frame = the last number in the file name (12 above), the video's frame index;
 - camera = the folder's name matched to the rig's cameras (as anipose matches file names:
-  cam01_json -> cam01; --camera-map SRC=DST renames);
+  cam01_json -> cam01; --camera-map SRC=DST renames), else the name of the folder above
+  it (cam01/json/);
 - keypoint names = the stated pose model's (pose_model, geometry.pose2sim.POSE_MODELS:
   BODY_25, BODY_25B, COCO_18, COCO_17, HALPE_26), else the skeleton's names when it has as
   many keypoints as the files (in the model's output order), else the one model with that
@@ -64,6 +65,12 @@ def model_names(count, source, pose_model=None, keypoints=None):
                      f"of {count} keypoints in the model's order")
 
 
+def _mean_confidence(c):
+    """Mean of a person's finite confidences, -1 when it has none."""
+    c = c[np.isfinite(c)]
+    return float(c.mean()) if c.size else -1.0
+
+
 def import_openpose(paths, cameras=(), camera=None, min_score=0.0, camera_map=None,
                     pose_model=None, keypoints=None):
     """ImportResult of OpenPose JSON folders (module docstring). pose_model: a name of
@@ -78,6 +85,9 @@ def import_openpose(paths, cameras=(), camera=None, min_score=0.0, camera_map=No
     files_read = several = others = dropped = 0
     for folder, files in json_folders(paths).items():
         cam = camera_for(folder.name, cameras, camera, camera_map)
+        if cam not in cameras:          # e.g. cam01/json/: the camera is the folder above
+            above = camera_for(folder.parent.name, cameras, camera, camera_map)
+            cam = above if above in cameras else cam
         last = -1
         for path in files:
             frame = frame_of_image(path.name)
@@ -101,7 +111,7 @@ def import_openpose(paths, cameras=(), camera=None, min_score=0.0, camera_map=No
             if len(people) > 1:
                 several += 1
                 others += len(people) - 1
-            best = max(people, key=lambda p: float(np.nanmean(p[:, 2])))
+            best = max(people, key=lambda p: _mean_confidence(p[:, 2]))
             for c, (u, v, score) in enumerate(best):
                 if not (np.isfinite(u) and np.isfinite(v)) or score == 0:
                     continue

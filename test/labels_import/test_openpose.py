@@ -82,6 +82,12 @@ def test_generated_openpose_files_frame_numbers_from_names_and_model_from_count(
         np.testing.assert_array_equal(p.score[[0, 1, 3], v][det[cam][..., 2] > 0],
                                       det[cam][..., 2][det[cam][..., 2] > 0])
     assert np.isnan(p.points[2]).all() and np.isnan(p.points[1, :, 4]).all()
+    # OpenPose's --write_json into <camera>/json/: the camera is the folder above
+    for cam in ('left', 'right'):
+        (tmp_path / 'nested' / cam).mkdir(parents=True)
+        (tmp_path / 'json' / cam).rename(tmp_path / 'nested' / cam / 'json')
+    q = read_points2d([tmp_path / 'nested'], ['left', 'right'])
+    np.testing.assert_array_equal(q.points, p.points)
 
 
 def test_bad_openpose_input_is_named(tmp_path, shared_data):
