@@ -55,7 +55,7 @@ def model_names(count, source, pose_model=None, keypoints=None):
                              f'person, but {pose_model} has {len(names)}')
         return names, pose_model
     if keypoints is not None and len(keypoints) == count:
-        return tuple(keypoints), "the skeleton's names, in order"
+        return tuple(keypoints), 'the skeleton (in order)'
     fits = [m for m, names in POSE_MODELS.items() if len(names) == count]
     if len(fits) == 1:
         return POSE_MODELS[fits[0]], fits[0]
