@@ -19,10 +19,10 @@ FPS = 25.0
 
 
 def test_source_frames_and_times_from_the_origin(tmp_path):
-    fnum = np.array([50, 51, 53])
+    fnum = np.array([50, 51, 52, 54])
     stamps = np.round(fnum * 1e9 / FPS).astype(np.int64)
-    X = np.arange(18, dtype=float).reshape(3, 2, 3)
-    ones = np.ones((3, 2))
+    X = np.arange(24, dtype=float).reshape(4, 2, 3)
+    ones = np.ones((4, 2))
     csv = write_anipose_csv(tmp_path / 'k.csv', KP, stamps, X, ones, ones, ones, fnum=fnum)
     np.testing.assert_array_equal(read_anipose_csv(csv)['fnum'], fnum)
     trc = read_trc(write_trc(tmp_path / 'k.trc', KP, stamps, X, fnum=fnum, origin_ns=0,
@@ -32,7 +32,7 @@ def test_source_frames_and_times_from_the_origin(tmp_path):
     assert trc['rate'] == FPS
     np.testing.assert_allclose(export_times(stamps, 0), fnum / FPS, rtol=0, atol=1e-12)
     # without them: counted from the first stamp, as `monet process` writes
-    np.testing.assert_array_equal(source_frames(stamps), [0, 1, 3])
+    np.testing.assert_array_equal(source_frames(stamps), [0, 1, 2, 4])
     assert export_times(stamps)[0] == 0.0
     # one frame: its number, its time and the given rate
     one = read_trc(write_trc(tmp_path / 'one.trc', KP, stamps[:1], X[:1], fnum=fnum[:1],
