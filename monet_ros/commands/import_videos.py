@@ -7,7 +7,9 @@ player read.
         [--format jpeg|png] [--camera-map cam_01=cam01] [--start-ns N] [--timing container]
 
 - SESSION_DIR holds one video per camera (any file OpenCV/FFmpeg decodes: .mp4, .avi,
-  .mkv, .mov, ...) or one folder of images per camera (.png/.jpg). A camera of the
+  .mkv, .mov, ...), one folder of images per camera (.png/.jpg), or one folder per camera
+  holding its video (sleap-anipose's layout SESSION/back/minimal_back.mp4: the folder's
+  name is the entry's, its subfolders such as calibration_images/ are not read). A camera of the
   calibration (any monet_ros.geometry.load_rig format) is matched to the entry whose name
   contains the camera name, as anipose does (the longest camera name wins, so cam1 does
   not take cam10's file); --camera-map renames calibration cameras first (Pose2Sim's

@@ -33,6 +33,7 @@ def label_options_from_args(args):
 
 
 def add_arguments(parser):
+    from monet_ros.geometry.pose2sim import POSE_MODELS
     from monet_ros.labels_import import FORMATS
     sub = parser.add_subparsers(dest='labels_command', metavar='ACTION')
     sub.required = True
@@ -53,6 +54,9 @@ def add_arguments(parser):
     imp.add_argument('--min-score', type=float, default=0.0,
                      help='drop points whose likelihood/score is below this (anipose, SLEAP '
                      'predictions; counted)')
+    imp.add_argument('--pose-model', choices=tuple(POSE_MODELS), default=None,
+                     help="openpose: the keypoint names (default: the --skeleton's when it "
+                     'has as many, else the one model with that many)')
     add_label_arguments(imp)
 
 
@@ -68,10 +72,14 @@ def run(args):
         index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map,
                                 rig_units=args.rig_units)
         cameras = [c.name for c in index.cameras]
+        skeleton = tuple(load_skeleton(args.skeleton).keypoints) if args.skeleton else None
+        extra = (dict(pose_model=args.pose_model, keypoints=skeleton)
+                 if args.format == 'openpose' else None)
         result = import_labels(args.format, args.path, cameras=cameras, camera=args.camera,
-                               min_score=args.min_score, camera_map=dict(options.camera_map))
-        if args.skeleton:
-            keypoints = tuple(load_skeleton(args.skeleton).keypoints)
+                               min_score=args.min_score, camera_map=dict(options.camera_map),
+                               options=extra)
+        if skeleton:
+            keypoints = skeleton
         else:
             mapped = dict(options.keypoint_map)
             keypoints = tuple(dict.fromkeys(mapped.get(k, k) for k in result.keypoints))

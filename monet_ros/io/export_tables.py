@@ -27,8 +27,15 @@ recording is a gap in Frame#; the rate is the median stamp period's, snapped to 
 when within 1e-4 Hz.
 
 One time base for every export (TIME_BASE): time of an instant = (its header stamp - the
-first exported instant's stamp) / 1e9 s, so the first instant is 0.0: TRC Time, the NWB
-timestamps (export_nwb) and stamp_ns - stamp_ns[0] of the CSV / npz are the same numbers.
+time origin) / 1e9 s. The origin is the first exported instant's stamp (a recording,
+`monet process`: the first instant is 0.0) unless the writer is given origin_ns: 2D tables
+(`monet triangulate`) have stamps = source frame / fps (+ a start time the source gives)
+and origin 0, so an export's time is its source's (video frame 10 at 30 fps: 0.333 s). TRC
+Time and the NWB timestamps (export_nwb) are the same numbers.
+Frame numbers (SOURCE_FRAMES): CSV fnum = the source's frame number (anipose's meaning,
+0-based) when the writer is given fnum (2D tables: the tables' own frame numbers, a table
+that starts late keeps them), else counted from the stamps as above; TRC Frame# = fnum + 1
+(OpenSim's 1-based numbering, as Pose2Sim writes frame 0 as Frame# 1).
 (Pose2Sim writes Time = Frame# / DataRate, one period later; readers here place TRC rows
 by Frame#, which both agree on.)
 """
@@ -41,7 +48,8 @@ import numpy as np
 from monet_ros.labels import frame_period_ns
 
 FIELDS = ('x', 'y', 'z', 'error', 'ncams', 'score')
-TIME_BASE = 'seconds from the first exported instant (its header stamp); first instant 0.0'
+TIME_BASE = ('seconds from the time origin: the first exported instant, or frame 0 of the '
+             'source for 2D tables (frame / fps)')
 EXTRA_FIELDS = ('change_mm', 'bridged')
 AXES = {'xyz': (0, 1, 2), 'yzx': (1, 2, 0)}
 
@@ -60,11 +68,27 @@ def frame_numbers(stamps_ns):
     return np.round((stamps - stamps[0]) / period).astype(np.int64)
 
 
-def export_times(stamps_ns):
-    """(T,) seconds of each instant from the first one (TIME_BASE): the time column of
-    every export."""
+def export_times(stamps_ns, origin_ns=None):
+    """(T,) seconds of each instant from the time origin (TIME_BASE): origin_ns (int ns),
+    default the first stamp. The time column of every export."""
     stamps = np.asarray(stamps_ns, dtype=np.int64)
-    return (stamps - stamps[0]) / 1e9 if len(stamps) else np.zeros(0)
+    if not len(stamps):
+        return np.zeros(0)
+    return (stamps - (stamps[0] if origin_ns is None else np.int64(origin_ns))) / 1e9
+
+
+def source_frames(stamps_ns, fnum=None):
+    """(T,) int frame numbers of the exported instants (SOURCE_FRAMES in the module
+    docstring): fnum as given (the source's own), else frame_numbers(stamps_ns).
+    Raises ExportError when fnum is not T integers."""
+    if fnum is None:
+        return frame_numbers(stamps_ns)
+    out = np.asarray(fnum)
+    if out.shape != (len(stamps_ns),) or (out.size and not np.issubdtype(out.dtype,
+                                                                          np.integer)):
+        raise ExportError(f'fnum: expected {len(stamps_ns)} integer frame numbers, got '
+                          f'shape {out.shape} {out.dtype}')
+    return out.astype(np.int64)
 
 
 def _cell(x, integer=False):
@@ -101,10 +125,11 @@ def read_csv_units(path):
 
 
 def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=None,
-                      units='m'):
+                      units='m', fnum=None):
     """Write anipose's 3D CSV. X (T, C, 3) in `units` (the rig's length unit, written to
     the sidecar csv_units_path(path)); error, ncams, score (T, C); extra: None or
-    {field: (T, C)} for fields of EXTRA_FIELDS (module docstring). Atomic."""
+    {field: (T, C)} for fields of EXTRA_FIELDS (module docstring); fnum: None or (T,) int
+    the source's frame numbers (source_frames). Atomic."""
     import json
     extra = {f: np.asarray(v, float) for f, v in (extra or {}).items()}
     bad = [f for f in extra if f not in EXTRA_FIELDS]
@@ -112,7 +137,7 @@ def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=
         raise ExportError(f'{path}: unknown extra column {bad[0]!r}; one of {EXTRA_FIELDS}')
     X = np.asarray(X, float)
     T, C = X.shape[:2]
-    fnum = frame_numbers(stamps_ns)
+    fnum = source_frames(stamps_ns, fnum)
     path, tmp = _atomic_writer(path)
     with open(tmp, 'w', newline='', encoding='utf-8') as f:
         w = csv.writer(f, lineterminator='\n')
@@ -188,19 +213,22 @@ def read_anipose_csv(path):
                 extra={f: out[f] for f in present})
 
 
-def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m'):
+def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m', fnum=None,
+              origin_ns=None, rate_hz=None):
     """Write a TRC marker file (module docstring). X (T, C, 3) world in `units` (the
     rig's, the header's Units); axes 'xyz' (as is) or 'yzx' (Y-up as Pose2Sim / OpenSim:
-    trc = world(Y, Z, X)). Atomic."""
+    trc = world(Y, Z, X)); fnum (T,) source frame numbers (Frame# = fnum + 1) and origin_ns
+    (Time origin): None = counted from the first stamp (TIME_BASE, SOURCE_FRAMES); rate_hz:
+    DataRate when known (default: the median stamp period's). Atomic."""
     if axes not in AXES:
         raise ExportError(f'axes must be one of {sorted(AXES)}, got {axes!r}')
     X = np.asarray(X, float)[..., list(AXES[axes])]
     T, C = X.shape[:2]
     period = frame_period_ns(stamps_ns)
-    rate = 1e9 / period if period > 0 else 0.0
+    rate = float(rate_hz) if rate_hz else 1e9 / period if period > 0 else 0.0
     if abs(rate - round(rate, 3)) < 1e-4:      # integer-ns periods: 16666667 ns -> 60 Hz
         rate = round(rate, 3)
-    fnum = frame_numbers(stamps_ns) + 1
+    fnum = source_frames(stamps_ns, fnum) + 1
     path, tmp = _atomic_writer(path)
     rate_text = f'{rate:g}'
     lines = [f'PathFileType\t4\t(X/Y/Z)\t{path.name}',
@@ -210,7 +238,7 @@ def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m'):
              f'{int(fnum[0]) if T else 1}\t{T}',
              'Frame#\tTime\t' + ''.join(f'{k}\t\t\t' for k in keypoints)[:-1],
              '\t\t' + '\t'.join(f'{a}{c + 1}' for c in range(C) for a in 'XYZ')]
-    times = export_times(stamps_ns)
+    times = export_times(stamps_ns, origin_ns)
     for t in range(T):
         time = float(times[t])
         lines.append(f'{int(fnum[t])}\t{time!r}\t'
