@@ -82,9 +82,14 @@ def run(args):
     from monet_ros.learning import distributed
     from monet_ros.learning.distributed import DistributedTrainer as Trainer
     from monet_ros.learning.recording import load_recording
-    from monet_ros.learning.trainer import check_training_precision, pick_device
+    from monet_ros.learning.trainer import (
+        check_resume_keypoints,
+        check_training_precision,
+        pick_device,
+    )
     from monet_ros.models import build_model
     from monet_ros.models.device import check_device
+    from monet_ros.skeleton import load_skeleton
 
     options = TrainRunOptions(max_instants=args.max_instants, threads=args.threads)
     config = config_from_args(args)
@@ -102,9 +107,15 @@ def run(args):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
+    skeleton = load_skeleton(args.skeleton)
+    if world.writer:
+        print(f'monet train: {skeleton_line(skeleton, args.skeleton)}', file=sys.stderr,
+              flush=True)
+    if args.resume and (out / 'trainer_state.pt').exists():    # before any network is built
+        check_resume_keypoints(out, skeleton.keypoints, skeleton.name)
     out.mkdir(parents=True, exist_ok=True)        # an unwritable place is named at once
     recording = load_recording(args.data, rig=args.rig, labels=args.labels,
-                               ground_truth=args.ground_truth, skeleton=args.skeleton,
+                               ground_truth=args.ground_truth, skeleton=skeleton.keypoints,
                                max_instants=options.max_instants or None,
                                label_options=label_options_from_args(args))
     notes = ([f'monet train: {recording.read_report.notice(args.data)}']
@@ -120,13 +131,7 @@ def run(args):
         data = distributed.shared_training_data(recording, config, probe.input_size,
                                                 probe.heatmap_size)
     except ValueError as error:
-        labelled = recording.labelled_instants
-        where = (f'{len(labelled)} labelled instants (indices {labelled.tolist()[:8]}) of '
-                 f'{recording.num_instants}' if len(labelled) else 'no labelled instant: '
-                 'give --labels (or a labels.csv beside the recording)')
-        raise ValueError(f'{error}; {where}; --eval-fraction {config.eval_fraction} holds '
-                         'out the tail (use --eval-fraction 0 to train on every labelled '
-                         'instant)') from None
+        raise ValueError(f'{error}; {_labels_text(recording, config)}') from None
     if args.resume and (out / 'trainer_state.pt').exists():
         trainer = Trainer.resume(out, data, config=config, device=device)
         if world.writer:
@@ -136,6 +141,7 @@ def run(args):
             print(f'nothing to resume: no {out / "trainer_state.pt"} (a checkpoint is written '
                   f'every {config.checkpoint_every} steps); starting at step 0', file=sys.stderr)
         trainer = Trainer(config, data, out, device=device)
+    trainer.skeleton_name = skeleton.name
     if world.writer:
         print(f'{recording.name}: {recording.num_instants} instants x {recording.num_views} '
               f'views, {len(data.labelled_instants)} labelled, {len(data.unlabeled_instants)} '
@@ -190,6 +196,46 @@ def run(args):
     print(json.dumps(summary, indent=1))
     distributed.shutdown()
     return 0
+
+
+def skeleton_line(skeleton, given):
+    """'skeleton NAME (FILE), C keypoints: a, b, ...' (the start-up line of `monet train`):
+    which skeleton the heatmap channels are, a preset's file or the YAML given."""
+    from monet_ros.share import share_path
+    source = str(given)
+    if not Path(source).suffix and not Path(source).exists():
+        try:
+            source = f'preset {share_path("config", "skeletons", f"{given}.yaml")}'
+        except FileNotFoundError:
+            pass
+    names = list(skeleton.keypoints)
+    shown = ', '.join(names[:8]) + (', ...' if len(names) > 8 else '')
+    return (f'skeleton {skeleton.name} ({source}), {len(names)} keypoints: {shown} '
+            '(--skeleton to choose another)')
+
+
+def _labels_text(recording, config):
+    """Where the labelled instants went, for the error of a run left with none to train on:
+    none in the labels, or all held out by --eval-fraction / --validation-labels."""
+    import numpy as np
+
+    from monet_ros.learning.trainer import split_instants
+    labelled = recording.labelled_instants
+    if not len(labelled):
+        return ('the labels have no instant of this recording: give --labels (or a labels.csv '
+                'beside the recording)')
+    text = (f'{len(labelled)} labelled instants (indices {labelled.tolist()[:8]}) of '
+            f'{recording.num_instants}')
+    if config.eval_fraction > 0:
+        held = np.intersect1d(labelled, split_instants(recording.num_instants,
+                                                       config.eval_fraction)[1])
+        text += (f', {len(held)} of them in the last {config.eval_fraction:.0%} of the '
+                 f'instants, held out by --eval-fraction {config.eval_fraction:g} (the '
+                 'default 0 trains on every instant)')
+    if config.validation_labels > 0:
+        text += (f'; --validation-labels {config.validation_labels:g} holds out a share of '
+                 'the labelled instants')
+    return text
 
 
 def _gate_text(gate):
