@@ -56,8 +56,9 @@ def add_arguments(parser):
         flag = '--' + f.name.replace('_', '-')
         kind = {'int': int, 'float': float, 'str': str, 'bool': parse_bool}[
             f.type if isinstance(f.type, str) else f.type.__name__]
+        default = COMMAND_DEFAULTS.get(f.name, f.default)
         group.add_argument(flag, dest=f.name, type=kind, default=None,
-                           help=f'{f.metadata["description"]} (default {f.default!r})')
+                           help=f'{f.metadata["description"]} (default {default!r})')
 
 
 def parse_bool(text):
@@ -69,9 +70,14 @@ def parse_bool(text):
     return value
 
 
+# TrainConfig fields whose default for `monet train` is not the Python API's
+COMMAND_DEFAULTS = {'precision': 'auto'}
+
+
 def config_from_args(args):
-    values = {f.name: getattr(args, f.name) for f in fields(TrainConfig)
-              if getattr(args, f.name, None) is not None}
+    values = dict(COMMAND_DEFAULTS)
+    values.update({f.name: getattr(args, f.name) for f in fields(TrainConfig)
+                   if getattr(args, f.name, None) is not None})
     return TrainConfig(**values)
 
 
@@ -88,6 +94,7 @@ def run(args):
         pick_device,
     )
     from monet_ros.models import build_model
+    from monet_ros.models.detector import resolve_precision
     from monet_ros.models.device import check_device
     from monet_ros.skeleton import load_skeleton
 
@@ -97,7 +104,11 @@ def run(args):
     check_threads('monet train', options.threads)
     world, device = distributed.init_from_env(config.device)     # a torchrun job, if any
     # bfloat16 only where native: refused before the recording is read
-    check_training_precision(config.precision, device or pick_device(config.device))
+    train_device = device or pick_device(config.device)
+    check_training_precision(config.precision, train_device)
+    if world.writer:           # which arithmetic runs, and why (auto: the CPU feature found)
+        note = resolve_precision(config.precision, 'torch', train_device)[1]
+        print(f'monet train: {note}', file=sys.stderr, flush=True)
     if world.distributed and args.holdout_labelled:
         raise ValueError('--holdout-labelled is not supported under torchrun (train, then '
                          'score the held-out labels with `monet eval`)')

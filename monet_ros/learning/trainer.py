@@ -23,7 +23,8 @@ Precision (config.precision): bfloat16 runs the network forward under torch.auto
 (about 2x the steps/s on a CPU with AVX512-BF16 / AMX, bench/train_recipe.py); the stages are
 cast to float32 before the losses, and weights, Adam and checkpoints stay float32. It is
 refused (ConfigError naming precision) where bfloat16 is not native: the inference rule,
-models.detector.check_precision.
+models.detector.check_precision; auto picks bfloat16 there where native, else float32
+(models.detector.resolve_precision; Trainer.precision / precision_note say which).
 
 Problems that make a run quietly useless are warned about loudly (stderr by default, and in
 `warnings` of the run summary): a semi-supervised term with no data (no pseudo-labels, a
@@ -67,7 +68,7 @@ from monet_ros.learning.pseudo_labels import (
     spatiotemporal_pseudo_labels,
 )
 from monet_ros.models import build_model, decode_heatmaps, save_checkpoint
-from monet_ros.models.detector import check_precision
+from monet_ros.models.detector import check_precision, resolve_precision
 
 STATE_FORMAT = 'monet_ros.trainer_state/1'
 LOG_FIELDS = ('step', 'loss', *LOSS_TERMS, 'lr', 'pseudo_labels', 'seconds')
@@ -361,6 +362,9 @@ class Trainer:
         self.data = data
         self.device = torch.device(device) if device is not None else pick_device(config.device)
         check_training_precision(config.precision, self.device)
+        # auto -> bfloat16 where native on the device, else float32 (the inference rule)
+        self.precision, self.precision_note = resolve_precision(config.precision, 'torch',
+                                                                self.device)
         self.out_dir = Path(out_dir) if out_dir is not None else None
         torch.manual_seed(config.seed)
         self.keypoints = list(data.recording.keypoints)
@@ -628,10 +632,11 @@ class Trainer:
 
     def autocast(self):
         """The context of the training forward: torch.autocast to bfloat16 when
-        config.precision is bfloat16 (weights, gradients and Adam stay float32), else none.
+        the precision run (config.precision, auto resolved) is bfloat16 (weights, gradients
+        and Adam stay float32), else none.
         Detections (detect: bootstrapping, fit_error) run in float32."""
         return torch.autocast(self.device.type, dtype=torch.bfloat16,
-                              enabled=self.config.precision == 'bfloat16')
+                              enabled=self.precision == 'bfloat16')
 
     def forward_batch(self, images):
         """The network's stages on a batch of crops (B, 3, H, W); learning.distributed
