@@ -96,3 +96,29 @@ def test_demo_recipe_is_sparse_distinct_sided_and_the_default_recipe_at_a_short_
     assert TRAIN_ARGS[TRAIN_ARGS.index('--mode') + 1] == 'supervised'
     assert int(TRAIN_ARGS[TRAIN_ARGS.index('--steps') + 1]) < 2000
     assert '--lr' not in TRAIN_ARGS
+
+
+def test_demo_training_shows_its_progress(tmp_path, repo_root):
+    """The demo's `monet train` (its TRAIN_ARGS, a few steps here) shows a progress bar with
+    the step count on stderr: the first `make demo` trains for minutes."""
+    import os
+    import subprocess
+    import sys
+
+    from helpers.blob_bag import write_blob_folder
+    from helpers.blobs import blob_recording
+    data = write_blob_folder(blob_recording(num_views=3, T=8, C=3, labelled=(2, 5)),
+                             tmp_path / 'data')
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text('name: blobs\nkeypoints: [k0, k1, k2]\n')
+    args = list(TRAIN_ARGS)
+    args[args.index('--steps') + 1] = '3'
+    args[args.index('--checkpoint-every') + 1] = '3'
+    env = dict(os.environ)
+    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(repo_root), env.get('PYTHONPATH')]))
+    done = subprocess.run([sys.executable, '-m', 'monet_ros.cli', 'train', str(data), '--out',
+                           str(tmp_path / 'run'), '--skeleton', str(skeleton), '--width', '8',
+                           '--batch-labelled', '2', *args], cwd=repo_root, env=env,
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    assert 'train supervised: 100%' in done.stderr and '3/3' in done.stderr
