@@ -25,11 +25,10 @@ def check_threads(owner, threads):
 
 def print_precision(owner, precision, backend='torch', device=None):
     """Resolve --precision (auto: bfloat16 where native, else float32) for `device` (None =
-    CUDA when present, else CPU) and print the one line saying which runs and why (stderr,
-    `owner: precision auto: ...`); returns the precision run. ConfigError names precision
-    for a value that cannot run (bfloat16 on a CPU that would emulate it)."""
-    import sys
-
+    CUDA when present, else CPU) and print the one line saying which runs and why (stdout,
+    `owner: precision auto: ...`: stderr keeps one line for a bad input); returns the
+    precision run. ConfigError names precision for a value that cannot run (bfloat16 on a
+    CPU that would emulate it)."""
     import torch
 
     from monet_ros.models.detector import resolve_precision
@@ -39,7 +38,7 @@ def print_precision(owner, precision, backend='torch', device=None):
         chosen, note = resolve_precision(precision, backend, device)
     except ValueError as error:
         raise ConfigError(owner, 'precision', str(error)) from None
-    print(f'{owner}: {note}', file=sys.stderr, flush=True)
+    print(f'{owner}: {note}', flush=True)
     return chosen
 
 

@@ -85,6 +85,7 @@ def run(args):
     from monet_ros.commands.common import check_threads
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.commands.train_holdout import hold_out, score_holdout
+    from monet_ros.labels import LabelError
     from monet_ros.learning import distributed
     from monet_ros.learning.distributed import DistributedTrainer as Trainer
     from monet_ros.learning.recording import load_recording
@@ -106,9 +107,8 @@ def run(args):
     # bfloat16 only where native: refused before the recording is read
     train_device = device or pick_device(config.device)
     check_training_precision(config.precision, train_device)
-    if world.writer:           # which arithmetic runs, and why (auto: the CPU feature found)
-        note = resolve_precision(config.precision, 'torch', train_device)[1]
-        print(f'monet train: {note}', file=sys.stderr, flush=True)
+    # which arithmetic runs, and why (auto: the CPU feature found); said with the notes
+    precision_note = resolve_precision(config.precision, 'torch', train_device)[1]
     if world.distributed and args.holdout_labelled:
         raise ValueError('--holdout-labelled is not supported under torchrun (train, then '
                          'score the held-out labels with `monet eval`)')
@@ -119,18 +119,24 @@ def run(args):
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
     skeleton = load_skeleton(args.skeleton)
-    if world.writer:
-        print(f'monet train: {skeleton_line(skeleton, args.skeleton)}', file=sys.stderr,
-              flush=True)
+    said = skeleton_line(skeleton, args.skeleton)
     if args.resume and (out / 'trainer_state.pt').exists():    # before any network is built
         check_resume_keypoints(out, skeleton.keypoints, skeleton.name)
     out.mkdir(parents=True, exist_ok=True)        # an unwritable place is named at once
-    recording = load_recording(args.data, rig=args.rig, labels=args.labels,
-                               ground_truth=args.ground_truth, skeleton=skeleton.keypoints,
-                               max_instants=options.max_instants or None,
-                               label_options=label_options_from_args(args))
-    notes = ([f'monet train: {recording.read_report.notice(args.data)}']
-             if recording.read_report.notice(args.data) else [])
+    try:
+        recording = load_recording(args.data, rig=args.rig, labels=args.labels,
+                                   ground_truth=args.ground_truth, skeleton=skeleton.keypoints,
+                                   max_instants=options.max_instants or None,
+                                   label_options=label_options_from_args(args))
+    except LabelError as error:      # labels of another animal: say which skeleton it was
+        if 'is not a keypoint of the skeleton' not in str(error):
+            raise
+        raise LabelError(f'{error} [{said}]') from None
+    # the skeleton and the arithmetic first (once the inputs are read: a bad input stays one
+    # line), then what reading found
+    notes = [f'monet train: {said}', f'monet train: {precision_note}']
+    notes += ([f'monet train: {recording.read_report.notice(args.data)}']
+              if recording.read_report.notice(args.data) else [])
     notes += [f'monet train: note: {note}' for note in recording.rig_notes]
     if recording.label_report is not None:
         notes.append(f'monet train: labels: {recording.label_report.summary()}')
