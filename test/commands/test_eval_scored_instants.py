@@ -2,12 +2,10 @@
 on) and counts reprojection errors beyond the image diagonal as failures instead of
 averaging them (a badly trained model's triangulation can land 1e15 px away)."""
 import json
-import os
-import subprocess
-import sys
 
 from helpers.blob_bag import write_blob_folder
 from helpers.blobs import blob_recording
+from helpers.commands import run_monet_process
 import numpy as np
 import pytest
 
@@ -22,10 +20,7 @@ TRAIN = ['--architecture', 'small', '--input-size', '48', '--width', '16',
 
 
 def monet(repo_root, *args):
-    env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(repo_root), env.get('PYTHONPATH')]))
-    return subprocess.run([sys.executable, '-m', 'monet_ros.cli', *map(str, args)],
-                          cwd=repo_root, env=env, capture_output=True, text=True, timeout=300)
+    return run_monet_process(repo_root, *args)
 
 
 def test_errors_beyond_the_image_diagonal_are_failures_counted_apart():

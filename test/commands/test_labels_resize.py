@@ -4,12 +4,10 @@ the recording records the videos' size, the import scales the labels to the reco
 images and says so; labels at the wrong scale are refused whole (never half kept by
 --skip-bad-labels), naming the option that brings them."""
 import csv
-import os
-import subprocess
-import sys
 
 import cv2
 import h5py
+from helpers.commands import run_monet_process
 import numpy as np
 import pytest
 import yaml
@@ -18,10 +16,7 @@ CAMERAS = ('back', 'mid', 'side', 'top')
 
 
 def monet(repo_root, *args, cwd):
-    env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(repo_root), env.get('PYTHONPATH')]))
-    return subprocess.run([sys.executable, '-m', 'monet_ros.cli', *map(str, args)], cwd=cwd,
-                          env=env, capture_output=True, text=True, timeout=300)
+    return run_monet_process(repo_root, *args, cwd=cwd)
 
 
 def sleap_points(path):

@@ -101,12 +101,9 @@ def test_demo_recipe_is_sparse_distinct_sided_and_the_default_recipe_at_a_short_
 def test_demo_training_shows_its_progress(tmp_path, repo_root):
     """The demo's `monet train` (its TRAIN_ARGS, a few steps here) shows a progress bar with
     the step count on stderr: the first `make demo` trains for minutes."""
-    import os
-    import subprocess
-    import sys
-
     from helpers.blob_bag import write_blob_folder
     from helpers.blobs import blob_recording
+    from helpers.commands import run_monet_process
     data = write_blob_folder(blob_recording(num_views=3, T=8, C=3, labelled=(2, 5)),
                              tmp_path / 'data')
     skeleton = tmp_path / 'blobs.yaml'
@@ -114,11 +111,7 @@ def test_demo_training_shows_its_progress(tmp_path, repo_root):
     args = list(TRAIN_ARGS)
     args[args.index('--steps') + 1] = '3'
     args[args.index('--checkpoint-every') + 1] = '3'
-    env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(repo_root), env.get('PYTHONPATH')]))
-    done = subprocess.run([sys.executable, '-m', 'monet_ros.cli', 'train', str(data), '--out',
-                           str(tmp_path / 'run'), '--skeleton', str(skeleton), '--width', '8',
-                           '--batch-labelled', '2', *args], cwd=repo_root, env=env,
-                          capture_output=True, text=True, timeout=300)
+    done = run_monet_process(repo_root, 'train', data, '--out', tmp_path / 'run', '--skeleton',
+                             skeleton, '--width', '8', '--batch-labelled', '2', *args)
     assert done.returncode == 0, done.stderr
     assert 'train supervised: 100%' in done.stderr and '3/3' in done.stderr

@@ -2,13 +2,11 @@
 learner's `precision`): bfloat16 where this machine runs it natively, else float32, said in
 one line naming the CPU feature. Checked against the CPU flags read independently from
 /proc/cpuinfo (the flags oneDNN's bfloat16 paths need: avx512_bf16, amx_bf16)."""
-import os
 from pathlib import Path
-import subprocess
-import sys
 
 from helpers.blob_bag import write_blob_folder
 from helpers.blobs import blob_recording
+from helpers.commands import run_monet_process
 import pytest
 
 from monet_ros.models import build_model
@@ -41,10 +39,7 @@ pytestmark = pytest.mark.skipif(not Path('/proc/cpuinfo').is_file(),
 
 
 def monet(repo_root, *args):
-    env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(repo_root), env.get('PYTHONPATH')]))
-    return subprocess.run([sys.executable, '-m', 'monet_ros.cli', *map(str, args)],
-                          cwd=repo_root, env=env, capture_output=True, text=True, timeout=300)
+    return run_monet_process(repo_root, *args)
 
 
 def test_auto_is_bfloat16_exactly_where_the_cpu_has_it():

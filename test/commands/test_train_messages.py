@@ -3,12 +3,10 @@ it trains (one line at start), a resume with another skeleton (one line naming b
 any network is built), a pickled file refused as unsafe (never torch's advice to load it
 with weights_only=False) and the no-labels error (no contradiction about --eval-fraction)."""
 import fractions
-import os
-import subprocess
-import sys
 
 from helpers.blob_bag import write_blob_folder
 from helpers.blobs import blob_recording
+from helpers.commands import run_monet_process
 import pytest
 import torch
 
@@ -23,10 +21,7 @@ TRAIN = ['--architecture', 'small', '--input-size', '48', '--width', '16',
 
 
 def monet(repo_root, *args):
-    env = dict(os.environ)
-    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(repo_root), env.get('PYTHONPATH')]))
-    return subprocess.run([sys.executable, '-m', 'monet_ros.cli', *map(str, args)],
-                          cwd=repo_root, env=env, capture_output=True, text=True, timeout=300)
+    return run_monet_process(repo_root, *args)
 
 
 @pytest.fixture(scope='module')
