@@ -123,13 +123,16 @@ def view_problem(image, camera):
 
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
                       skeleton=None, progress=True, backend='torch', threads=0, exports=(),
-                      trc_axes='xyz', camera_map=(), precision='float32', filter_config=None):
+                      trc_axes='xyz', camera_map=(), precision='auto', filter_config=None):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
     first reason), seconds, mean_error, mean_views, report (the reader's ReadReport).
     backend: 'torch' or 'onnxruntime'; threads: CPU threads (0 = the library's default);
-    precision: 'float32' or 'bfloat16' (models.detector.check_precision).
+    precision: 'auto' (the command's default: bfloat16 where native, else float32),
+    'float32' or 'bfloat16' (models.detector.resolve_precision); `monet eval --reference`
+    and `monet train --holdout-labelled` score models through this function, so as `monet
+    process` runs them.
     exports: formats of monet_ros.io.export_results written inside `out` (figures['exports']:
     {format: path}; figures['summary']: per-joint dropout and inlier views).
     filter_config: a temporal.FilterConfig; with a method other than 'none' the exports

@@ -218,13 +218,9 @@ def run(args):
 def skeleton_line(skeleton, given):
     """'skeleton NAME (FILE), C keypoints: a, b, ...' (the start-up line of `monet train`):
     which skeleton the heatmap channels are, a preset's file or the YAML given."""
-    from monet_ros.share import share_path
-    source = str(given)
-    if not Path(source).suffix and not Path(source).exists():
-        try:
-            source = f'preset {share_path("config", "skeletons", f"{given}.yaml")}'
-        except FileNotFoundError:
-            pass
+    from monet_ros.skeleton import skeleton_path
+    path, preset = skeleton_path(given)
+    source = f'preset {path}' if preset else str(given)
     names = list(skeleton.keypoints)
     shown = ', '.join(names[:8]) + (', ...' if len(names) > 8 else '')
     return (f'skeleton {skeleton.name} ({source}), {len(names)} keypoints: {shown} '

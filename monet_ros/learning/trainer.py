@@ -307,8 +307,8 @@ def _read_state(path):
     except FileNotFoundError:
         raise FileNotFoundError(f'{path}: no trainer state to resume from') from None
     except Exception as error:  # noqa: BLE001 - corrupt, truncated or pickled objects
-        problem = torch_load_problem(error).replace('monet checkpoint', 'monet trainer state')
-        raise ValueError(f'{path}: {problem}') from error
+        raise ValueError(f'{path}: {torch_load_problem(error, "monet trainer state")}') \
+            from error
     if not isinstance(state, dict) or state.get('format') != STATE_FORMAT:
         raise ValueError(f'{path}: field format is not {STATE_FORMAT!r}')
     return state

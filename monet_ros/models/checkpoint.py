@@ -208,17 +208,17 @@ def save_checkpoint(path, model, metadata):
 _UNSAFE = re.compile(r'Unsupported global: GLOBAL ([\w.]+)')
 
 
-def torch_load_problem(error):
+def torch_load_problem(error, what='monet checkpoint'):
     """One line for an error of torch.load(..., weights_only=True): a file holding pickled
-    Python objects is named as unsafe and refused (torch's advice to load it with
-    weights_only=False, which would run its code, is never relayed); anything else is a
-    corrupt or truncated file."""
+    Python objects is 'not a <what>', named as unsafe and refused (torch's advice to load it
+    with weights_only=False, which would run its code, is never relayed); anything else is
+    a corrupt or truncated file."""
     text = str(error)
     if 'Weights only load failed' in text or 'WeightsUnpickler' in text:
         found = _UNSAFE.search(text)
-        what = f' ({found.group(1)})' if found else ''
-        return ('not a monet checkpoint: it holds pickled Python objects' + what
-                + ', which are unsafe to load (they can run code); refused')
+        objects = f' ({found.group(1)})' if found else ''
+        return (f'not a {what}: it holds pickled Python objects{objects}, which are unsafe '
+                'to load (they can run code); refused')
     return f'not a readable checkpoint (corrupt or truncated): {type(error).__name__}: {text}'
 
 
