@@ -35,8 +35,8 @@ ARGUMENTS = {
     'use_sim_time': ('false', 'nodes follow /clock (the player publishes the bag time)'),
     'slop_ms': ('0.0', 'detector and fusion: stamp tolerance between cameras (ms)'),
     'rate': ('1.0', 'player: playback speed (0 = as fast as possible)'),
-    'precision': ('float32', 'detector: network arithmetic, float32 or bfloat16 (CPUs with '
-                  'AVX512-BF16 / AMX, CUDA)'),
+    'precision': ('auto', 'detector: network arithmetic, auto (bfloat16 where native, else '
+                  'float32), float32 or bfloat16 (CPUs with AVX512-BF16 / AMX, CUDA)'),
     'backend': ('torch', 'detector: inference backend, torch or onnxruntime'),
     'device': ('', "detector: torch device ('' = CUDA when available, else CPU)"),
 }

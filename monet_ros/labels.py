@@ -66,6 +66,11 @@ class LabelError(ValueError):
     """A labels file is malformed; the message names the file, line and field."""
 
 
+class LabelResolutionError(LabelError):
+    """Labels refused whole: too many lie outside the images, as labels made at another
+    resolution than the recording's (resolve_labels)."""
+
+
 @dataclass(frozen=True)
 class Labels:
     """Labels of a recording.
@@ -428,6 +433,11 @@ def frame_period_ns(stamps):
     return int(np.median(np.diff(stamps))) if len(stamps) > 1 else 0
 
 
+# More than this share of the rows outside the images: labels at another resolution (the
+# full-size videos of a resized recording), refused whole even with skip_bad.
+OTHER_RESOLUTION_SHARE = 0.25
+
+
 def resolve_labels(rows, stamps, cameras, keypoints, options=None, valid=None):
     """Check label rows against a recording -> (Labels keyed by the recording's stamps,
     LabelReport). The ONE label validator (rules in the module docstring).
@@ -438,7 +448,10 @@ def resolve_labels(rows, stamps, cameras, keypoints, options=None, valid=None):
     options: LabelOptions; valid: optional (T,) bool, False where an instant cannot be
     used (e.g. a view is missing) - labels there are 'instant' errors too.
     Raises LabelError (file:line: field ...: reason) for the first bad row unless
-    options.skip_bad; then bad rows are counted in the report.
+    options.skip_bad; then bad rows are counted in the report. Rows outside the images are
+    judged together: more than OTHER_RESOLUTION_SHARE of the rows means labels at another
+    resolution than the recording's images, a LabelError even with skip_bad (naming
+    `monet labels import --label-scale`).
     """
     options = options or LabelOptions()
     names = _keypoint_names(keypoints)
@@ -456,7 +469,9 @@ def resolve_labels(rows, stamps, cameras, keypoints, options=None, valid=None):
 
     def bad(kind, row, field_name, reason):
         message = f'{row.place}: field {field_name}: {reason}'
-        if not options.skip_bad:
+        # rows outside the images are judged together at the end: many of them mean labels
+        # at another resolution, which no row-by-row skipping may half-keep
+        if not options.skip_bad and kind != 'bounds':
             raise LabelError(message + ' (--skip-bad-labels drops and counts such rows)')
         report.skipped[kind] = report.skipped.get(kind, 0) + 1
         report.first.setdefault(kind, message)
@@ -514,6 +529,17 @@ def resolve_labels(rows, stamps, cameras, keypoints, options=None, valid=None):
         kept_stamps.append(int(stamps[t]))
         kept_cams.append(camera)
         kept_kps.append(keypoint)
+    outside = report.skipped.get('bounds', 0)
+    if outside and outside > OTHER_RESOLUTION_SHARE * report.rows:
+        raise LabelResolutionError(
+            f'{outside} of {report.rows} label rows lie outside the images (first: '
+            f'{report.first["bounds"]}): the labels look like another resolution than the '
+            "recording's images; refused whole (--skip-bad-labels drops only stray rows). "
+            'Labels of the full-size videos of a recording imported with --resize S: '
+            '`monet labels import ... --label-scale S`')
+    if outside and not options.skip_bad:
+        raise LabelError(report.first['bounds'] + ' (--skip-bad-labels drops and counts such '
+                         'rows)')
     report.kept = len(kept)
     return _build_labels(kept, names, kept_stamps, kept_cams, kept_kps), report
 

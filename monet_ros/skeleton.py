@@ -83,14 +83,21 @@ def skeleton_from_dict(data, source='<dict>'):
         raise SkeletonError(f'{source}: malformed field ({error})') from None
 
 
-def load_skeleton(path_or_name):
-    """A Skeleton from a YAML path, or a preset name under config/skeletons (e.g. 'human14')."""
+def skeleton_path(path_or_name):
+    """(Path of the YAML, True when it is a shipped preset): a path as given, or a preset
+    name under config/skeletons (e.g. 'human14'). SkeletonError for an unknown preset."""
     path = Path(path_or_name)
     if not path.suffix and not path.exists():
         try:
-            path = share_path('config', 'skeletons', f'{path_or_name}.yaml')
+            return share_path('config', 'skeletons', f'{path_or_name}.yaml'), True
         except FileNotFoundError as error:
             raise SkeletonError(f'skeleton preset {path_or_name!r}: {error}') from None
+    return path, False
+
+
+def load_skeleton(path_or_name):
+    """A Skeleton from a YAML path, or a preset name under config/skeletons (e.g. 'human14')."""
+    path = skeleton_path(path_or_name)[0]
     if not path.is_file():
         raise SkeletonError(f'{path}: skeleton file not found')
     from monet_ros.geometry.rig_fields import safe_yaml

@@ -36,7 +36,7 @@ def test_launch_file_declares_its_arguments_and_nodes(repo_root, tmp_path, monke
                 for name, a in arguments.items() if name not in ('model', 'rig')}
     assert defaults == {'bag': '', 'namespace': 'monet', 'transport': 'auto',
                         'debug_image': 'false', 'use_sim_time': 'false', 'slop_ms': '0.0',
-                        'rate': '1.0', 'precision': 'float32', 'backend': 'torch',
+                        'rate': '1.0', 'precision': 'auto', 'backend': 'torch',
                         'device': ''}
     nodes = [e for e in description.entities if isinstance(e, Node)]
     assert sorted(n.node_executable for n in nodes) == ['detector', 'fusion', 'player']

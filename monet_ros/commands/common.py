@@ -23,6 +23,25 @@ def check_threads(owner, threads):
         torch.set_num_threads(threads)
 
 
+def print_precision(owner, precision, backend='torch', device=None):
+    """Resolve --precision (auto: bfloat16 where native, else float32) for `device` (None =
+    CUDA when present, else CPU) and print the one line saying which runs and why (stdout,
+    `owner: precision auto: ...`: stderr keeps one line for a bad input); returns the
+    precision run. ConfigError names precision for a value that cannot run (bfloat16 on a
+    CPU that would emulate it)."""
+    import torch
+
+    from monet_ros.models.detector import resolve_precision
+    if device is None:
+        device = 'cuda' if torch.cuda.is_available() else 'cpu'
+    try:
+        chosen, note = resolve_precision(precision, backend, device)
+    except ValueError as error:
+        raise ConfigError(owner, 'precision', str(error)) from None
+    print(f'{owner}: {note}', flush=True)
+    return chosen
+
+
 def check_new_output(path, owner, field='out'):
     """An output folder that must not exist yet (or be an empty folder) in a place where a
     folder can be made: ConfigError naming it when it is a file or holds something, OSError

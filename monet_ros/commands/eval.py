@@ -28,6 +28,29 @@ def add_arguments(parser):
     add_reference_arguments(parser)
 
 
+def scored_instants_text(rec, instants, start, meta, which):
+    """(kind, line) saying which instants `monet eval` scores: kind 'held-out' (never
+    trained on), 'training' (every one was trained on) or 'mixed' (--instants all over a
+    held-out tail); the line counts them."""
+    import numpy as np
+
+    n = len(instants)
+    if start is None:
+        if meta.get('recording') not in (None, rec.name):      # another recording's model
+            return 'held-out', (f'all {n} instants (the model was trained on '
+                                f'{meta.get("recording")}, not on this recording)')
+        return 'training', (f'all {n} instants, which the model was TRAINED on (it was '
+                            'trained without a held-out tail, --eval-fraction 0): these '
+                            'figures are not generalisation; train with --eval-fraction 0.2 '
+                            'to score instants it never saw')
+    held = int(np.sum(rec.stamps[instants] >= int(start)))
+    if which == 'all' and held < n:
+        return 'mixed', (f'all {n} instants (--instants all): {n - held} trained on, {held} '
+                         'held out')
+    return 'held-out', (f'{n} held-out instants (from instant {int(instants[0])}, never '
+                        'trained on)')
+
+
 def load_results_json(path):
     """EvalSummary list from a results.json (ValueError naming the file and what is wrong)."""
     import json
@@ -101,12 +124,21 @@ def run(args):
                 if len(instants) == 0:
                     raise ValueError(f'{path}: no held-out instant of {rec.name} (held out '
                                      f'from stamp {start}); use --instants all')
+                kind, line = scored_instants_text(rec, instants, start, meta, args.instants)
+                print(f'monet eval: {path} on {rec.name}: {line}', file=sys.stderr)
                 h, w = detector.input_size
                 boxes = crop_boxes(rec, cfg.get('box_source', 'auto'), w / h,
                                    cfg.get('box_margin', 0.25))
                 mode = meta.get('mode') or Path(path).stem
                 summary = evaluate_detector(detector, rec, instants, boxes, mode, rec.name)
                 summary.extra['checkpoint'] = str(path)
+                summary.extra['instants_scored'] = kind
+                failed = summary.extra['reprojection_failures']
+                if failed:
+                    print(f'monet eval: {path} on {rec.name}: {failed} of '
+                          f'{failed + summary.extra["reprojection_count"]} view reprojection '
+                          'errors beyond the image diagonal (views that do not agree at all) '
+                          'counted as failures, not in the mean', file=sys.stderr)
                 summary.extra['step'] = meta.get('step')
                 summaries.append(summary)
     paths = write_report(out, summaries)

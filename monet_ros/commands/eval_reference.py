@@ -95,6 +95,7 @@ def _write_instants(path, reference, scored, labelled):
 
 
 def run_reference(args):
+    from monet_ros.commands.common import print_precision
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.commands.process import process_recording
     from monet_ros.evaluation.reference import alignment_text, load_reference, score
@@ -117,6 +118,8 @@ def run_reference(args):
         index = recording_index(args.data[0], rig=args.rig, camera_map=options.camera_map,
                                 rig_units=args.rig_units)
         references = {}
+        # the models run as `monet process` runs them: its default precision, said once
+        print_precision(prog, 'auto', 'torch', args.device or None)
         with tempfile.TemporaryDirectory(prefix='monet-eval-') as tmp:
             for n, path in enumerate(args.checkpoints):
                 _, meta = load_checkpoint(path)

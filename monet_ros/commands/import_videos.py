@@ -40,7 +40,8 @@ player read.
   demo videos are 1080 wide, its calibration says 1088), the video's size is used with K
   unchanged and a note. Any other difference is an error. --resize s scales images and
   calibration together (cv2.INTER_AREA; Camera.crop of the full frame, the same mapping
-  as cv2.resize).
+  as cv2.resize); the videos' and the recorded sizes are kept in OUT/monet_import.yaml
+  (io.source_sizes), from which `monet labels import` scales labels made on the videos.
 - Frames are streamed one instant at a time (memory: one frame per camera); a tqdm
   progress bar shows the instants written. A failed or interrupted import removes its
   output folder, so the same command can be rerun.
@@ -251,6 +252,7 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
     from monet_ros.io import BagWriter
     from monet_ros.io.frame_sources import FrameSource, session_entries
     from monet_ros.io.rig_fit import fit_camera
+    from monet_ros.io.source_sizes import write_source_sizes
     from monet_ros.labels import match_camera_names, parse_name_map
 
     _check_options(fps, resize, quality, start_ns, max_frames, timing)
@@ -328,6 +330,11 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
                 bar.update(1)
                 t += 1
             bar.close()
+        # the videos' size beside the recorded one: monet labels import brings labels made
+        # on the videos to the recording's pixels (io.source_sizes)
+        write_source_sizes(out, resize, {
+            cam.name: (files[cam.name], (sources[cam.name].width, sources[cam.name].height),
+                       (cam.width, cam.height)) for cam in final})
         skipped = {n: p.skipped + (p.remaining() if max_frames else 0)
                    for n, p in placers.items()}
         notes += _timing_notes(placers, files, rate, timing, fps is not None)

@@ -32,6 +32,20 @@ def label_options_from_args(args):
                         skip_bad=bool(args.skip_bad_labels))
 
 
+def resize_hint(bag, label_scale):
+    """'; this recording ... --label-scale S' when its import record says how it was resized
+    (and --label-scale asked for something else), else ''."""
+    from monet_ros.io.source_sizes import SourceSizeError, read_source_sizes
+    try:
+        record = read_source_sizes(bag)
+    except SourceSizeError:
+        return ''
+    if record is None or record[0] == 1.0 or str(label_scale) == f'{record[0]:g}':
+        return ''
+    return (f'; this recording was imported with --resize {record[0]:g}: --label-scale '
+            f'{record[0]:g} for labels of its videos')
+
+
 def add_arguments(parser):
     from monet_ros.geometry.pose2sim import POSE_MODELS
     from monet_ros.labels_import import FORMATS
@@ -57,12 +71,18 @@ def add_arguments(parser):
     imp.add_argument('--pose-model', choices=tuple(POSE_MODELS), default=None,
                      help="openpose: the keypoint names (default: the --skeleton's when it "
                      'has as many, else the one model with that many)')
+    imp.add_argument('--label-scale', default='auto', metavar='auto|S',
+                     help="labels made on the videos of a recording imported with --resize: "
+                     "auto (default) scales other tools' labels (not frames / stamps) from "
+                     'the videos to the recording as monet import videos recorded it; S: '
+                     "scale every label by S (the recording's size / the labels' images' "
+                     "size; 1 = already in the recording's pixels)")
     add_label_arguments(imp)
 
 
 def run(args):
-    from monet_ros.labels import LabelError, resolve_labels, write_labels
-    from monet_ros.labels_import import import_labels
+    from monet_ros.labels import LabelError, LabelResolutionError, resolve_labels, write_labels
+    from monet_ros.labels_import import import_labels, to_recording_pixels
     from monet_ros.learning.recording import RecordingError
     from monet_ros.learning.recording_index import recording_index
     from monet_ros.skeleton import SkeletonError, load_skeleton
@@ -73,24 +93,29 @@ def run(args):
                                 rig_units=args.rig_units)
         cameras = [c.name for c in index.cameras]
         skeleton = tuple(load_skeleton(args.skeleton).keypoints) if args.skeleton else None
-        extra = (dict(pose_model=args.pose_model, keypoints=skeleton)
-                 if args.format == 'openpose' else None)
+        reader_options = (dict(pose_model=args.pose_model, keypoints=skeleton)
+                          if args.format == 'openpose' else None)
         result = import_labels(args.format, args.path, cameras=cameras, camera=args.camera,
                                min_score=args.min_score, camera_map=dict(options.camera_map),
-                               options=extra)
+                               options=reader_options)
+        rows, scaled = to_recording_pixels(result.rows, args.format, index.bag,
+                                           args.label_scale, dict(options.camera_map))
         if skeleton:
             keypoints = skeleton
         else:
             mapped = dict(options.keypoint_map)
             keypoints = tuple(dict.fromkeys(mapped.get(k, k) for k in result.keypoints))
-        labels, report = resolve_labels(result.rows, index.stamps, index.cameras, keypoints,
-                                        options, valid=index.complete)
+        try:
+            labels, report = resolve_labels(rows, index.stamps, index.cameras, keypoints,
+                                            options, valid=index.complete)
+        except LabelResolutionError as error:
+            raise LabelError(f'{error}{resize_hint(index.bag, args.label_scale)}') from None
         count = write_labels(args.out, labels)
     except (LabelError, RecordingError, SkeletonError, ValueError,
             OSError) as error:
         print(f'monet labels import: {error}', file=sys.stderr)
         return 2
-    extra = f'; {result.note}' if result.note else ''
+    extra = ''.join(f'; {note}' for note in (result.note, scaled) if note)
     print(f'monet labels import: {count} labels at {len(labels)} instants x '
           f'{len(labels.cameras)} cameras -> {args.out} ({report.summary()}{extra})')
     return 0

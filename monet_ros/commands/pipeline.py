@@ -46,6 +46,7 @@ HELP = ('live all-in-one: player + detector + fusion as ROS nodes (player and de
 
 
 def add_arguments(parser):
+    from monet_ros.models.detector import PRECISIONS
     parser.add_argument('--bag', help='recording (rosbag2 folder or .mcap); default: a small '
                         'synthetic recording generated (once) in --workdir')
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
@@ -80,9 +81,10 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network in each detector process (0 = the '
                         'backend default with one process, the cores shared out with several)')
-    parser.add_argument('--precision', choices=('float32', 'bfloat16'), default='float32',
-                        help='network arithmetic (bfloat16: torch backend, 2-3x faster on '
-                        'CPUs with AVX512-BF16 / AMX and on CUDA)')
+    parser.add_argument('--precision', choices=PRECISIONS, default='auto',
+                        help='network arithmetic: auto (default: bfloat16 where native, else '
+                        'float32; the choice is printed), float32, or bfloat16 (torch backend, '
+                        '2-3x faster on CPUs with AVX512-BF16 / AMX and on CUDA)')
     parser.add_argument('--workdir', help='where the demo recording and model are cached '
                         '(default: ~/.cache/monet_ros/demo)')
     parser.add_argument('--start-delay', type=float, default=0.5,
@@ -346,14 +348,9 @@ def run(args):
                               start_delay=args.start_delay,
                               detector_processes=args.detector_processes)
     device = check_device('monet pipeline', args.device)
-    import torch
-
-    from monet_ros.models.detector import check_precision
-    try:                  # from the arguments alone, before any node logs a line
-        check_precision(args.precision, args.backend,
-                        device or ('cuda' if torch.cuda.is_available() else 'cpu'))
-    except ValueError as error:
-        raise ConfigError('monet pipeline', 'precision', str(error)) from None
+    from monet_ros.commands.common import print_precision
+    # from the arguments alone, before any node logs a line; auto: the choice said once
+    print_precision('monet pipeline', args.precision, args.backend, device)
     use_large_data_profile()
     import rclpy
     from rclpy.node import Node

@@ -31,6 +31,7 @@ import numpy as np
 
 from monet_ros.config import ConfigError, config_subset, setting
 from monet_ros.fusion import PEAKS_PER_VIEW, FusionConfig
+from monet_ros.models.detector import PRECISIONS
 
 HELP = 'run detector + fusion over a recording offline, write keypoints3d to an MCAP'
 
@@ -74,9 +75,10 @@ def add_arguments(parser):
                         'beside the checkpoint)')
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default)')
-    parser.add_argument('--precision', choices=('float32', 'bfloat16'), default='float32',
-                        help='network arithmetic (bfloat16: torch backend, 2-3x faster on '
-                        'CPUs with AVX512-BF16 / AMX and on CUDA)')
+    parser.add_argument('--precision', choices=PRECISIONS, default='auto',
+                        help='network arithmetic: auto (default: bfloat16 where native, else '
+                        'float32; the choice is printed), float32, or bfloat16 (torch backend, '
+                        '2-3x faster on CPUs with AVX512-BF16 / AMX and on CUDA)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--export', default='csv,trc,nwb,npz',
                         help='analysis files written into OUT: any of csv (anipose), trc, '
@@ -126,14 +128,17 @@ def view_problem(image, camera):
 
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
                       skeleton=None, progress=True, backend='torch', threads=0, exports=(),
-                      trc_axes='xyz', camera_map=(), precision='float32', filter_config=None,
+                      trc_axes='xyz', camera_map=(), precision='auto', filter_config=None,
                       rig_units=None):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
     first reason), seconds, mean_error, mean_views, report (the reader's ReadReport).
     backend: 'torch' or 'onnxruntime'; threads: CPU threads (0 = the library's default);
-    precision: 'float32' or 'bfloat16' (models.detector.check_precision).
+    precision: 'auto' (the command's default: bfloat16 where native, else float32),
+    'float32' or 'bfloat16' (models.detector.resolve_precision); `monet eval --reference`
+    and `monet train --holdout-labelled` score models through this function, so as `monet
+    process` runs them.
     exports: formats of monet_ros.io.export_results written inside `out` (figures['exports']:
     {format: path}; figures['summary']: per-joint dropout and inlier views).
     filter_config: a temporal.FilterConfig; with a method other than 'none' the exports
@@ -247,7 +252,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
 
 
 def run(args):
-    from monet_ros.commands.common import check_threads
+    from monet_ros.commands.common import check_threads, print_precision
     from monet_ros.commands.filter_options import filter_config_from_args
     from monet_ros.io.export_results import parse_formats
     from monet_ros.labels import parse_name_map
@@ -261,6 +266,7 @@ def run(args):
     filter_config = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)
+    print_precision('monet process', args.precision, args.backend, device)
     options = dict(model=args.model, rig=args.rig, cameras=args.cameras or (), config=config,
                    skeleton=args.skeleton, backend=args.backend,
                    exports=parse_formats(args.export), trc_axes=args.trc_axes,

@@ -7,7 +7,8 @@ the 'spawn' context: torch's thread pools, CUDA and DDS threads do not survive f
 With several CUDA devices the jobs are spread over them round-robin (one device per job);
 CPU threads are split (default --threads per job = cores // jobs). A failed recording is
 reported (one line naming it) and the others go on; the command ends with a summary table
-(recording, frames, frames/s, mean reprojection error, status) and exits 2 if any failed.
+(recording, its output folder, frames, frames/s, mean reprojection error, status) and exits
+2 if any failed.
 """
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -108,13 +109,16 @@ def process_job(job, options, work):
 
 
 def summary_table(results):
-    """The closing table, one row per recording in the order given (a list of lines)."""
-    rows = [('recording', 'frames', 'frames/s', 'mean reproj. error (px)', 'status')]
+    """The closing table, one row per recording in the order given (a list of lines): the
+    recording, the output folder that holds its results ('-' when it failed), frames,
+    frames/s, mean reprojection error and status."""
+    rows = [('recording', 'output', 'frames', 'frames/s', 'mean reproj. error (px)',
+             'status')]
     for r in results:
         fps = r['frames'] / r['seconds'] if r['seconds'] else 0.0
         error = r['mean_error']
-        rows.append((r['bag'], str(r['frames']), f'{fps:.1f}',
-                     '-' if error != error else f'{error:.2f}',
+        rows.append((r['bag'], r['out'] if r['error'] is None else '-', str(r['frames']),
+                     f'{fps:.1f}', '-' if error != error else f'{error:.2f}',
                      'ok' if r['error'] is None else 'FAILED'))
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     return ['  '.join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]

@@ -58,8 +58,9 @@ def add_arguments(parser):
         flag = '--' + f.name.replace('_', '-')
         kind = {'int': int, 'float': float, 'str': str, 'bool': parse_bool}[
             f.type if isinstance(f.type, str) else f.type.__name__]
+        default = COMMAND_DEFAULTS.get(f.name, f.default)
         group.add_argument(flag, dest=f.name, type=kind, default=None,
-                           help=f'{f.metadata["description"]} (default {f.default!r})')
+                           help=f'{f.metadata["description"]} (default {default!r})')
 
 
 def parse_bool(text):
@@ -71,9 +72,14 @@ def parse_bool(text):
     return value
 
 
+# TrainConfig fields whose default for `monet train` is not the Python API's
+COMMAND_DEFAULTS = {'precision': 'auto'}
+
+
 def config_from_args(args):
-    values = {f.name: getattr(args, f.name) for f in fields(TrainConfig)
-              if getattr(args, f.name, None) is not None}
+    values = dict(COMMAND_DEFAULTS)
+    values.update({f.name: getattr(args, f.name) for f in fields(TrainConfig)
+                   if getattr(args, f.name, None) is not None})
     return TrainConfig(**values)
 
 
@@ -81,12 +87,19 @@ def run(args):
     from monet_ros.commands.common import check_threads
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.commands.train_holdout import hold_out, score_holdout
+    from monet_ros.labels import LabelError
     from monet_ros.learning import distributed
     from monet_ros.learning.distributed import DistributedTrainer as Trainer
     from monet_ros.learning.recording import load_recording
-    from monet_ros.learning.trainer import check_training_precision, pick_device
+    from monet_ros.learning.trainer import (
+        check_resume_keypoints,
+        check_training_precision,
+        pick_device,
+    )
     from monet_ros.models import build_model
+    from monet_ros.models.detector import resolve_precision
     from monet_ros.models.device import check_device
+    from monet_ros.skeleton import load_skeleton
 
     options = TrainRunOptions(max_instants=args.max_instants, threads=args.threads)
     config = config_from_args(args)
@@ -94,7 +107,10 @@ def run(args):
     check_threads('monet train', options.threads)
     world, device = distributed.init_from_env(config.device)     # a torchrun job, if any
     # bfloat16 only where native: refused before the recording is read
-    check_training_precision(config.precision, device or pick_device(config.device))
+    train_device = device or pick_device(config.device)
+    check_training_precision(config.precision, train_device)
+    # which arithmetic runs, and why (auto: the CPU feature found); said with the notes
+    precision_note = resolve_precision(config.precision, 'torch', train_device)[1]
     if world.distributed and args.holdout_labelled:
         raise ValueError('--holdout-labelled is not supported under torchrun (train, then '
                          'score the held-out labels with `monet eval`)')
@@ -104,14 +120,26 @@ def run(args):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
+    skeleton = load_skeleton(args.skeleton)
+    said = skeleton_line(skeleton, args.skeleton)
+    if args.resume and (out / 'trainer_state.pt').exists():    # before any network is built
+        check_resume_keypoints(out, skeleton.keypoints, skeleton.name)
     out.mkdir(parents=True, exist_ok=True)        # an unwritable place is named at once
-    recording = load_recording(args.data, rig=args.rig, labels=args.labels,
-                               ground_truth=args.ground_truth, skeleton=args.skeleton,
-                               max_instants=options.max_instants or None,
-                               label_options=label_options_from_args(args),
-                               rig_units=args.rig_units)
-    notes = ([f'monet train: {recording.read_report.notice(args.data)}']
-             if recording.read_report.notice(args.data) else [])
+    try:
+        recording = load_recording(args.data, rig=args.rig, labels=args.labels,
+                                   ground_truth=args.ground_truth, skeleton=skeleton.keypoints,
+                                   max_instants=options.max_instants or None,
+                                   label_options=label_options_from_args(args),
+                                   rig_units=args.rig_units)
+    except LabelError as error:      # labels of another animal: say which skeleton it was
+        if 'is not a keypoint of the skeleton' not in str(error):
+            raise
+        raise LabelError(f'{error} [{said}]') from None
+    # the skeleton and the arithmetic first (once the inputs are read: a bad input stays one
+    # line), then what reading found
+    notes = [f'monet train: {said}', f'monet train: {precision_note}']
+    notes += ([f'monet train: {recording.read_report.notice(args.data)}']
+              if recording.read_report.notice(args.data) else [])
     notes += [f'monet train: note: {note}' for note in recording.rig_notes]
     if recording.label_report is not None:
         notes.append(f'monet train: labels: {recording.label_report.summary()}')
@@ -123,13 +151,7 @@ def run(args):
         data = distributed.shared_training_data(recording, config, probe.input_size,
                                                 probe.heatmap_size)
     except ValueError as error:
-        labelled = recording.labelled_instants
-        where = (f'{len(labelled)} labelled instants (indices {labelled.tolist()[:8]}) of '
-                 f'{recording.num_instants}' if len(labelled) else 'no labelled instant: '
-                 'give --labels (or a labels.csv beside the recording)')
-        raise ValueError(f'{error}; {where}; --eval-fraction {config.eval_fraction} holds '
-                         'out the tail (use --eval-fraction 0 to train on every labelled '
-                         'instant)') from None
+        raise ValueError(f'{error}; {_labels_text(recording, config)}') from None
     if args.resume and (out / 'trainer_state.pt').exists():
         trainer = Trainer.resume(out, data, config=config, device=device)
         if world.writer:
@@ -139,6 +161,7 @@ def run(args):
             print(f'nothing to resume: no {out / "trainer_state.pt"} (a checkpoint is written '
                   f'every {config.checkpoint_every} steps); starting at step 0', file=sys.stderr)
         trainer = Trainer(config, data, out, device=device)
+    trainer.skeleton_name = skeleton.name
     if world.writer:
         print(f'{recording.name}: {recording.num_instants} instants x {recording.num_views} '
               f'views, {len(data.labelled_instants)} labelled, {len(data.unlabeled_instants)} '
@@ -194,6 +217,42 @@ def run(args):
     print(json.dumps(summary, indent=1))
     distributed.shutdown()
     return 0
+
+
+def skeleton_line(skeleton, given):
+    """'skeleton NAME (FILE), C keypoints: a, b, ...' (the start-up line of `monet train`):
+    which skeleton the heatmap channels are, a preset's file or the YAML given."""
+    from monet_ros.skeleton import skeleton_path
+    path, preset = skeleton_path(given)
+    source = f'preset {path}' if preset else str(given)
+    names = list(skeleton.keypoints)
+    shown = ', '.join(names[:8]) + (', ...' if len(names) > 8 else '')
+    return (f'skeleton {skeleton.name} ({source}), {len(names)} keypoints: {shown} '
+            '(--skeleton to choose another)')
+
+
+def _labels_text(recording, config):
+    """Where the labelled instants went, for the error of a run left with none to train on:
+    none in the labels, or all held out by --eval-fraction / --validation-labels."""
+    import numpy as np
+
+    from monet_ros.learning.trainer import split_instants
+    labelled = recording.labelled_instants
+    if not len(labelled):
+        return ('the labels have no instant of this recording: give --labels (or a labels.csv '
+                'beside the recording)')
+    text = (f'{len(labelled)} labelled instants (indices {labelled.tolist()[:8]}) of '
+            f'{recording.num_instants}')
+    if config.eval_fraction > 0:
+        held = np.intersect1d(labelled, split_instants(recording.num_instants,
+                                                       config.eval_fraction)[1])
+        text += (f', {len(held)} of them in the last {config.eval_fraction:.0%} of the '
+                 f'instants, held out by --eval-fraction {config.eval_fraction:g} (the '
+                 'default 0 trains on every instant)')
+    if config.validation_labels > 0:
+        text += (f'; --validation-labels {config.validation_labels:g} holds out a share of '
+                 'the labelled instants')
+    return text
 
 
 def _gate_text(gate):

@@ -85,7 +85,9 @@ def evaluate_detector(detector, recording, instants, boxes, mode='model', datase
     original image, distances normalised by the side of the ground-truth subject box of the
     view (square, 25% margin; = the heatmap window of a ground-truth crop). Reprojection:
     consistency of the all-view triangulation with the detections, and of its reprojection
-    with the ground truth, in original pixels."""
+    with the ground truth, in original pixels; an error beyond the view's image diagonal is a
+    failure, left out of the mean and std and counted in extra (reprojection_failures,
+    gt_reprojection_failures; reprojection_count, gt_reprojection_count: those scored)."""
     if recording.gt3d is None:
         raise ValueError(f'{recording.name}: evaluation needs ground-truth 3D keypoints')
     instants = np.asarray(instants, dtype=np.int64)
@@ -106,7 +108,9 @@ def evaluate_detector(detector, recording, instants, boxes, mode='model', datase
     result = pck(distances.reshape(-1, recording.num_keypoints), keypoints=recording.keypoints)
     error2d = error[visible]
     reproj = multiview_reprojection(det['points'], recording.cameras, gt3d)
-    cons, gt_err = reproj.consistency_stats, reproj.gt_stats
+    # beyond a view's image diagonal a reprojection error is a failure (a triangulation of
+    # disagreeing views can land 1e15 px away): counted apart, never in the mean
+    cons, gt_err = reproj.capped_stats(reproj.consistency), reproj.capped_stats(reproj.gt_error)
     e3d = reproj.error3d_stats
     fused_err = np.linalg.norm(det['fused'] - gt3d, axis=-1)                 # (N, C)
     has = np.isfinite(gt3d[..., 0])
@@ -120,6 +124,8 @@ def evaluate_detector(detector, recording, instants, boxes, mode='model', datase
              'fused3d_median': float(np.median(scored)) if scored.size else float('nan'),
              'fused3d_p90': float(np.percentile(scored, 90)) if scored.size else float('nan'),
              'fused3d_missing': float(1 - scored.size / max(1, int(has.sum()))),
-             'heatmap_size': [h, w], 'crop': crop}
+             'heatmap_size': [h, w], 'crop': crop,
+             'reprojection_count': cons.count, 'reprojection_failures': cons.failures,
+             'gt_reprojection_count': gt_err.count, 'gt_reprojection_failures': gt_err.failures}
     return EvalSummary(mode, dataset or recording.name, cons.mean, cons.std, gt_err.mean,
                        gt_err.std, result, len(instants), extra)

@@ -298,9 +298,12 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
     if fmt == 'labels':
         rows = read_label_rows(path)
     else:
-        from monet_ros.labels_import import import_labels
+        from monet_ros.labels_import import import_labels, to_recording_pixels
         rows = import_labels(fmt, path, cameras=[c.name for c in index.cameras],
                              camera=camera, camera_map=dict(options.camera_map)).rows
+        # labels of the videos of a resized import: in the recording's pixels
+        rows = to_recording_pixels(rows, fmt, index.bag,
+                                   camera_map=dict(options.camera_map))[0]
     names = tuple(dict.fromkeys(kmap.get(r.keypoint, r.keypoint) for r in rows))
     unused = tuple(n for n in names if n not in keypoints)
     rows = [r for r in rows if kmap.get(r.keypoint, r.keypoint) in keypoints]

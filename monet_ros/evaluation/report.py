@@ -71,13 +71,17 @@ def _ordered(values, order):
     return known + sorted(v for v in values if v not in order)
 
 
-def _fmt(mean, std):
-    return 'n/a' if not np.isfinite(mean) else f'{mean:.2f} ± {std:.2f}'
+def _fmt(mean, std, failures=None):
+    """'mean ± std', with ' (+N failed)' when N errors beyond the image diagonal were left
+    out (EvalSummary.extra *_failures)."""
+    text = 'n/a' if not np.isfinite(mean) else f'{mean:.2f} ± {std:.2f}'
+    return text + (f' (+{failures} failed)' if failures else '')
 
 
 def markdown_table(summaries, pck_levels=REPORT_PCK):
-    """Markdown table: one row per mode, per dataset the reprojection error (mean ± std px),
-    the ground-truth reprojection error and PCK at `pck_levels`."""
+    """Markdown table: one row per mode, per dataset the reprojection error (mean ± std px;
+    '(+N failed)': errors beyond the image diagonal, left out), the ground-truth
+    reprojection error and PCK at `pck_levels`."""
     modes = _ordered({s.mode for s in summaries}, MODE_ORDER)
     datasets = _ordered({s.dataset for s in summaries}, ())
     cell = {(s.mode, s.dataset): s for s in summaries}
@@ -93,8 +97,10 @@ def markdown_table(summaries, pck_levels=REPORT_PCK):
             if s is None:
                 row += ['—'] * (2 + len(pck_levels))
                 continue
-            row += [_fmt(s.reprojection_mean, s.reprojection_std),
-                    _fmt(s.gt_reprojection_mean, s.gt_reprojection_std)]
+            row += [_fmt(s.reprojection_mean, s.reprojection_std,
+                         s.extra.get('reprojection_failures')),
+                    _fmt(s.gt_reprojection_mean, s.gt_reprojection_std,
+                         s.extra.get('gt_reprojection_failures'))]
             row += [f'{s.pck.at(a):.3f}' for a in pck_levels]
         lines.append('| ' + ' | '.join(row) + ' |')
     return '\n'.join(lines) + '\n'

@@ -16,18 +16,30 @@ from monet_ros.geometry import project_views, reprojection_error, triangulate
 
 @dataclass(frozen=True)
 class ErrorStats:
+    """mean / std / median of `count` finite values; failures: finite values beyond the
+    limit given to `of` (counted apart, in none of the figures)."""
     mean: float
     std: float
     median: float
     count: int
+    failures: int = 0
 
     @classmethod
-    def of(cls, values):
-        v = np.asarray(values, dtype=np.float64).ravel()
-        v = v[np.isfinite(v)]
+    def of(cls, values, limit=None):
+        """Stats of the finite values; limit (broadcastable to values, e.g. (V, 1) px: each
+        view's image diagonal): larger values are failures, counted and left out (a badly
+        trained model's triangulation can reproject 1e15 px away, which no mean survives)."""
+        v = np.asarray(values, dtype=np.float64)
+        finite = np.isfinite(v)
+        failed = np.zeros_like(finite)
+        if limit is not None:
+            failed = finite & (v > np.broadcast_to(limit, v.shape))
+        v = v[finite & ~failed]
+        failures = int(failed.sum())
         if v.size == 0:
-            return cls(float('nan'), float('nan'), float('nan'), 0)
-        return cls(float(v.mean()), float(v.std()), float(np.median(v)), int(v.size))
+            return cls(float('nan'), float('nan'), float('nan'), 0, failures)
+        return cls(float(v.mean()), float(v.std()), float(np.median(v)), int(v.size),
+                   failures)
 
     def __str__(self):
         return f'{self.mean:.2f} +- {self.std:.2f}'
@@ -36,11 +48,19 @@ class ErrorStats:
 @dataclass(frozen=True)
 class ReprojectionResult:
     """points3d (T, C, 3); consistency (T, V, C) px; gt_error (T, V, C) px or None;
-    error3d (T, C) world units or None; summary ErrorStats of each."""
+    error3d (T, C) world units or None; summary ErrorStats of each; diagonal (V,) px: each
+    view's image diagonal, beyond which a reprojection error is a failure (capped_stats)."""
     points3d: np.ndarray
     consistency: np.ndarray
     gt_error: np.ndarray
     error3d: np.ndarray
+    diagonal: np.ndarray = None
+
+    def capped_stats(self, errors):
+        """ErrorStats of a (T, V, C) px error array with the errors beyond each view's image
+        diagonal counted as failures, apart from the figures."""
+        return ErrorStats.of(errors, None if self.diagonal is None
+                             else self.diagonal[None, :, None])
 
     @property
     def consistency_stats(self):
@@ -81,5 +101,6 @@ def multiview_reprojection(detections, cameras, gt3d=None):
         gt2d = project_views(cameras, gt_flat)                         # (V, T*C, 2)
         gt_error = reprojection_error(X, gt2d, cameras).reshape(V, T, C).transpose(1, 0, 2)
         error3d = np.linalg.norm(X - gt_flat, axis=-1).reshape(T, C)
-    return ReprojectionResult(X.reshape(T, C, 3), consistency, gt_error, error3d)
+    diagonal = np.array([np.hypot(c.width, c.height) for c in cameras], np.float64)
+    return ReprojectionResult(X.reshape(T, C, 3), consistency, gt_error, error3d, diagonal)
 

@@ -58,9 +58,10 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
     nwb = NWBFile(session_description=description, identifier=f'monet-{int(stamps[0])}'
                   if len(stamps) else 'monet', session_start_time=start)
     behavior = nwb.create_processing_module('behavior', 'keypoints from monet_ros')
+    # (E, 2) node index pairs; a skeleton without bones has none: (0, 2), never (0,)
     skeleton = Skeleton(name='skeleton', nodes=list(keypoints),
-                        edges=np.asarray(edges if edges is not None else np.zeros((0, 2)),
-                                         dtype='uint8'))
+                        edges=np.asarray(edges if edges is not None else (),
+                                         dtype='uint8').reshape(-1, 2))
     behavior.add(Skeletons(skeletons=[skeleton]))
     version = getattr(monet_ros, '__version__', '')
     if fnum is not None:

@@ -99,6 +99,7 @@ class LabelSession:
         index = recording_index(rec, rig=rig, camera_map=self.options.camera_map,
                                 rig_units=rig_units)
         self.rec = str(rec)
+        self.bag = index.bag          # its import record scales labels made on the videos
         self.notes = list(index.notes or ())
         self.cameras = list(index.cameras)
         self.names = [c.name for c in self.cameras]
@@ -211,13 +212,17 @@ class LabelSession:
         """Labels of the imports, then of the table itself (each through resolve_labels);
         a point the table has wins over an imported one."""
         from monet_ros.labels import read_label_rows
-        from monet_ros.labels_import import import_labels
+        from monet_ros.labels_import import import_labels, to_recording_pixels
 
         sources = []
         for fmt, path in imports:
             result = import_labels(fmt, path, cameras=self.names,
                                    camera_map=dict(self.options.camera_map))
-            sources.append((f'{fmt}={path}', result.rows))
+            rows, note = to_recording_pixels(result.rows, fmt, self.bag,
+                                             camera_map=dict(self.options.camera_map))
+            if note:
+                self.notes.append(f'{fmt}={path}: {note}')
+            sources.append((f'{fmt}={path}', rows))
         if self.labels_path.is_file():
             sources.append((str(self.labels_path), read_label_rows(self.labels_path)))
         notes = []

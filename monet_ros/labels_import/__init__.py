@@ -85,3 +85,55 @@ def import_labels(fmt, paths, cameras=(), camera=None, min_score=0.0, camera_map
     return FORMATS[fmt](paths, cameras=tuple(cameras), camera=camera,
                         min_score=float(min_score), camera_map=camera_map or {},
                         **(options or {}))
+
+
+# Formats keyed to the recording's own instants (monet's tables): in the recording's pixels.
+# The others come from tools that label the source videos: in the videos' pixels.
+RECORDING_FORMATS = ('frames', 'stamps')
+
+
+def to_recording_pixels(rows, fmt, bag, label_scale='auto', camera_map=None):
+    """(rows in the recording's pixels, note or '') - labels made on the source videos of a
+    recording imported with `monet import videos --resize` brought to its images.
+
+    label_scale: 'auto' - other tools' formats (not RECORDING_FORMATS) are mapped from each
+    camera's video size to its recorded size, as monet_import.yaml beside the bag records
+    (io.source_sizes; nothing to do without a record or a resize); a number S > 0 - every
+    row mapped as images resized by S (u' = (u + 0.5) S - 0.5; 1 = already in the
+    recording's pixels). The note says what was done (or assumed, where it matters).
+    Raises LabelError for a bad label_scale or a malformed record."""
+    from monet_ros.io.source_sizes import (
+        SourceSizeError,
+        read_source_sizes,
+        scale_label_rows,
+        uniform_scale,
+        video_to_recording,
+    )
+    if label_scale != 'auto':
+        try:
+            scale = float(label_scale)
+        except (TypeError, ValueError):
+            scale = float('nan')
+        if not 0 < scale < float('inf'):
+            raise LabelError(f'--label-scale must be auto or a number > 0, got {label_scale!r}')
+        if scale == 1.0:
+            return list(rows), ''
+        return (scale_label_rows(rows, {None: uniform_scale(scale)}),
+                f'label pixels scaled by {scale:g} (--label-scale)')
+    try:
+        record = read_source_sizes(bag)
+    except SourceSizeError as error:
+        raise LabelError(str(error)) from None
+    transforms = video_to_recording(record[1]) if record else {}
+    if not transforms:
+        return list(rows), ''
+    sizes = ', '.join(f'{name} {s[0]}x{s[1]} -> {r[0]}x{r[1]}'
+                      for name, (s, r) in record[1].items() if name in transforms)
+    if fmt in RECORDING_FORMATS:
+        return list(rows), (f"{fmt} labels taken in the recording's pixels (its images are "
+                            f'the videos resized: {sizes}); --label-scale {record[0]:g} if '
+                            "they are in the videos' pixels")
+    return (scale_label_rows(rows, transforms, camera_map),
+            f"labels scaled from the videos' pixels to the recording's ({sizes}: imported "
+            f'with --resize {record[0]:g}); --label-scale 1 if they are already in the '
+            "recording's pixels")

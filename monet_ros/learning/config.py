@@ -123,10 +123,12 @@ class TrainConfig:
     checkpoint_every: int = setting(500, 'steps between checkpoints', minimum=1)
     seed: int = setting(0, 'random seed (sampling, augmentation, initialisation)', minimum=0)
     device: str = setting('auto', 'torch device: auto (CUDA when present), cpu, cuda, cuda:N')
-    precision: str = setting('float32', 'training arithmetic: float32, or bfloat16 (the '
+    precision: str = setting('float32', 'training arithmetic: float32, bfloat16 (the '
                              'network forward under torch.autocast; losses, weights and '
                              'checkpoints stay float32; only where the CPU (AVX512-BF16 / AMX) '
-                             'or GPU runs bfloat16 natively)', choices=PRECISIONS)
+                             'or GPU runs bfloat16 natively), or auto (bfloat16 where native, '
+                             'else float32; the default of monet train and the learner)',
+                             choices=PRECISIONS)
     eval_fraction: float = setting(0.0, 'held-out tail of the recording, never trained on '
                                    '(0 = train on everything, for real use; e.g. 0.2 to keep '
                                    'a tail to measure generalisation on)', minimum=0.0,

@@ -43,6 +43,7 @@ import numpy as np
 from monet_ros.atomic import atomic_write, sha256_file
 from monet_ros.config import ConfigError, setting
 from monet_ros.learning.config import LOSS_TERMS, MODES, TrainConfig
+from monet_ros.models.detector import PRECISIONS
 
 PUBLISHED = 'published.json'
 # publish_metric -> the Trainer.validate key it compares (lower is better, px)
@@ -59,6 +60,10 @@ class LearnerConfig(TrainConfig):
     # held-out labelled error (publish_metric)
     mode: str = setting('reprojection', "training mode (a row of the paper's Table 1, or "
                         'reprojection: + L_R, the lowest error measured)', choices=MODES)
+    precision: str = setting('auto', 'training arithmetic: auto (bfloat16 where the CPU '
+                             '(AVX512-BF16 / AMX) or GPU runs it natively, else float32), '
+                             'float32 or bfloat16 (the network forward under torch.autocast; '
+                             'weights and checkpoints stay float32)', choices=PRECISIONS)
     bags: tuple[str, ...] = setting((), 'recordings to learn from: rosbag2 folders, .mcap files '
                                     'or `monet synth` output folders', min_length=1)
     out: str = setting('', 'output folder: checkpoints/, model.pt, trainer_state.pt, '
@@ -283,6 +288,7 @@ class OnlineLearner:
             log(f'resumed at step {self.trainer.step_count} from {self.out}')
         else:
             self.trainer = Trainer(train_config, data, self.out, model=model)
+        log(f'training {self.trainer.precision_note}')
         self.data = data
         self.metric = publish_metric_key(config.publish_metric, len(data.validation_instants),
                                          self.trainer.warn)

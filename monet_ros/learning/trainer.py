@@ -23,7 +23,8 @@ Precision (config.precision): bfloat16 runs the network forward under torch.auto
 (about 2x the steps/s on a CPU with AVX512-BF16 / AMX, bench/train_recipe.py); the stages are
 cast to float32 before the losses, and weights, Adam and checkpoints stay float32. It is
 refused (ConfigError naming precision) where bfloat16 is not native: the inference rule,
-models.detector.check_precision.
+models.detector.check_precision; auto picks bfloat16 there where native, else float32
+(models.detector.resolve_precision; Trainer.precision / precision_note say which).
 
 Problems that make a run quietly useless are warned about loudly (stderr by default, and in
 `warnings` of the run summary): a semi-supervised term with no data (no pseudo-labels, a
@@ -67,7 +68,7 @@ from monet_ros.learning.pseudo_labels import (
     spatiotemporal_pseudo_labels,
 )
 from monet_ros.models import build_model, decode_heatmaps, save_checkpoint
-from monet_ros.models.detector import check_precision
+from monet_ros.models.detector import check_precision, resolve_precision
 
 STATE_FORMAT = 'monet_ros.trainer_state/1'
 LOG_FIELDS = ('step', 'loss', *LOSS_TERMS, 'lr', 'pseudo_labels', 'seconds')
@@ -176,7 +177,7 @@ class TrainingData:
         self.unlabeled_instants = np.setdiff1d(self.train, np.union1d(
             self.labelled_instants, self.validation_instants))
         if self.labelled_instants.size == 0:
-            raise ValueError(f'{recording.name}: no labelled instant in the training split')
+            raise ValueError(f'{recording.name}: no labelled instant to train on')
         h_in, w_in = input_size
         self._tracked = tracked       # tracks() given (rank 0's, in a torchrun job)
         # pseudo_max_frames' counts of view x keypoint cells (initial_pseudo_labels): tracked,
@@ -296,6 +297,56 @@ def _atomic_torch_save(payload, path):
         torch.save(payload, stream)
 
 
+def _read_state(path):
+    """The dict of a trainer_state.pt (FileNotFoundError, or ValueError naming the file: a
+    corrupt file, one holding pickled objects (refused, never loaded unsafely), another
+    format)."""
+    from monet_ros.models.checkpoint import torch_load_problem
+    try:
+        state = torch.load(path, map_location='cpu', weights_only=True)
+    except FileNotFoundError:
+        raise FileNotFoundError(f'{path}: no trainer state to resume from') from None
+    except Exception as error:  # noqa: BLE001 - corrupt, truncated or pickled objects
+        raise ValueError(f'{path}: {torch_load_problem(error, "monet trainer state")}') \
+            from error
+    if not isinstance(state, dict) or state.get('format') != STATE_FORMAT:
+        raise ValueError(f'{path}: field format is not {STATE_FORMAT!r}')
+    return state
+
+
+def saved_skeleton(out_dir, state=None):
+    """(skeleton name or None, keypoint names or None) of the run saved in out_dir: from its
+    trainer_state.pt, else (a state written before it recorded them) the keypoints of its
+    model.pt; (None, None) when neither says. state: the loaded trainer_state.pt dict."""
+    out_dir = Path(out_dir)
+    if state is None:
+        state = _read_state(out_dir / 'trainer_state.pt')
+    if 'keypoints' in state:
+        return json.loads(state.get('skeleton', 'null')), list(json.loads(state['keypoints']))
+    from monet_ros.models.checkpoint import read_checkpoint
+    try:
+        return None, list(read_checkpoint(out_dir / 'model.pt')[0]['keypoints'])
+    except Exception:  # noqa: BLE001 - no readable model.pt: the weights' shapes will say
+        return None, None
+
+
+def check_resume_keypoints(out_dir, keypoints, skeleton_name=None, state=None):
+    """ValueError (one line naming both skeletons) when the run saved in out_dir trained
+    other keypoints than `keypoints` (names, in heatmap channel order): checked before any
+    network is built, so no weight shapes are compared."""
+    saved_name, saved = saved_skeleton(out_dir, state)
+    if saved is None or list(saved) == list(keypoints):
+        return
+
+    def named(name, names):
+        shown = ', '.join(names[:6]) + (', ...' if len(names) > 6 else '')
+        return f'{name + " " if name else ""}({len(names)} keypoints: {shown})'
+    raise ValueError(f'{Path(out_dir) / "trainer_state.pt"}: --resume: the saved run trained '
+                     f'skeleton {named(saved_name, list(saved))}, this run has skeleton '
+                     f'{named(skeleton_name, list(keypoints))}; give the same --skeleton or '
+                     'a new --out')
+
+
 class Trainer:
     """Semi-supervised trainer of one detector on one TrainingData.
 
@@ -311,9 +362,13 @@ class Trainer:
         self.data = data
         self.device = torch.device(device) if device is not None else pick_device(config.device)
         check_training_precision(config.precision, self.device)
+        # auto -> bfloat16 where native on the device, else float32 (the inference rule)
+        self.precision, self.precision_note = resolve_precision(config.precision, 'torch',
+                                                                self.device)
         self.out_dir = Path(out_dir) if out_dir is not None else None
         torch.manual_seed(config.seed)
         self.keypoints = list(data.recording.keypoints)
+        self.skeleton_name = None      # the skeleton's name, kept in trainer_state.pt
         if model is None:
             model = build_model(config.architecture, len(self.keypoints),
                                 **config.model_options())
@@ -577,10 +632,11 @@ class Trainer:
 
     def autocast(self):
         """The context of the training forward: torch.autocast to bfloat16 when
-        config.precision is bfloat16 (weights, gradients and Adam stay float32), else none.
+        the precision run (config.precision, auto resolved) is bfloat16 (weights, gradients
+        and Adam stay float32), else none.
         Detections (detect: bootstrapping, fit_error) run in float32."""
         return torch.autocast(self.device.type, dtype=torch.bfloat16,
-                              enabled=self.config.precision == 'bfloat16')
+                              enabled=self.precision == 'bfloat16')
 
     def forward_batch(self, images):
         """The network's stages on a batch of crops (B, 3, H, W); learning.distributed
@@ -788,6 +844,8 @@ class Trainer:
             'torch_rng': torch.get_rng_state(),
             'pseudo': torch.from_numpy(self.pseudo.astype(np.float64)),
             'last_terms': json.dumps(self.last_terms),
+            'keypoints': json.dumps(list(self.keypoints)),
+            'skeleton': json.dumps(self.skeleton_name),
         }
         _atomic_torch_save(state, self.out_dir / 'trainer_state.pt')
         self.last_checkpoint = ckpt
@@ -799,14 +857,8 @@ class Trainer:
         given; only `steps`, `checkpoint_every`, `device` and `precision` may differ; model:
         the network to load the saved weights into, default one built from the config)."""
         path = Path(out_dir) / 'trainer_state.pt'
-        try:
-            state = torch.load(path, map_location='cpu', weights_only=True)
-        except FileNotFoundError:
-            raise FileNotFoundError(f'{path}: no trainer state to resume from') from None
-        except Exception as error:  # noqa: BLE001 - corrupt or truncated file
-            raise ValueError(f'{path}: unreadable trainer state: {error}') from error
-        if not isinstance(state, dict) or state.get('format') != STATE_FORMAT:
-            raise ValueError(f'{path}: field format is not {STATE_FORMAT!r}')
+        state = _read_state(path)
+        check_resume_keypoints(out_dir, data.recording.keypoints, state=state)
         saved = TrainConfig.from_dict(json.loads(state['config']), str(path))
         if config is None:
             config = saved

@@ -21,6 +21,7 @@ problem is one CheckpointError naming the file and the field, for the API, the d
 """
 import json
 from pathlib import Path
+import re
 import zipfile
 
 import torch
@@ -204,6 +205,23 @@ def save_checkpoint(path, model, metadata):
     return meta
 
 
+_UNSAFE = re.compile(r'Unsupported global: GLOBAL ([\w.]+)')
+
+
+def torch_load_problem(error, what='monet checkpoint'):
+    """One line for an error of torch.load(..., weights_only=True): a file holding pickled
+    Python objects is 'not a <what>', named as unsafe and refused (torch's advice to load it
+    with weights_only=False, which would run its code, is never relayed); anything else is
+    a corrupt or truncated file."""
+    text = str(error)
+    if 'Weights only load failed' in text or 'WeightsUnpickler' in text:
+        found = _UNSAFE.search(text)
+        objects = f' ({found.group(1)})' if found else ''
+        return (f'not a {what}: it holds pickled Python objects{objects}, which are unsafe '
+                'to load (they can run code); refused')
+    return f'not a readable checkpoint (corrupt or truncated): {type(error).__name__}: {text}'
+
+
 def read_checkpoint(path):
     """(metadata, state_dict) of a checkpoint file, validated (archive CRCs, metadata types,
     ranges and bounded sizes, finite weights); CheckpointError otherwise."""
@@ -214,8 +232,7 @@ def read_checkpoint(path):
     try:
         payload = torch.load(path, map_location='cpu', weights_only=True)
     except Exception as error:  # noqa: BLE001 - zip, pickle and EOF errors all mean "corrupt"
-        raise CheckpointError(f'{path}: not a readable checkpoint (corrupt or truncated): '
-                              f'{type(error).__name__}: {error}') from error
+        raise CheckpointError(f'{path}: {torch_load_problem(error)}') from error
     if not isinstance(payload, dict):
         raise CheckpointError(f'{path}: not a monet_ros checkpoint (top level is '
                               f'{type(payload).__name__}, not a dict)')

@@ -16,26 +16,35 @@ from monet_ros.models.layers import fuse_for_inference
 from monet_ros.models.onnx_backend import BACKENDS, OnnxRunner, export_onnx, onnx_runner_for
 from monet_ros.timing import StageTimer
 
-PRECISIONS = ('float32', 'bfloat16')
+PRECISIONS = ('auto', 'float32', 'bfloat16')
+
+
+def bfloat16_feature(device):
+    """What makes bfloat16 native on `device`, as text ('AMX', 'AVX512-BF16', both joined by
+    ' and ', or 'CUDA bfloat16 (<GPU name>)'), or None where it would be emulated (slower
+    than float32): oneDNN's fast paths need AVX512-BF16 or AMX on a CPU."""
+    device = torch.device(device)
+    if device.type == 'cuda':
+        return (f'CUDA bfloat16 ({torch.cuda.get_device_name(device)})'
+                if torch.cuda.is_bf16_supported() else None)
+    if device.type != 'cpu':
+        return None
+    # torch.cpu's probes of the CPU flags (cpuinfo); absent from a torch build -> False
+    probes = (('_is_amx_tile_supported', 'AMX'), ('_is_avx512_bf16_supported', 'AVX512-BF16'))
+    found = [text for name, text in probes if getattr(torch.cpu, name, lambda: False)()]
+    return ' and '.join(found) or None
 
 
 def bfloat16_native(device):
     """True when `device` runs bfloat16 convolutions natively: a CUDA GPU that supports
-    them, or a CPU with AVX512-BF16 or AMX (oneDNN's fast paths; elsewhere bfloat16 is
-    emulated and slower than float32)."""
-    device = torch.device(device)
-    if device.type == 'cuda':
-        return torch.cuda.is_bf16_supported()
-    if device.type != 'cpu':
-        return False
-    # torch.cpu's probes of the CPU flags (cpuinfo); absent from a torch build -> False
-    probes = ('_is_avx512_bf16_supported', '_is_amx_tile_supported')
-    return any(getattr(torch.cpu, name, lambda: False)() for name in probes)
+    them, or a CPU with AVX512-BF16 or AMX (bfloat16_feature)."""
+    return bfloat16_feature(device) is not None
 
 
 def check_precision(precision, backend, device):
     """Raises ValueError (naming precision) unless `precision` is one of PRECISIONS that
-    `backend` runs well on `device` (bfloat16: torch backend, bfloat16_native device)."""
+    `backend` runs well on `device` (bfloat16: torch backend, bfloat16_native device; auto
+    always runs: resolve_precision)."""
     if precision not in PRECISIONS:
         raise ValueError(f'precision must be one of {PRECISIONS}, got {precision!r}')
     if precision == 'bfloat16':
@@ -44,7 +53,27 @@ def check_precision(precision, backend, device):
         if not bfloat16_native(device):
             raise ValueError(f'precision bfloat16 needs a CPU with AVX512-BF16 or AMX, or a '
                              f'CUDA GPU with bfloat16; {torch.device(device)} has neither (it '
-                             f'would be slower than float32)')
+                             f'would be slower than float32; precision auto picks float32 '
+                             f'there)')
+
+
+def resolve_precision(precision, backend='torch', device='cpu'):
+    """(precision run, one line saying why) for a precision of PRECISIONS (check_precision
+    first: ValueError naming precision). auto -> bfloat16 where the torch backend runs it
+    natively on `device` (bfloat16_feature names the CPU feature or GPU found), else
+    float32; float32 / bfloat16 are kept as given."""
+    check_precision(precision, backend, device)
+    if precision != 'auto':
+        return precision, f'precision {precision}'
+    device = torch.device(device)
+    if backend != 'torch':
+        return 'float32', f'precision auto: float32 (backend {backend} runs float32)'
+    feature = bfloat16_feature(device)
+    if feature is not None:
+        return 'bfloat16', f'precision auto: bfloat16 ({device.type} has {feature}: native)'
+    what = ('the GPU has no native bfloat16' if device.type == 'cuda' else
+            'the CPU has neither AVX512-BF16 nor AMX, so bfloat16 would be emulated')
+    return 'float32', f'precision auto: float32 ({what})'
 
 
 def images_to_tensor(images, device='cpu'):
@@ -73,7 +102,9 @@ class Detector:
     (0 = its default; torch's are process-wide: torch.set_num_threads).
     precision: 'float32', or 'bfloat16' (torch backend only: the network runs under
     torch.autocast in bfloat16, 2-3x faster on CPUs with AVX512-BF16 / AMX; heatmaps are
-    returned as float32 and differ from float32 inference by ~1e-2 of their peak).
+    returned as float32 and differ from float32 inference by ~1e-2 of their peak), or
+    'auto' (bfloat16 where native, else float32: resolve_precision; `precision` is then the
+    one chosen and `precision_note` the line saying why).
     The torch backend keeps the network and its input channels-last (NHWC), the layout
     oneDNN's bfloat16 convolutions take (for float32 within noise of NCHW on CPU, results
     equal to ~1e-6).
@@ -95,8 +126,8 @@ class Detector:
         if device is None:
             device = 'cuda' if torch.cuda.is_available() else 'cpu'
         self.device = torch.device(device)
-        check_precision(precision, backend, self.device)
-        self.precision = precision
+        # auto -> the precision run here; precision_note: the one line saying which and why
+        self.precision, self.precision_note = resolve_precision(precision, backend, self.device)
         self.model = copy.deepcopy(model).eval().to(self.device)
         if fuse:
             fuse_for_inference(self.model)

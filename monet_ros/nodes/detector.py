@@ -133,9 +133,10 @@ class DetectorConfig:
     backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
                            'exported to ONNX once, cached beside the checkpoint)',
                            choices=('torch', 'onnxruntime'))
-    precision: str = setting('float32', 'network arithmetic: float32, or bfloat16 (torch '
-                             'backend, 2-3x faster on CPUs with AVX512-BF16 / AMX and on '
-                             "CUDA; peaks ~0.05 input px (median) from float32's)",
+    precision: str = setting('auto', 'network arithmetic: auto (bfloat16 where native, else '
+                             'float32; the start-up line says which and why), float32, or '
+                             'bfloat16 (torch backend, 2-3x faster on CPUs with AVX512-BF16 / '
+                             "AMX and on CUDA; peaks ~0.05 input px (median) from float32's)",
                              choices=PRECISIONS)
 
     def __post_init__(self):
@@ -245,7 +246,7 @@ class DetectorNode(Node):
             f'{[(s.name, self.resolve_topic_name(s.image_topic)) for s in self.slots]} with '
             f'{self.detector.metadata.get("architecture")} ({len(self.detector.keypoints)} '
             f'keypoints, heatmaps {self.detector.heatmap_size}) on {self.detector.device}, '
-            f'{self.detector.backend} {self.detector.precision}')
+            f'{self.detector.backend}, {self.detector.precision_note}')
 
     @staticmethod
     def tracked_rule(config):

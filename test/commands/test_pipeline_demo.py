@@ -96,3 +96,22 @@ def test_demo_recipe_is_sparse_distinct_sided_and_the_default_recipe_at_a_short_
     assert TRAIN_ARGS[TRAIN_ARGS.index('--mode') + 1] == 'supervised'
     assert int(TRAIN_ARGS[TRAIN_ARGS.index('--steps') + 1]) < 2000
     assert '--lr' not in TRAIN_ARGS
+
+
+def test_demo_training_shows_its_progress(tmp_path, repo_root):
+    """The demo's `monet train` (its TRAIN_ARGS, a few steps here) shows a progress bar with
+    the step count on stderr: the first `make demo` trains for minutes."""
+    from helpers.blob_bag import write_blob_folder
+    from helpers.blobs import blob_recording
+    from helpers.commands import run_monet_process
+    data = write_blob_folder(blob_recording(num_views=3, T=8, C=3, labelled=(2, 5)),
+                             tmp_path / 'data')
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text('name: blobs\nkeypoints: [k0, k1, k2]\n')
+    args = list(TRAIN_ARGS)
+    args[args.index('--steps') + 1] = '3'
+    args[args.index('--checkpoint-every') + 1] = '3'
+    done = run_monet_process(repo_root, 'train', data, '--out', tmp_path / 'run', '--skeleton',
+                             skeleton, '--width', '8', '--batch-labelled', '2', *args)
+    assert done.returncode == 0, done.stderr
+    assert 'train supervised: 100%' in done.stderr and '3/3' in done.stderr

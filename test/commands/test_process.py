@@ -29,7 +29,8 @@ def test_every_frame_is_written_and_equals_the_core_functions(tmp_path, capsys):
               if m.topic.endswith('image_raw') and m.stamp_ns == stamps[0]}
     frames = [np.frombuffer(images[f'/{c.name}/image_raw'].data, np.uint8)
               .reshape(c.height, c.width, 3) for c in rig]
-    detector = Detector.from_checkpoint(model, device='cpu')
+    # the command's default precision (auto: bfloat16 where native)
+    detector = Detector.from_checkpoint(model, device='cpu', precision='auto')
     heat, heat_cams = detector.predict(frames, rig)
     result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cams]), rig, FusionConfig())
     got = cloud_to_keypoints3d(clouds[0].msg)
@@ -64,7 +65,7 @@ def test_onnxruntime_backend_writes_the_torch_heatmaps(tmp_path, capsys):
         out = tmp_path / backend
         assert monet(['process', str(tmp_path / 'rec'), '--model', str(model), '--out',
                       str(out), '--no-track', '--heatmaps', '--quiet', '--backend', backend,
-                      '--threads', '1']) == 0
+                      '--threads', '1', '--precision', 'float32']) == 0
         heat[backend] = [(m.topic, m.stamp_ns, image_msg_to_heatmaps(m.msg))
                          for m in open_bag(out).messages() if m.topic.endswith('/heatmaps')]
     assert len(heat['torch']) == 4

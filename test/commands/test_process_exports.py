@@ -70,6 +70,27 @@ def test_process_writes_analysis_files_equal_to_its_mcap(tmp_path, capsys):
             det['points2d'][:, 1, 1])
 
 
+def test_a_skeleton_file_without_bones_exports_every_format(tmp_path, capsys):
+    """README's skeleton format makes bones optional: such a skeleton still writes the NWB
+    (its Skeleton has no edges), with the file's keypoint names."""
+    from pynwb import NWBHDF5IO
+
+    from monet_ros.skeleton import load_skeleton
+    names = list(load_skeleton('human14').keypoints)
+    skeleton = tmp_path / 'nobones.yaml'
+    skeleton.write_text(f'name: nobones\nkeypoints: [{", ".join(names)}]\n')
+    noise_recording(tmp_path / 'rec', cameras=2, frames=2)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    out = tmp_path / 'out'
+    assert monet(['process', str(tmp_path / 'rec'), '--model', str(model), '--out', str(out),
+                  '--no-track', '--quiet', '--threads', '1', '--skeleton', str(skeleton),
+                  '--export', 'nwb']) == 0, capsys.readouterr().err
+    with NWBHDF5IO(str(out / 'keypoints.nwb'), 'r') as io:
+        nwb = io.read()
+        bones = nwb.processing['behavior']['Skeletons'].skeletons['skeleton']
+        assert list(bones.nodes[:]) == names and len(bones.edges[:]) == 0
+
+
 def test_export_option_is_checked(tmp_path, capsys):
     noise_recording(tmp_path / 'rec', cameras=2, frames=1)
     model = small_checkpoint(tmp_path / 'model.pt')

@@ -36,7 +36,7 @@ def test_two_jobs_equal_two_single_runs_and_a_failed_recording_is_reported(tmp_p
         assert (many / name / 'keypoints3d.csv').read_bytes() == \
             (tmp_path / f'single{i}' / 'keypoints3d.csv').read_bytes()
     rows = [line for line in out.splitlines() if line.startswith(f'monet process: {recs[0]}')]
-    assert len(rows) == 1 and rows[0].split()[3] == '3' and rows[0].endswith('ok')
+    assert len(rows) == 1 and rows[0].split()[4] == '3' and rows[0].endswith('ok')
 
     # A corrupt recording: one line naming it, the other still written, exit 2.
     corrupt = tmp_path / 'corrupt.mcap'
@@ -53,6 +53,32 @@ def test_two_jobs_equal_two_single_runs_and_a_failed_recording_is_reported(tmp_p
     row = [line for line in captured.out.splitlines() if str(corrupt) in line]
     assert len(row) == 1 and row[0].endswith('FAILED')
     assert '1 of 2 recordings processed' in captured.out and '1 failed' in captured.out
+
+
+@pytest.mark.slow
+def test_the_summary_says_which_folder_holds_which_recording(tmp_path, capfd):
+    """Recordings of one name (dayA/recording, dayB/recording, ...) go to recording,
+    recording_2, ...: the closing table names each one's folder, and that folder holds that
+    recording's frames (told apart by their counts); no numpy warning reaches the terminal."""
+    model = small_checkpoint(tmp_path / 'model.pt')
+    frames = {'dayC': 2, 'dayA': 3, 'dayB': 4}
+    recs = []
+    for day, count in frames.items():
+        recs.append(tmp_path / day / 'recording')
+        noise_recording(recs[-1], cameras=2, frames=count, seed=count)
+    many = tmp_path / 'many'
+    assert monet(['process', *map(str, recs), '--out', str(many), '--jobs', '2', '--model',
+                  str(model), '--quiet', '--threads', '1']) == 0
+    captured = capfd.readouterr()        # the workers' stderr too (file descriptor 2)
+    header = next(line for line in captured.out.splitlines() if 'recording ' in line)
+    assert header.split()[2:4] == ['recording', 'output']
+    for rec in recs:
+        row, = [line for line in captured.out.splitlines()
+                if line.startswith(f'monet process: {rec} ')]
+        folder = row.split()[3]
+        assert folder.startswith(str(many))
+        assert len(keypoints3d(folder)) == frames[rec.parent.name], (row, folder)
+    assert 'Warning' not in captured.err, captured.err
 
 
 def test_jobs_get_one_gpu_each_round_robin_and_a_share_of_the_cores():

@@ -115,7 +115,9 @@ def test_bfloat16_is_refused_on_cuda_without_it():
 def test_the_learner_mirrors_precision():
     config = LearnerConfig(bags=('a',), out='x', precision='bfloat16')
     assert config.train_config().precision == 'bfloat16'
-    assert LearnerConfig(bags=('a',), out='x').train_config().precision == 'float32'
+    # the learner defaults to auto (bfloat16 where native, else float32), TrainConfig keeps
+    # float32 for the Python API
+    assert LearnerConfig(bags=('a',), out='x').train_config().precision == 'auto'
 
 
 @native

@@ -111,7 +111,7 @@ def detector_boxes(checkpoint, rig, boxes):
     return Detector(model, metadata, device='cpu').boxes_for(rig, boxes)
 
 
-def reference(checkpoint, images, rig, boxes, precision='float32'):
+def reference(checkpoint, images, rig, boxes, precision='auto'):
     model, metadata = load_checkpoint(checkpoint)
     return Detector(model, metadata, device='cpu', precision=precision).predict(
         list(images), rig, boxes, keep_aspect=False)[0]
@@ -303,7 +303,7 @@ def test_backend_and_precision_give_the_core_frame_and_report_stages(ros_env, se
         boxes = np.array([expected_box(box, aspect)] * len(rig))
         # the torch backend at this precision, rgb frames
         expected = reference(first, images, rig, boxes, precision)
-        float32 = reference(first, images, rig, boxes)
+        float32 = reference(first, images, rig, boxes, 'float32')
         for v, cam in enumerate(rig):
             heat = image_msg_to_heatmaps(got[cam.name][0])
             np.testing.assert_allclose(heat, expected[v], atol=1e-4, rtol=0)

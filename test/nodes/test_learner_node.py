@@ -49,8 +49,9 @@ def sha256(path):
 
 
 def reference(checkpoint, image, camera, box):
-    """What the detector must publish for `image` with the weights of `checkpoint`."""
-    detector = Detector(*load_checkpoint(checkpoint), device='cpu')
+    """What the detector must publish for `image` with the weights of `checkpoint` (at the
+    node's default precision, auto)."""
+    detector = Detector(*load_checkpoint(checkpoint), device='cpu', precision='auto')
     boxes = detector.boxes_for([camera], np.array([box]))
     return detector.predict([image], [camera], boxes, keep_aspect=False)[0][0]
 
