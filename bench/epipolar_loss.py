@@ -16,9 +16,13 @@ Candidates (a good one scores ideal lowest):
   KL rowmax floor     the same on heatmap_distribution (relu(heat - 0.1), normalised)
   KL rowsum floor     rectified row sums (the distribution's marginal over epipolar planes)
               of heatmap_distribution, KL both directions, mean over pairs and keypoints
-  E dist softmax      expected symmetric epipolar distance (epipolar_loss_terms) on the
+  E dist softmax      expected symmetric epipolar distance (symmetric_epipolar_terms) on the
               softmax distribution (shift invariant: floor = ideal)
-  E dist floor        monet_ros.learning.losses.epipolar_loss (the one the trainer applies)
+  E dist floor        symmetric_epipolar_loss (the trainer's L_E until issue 36)
+  anchored            monet_ros.learning.losses.epipolar_loss (L_E now: one-sided, anchored
+              on confident views that agree; all maps here have peak 1, so no view is
+              less confident than another and it scores 0 throughout: it only ranks views
+              of different confidence, test/learning/test_epipolar_anchored.py)
 Also: the share of view pairs each candidate uses (the rectified ones skip pairs whose
 epipole is within 10 degrees of a window).
 
@@ -38,10 +42,10 @@ from monet_ros.learning.epipolar import (  # noqa: E402
     rectify_pair,
     valid_view_pairs,
 )
-from monet_ros.learning.losses import (  # noqa: E402
-    epipolar_loss,
-    epipolar_loss_terms,
-    heatmap_distribution,
+from monet_ros.learning.losses import epipolar_loss, heatmap_distribution  # noqa: E402
+from monet_ros.learning.symmetric_epipolar import (  # noqa: E402
+    symmetric_epipolar_loss,
+    symmetric_epipolar_terms,
 )
 from monet_ros.learning.trainer import nonnegative  # noqa: E402
 from monet_ros.models import render_heatmaps  # noqa: E402
@@ -116,7 +120,7 @@ def main(argv=None):
     maps = cases(cams, B, args.keypoints, rng)
 
     def e_dist(heat, distribution=None):
-        terms = epipolar_loss_terms(heat, K, R, t, distribution=distribution)
+        terms = symmetric_epipolar_terms(heat, K, R, t, distribution=distribution)
         w = terms['weight']
         return float((w * terms['distance']).sum() / w.sum())
     candidates = {
@@ -126,7 +130,9 @@ def main(argv=None):
                                                                    K, R, t)),
         'KL rowsum floor': lambda h: kl_rowsum(heatmap_distribution(h), K, R, t),
         'E dist softmax': lambda h: e_dist(h, softmax),
-        'E dist floor (epipolar_loss)': lambda h: float(epipolar_loss(h, K, R, t)),
+        'E dist floor (symmetric_epipolar_loss)':
+            lambda h: float(symmetric_epipolar_loss(h, K, R, t)),
+        'anchored (epipolar_loss, L_E)': lambda h: float(epipolar_loss(h, K, R, t)),
     }
     names = list(maps)
     print(f'{args.views}-camera non-coplanar ring, {B} instants x {args.keypoints} keypoints, '
@@ -141,9 +147,9 @@ def main(argv=None):
               f' | {"yes" if best else "no"} |')
     V = args.views
     b, _, _ = valid_view_pairs(K[:1], R[:1], t[:1], SIZE)
-    used = epipolar_loss_terms(maps['ideal'][:1], K[:1], R[:1], t[:1])['pair_used']
+    used = symmetric_epipolar_terms(maps['ideal'][:1], K[:1], R[:1], t[:1])['pair_used']
     print(f'\nview pairs used: rectified (10 degree rule) {len(b)} of {V * (V - 1) // 2}; '
-          f'epipolar_loss {int(used.sum())} of {V * (V - 1) // 2}')
+          f'symmetric_epipolar_loss {int(used.sum())} of {V * (V - 1) // 2}')
     return 0
 
 

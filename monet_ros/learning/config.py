@@ -19,7 +19,8 @@ MAX_BATCH = 4096
 
 # The paper's rows (Table 1), then ablations.
 MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 'monet',
-         'bootstrap2_epipolar', 'epipolar', 'temporal_difference', 'reprojection')
+         'bootstrap2_epipolar', 'epipolar', 'temporal_difference', 'reprojection',
+         'reprojection_epipolar')
 # The loss terms a step can have: L_L, L_E, L_B, L_T, L_R (learning.losses.objective).
 LOSS_TERMS = ('L', 'E', 'B', 'T', 'R')
 
@@ -60,6 +61,9 @@ MODE_SPECS = {
     'epipolar': ModeSpec(False, False, 0, True),
     'temporal_difference': ModeSpec(True, True, 0, False, temporal_difference=True),
     'reprojection': ModeSpec(True, True, 0, False, reprojection=True),
+    # issue 36: the default recipe + the anchored L_E on the same unlabeled instants as L_R
+    # (its exact control: lambda_e = 0, the plan of `reprojection`)
+    'reprojection_epipolar': ModeSpec(True, True, 0, True, reprojection=True),
 }
 
 
@@ -90,7 +94,17 @@ class TrainConfig:
     views_per_instant: int = setting(0, 'views of each unlabeled instant (L_E: all their '
                                      'pairs; L_R: their consensus); 0 = every view of the rig',
                                      minimum=0, maximum=64)
-    lambda_e: float = setting(5.0, 'weight of the epipolar divergence L_E', minimum=0.0)
+    lambda_e: float = setting(5.0, 'weight of the epipolar term L_E (anchored: each view '
+                              'pulled onto the epipolar lines of the confident views that '
+                              'agree with each other, never the other way)', minimum=0.0)
+    epipolar_kernel_px: float = setting(1.0, 'L_E: scale of its Cauchy kernel (heatmap px): a '
+                                        'view farther off its lines is pulled more gently',
+                                        minimum=0.0, exclusive_minimum=True, maximum=1e3)
+    epipolar_fit_heat_px: float = setting(
+        1.0, 'L_E starts (after the warm-up) at the first step where the median distance of '
+        "the detector's peaks to the labels of its labelled crops is at most this many "
+        "heatmap px: its anchors are the detector's own peaks", minimum=0.0,
+        exclusive_minimum=True, maximum=1e3)
     lambda_p: float = setting(1.0, 'weight of the pseudo-label loss L_B', minimum=0.0)
     lambda_t: float = setting(1.0, 'temporal_difference: weight of the temporal-difference '
                               'loss L_T (frame-to-frame jumps of the soft-argmax beyond '

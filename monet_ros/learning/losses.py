@@ -1,15 +1,20 @@
-"""Training losses of MONET: L_L / L_B (masked heatmap MSE) and L_E (epipolar_loss).
+"""Training losses of MONET: L_L / L_B (masked heatmap MSE), L_T and L_E (epipolar_loss).
 
-objective = L_L + lambda_e L_E + lambda_p L_B   (the paper: lambda_e = 5, lambda_p = 1)
+objective = L_L + lambda_e L_E + lambda_p L_B (+ lambda_t L_T + lambda_r L_R)
 
-L_E here is epipolar_loss, the expected symmetric epipolar distance between the views' maps
-read as distributions, not the paper's KL of row maxima (epipolar.epipolar_divergence, kept
-as a public function): that KL falls as maps flatten, this one is lowest for sharp peaks on
-consistent epipolar lines (measured side by side: bench/epipolar_loss.py).
+L_E is epipolar_loss, the ANCHORED, one-sided epipolar term (issue 36): in every view pair the
+less confident view's soft-argmax is pulled onto the epipolar line of the more confident
+view's detached peak, with a robust (Cauchy) kernel, and only from anchors above a confidence
+cut-off. The symmetric forms (the paper's KL of row maxima, epipolar.epipolar_divergence /
+multiview_epipolar_loss, and the expected symmetric distance, symmetric_epipolar) are kept
+as diagnostics: they are met by any configuration consistent with some 3D point and collapse
+when trained (bench/results/accuracy.md).
 """
+import math
+
 import torch
 
-from monet_ros.models import render_heatmaps
+from monet_ros.models import decode_heatmaps, render_heatmaps
 
 
 def masked_heatmap_mse(stages, points, sigma):
@@ -62,7 +67,6 @@ def objective(terms, lambda_e, lambda_p, lambda_t=0.0, lambda_r=0.0):
 # the peak is background.
 HEAT_FLOOR = 0.1
 _EMPTY = 1e-6            # per pixel: an empty (no pixel above the floor) map becomes uniform
-_MIN_WEIGHT = 1e-3       # weight of a term between two flat maps
 
 
 def heatmap_distribution(heat, floor=HEAT_FLOOR):
@@ -144,111 +148,185 @@ def peak_contrast(heat):
         return (flat.amax(-1) - flat.median(-1).values).clamp(0.0, 1.0)
 
 
-def epipolar_loss_terms(outputs, K, R, t, valid=None, floor=HEAT_FLOOR, distribution=None,
-                        sharpen=True):
-    """Per (instant, view pair, keypoint) terms of epipolar_loss; see there for the inputs.
 
-    Returns dict: 'distance' (B, P, C) RMS symmetric epipolar distance (heatmap px, with
-    gradient), 'weight' (B, P, C) detached weights (0 for unused pairs), 'pairs' (P, 2) the
-    unordered view pairs (i < j), 'pair_used' (B, P) bool, 'pairs_possible' (the pairs of
-    views present). distribution: optional callable (..., h, w) -> distributions replacing
-    heatmap_distribution (for comparisons, bench/epipolar_loss.py). sharpen (default
-    True): the spread terms (each map's covariance across the lines) carry gradient, so the
-    loss optimised is the loss reported and training does not flatten maps; False: the
-    gradient only moves the maps' means (measured worse-behaved: maps flatten towards the
-    crop centre and peak contrast falls, bench/results/accuracy.md)."""
+
+# --------------------------------------------------------------- L_E: anchored, one-sided
+# The anchors' default cut-off without a trainer to give L_R's: half the peak of 1 that L_L
+# trains labelled maps towards.
+ANCHOR_CONFIDENCE = 0.5
+KERNEL_PX = 1.0          # Cauchy scale (heatmap px): quadratic below it, logarithmic beyond
+# Two confident views agree when their peaks lie within this distance (heatmap px) of each
+# other's epipolar lines; an anchor needs one that agrees and no more that disagree.
+AGREEMENT_PX = 2.0
+
+
+def _ordered_pairs(V, device):
+    """(P, 2) long: every ordered pair (anchor a, target g) of V views, a != g."""
+    a, g = torch.meshgrid(torch.arange(V, device=device), torch.arange(V, device=device),
+                          indexing='ij')
+    keep = a != g
+    return torch.stack([a[keep], g[keep]], -1)
+
+
+def _check_epipolar_inputs(outputs, K, R, t, valid):
     if outputs.dim() != 5:
         raise ValueError(f'epipolar_loss: outputs must be (B, V, C, h, w), got '
                          f'{tuple(outputs.shape)}')
-    B, V, C, h, w = outputs.shape
+    B, V = outputs.shape[:2]
     for name, a, tail in (('K', K, (3, 3)), ('R', R, (3, 3)), ('t', t, (3,))):
         if tuple(a.shape) != (B, V, *tail):
             raise ValueError(f'epipolar_loss: {name} must be {(B, V, *tail)}, got '
                              f'{tuple(a.shape)}')
-    present = torch.ones(B, V, dtype=torch.bool, device=outputs.device)
-    if valid is not None:
-        valid = torch.as_tensor(valid, device=outputs.device)
-        if tuple(valid.shape) != (B, V):
-            raise ValueError(f'epipolar_loss: valid must be {(B, V)}, got '
-                             f'{tuple(valid.shape)}')
-        present = valid.to(torch.bool)
-    ii, jj = torch.triu_indices(V, V, 1, device=outputs.device)
-    p = distribution(outputs) if distribution else heatmap_distribution(outputs, floor)
-    mean, cov = heatmap_moments(p)                                         # (B, V, C, ...)
-    F, baseline = fundamental_matrices(K[:, ii], R[:, ii], t[:, ii],
-                                       K[:, jj], R[:, jj], t[:, jj])       # (B, P, 3, 3)
+    if valid is None:
+        return torch.ones(B, V, dtype=torch.bool, device=outputs.device)
+    valid = torch.as_tensor(valid, device=outputs.device)
+    if tuple(valid.shape) != (B, V):
+        raise ValueError(f'epipolar_loss: valid must be {(B, V)}, got {tuple(valid.shape)}')
+    return valid.to(torch.bool)
+
+
+def _agreeing_anchors(peaks, conf, candidate, F, separated, pairs, agreement_px):
+    """(B, V, C) bool: the candidates (confident views) that anchor L_E.
+
+    Two candidates agree when the symmetric epipolar distance of their peaks is below
+    agreement_px. A candidate's support is its peak plus the peaks of the candidates that
+    agree with it (a confidence-weighted inlier count of its agreeing set, as RANSAC's). It
+    anchors when at least one candidate agrees with it and its support is above that of
+    every candidate that disagrees with it: a confident view on a wrong peak (a left / right
+    swap, a stray detection) anchors nothing, and of two self-consistent groups (e.g. views
+    collapsed on one wrong point against views on the truth) the better supported wins.
+    peaks (B, V, C, 2), conf (B, V, C) peak heights, candidate (B, V, C), F (B, P, 3, 3)
+    anchor -> target fundamental matrices of the ordered pairs (P, 2), separated (B, P)."""
+    a, g = pairs[:, 0], pairs[:, 1]
+    ones = torch.ones_like(peaks[..., :1])
+    x_a = torch.cat([peaks[:, a], ones[:, a]], -1)                         # (B, P, C, 3)
+    x_g = torch.cat([peaks[:, g], ones[:, g]], -1)
+    line_g = (F[:, :, None] @ x_a[..., None])[..., 0]
+    line_a = (F[:, :, None].transpose(-1, -2) @ x_g[..., None])[..., 0]
+    e = (x_g * line_g).sum(-1).abs()
+    d = 0.5 * (e / line_g[..., :2].norm(dim=-1).clamp_min(1e-300)
+               + e / line_a[..., :2].norm(dim=-1).clamp_min(1e-300))
+    both = candidate[:, a] & candidate[:, g] & separated[..., None]        # (B, P, C)
+    close = d < agreement_px
+    agree, disagree = both & close, both & ~close
+    B, V, C = candidate.shape
+    weight = torch.where(candidate, conf, torch.zeros_like(conf))
+    support = weight.clone()
+    support.index_add_(1, a, torch.where(agree, weight[:, g], torch.zeros_like(d)))
+    partners = torch.zeros(B, V, C, dtype=torch.int64, device=peaks.device)
+    partners.index_add_(1, a, agree.to(torch.int64))
+    rival = torch.where(disagree, support[:, g], torch.full_like(d, -1.0))
+    best_rival = torch.full_like(support, -1.0).scatter_reduce_(
+        1, a[None, :, None].expand_as(rival), rival, 'amax')
+    return candidate & (partners >= 1) & (support > best_rival)
+
+
+def anchored_epipolar_terms(outputs, K, R, t, valid=None, anchor_confidence=ANCHOR_CONFIDENCE,
+                            kernel_px=KERNEL_PX, agreement_px=AGREEMENT_PX, floor=HEAT_FLOOR):
+    """Per (instant, ordered view pair, keypoint) terms of epipolar_loss; inputs as there.
+
+    Returns dict: 'distance' (B, P, C) signed distance (heatmap px of the target view, with
+    gradient into the target only) of the target's soft-argmax to the epipolar line of the
+    anchor's peak, 'rho' (B, P, C) the Cauchy kernel of it, 'weight' (B, P, C) detached (the
+    anchor's peak, clipped to [0, 1]; 0 where the term is not used), 'pairs' (P, 2) the
+    ordered (anchor, target) view pairs, 'used' (B, P, C) bool, 'confidence' (B, V, C) the
+    maps' peaks (detached), 'anchors' (B, V, C) bool: the views that may anchor others.
+    An anchor is a present view whose peak is at least anchor_confidence, that another such
+    view agrees with (peaks within agreement_px heatmap px of each other's epipolar lines)
+    and whose agreeing set outweighs that of every such view disagreeing with it
+    (_agreeing_anchors). A term is used where both views are present, their centres differ,
+    view a anchors and its peak is above view g's: gradient only into the less confident
+    view of a pair (ties: no term; the most confident view of a keypoint gets none)."""
+    present = _check_epipolar_inputs(outputs, K, R, t, valid)
+    if not (math.isfinite(kernel_px) and kernel_px > 0):
+        raise ValueError(f'epipolar_loss: kernel_px must be finite and > 0, got {kernel_px}')
+    if not math.isfinite(anchor_confidence):
+        raise ValueError(f'epipolar_loss: anchor_confidence must be finite, got '
+                         f'{anchor_confidence}')
+    if not (math.isfinite(agreement_px) and agreement_px > 0):
+        raise ValueError(f'epipolar_loss: agreement_px must be finite and > 0, got '
+                         f'{agreement_px}')
+    B, V, C, h, w = outputs.shape
+    pairs = _ordered_pairs(V, outputs.device)
+    a, g = pairs[:, 0], pairs[:, 1]
+    # the anchors: detached sub-pixel peaks (the detections fusion would use) and their height
+    peaks, conf = decode_heatmaps(outputs.detach().float().reshape(B * V, C, h, w))
+    peaks = peaks.reshape(B, V, C, 2).to(torch.float64)
+    conf = conf.reshape(B, V, C).to(torch.float64)
+    mean = soft_argmax(outputs, floor)                                    # (B, V, C, 2) f64
+    F, baseline = fundamental_matrices(K[:, a], R[:, a], t[:, a], K[:, g], R[:, g], t[:, g])
     scale = torch.linalg.inv(R.detach().to(torch.float64)).matmul(
         t.detach().to(torch.float64)[..., None]).norm(dim=(-2, -1))      # |C| per view
-    separated = baseline > 1e-9 * torch.maximum(scale[:, ii], scale[:, jj]).clamp_min(1.0)
-    possible = present[:, ii] & present[:, jj]
-    used = possible & separated
-    # x = mu + delta, E[delta] = 0, views independent:
-    # E[(x_j^T F x_i)^2] = e^2 + l_j^T S_j l_j + l_i^T S_i l_i + tr(F2 S_i F2^T S_j)
-    ones = torch.ones_like(mean[..., :1])
-    m_i = torch.cat([mean[:, ii], ones[:, ii]], -1)                        # (B, P, C, 3)
-    m_j = torch.cat([mean[:, jj], ones[:, jj]], -1)
-    S_i, S_j = cov[:, ii], cov[:, jj]                                      # (B, P, C, 2, 2)
-    Fc = F[:, :, None]                                                     # (B, P, 1, 3, 3)
-    l_j = (Fc @ m_i[..., None])[..., 0]                                    # line in view j
-    l_i = (Fc.transpose(-1, -2) @ m_j[..., None])[..., 0]                  # line in view i
-    e = (m_j * l_j).sum(-1)
-    F2 = Fc[..., :2, :2]
-    spread = ((l_j[..., None, :2] @ S_j @ l_j[..., :2, None])[..., 0, 0]
-              + (l_i[..., None, :2] @ S_i @ l_i[..., :2, None])[..., 0, 0]
-              + (F2 @ S_i @ F2.transpose(-1, -2) @ S_j).diagonal(dim1=-2, dim2=-1).sum(-1))
-    expected = e * e + (spread if sharpen else spread.detach())
-    # symmetric epipolar distance: the mean of the two point-to-line squared distances, the
-    # line norms taken at the means (detached: they only set the units)
-    inv = 0.5 * (1.0 / l_j[..., :2].detach().square().sum(-1).clamp_min(1e-300)
-                 + 1.0 / l_i[..., :2].detach().square().sum(-1).clamp_min(1e-300))
-    # beyond the window diagonal a distance says nothing more (and is not pulled on)
-    sq = (expected * inv).clamp(1e-12, float(h * h + w * w))
-    distance = sq.sqrt().to(outputs.dtype)
-    contrast = peak_contrast(outputs)                                      # (B, V, C)
-    # + _MIN_WEIGHT: flat maps (contrast 0) still count, a little, so that the weighted mean
-    # is defined and a batch of flat maps scores their (large) spread, not 0
-    weight = (contrast[:, ii] * contrast[:, jj] + _MIN_WEIGHT) * \
-        used[..., None].to(outputs.dtype)
-    return {'distance': distance, 'weight': weight, 'pairs': torch.stack([ii, jj], -1),
-            'pair_used': used, 'pairs_possible': int(possible.sum())}
+    separated = baseline > 1e-9 * torch.maximum(scale[:, a], scale[:, g]).clamp_min(1.0)
+    anchors = _agreeing_anchors(peaks, conf, present[..., None] & (conf >= anchor_confidence),
+                                F, separated, pairs, agreement_px)
+    used = ((present[:, a] & present[:, g] & separated)[..., None]
+            & anchors[:, a] & (conf[:, a] > conf[:, g]))                   # (B, P, C)
+    ones = torch.ones_like(peaks[..., :1])
+    x_a = torch.cat([peaks[:, a], ones[:, a]], -1)                         # (B, P, C, 3)
+    line = (F[:, :, None] @ x_a[..., None])[..., 0]                        # in the target
+    line = line / line[..., :2].norm(dim=-1, keepdim=True).clamp_min(1e-300)
+    x_g = torch.cat([mean[:, g], ones[:, g]], -1)
+    distance = (line * x_g).sum(-1)
+    # beyond the window diagonal a distance says nothing more
+    diag = math.hypot(h, w)
+    distance = distance.clamp(-diag, diag)
+    c2 = kernel_px * kernel_px
+    rho = 0.5 * c2 * torch.log1p(distance * distance / c2)
+    weight = conf[:, a].clamp(0.0, 1.0) * used.to(conf.dtype)
+    return {'distance': distance.to(outputs.dtype), 'rho': rho.to(outputs.dtype),
+            'weight': weight.to(outputs.dtype), 'pairs': pairs, 'used': used,
+            'confidence': conf.to(outputs.dtype), 'anchors': anchors}
 
 
-def epipolar_loss(outputs, K, R, t, valid=None):
-    """L_E: expected epipolar distance between the views of each instant, lowest where the
-    keypoints are right.
+def reduce_anchored_terms(terms, outputs):
+    """epipolar_loss from anchored_epipolar_terms' dict: the anchor-weighted mean of the
+    kernel over the used terms; 0 attached to `outputs` when none is used."""
+    weight = terms['weight']
+    total = weight.sum()
+    if not bool(total > 0):
+        return outputs.sum() * 0.0
+    return (weight * terms['rho']).sum() / total
+
+
+def epipolar_loss(outputs, K, R, t, valid=None, *, anchor_confidence=ANCHOR_CONFIDENCE,
+                  kernel_px=KERNEL_PX, agreement_px=AGREEMENT_PX):
+    """L_E, the anchored epipolar term (issue 36): each view is pulled onto the epipolar
+    lines of the views more confident than it, never the other way.
 
     outputs (B, V, C, h, w): the network's last-stage raw heatmaps of V views of B instants;
     K (B, V, 3, 3): intrinsics of the heatmap grid (px of the h x w output); R (B, V, 3, 3),
-    t (B, V, 3): world -> camera; valid (B, V) bool: views present (None = all). Returns a
-    scalar, differentiable in `outputs`.
+    t (B, V, 3): world -> camera (any length unit: only the direction of the baseline
+    matters); valid (B, V) bool: views present (None = all); anchor_confidence: the least
+    heatmap peak a view needs to anchor others (the trainer passes L_R's cut-off: a share of
+    the detector's peak on its labelled views); kernel_px: the Cauchy kernel's scale (heatmap
+    px); agreement_px: how close (heatmap px, symmetric epipolar distance) two confident
+    views' peaks must be to agree. Returns a scalar >= 0, differentiable in `outputs`
+    (through the targets only).
 
-    Each map becomes a distribution over its pixels (heatmap_distribution: relu(heat - 0.1
-    max), normalised). For every unordered pair (i, j) of present views with distinct centres (all
-    V (V - 1) / 2 pairs, batched; no pair is skipped: nothing is rectified, so an epipole in
-    the window is no special case) and keypoint, with x_i, x_j drawn independently from the
-    two distributions, the term is sqrt(E[d^2]) with d^2 the symmetric epipolar distance
-    (the mean of the squared distances of x_j to the epipolar line of x_i and of x_i to that
-    of x_j; Hartley & Zisserman sec. 11.4.3), computed in closed form from the maps' means
-    and covariances (heatmap px), clipped at the window diagonal. E[d^2] = (distance of the
-    means)^2 + the spread of both maps across the lines, so it is lowest for sharp peaks on
-    consistent epipolar lines: a uniform floor, broadening, a shift off the line or a flat
-    map all raise it (measured: bench/epipolar_loss.py). The MONET paper's KL between
-    row-max distributions falls instead as maps flatten. Measured in training
-    (bench/results/accuracy.md): it raises peak contrast, but on a weak detector it makes
-    the views agree on the cheapest consistent answer, the crop centre, and costs accuracy
-    against its exact control. Terms are weighted by the detached
-    peak contrasts of the two maps (peak_contrast: a map the detector is unsure of pulls
-    little; + 0.001) and averaged with those weights over the used (pair, keypoint) terms.
-    0 (attached) if no pair is used.
-    Errors: ValueError naming the argument whose shape is wrong.
+    For every ordered pair (anchor a, target g) of present views with distinct centres and
+    keypoint where view a anchors and its peak is above view g's (an anchor: a peak of at
+    least anchor_confidence confirmed by another confident view, its agreeing set
+    outweighing any disagreeing one's, so a confident wrong view, such as a left / right
+    swap, anchors nothing and drags no view): the anchor's
+    sub-pixel peak x_a (models.decode_heatmaps, detached: no gradient into the anchor) gives
+    the epipolar line l = F x_a in the target (Hartley & Zisserman eq. 9.2), and the term is
+    rho(d) = c^2 / 2 log(1 + d^2 / c^2), d the distance (heatmap px) of the target's
+    soft-argmax (the part of the map above a tenth of its peak, normalised) to l: a Cauchy
+    kernel, so a view that is far off (a wrong peak, an occlusion) is pulled gently and an
+    anchor that is itself wrong cannot drag a view far. Terms are averaged with the anchor's
+    peak (clipped to [0, 1]) as weight; 0 (attached) when no term is used.
+
+    Why this form (issue 36, measured): the symmetric forms (the paper's KL of rectified
+    row maxima, epipolar.multiview_epipolar_loss, and the expected symmetric distance,
+    symmetric_epipolar) score every keypoint stacked on the body's centroid as well as the
+    truth, reward sharpening more than correcting a view, and move accurate views towards
+    poor ones (55% of their gradient lands on the views that were right). Here the anchor
+    gets no gradient, the soft-argmax of a symmetric peak does not change when it sharpens
+    (no reward for sharpening at a fixed mean), and a configuration collapsed onto a
+    consistent wrong point is pulled back by any confident view. With one anchor a target is
+    constrained to a line only; with two or more, to their lines' intersection.
+    Errors: ValueError naming the argument whose shape or value is wrong.
     """
-    return reduce_epipolar_terms(epipolar_loss_terms(outputs, K, R, t, valid), outputs)
-
-
-def reduce_epipolar_terms(terms, outputs):
-    """epipolar_loss from epipolar_loss_terms' dict: the weighted mean of the distances over
-    the used terms; 0 attached to `outputs` when no pair is used."""
-    if not bool(terms['pair_used'].any()):
-        return outputs.sum() * 0.0
-    weight = terms['weight']
-    return (weight * terms['distance']).sum() / weight.sum()
+    return reduce_anchored_terms(anchored_epipolar_terms(
+        outputs, K, R, t, valid, anchor_confidence, kernel_px, agreement_px), outputs)

@@ -11,10 +11,14 @@ Modes (config.mode) are the paper's rows: supervised (L_L), spatial / spatiotemp
 augmentation plus one or two rounds of detections -> RANSAC triangulation -> reprojection
 as labels, at evenly spaced steps), monet (the paper's: L_L + lambda_e L_E on unlabeled
 instants, after a warm-up of epipolar_warmup x steps without L_E, + lambda_p L_B on the
-spatiotemporal augmentation; monet_bootstrap_rounds > 0 adds bootstrapped labels), and the
-ablations bootstrap2_epipolar (Bootstrapping II from spatial labels + L_E) and epipolar (L_L
-+ lambda_e L_E only). L_E is losses.epipolar_loss on the raw last-stage heatmaps of every
-view (views_per_instant = 0) of batch_unlabeled unlabeled instants per step. Every mode sees
+spatiotemporal augmentation; monet_bootstrap_rounds > 0 adds bootstrapped labels),
+reprojection_epipolar (the default recipe, reprojection, + L_E on the same instants as L_R),
+and the ablations bootstrap2_epipolar (Bootstrapping II from spatial labels + L_E) and
+epipolar (L_L + lambda_e L_E only). L_E is losses.epipolar_loss, the anchored one-sided
+epipolar term (issue 36), on the raw last-stage heatmaps of every view (views_per_instant =
+0) of batch_unlabeled unlabeled instants per step, anchored at L_R's confidence cut-off
+(anchor_cutoff); it starts after the warm-up at the first step whose labelled crops the
+detector fits (epipolar_fit_heat_px). Every mode sees
 the same number of images per step, and the batch plan never depends on lambda_e /
 lambda_p: a run with a weight of 0 is that term's exact control (see _batch_plan).
 State (weights, Adam, schedule, step, RNG, pseudo-labels) is checkpointed atomically and
@@ -54,10 +58,10 @@ from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.learning.config import LOSS_TERMS, TrainConfig
 from monet_ros.learning.dataset import CropCache
 from monet_ros.learning.losses import (
-    epipolar_loss_terms,
+    anchored_epipolar_terms,
     masked_heatmap_mse,
     objective,
-    reduce_epipolar_terms,
+    reduce_anchored_terms,
     soft_argmax,
     temporal_difference_loss,
 )
@@ -67,6 +71,7 @@ from monet_ros.learning.pseudo_labels import (
     spatial_pseudo_labels,
     spatiotemporal_pseudo_labels,
 )
+from monet_ros.learning.symmetric_epipolar import symmetric_epipolar_loss
 from monet_ros.models import build_model, decode_heatmaps, save_checkpoint
 from monet_ros.models.detector import check_precision, resolve_precision
 
@@ -384,7 +389,10 @@ class Trainer:
         self._update_pools()
         self.last_terms = {}
         self.last_plan = None            # the latest step's batch plan (see batch_plan)
-        self.last_pair_share = None      # share of L_E's view pairs used, latest step
+        self.last_pair_share = None      # share of L_E's (pair, keypoint) terms used, latest
+        # L_E starts at the first step after the warm-up whose labelled crops the detector
+        # fits (epipolar_fit_heat_px); latched, saved with the state
+        self.epipolar_started = None
         self.last_checkpoint = None      # path of the latest checkpoints/step_N.pt written
         self._started = time.monotonic()
         self.warnings = []
@@ -446,7 +454,11 @@ class Trainer:
                                  (spec.temporal_difference, c.lambda_t, 'L_T'),
                                  (spec.reprojection, c.lambda_r, 'L_R')):
             if on and weight:
-                parts.append(f'{weight:g} {term}' + (f' from step {start}' if start else ''))
+                when = f' from step {start}' if start else ''
+                if term == 'L_E':
+                    when += (' once the detector fits its labelled crops (median <= '
+                             f'{c.epipolar_fit_heat_px:g} heatmap px)')
+                parts.append(f'{weight:g} {term}' + when)
         return ' + '.join(parts)
 
     # ----------------------------------------------------------------- sampling
@@ -503,7 +515,11 @@ class Trainer:
             inst = self.rng.choice(unlabeled, size=n_inst, replace=len(unlabeled) < n_inst)
             views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
         pairs = np.stack([np.repeat(inst, k), views.ravel()], axis=1)
-        return ('E' if self.spec.epipolar else 'U', pairs, k)
+        # 'U': L_T / L_R (+ L_E with them); 'E': L_E alone. A mode with L_E added to L_R
+        # draws the plan of L_R's mode: lambda_e = 0 is that mode's exact control
+        alone = self.spec.epipolar and not (self.spec.temporal_difference or
+                                            self.spec.reprojection)
+        return ('E' if alone else 'U', pairs, k)
 
     def _batch_plan(self):
         """The (instant, view) crops of one step: parts ('L', pairs), ('B', pairs),
@@ -559,24 +575,57 @@ class Trainer:
                 heat_pts = batch.to_heatmap(source[p[:, 0], p[:, 1]], sl)
                 terms[kind] = masked_heatmap_mse([s[sl] for s in stages], heat_pts,
                                                  self.config.sigma)
-                if kind == 'L' and self.spec.reprojection:     # L_R's cut-off (a host sync)
+                if kind == 'L' and (self.spec.reprojection or self.spec.epipolar):
+                    # L_R's / L_E's cut-off (a host sync)
                     labelled_peak = _labelled_peak(stages[-1][sl], heat_pts)
+                if kind == 'L' and self.spec.epipolar and self.epipolar_started is None \
+                        and rng is not None and self.unlabeled_active:
+                    self._check_epipolar_start(stages[-1][sl], heat_pts)
             elif kind == 'U':
                 terms.update(self._unlabeled_terms([s[sl] for s in stages], batch, sl, p,
                                                    rest[0], labelled_peak))
             else:
-                k = rest[0]
-                heat = stages[-1][sl]          # raw: epipolar_loss makes distributions
-                B = n // k
-                f32 = dict(dtype=torch.float32, device=self.device)
-                K = torch.as_tensor(batch.K[sl], **f32).reshape(B, k, 3, 3)
-                R = torch.as_tensor(batch.R[sl], **f32).reshape(B, k, 3, 3)
-                t = torch.as_tensor(batch.t[sl], **f32).reshape(B, k, 3)
-                e = epipolar_loss_terms(heat.reshape(B, k, *heat.shape[1:]), K, R, t)
-                terms['E'] = reduce_epipolar_terms(e, heat)
-                self.last_pair_share = float(e['pair_used'].sum()) / max(1, e['pairs_possible'])
+                terms.update(self._epipolar_terms(stages[-1][sl], batch, sl, rest[0],
+                                                  labelled_peak, rng is None))
             start += n
         return terms
+
+    def anchor_cutoff(self, labelled_peak):
+        """The least heatmap peak of a view that anchors L_E or votes in L_R's consensus:
+        the larger of bootstrap_confidence and bootstrap_relative_confidence x the median
+        peak of the step's labelled views (labelled_peak; None: the absolute floor only)."""
+        c = self.config
+        return max(c.bootstrap_confidence, c.bootstrap_relative_confidence *
+                   (labelled_peak if labelled_peak is not None else 0.0))
+
+    def _check_epipolar_start(self, heat, points):
+        """Start L_E (latched) once the detector fits the step's labelled crops: the median
+        distance of their peaks to their labels is at most epipolar_fit_heat_px (heatmap px).
+        Before that its anchors would be a detector's guesses."""
+        peaks, _ = decode_heatmaps(heat.detach().float())
+        err = torch.linalg.norm(peaks.cpu().double() - torch.as_tensor(points).double().cpu(),
+                                dim=-1)
+        err = err[torch.isfinite(err)]
+        if err.numel() and float(err.median()) <= self.config.epipolar_fit_heat_px:
+            self.epipolar_started = self.step_count
+
+    def _epipolar_terms(self, heat, batch, sl, k, labelled_peak, always=False):
+        """{'E': L_E} of a part of instants x k views (heat (N, C, h, w) raw last-stage maps,
+        batch[sl] their geometry): losses.epipolar_loss anchored at anchor_cutoff; {} before
+        L_E has started (unless `always`: evaluation)."""
+        if not (always or self.epipolar_started is not None):
+            return {}
+        n = heat.shape[0]
+        B = n // k
+        f32 = dict(dtype=torch.float32, device=heat.device)
+        K = torch.as_tensor(batch.K[sl], **f32).reshape(B, k, 3, 3)
+        R = torch.as_tensor(batch.R[sl], **f32).reshape(B, k, 3, 3)
+        t = torch.as_tensor(batch.t[sl], **f32).reshape(B, k, 3)
+        e = anchored_epipolar_terms(heat.reshape(B, k, *heat.shape[1:]), K, R, t,
+                                    anchor_confidence=self.anchor_cutoff(labelled_peak),
+                                    kernel_px=self.config.epipolar_kernel_px)
+        self.last_pair_share = float(e['used'].float().mean()) if e['used'].numel() else 0.0
+        return {'E': reduce_anchored_terms(e, heat)}
 
     def _unlabeled_terms(self, stages, batch, sl, pairs, k, labelled_peak):
         """L_T and / or L_R of the 'U' part: stages (N, C, h, w) of its crops, batch[sl] their
@@ -605,6 +654,8 @@ class Trainer:
         if spec.reprojection:
             terms['R'] = masked_heatmap_mse(stages, self._reprojection_targets(
                 heat, batch, sl, pairs, k, labelled_peak), c.sigma)
+        if spec.epipolar:
+            terms.update(self._epipolar_terms(heat, batch, sl, k, labelled_peak))
         return terms
 
     def _reprojection_targets(self, heat, batch, sl, pairs, k, labelled_peak):
@@ -624,8 +675,7 @@ class Trainer:
         row = np.repeat(np.arange(n_inst), k)
         det[row, pairs[:, 1]] = points
         score[row, pairs[:, 1]] = conf.cpu().numpy()
-        cutoff = max(c.bootstrap_confidence, c.bootstrap_relative_confidence *
-                     (labelled_peak if labelled_peak is not None else 0.0))
+        cutoff = self.anchor_cutoff(labelled_peak)
         boot = bootstrap_pseudo_labels(det, score, self.data.cameras, cutoff,
                                        c.bootstrap_threshold_px, c.bootstrap_min_views)
         return batch.to_heatmap(boot.points[row, pairs[:, 1]], sl)
@@ -684,7 +734,7 @@ class Trainer:
             if len(self.data.unlabeled_instants):
                 k = self.views_per_instant()
                 n = max(2 if self.spec.temporal_difference else 1, num // k)
-                if self.spec.unlabeled and not self.spec.epipolar:
+                if self.spec.unlabeled:
                     parts.append(self._unlabeled_part(n, k))
                 else:     # L_E's value for every other mode (how epipolar its maps are)
                     V = self.data.recording.num_views
@@ -729,9 +779,18 @@ class Trainer:
         pairs = np.stack(np.meshgrid(instants, np.arange(V), indexing='ij'), -1).reshape(-1, 2)
         was_training = self.model.training
         self.model.eval()
-        terms = self._terms([('E', pairs, V)], None, None)
+        batch = self.data.cache.views(pairs[:, 0], pairs[:, 1])
+        heat = self.model(batch.images.to(self.device))[-1].float()
         self.model.train(was_training)
-        return {'epipolar_divergence': float(terms['E']), 'reprojection_px': reproj.mean,
+        f32 = dict(dtype=torch.float32, device=heat.device)
+        n = len(instants)
+        # the symmetric form as a score of agreement (as before issue 36), not the loss
+        divergence = symmetric_epipolar_loss(
+            heat.reshape(n, V, *heat.shape[1:]),
+            torch.as_tensor(batch.K, **f32).reshape(n, V, 3, 3),
+            torch.as_tensor(batch.R, **f32).reshape(n, V, 3, 3),
+            torch.as_tensor(batch.t, **f32).reshape(n, V, 3))
+        return {'epipolar_divergence': float(divergence), 'reprojection_px': reproj.mean,
                 'reprojection_std_px': reproj.std, 'instants': int(instants.size), **labelled}
 
     # ----------------------------------------------------------------- bootstrapping
@@ -837,6 +896,7 @@ class Trainer:
             'config': json.dumps(self.config.to_dict()),
             'step': self.step_count,
             'bootstrap_done': self.bootstrap_done,
+            'epipolar_started': json.dumps(self.epipolar_started),
             'model': {k: v.detach().cpu() for k, v in self.model.state_dict().items()},
             'optimizer': self.optimizer.state_dict(),
             'scheduler': self.scheduler.state_dict(),
@@ -876,6 +936,7 @@ class Trainer:
         trainer.scheduler.load_state_dict(state['scheduler'])
         trainer.step_count = int(state['step'])
         trainer.bootstrap_done = int(state['bootstrap_done'])
+        trainer.epipolar_started = json.loads(state.get('epipolar_started', 'null'))
         trainer.rng.bit_generator.state = json.loads(state['numpy_rng'])
         torch.set_rng_state(state['torch_rng'])
         trainer.pseudo = state['pseudo'].numpy().copy()
@@ -1020,6 +1081,12 @@ class Trainer:
             self.save()
         seconds = time.monotonic() - start
         fit = self.check_fit()
+        if self.spec.epipolar and self.config.lambda_e and self.epipolar_started is None \
+                and self.step_count >= total:
+            self.warn(f'mode {self.config.mode}: L_E never started: the detector did not fit its '
+                      f'labelled crops to epipolar_fit_heat_px '
+                      f'{self.config.epipolar_fit_heat_px:g} heatmap px in a step after the '
+                      'warm-up (train longer, or raise epipolar_fit_heat_px)')
         validation = (self.label_error(self.data.validation_instants,
                                        self.data.validation_labels)
                       if len(self.data.validation_instants) else None)
