@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monet_ros.config import setting, validate_config
+from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.temporal import cv_kalman
 
 # Consecutive gated measurements (that do not agree with each other: two that agree
@@ -87,6 +87,56 @@ class LiveFilterConfig:
         validate_config(self)
 
 
+def filter_numbers(config):
+    """(r2 m^2, q (m/s^2)^2, gate2) of a LiveFilterConfig, checked against what the filter
+    computes from them: the variances and the gate squared are finite and > 0 (r2, gate2),
+    and a joint's covariance predicted over the longest step the filter takes
+    (filter_reset_s), its innovation variance, the reach of filter_max_speed over the
+    oldest candidate's age (LOST_AFTER + 1 steps or filter_max_gap_s) and the covariance
+    of a restart from two measurements 1 ns apart are finite. Raises
+    ConfigError naming the field otherwise (e.g. filter_noise_mm 1e200: its square
+    overflows; 1e-200: it underflows to 0)."""
+    owner = type(config).__name__
+    with np.errstate(all='ignore'):
+        r2 = np.float64(config.filter_noise_mm * 1e-3) ** 2
+        q = np.float64(config.filter_acceleration) ** 2
+        gate2 = np.float64(config.filter_gate) ** 2
+    for name, value, what, unit in (
+            ('filter_noise_mm', r2, 'measurement variance', 'm^2'),
+            ('filter_acceleration', q, 'process noise variance', '(m/s^2)^2'),
+            ('filter_gate', gate2, 'squared gate', '')):
+        if not np.isfinite(value) or (name != 'filter_acceleration' and not value > 0):
+            raise ConfigError(owner, name, f'{getattr(config, name)!r} gives a {what} of '
+                              f'{float(value)!r} {unit}'.rstrip() + ' (must be finite'
+                              f'{"" if name == "filter_acceleration" else " and > 0"})')
+    step = np.float64(config.filter_reset_s)
+    with np.errstate(all='ignore'):
+        _, P = cv_kalman.predict(np.zeros((1, 3)), np.zeros((1, 3)),
+                                 np.array([[r2], [0.0], [cv_kalman.V0 ** 2]]), step, q)
+        S = P[0] + r2
+        # a candidate is at most LOST_AFTER frames old, or filter_max_gap_s
+        horizon = (LOST_AFTER + 1) * max(step, np.float64(config.filter_max_gap_s))
+        reach = config.filter_max_speed * horizon + config.filter_gate * np.sqrt(2 * r2)
+        pair = 2 * r2 / 1e-9 ** 2
+        long_step = not np.isfinite(step ** 4 * 2 * cv_kalman.V0 ** 2)
+    if not (np.isfinite(P).all() and np.isfinite(S).all()):
+        name = 'filter_reset_s' if long_step else 'filter_acceleration'
+        raise ConfigError(owner, name, f'filter_acceleration {config.filter_acceleration!r} '
+                          f'm/s^2 over a step of filter_reset_s {float(step)!r} s gives a '
+                          'non-finite covariance (lower one of them)')
+    if not np.isfinite(reach):
+        name = 'filter_max_speed' if np.isfinite(horizon) else \
+            'filter_max_gap_s' if config.filter_max_gap_s > step else 'filter_reset_s'
+        raise ConfigError(owner, name, f'filter_max_speed {config.filter_max_speed!r} m/s '
+                          f'over {LOST_AFTER + 1} x max(filter_reset_s {float(step)!r} s, '
+                          f'filter_max_gap_s {config.filter_max_gap_s!r} s) gives a '
+                          'non-finite reach (lower one of them)')
+    if not np.isfinite(pair):
+        raise ConfigError(owner, 'filter_noise_mm', f'{config.filter_noise_mm!r} mm gives a '
+                          'non-finite restart covariance')
+    return float(r2), float(q), float(gate2)
+
+
 class LiveFilter:
     """Per-joint constant-velocity Kalman filter with gating (see the module docstring).
 
@@ -94,14 +144,13 @@ class LiveFilter:
     measured (J,) bool: an accepted measurement this frame; False where the output is a
     prediction or NaN). Counters: resets (time jumps), restarts (joints restarted after a
     gap, LOST_AFTER gated measurements or from a pair), gated (measurements rejected as
-    outliers), frames.
+    outliers), frames. Raises ConfigError naming the field when the config's numbers
+    cannot be used (filter_numbers).
     """
 
     def __init__(self, config=LiveFilterConfig()):
         self.config = config
-        self.r2 = (config.filter_noise_mm * 1e-3) ** 2
-        self.q = config.filter_acceleration ** 2
-        self.gate2 = config.filter_gate ** 2
+        self.r2, self.q, self.gate2 = filter_numbers(config)
         self.joints = None
         self.last_ns = None
         self.resets = self.restarts = self.gated = self.frames = 0
@@ -123,7 +172,7 @@ class LiveFilter:
     def within_reach(self, X, origin, origin_ns, stamp_ns):
         """(J,) bool: X within filter_max_speed x the elapsed time + gate x sqrt(2 r2) of
         origin (J, 3) measured at origin_ns (J,) (False where either is NaN)."""
-        reach = self.config.filter_max_speed * (stamp_ns - origin_ns) * 1e-9 \
+        reach = self.config.filter_max_speed * ((stamp_ns - origin_ns) * 1e-9) \
             + self.config.filter_gate * np.sqrt(2 * self.r2)
         with np.errstate(invalid='ignore'):
             return np.linalg.norm(X - origin, axis=1) <= reach
