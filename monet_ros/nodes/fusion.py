@@ -29,6 +29,7 @@ import copy
 from dataclasses import dataclass
 import sys
 import time
+from types import SimpleNamespace
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
@@ -38,7 +39,7 @@ from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
-from monet_ros.config import ConfigError, config_subset, setting
+from monet_ros.config import MAX_THREADS, ConfigError, config_subset, setting
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
 from monet_ros.io import (
     header_stamp_ns,
@@ -59,7 +60,7 @@ from monet_ros.nodes.names import (
     TF_STATIC,
     node_namespace,
 )
-from monet_ros.nodes.params import declare_config
+from monet_ros.nodes.params import declare_config, duration_msg_ns
 from monet_ros.nodes.qos import HEATMAPS_IN, LATCHED, STREAM_OUT
 from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.nodes.tf import rig_tf_message, tf_message_class
@@ -126,7 +127,25 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     publish_tf: bool = setting(True, 'publish the rig on /tf_static (frame_id -> '
                                '<camera>_optical) when tf2_msgs is installed')
     threads: int = setting(1, 'torch CPU threads for heatmap decoding (0 = leave as is); one '
-                           'thread is fastest for these small tensors', minimum=0)
+                           'thread is fastest for these small tensors', minimum=0,
+                           maximum=MAX_THREADS)
+
+
+def derive(config):
+    """What the parameters of a FusionNodeConfig feed (no ROS), built before they are used
+    at start and before a live change is applied (monet_ros.nodes.params): the core's
+    FusionConfig, the live filter (built even while it is off, so switching it on cannot
+    fail), the durations in ns and the outlier score's scale. Raises ConfigError naming a
+    field (the filter), ArithmeticError or ValueError (a duration beyond what a float or
+    int64 holds); derive_checked turns those into an error naming the parameter."""
+    return SimpleNamespace(
+        core=config_subset(config, FusionConfig),
+        filter=LiveFilter(config_subset(config, LiveFilterConfig)),
+        slop_ns=int(config.slop_ms * 1e6),
+        max_queue_ns=config.max_queue_ms * 1e6,
+        diagnostics_period_ns=int(config.diagnostics_period_s * 1e9),     # rclpy's timer
+        marker_lifetime_ns=duration_msg_ns(config.marker_lifetime_s),
+        outlier_scale=config.threshold_px * 2)      # triangulation's tie-break divides by it
 
 
 class CameraStats:
@@ -157,10 +176,10 @@ class FusionNode(Node):
     def __init__(self, overrides=None, node_name='fusion', **kwargs):
         super().__init__(node_name, **node_namespace(kwargs))
         self.config = config = declare_config(self, FusionNodeConfig, overrides, live=LIVE,
-                                              on_change=self.apply_live)
-        self.core_config = config_subset(config, FusionConfig)
-        self.live_filter = LiveFilter(config_subset(config, LiveFilterConfig)) \
-            if config.filter else None
+                                              on_change=self.apply_live, derive=derive)
+        self.derived = derived = derive(config)
+        self.core_config = derived.core
+        self.live_filter = derived.filter if config.filter else None
         self.filter_counts = dict(resets=0, restarts=0, gated=0)  # of replaced filters
         self.timer = StageTimer()  # per-stage wall time, reported in /diagnostics
         if config.threads:
@@ -187,7 +206,7 @@ class FusionNode(Node):
         # filtered (C, 3) m the live filter's keypoints3d, None with the filter off
         self.listeners = []
         self.first_heard = None   # monotonic time of the first heatmap (of any camera)
-        self.sync = StampSynchronizer(self.names, slop_ns=int(config.slop_ms * 1e6),
+        self.sync = StampSynchronizer(self.names, slop_ns=derived.slop_ns,
                                       timeout_s=config.timeout_s, min_keys=config.min_views)
         self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.names}
         inputs = copy.copy(HEATMAPS_IN)
@@ -223,14 +242,14 @@ class FusionNode(Node):
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
-        self.core_config = config_subset(config, FusionConfig)
+        derived = derive(config)     # checked already (declare_config): cannot fail here
+        self.core_config = derived.core
         self.sync.min_keys = config.min_views
-        filter_config = config_subset(config, LiveFilterConfig)
-        if self.live_filter is None or self.live_filter.config != filter_config:
+        if self.live_filter is None or self.live_filter.config != derived.filter.config:
             # switched on, off or retuned: a fresh state from the next frame
             self.keep_filter_counts()
-            self.live_filter = LiveFilter(filter_config) if config.filter else None
-        self.config = config
+            self.live_filter = derived.filter if config.filter else None
+        self.config, self.derived = config, derived
 
     def keep_filter_counts(self):
         if self.live_filter is not None:
@@ -243,7 +262,7 @@ class FusionNode(Node):
         max_queue_ms between its reception by the middleware and its callback (the node is
         behind). False when off (0) or when the middleware gives no reception time (0)."""
         received = (info or {}).get('received_timestamp') or 0
-        limit_ns = self.config.max_queue_ms * 1e6
+        limit_ns = self.derived.max_queue_ns
         return bool(limit_ns and received) and time.time_ns() - received > limit_ns
 
     def on_message(self, name, kind, msg, info=None):
@@ -416,7 +435,7 @@ class FusionNode(Node):
         if self.pub_skeleton.get_subscription_count():
             self.pub_skeleton.publish(skeleton_marker_array(
                 group.stamp_ns, self.frame_id, X, self.skeleton.bone_indices,
-                ns=self.marker_ns, lifetime_ns=int(self.config.marker_lifetime_s * 1e9),
+                ns=self.marker_ns, lifetime_ns=self.derived.marker_lifetime_ns,
                 names=self.skeleton.keypoints if self.config.marker_labels else None))
         self.timer.add('publish', time.perf_counter() - start)
         for listener in self.listeners:
