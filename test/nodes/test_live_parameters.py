@@ -132,29 +132,29 @@ def test_fusion_survives_every_extreme_value_and_still_fuses(ros_env, tmp_path):
     assert np.abs(fused - X).max() < 1e-3      # the first filtered frame is the measurement
 
 
-def test_detector_survives_every_extreme_value(ros_env, tmp_path):
-    rig = ring_rig(2)
-    save_rig(tmp_path / 'rig.yaml', rig)
-    model = small_checkpoint(tmp_path / 'model.pt')
-    params = dict(rig=str(tmp_path / 'rig.yaml'), model=str(model), device='cpu', threads=1)
-    service = '/monet/detector'
-    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+def survives_storm(ros_env, name, params):
+    """Start node `name`, storm its parameters, check it after; returns the refusals."""
+    service = f'/monet/{name}'
+    with RosHarness(ros_env) as ros, NodeProcess(name, ros_env, params) as node:
         descriptors, _, expected, refusals = storm(ros, node, service)
         check_after_storm(ros, node, service, descriptors, expected, refusals)
         assert node.stop() == 0, node.output()
     assert 'Traceback' not in node.output()
+    return refusals
+
+
+def test_detector_survives_every_extreme_value(ros_env, tmp_path):
+    save_rig(tmp_path / 'rig.yaml', ring_rig(2))
+    model = small_checkpoint(tmp_path / 'model.pt')
+    params = dict(rig=str(tmp_path / 'rig.yaml'), model=str(model), device='cpu', threads=1)
+    refusals = survives_storm(ros_env, 'detector', params)
     assert any(n == 'track_timeout_s' and v == 1e200 for n, v, _ in refusals), refusals
 
 
 def test_player_survives_every_extreme_value(ros_env, tmp_path):
     noise_recording(tmp_path / 'bag', cameras=2, frames=3, width=32, height=24)
     params = dict(bag=str(tmp_path / 'bag'), wait_for_subscribers=0, start_delay_s=0.0)
-    service = '/monet/player'
-    with RosHarness(ros_env) as ros, NodeProcess('player', ros_env, params) as node:
-        descriptors, _, expected, refusals = storm(ros, node, service)
-        check_after_storm(ros, node, service, descriptors, expected, refusals)
-        assert node.stop() == 0, node.output()
-    assert 'Traceback' not in node.output()
+    survives_storm(ros_env, 'player', params)
 
 
 def test_learner_survives_every_extreme_value(ros_env, tmp_path):
@@ -166,12 +166,7 @@ def test_learner_survives_every_extreme_value(ros_env, tmp_path):
                   steps=1, checkpoint_every=1, batch_labelled=2, batch_pseudo=2,
                   batch_unlabeled=1, views_per_instant=3, eval_fraction=0.25, device='cpu',
                   threads=1, validate_instants=2)
-    service = '/monet/learner'
-    with RosHarness(ros_env) as ros, NodeProcess('learner', ros_env, params) as node:
-        descriptors, _, expected, refusals = storm(ros, node, service)
-        check_after_storm(ros, node, service, descriptors, expected, refusals)
-        assert node.stop() == 0, node.output()
-    assert 'Traceback' not in node.output()
+    survives_storm(ros_env, 'learner', params)
 
 
 @pytest.mark.parametrize('node_name, param, value', [
