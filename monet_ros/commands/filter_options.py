@@ -2,6 +2,7 @@
 the fields of monet_ros.temporal.FilterConfig as command-line options."""
 from dataclasses import fields
 
+from monet_ros.config import ConfigError
 from monet_ros.temporal import LOSSES, METHODS, FilterConfig
 
 FILTER_TOPIC = '/monet/keypoints3d_filtered'
@@ -32,12 +33,19 @@ def add_filter_arguments(parser):
 
 def filter_config_from_args(args, confidence_threshold, threshold_px):
     """FilterConfig of the options above; the fusion's thresholds decide which views count.
-    Raises ConfigError naming the field."""
+    Raises ValueError naming the option (ConfigError naming the field for the others), e.g.
+    --measurement-noise-mm 1e200, whose square overflows."""
     values = {name: getattr(args, option[2:].replace('-', '_'))
               for option, name in _OPTIONS.items()}
-    return FilterConfig(method=args.filter, loss=args.loss,
-                        confidence_threshold=confidence_threshold, threshold_px=threshold_px,
-                        **values)
+    try:
+        return FilterConfig(method=args.filter, loss=args.loss,
+                            confidence_threshold=confidence_threshold,
+                            threshold_px=threshold_px, **values)
+    except ConfigError as error:     # name the option the user typed
+        option = next((o for o, n in _OPTIONS.items() if n == error.field), None)
+        if option is None:
+            raise
+        raise ValueError(f'{option}: {error.message}') from None
 
 
 def write_filtered(writer, frame_id, smoothed, stamps_ns, topic=FILTER_TOPIC):

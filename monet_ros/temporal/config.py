@@ -51,3 +51,8 @@ class FilterConfig:
 
     def __post_init__(self):
         validate_config(self)
+        # the Kalman model's numbers (variances, gate, covariance over a max_gap_s step):
+        # a value whose square overflows or underflows to 0 is a ConfigError naming it
+        from monet_ros.temporal.cv_kalman import model_numbers
+        model_numbers(self, 'measurement_noise_mm', 'acceleration_m_s2', 'gate_sigma',
+                      'max_gap_s')

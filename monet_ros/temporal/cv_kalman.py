@@ -11,6 +11,8 @@ as its three entries P = (P00, P01, P11), shape (3, J) (m^2, m^2/s, m^2/s^2).
 """
 import numpy as np
 
+from monet_ros.config import ConfigError
+
 V0 = 2.0     # m/s: velocity standard deviation of a joint when it (re)starts
 
 
@@ -57,3 +59,37 @@ def as_matrices(P):
     row0 = np.stack([P[..., 0, :], P[..., 1, :]], axis=-1)
     row1 = np.stack([P[..., 1, :], P[..., 2, :]], axis=-1)
     return np.stack([row0, row1], axis=-2)
+
+
+def model_numbers(config, noise, acceleration, gate, step):
+    """(r2 m^2, q (m/s^2)^2, gate2) of a filter config whose fields are named by `noise`
+    (mm), `acceleration` (m/s^2), `gate` (sigmas) and `step` (s: the longest step the
+    filter predicts over), checked against what the step computes from them: r2 and gate2
+    finite and > 0, q finite, and a joint's covariance (started as `start` does) predicted
+    over `step` and its innovation variance finite. Raises ConfigError naming the field
+    (e.g. a noise of 1e200 mm: its square overflows; 1e-200 mm: it underflows to 0)."""
+    owner = type(config).__name__
+    values = {name: getattr(config, name) for name in (noise, acceleration, gate, step)}
+    with np.errstate(all='ignore'):
+        r2 = np.float64(values[noise] * 1e-3) ** 2
+        q = np.float64(values[acceleration]) ** 2
+        gate2 = np.float64(values[gate]) ** 2
+    for name, value, what, unit in ((noise, r2, 'measurement variance', 'm^2'),
+                                    (acceleration, q, 'process noise variance', '(m/s^2)^2'),
+                                    (gate, gate2, 'squared gate', '')):
+        positive = name != acceleration
+        if not np.isfinite(value) or (positive and not value > 0):
+            raise ConfigError(owner, name, f'{values[name]!r} gives a {what} of '
+                              f'{float(value)!r} {unit}'.rstrip() + ' (must be finite'
+                              f'{" and > 0" if positive else ""})')
+    dt = np.float64(values[step])
+    with np.errstate(all='ignore'):
+        _, P = predict(np.zeros((1, 3)), np.zeros((1, 3)), np.array([[r2], [0.0], [V0 ** 2]]),
+                       dt, q)
+        long_step = not np.isfinite(dt ** 4 * 2 * V0 ** 2)
+    if not (np.isfinite(P).all() and np.isfinite(P[0] + r2).all()):
+        name = step if long_step else acceleration
+        raise ConfigError(owner, name, f'{acceleration} {values[acceleration]!r} m/s^2 over a '
+                          f'step of {step} {values[step]!r} s gives a non-finite covariance '
+                          '(lower one of them)')
+    return float(r2), float(q), float(gate2)

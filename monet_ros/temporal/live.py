@@ -97,33 +97,14 @@ def filter_numbers(config):
     ConfigError naming the field otherwise (e.g. filter_noise_mm 1e200: its square
     overflows; 1e-200: it underflows to 0)."""
     owner = type(config).__name__
-    with np.errstate(all='ignore'):
-        r2 = np.float64(config.filter_noise_mm * 1e-3) ** 2
-        q = np.float64(config.filter_acceleration) ** 2
-        gate2 = np.float64(config.filter_gate) ** 2
-    for name, value, what, unit in (
-            ('filter_noise_mm', r2, 'measurement variance', 'm^2'),
-            ('filter_acceleration', q, 'process noise variance', '(m/s^2)^2'),
-            ('filter_gate', gate2, 'squared gate', '')):
-        if not np.isfinite(value) or (name != 'filter_acceleration' and not value > 0):
-            raise ConfigError(owner, name, f'{getattr(config, name)!r} gives a {what} of '
-                              f'{float(value)!r} {unit}'.rstrip() + ' (must be finite'
-                              f'{"" if name == "filter_acceleration" else " and > 0"})')
+    r2, q, gate2 = cv_kalman.model_numbers(config, 'filter_noise_mm', 'filter_acceleration',
+                                           'filter_gate', 'filter_reset_s')
     step = np.float64(config.filter_reset_s)
     with np.errstate(all='ignore'):
-        _, P = cv_kalman.predict(np.zeros((1, 3)), np.zeros((1, 3)),
-                                 np.array([[r2], [0.0], [cv_kalman.V0 ** 2]]), step, q)
-        S = P[0] + r2
         # a candidate is at most LOST_AFTER frames old, or filter_max_gap_s
         horizon = (LOST_AFTER + 1) * max(step, np.float64(config.filter_max_gap_s))
         reach = config.filter_max_speed * horizon + config.filter_gate * np.sqrt(2 * r2)
         pair = 2 * r2 / 1e-9 ** 2
-        long_step = not np.isfinite(step ** 4 * 2 * cv_kalman.V0 ** 2)
-    if not (np.isfinite(P).all() and np.isfinite(S).all()):
-        name = 'filter_reset_s' if long_step else 'filter_acceleration'
-        raise ConfigError(owner, name, f'filter_acceleration {config.filter_acceleration!r} '
-                          f'm/s^2 over a step of filter_reset_s {float(step)!r} s gives a '
-                          'non-finite covariance (lower one of them)')
     if not np.isfinite(reach):
         name = 'filter_max_speed' if np.isfinite(horizon) else \
             'filter_max_gap_s' if config.filter_max_gap_s > step else 'filter_reset_s'

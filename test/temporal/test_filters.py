@@ -5,6 +5,7 @@ frame-by-frame robust triangulation of the same 2D (fusion.fuse_points)."""
 import numpy as np
 import pytest
 
+from monet_ros.config import ConfigError
 from monet_ros.fusion import FusionConfig, fuse_frames
 from monet_ros.skeleton import load_skeleton
 from monet_ros.synth import RigConfig, Subject, make_rig
@@ -156,3 +157,33 @@ def test_a_joint_never_triangulated_or_started_late_is_no_error():
     assert np.isnan(result.X[:, 1]).all() and np.isnan(result.X[:25, 2]).all()
     assert np.allclose(result.X[25:, 2], X[25:, 2], atol=0.01)
     assert np.allclose(result.X[:, 0], X[:, 0], atol=0.01)
+
+
+# Issue 37: a Kalman setting whose square overflows (or underflows to 0) is refused naming
+# it, as the live filter's; every accepted one smooths to finite points.
+@pytest.mark.parametrize('name', ['measurement_noise_mm', 'acceleration_m_s2', 'gate_sigma',
+                                  'max_gap_s'])
+@pytest.mark.parametrize('value', [5e-324, 1e-200, 1e200, 1.7976931348623157e308])
+def test_extreme_kalman_settings_are_refused_by_name_or_smooth_finitely(name, value):
+    try:
+        config = FilterConfig(method='kalman', **{name: value})
+    except ConfigError as error:
+        assert error.field == name, str(error)
+        return
+    rng = np.random.default_rng(1)
+    X = rng.normal(0, 0.01, (6, 4, 3)) + [0.0, 0.0, 1.0]
+    X[2, 1] = np.nan
+    stamps = np.arange(6) * 33_000_000 + 10 ** 18
+    result = kalman_smooth(X, stamps, config)
+    seen = ~np.isnan(result.X)
+    assert seen.any() and np.isfinite(result.X[seen]).all(), (name, value)
+
+
+def test_the_filter_options_name_the_option(capsys):
+    from monet_ros.cli import main
+    code = main(['triangulate', 'absent.csv', '--rig', 'absent.toml', '--out', 'absent',
+                 '--filter', 'kalman', '--measurement-noise-mm', '1e200'])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert err[0] == ('monet triangulate: error: --measurement-noise-mm: 1e+200 gives a '
+                      'measurement variance of inf m^2 (must be finite and > 0)'), err
