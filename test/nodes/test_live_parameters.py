@@ -1,10 +1,10 @@
-"""Every declared parameter of every node, set to extreme finite values and to its range's
-ends on the running executable through the rcl_interfaces services (what `ros2 param set`
-calls, from another participant on the domain): the node keeps running and answering, a
-refusal names the parameter, a refused value leaves the old one, and (fusion) the node
-still fuses correctly once its parameters are set back (issue 37: filter_noise_mm 1e200
-killed the fusion node with an OverflowError in the parameter callback). At start a value
-whose derived numbers overflow exits 2 with one line naming the parameter."""
+"""Every declared parameter of every node, set to extreme finite values (and inf, NaN) and
+to its range's ends on the running executable through the rcl_interfaces services (what
+`ros2 param set` calls, from another participant on the domain): the node keeps running and
+answering, a refusal names the parameter, a refused value leaves the old one, and (fusion)
+the node still fuses correctly once its parameters are set back (issue 37: filter_noise_mm
+1e200 killed the fusion node with an OverflowError in the parameter callback). At start a
+value whose derived numbers overflow exits 2 with one line naming the parameter."""
 from helpers.blob_bag import write_blob_folder
 from helpers.blobs import blob_recording
 from helpers.fusion_frames import Frame, publishers, run_frames
@@ -24,7 +24,7 @@ from monet_ros.nodes.fusion import LIVE
 from monet_ros.nodes.qos import STREAM_OUT
 
 FLOAT_MAX = 1.7976931348623157e308
-DOUBLES = (1e200, -1e200, FLOAT_MAX, -FLOAT_MAX, 5e-324, 1e-200, 0.0)
+DOUBLES = (1e200, -1e200, FLOAT_MAX, -FLOAT_MAX, 5e-324, 1e-200, 0.0, float('inf'), float('nan'))
 INTEGERS = (2 ** 63 - 1, -2 ** 63, 0)
 
 
@@ -45,7 +45,7 @@ def plain(value):
 
 def trials(descriptor):
     """ParameterValues to try on one numeric parameter: its declared range's ends, huge and
-    tiny finite values (and a huge double on an integer parameter)."""
+    tiny finite values, inf and NaN (and a huge double on an integer parameter)."""
     if descriptor.type == ParameterType.PARAMETER_DOUBLE:
         ends = [v for r in descriptor.floating_point_range for v in (r.from_value, r.to_value)]
         return [double_value(v) for v in (*ends, *DOUBLES)]
