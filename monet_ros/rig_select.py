@@ -7,19 +7,21 @@ from monet_ros.config import ConfigError
 DEFAULT_FRAME = 'world'
 
 
-def load_node_rig(path):
+def load_node_rig(path, units=None):
     """(cameras, frame_id) from a rig file (any format geometry.load_rig reads) or from a
     recording (rosbag2 folder or .mcap: its camera_info + /tf_static, whose root frame is
-    then the frame, io.rig_and_frame_from_bag)."""
+    then the frame, io.rig_and_frame_from_bag). units ('m', 'cm', 'mm' or None / ''): the
+    rig's length unit when the file states none (the rig_units parameter, --rig-units)."""
+    units = units or None
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f'rig {path}: no such file or folder')
     if path.is_dir() or path.suffix == '.mcap':
         from monet_ros.io.rig import rig_and_frame_from_bag
-        cameras, root = rig_and_frame_from_bag(path)
+        cameras, root = rig_and_frame_from_bag(path, units=units)
         return list(cameras), root or DEFAULT_FRAME
     from monet_ros.geometry import read_rig
-    cameras, frame_id = read_rig(path)
+    cameras, frame_id = read_rig(path, units=units)
     return list(cameras), frame_id or DEFAULT_FRAME
 
 

@@ -23,7 +23,9 @@ ChArUco or checkerboard images / videos.
   board is counted, a board seen only mirrored and an unreadable image (named) apart; when a
   camera finds no board, markers that do not fit the board spec are named with the fields
   to check), per-camera intrinsics, spanning-tree extrinsics, one joint bundle
-  adjustment with a robust loss. Translations are in the board's unit.
+  adjustment with a robust loss. Translations are in the board's unit: --rig-units names
+  it (m, cm, mm), else the rule of monet_ros.geometry.units picks it from the camera
+  spread (noted); the outputs state it (rig YAML `units`, TOML [metadata] units).
 - Fewer than 2 cameras calibrated: exit 2, with why for each camera left out.
 - Output: --out as anipose calibration.toml (--format anipose, the default), the project
   rig YAML (--format rig) or both (--format both: --out and --out with .yaml); a summary
@@ -57,6 +59,9 @@ def add_arguments(parser):
     parser.add_argument('--marker-bits', type=int, help='ChArUco marker bits (4..7)')
     parser.add_argument('--dict-size', type=int, help='ChArUco dictionary size')
     parser.add_argument('--out', required=True, help='output calibration file')
+    parser.add_argument('--rig-units', choices=('m', 'cm', 'mm'), default=None,
+                        help="the board's length unit (that of --square-length), written "
+                        'into the outputs (default: camera centres >= 50 apart -> mm, else m)')
     parser.add_argument('--format', choices=FORMATS, default='anipose',
                         help='anipose calibration.toml, project rig YAML, or both')
     parser.add_argument('--distortion', choices=DISTORTION_MODELS,
@@ -242,6 +247,7 @@ def run(args):
     from monet_ros.calibration.rig import CalibrationConfig, calibrate_rig, stack_detections
     from monet_ros.calibration.summary import board_geometry, summary_lines
     from monet_ros.geometry import load_rig, save_anipose_toml, save_rig
+    from monet_ros.geometry.units import infer_units, with_units
 
     _check_args(args)
     board = board_from_args(args)
@@ -283,6 +289,13 @@ def run(args):
               f'frame: {unpaired}', file=sys.stderr)
     corners = stack_detections(detections)
     result = calibrate_rig(detections, board, config, fixed)
+    units = args.rig_units
+    if units is None:
+        units, reason = infer_units(result.cameras)
+        print(f'monet calibrate: note: the board states no length unit; {reason}: the '
+              f'calibration is taken as {units} (--rig-units m|cm|mm states it)',
+              file=sys.stderr)
+    cameras = with_units(result.cameras, units)
     geometry = board_geometry(result, corners, board)
     out = Path(args.out)
     metadata = {'generator': 'monet calibrate', 'board': board.describe(),
@@ -291,13 +304,13 @@ def run(args):
                 'board_square_triangulated': geometry['median']}
     written = []
     if args.format in ('anipose', 'both'):
-        save_anipose_toml(out, result.cameras, metadata)
+        save_anipose_toml(out, cameras, metadata)
         written.append(out)
     if args.format == 'rig':
-        save_rig(out, result.cameras)
+        save_rig(out, cameras)
         written.append(out)
     if args.format == 'both':
-        save_rig(out.with_suffix('.yaml'), result.cameras)
+        save_rig(out.with_suffix('.yaml'), cameras)
         written.append(out.with_suffix('.yaml'))
     if not args.no_report:
         write_report(_report_path(args), result, corners, board)

@@ -60,3 +60,13 @@ def atomic_output_dir(path):
         os.replace(staging, path)
     finally:
         shutil.rmtree(holder, ignore_errors=True)
+
+
+def add_rig_units_argument(parser):
+    """--rig-units m|cm|mm: the length unit of a rig file that states none (anipose /
+    Pose2Sim TOML, OpenCV, DANNCE); default: the file's, else the rule of geometry.units
+    (camera centres >= 50 apart -> mm, else m; noted on stderr)."""
+    from monet_ros.geometry.units import UNITS
+    parser.add_argument('--rig-units', choices=UNITS, default=None,
+                        help="length unit of a calibration that states none (default: the "
+                        "file's `units`, else camera centres >= 50 apart -> mm, else m)")

@@ -100,6 +100,7 @@ def run(args):
         read_trc,
         trc_to_world,
     )
+    from monet_ros.geometry.units import from_m, rig_units, to_mm
 
     DemoOptions(threshold_px=args.threshold_px, likelihood=args.likelihood)
     if args.synthetic:
@@ -150,8 +151,9 @@ def run(args):
     X, inliers = triangulate_robust(points, rig, weights, threshold_px=args.threshold_px,
                                     min_views=2, method='exclusion')
     elapsed = time.perf_counter() - start
-    expected = trc_to_world(trc).reshape(-1, 3)
-    diff_mm = np.linalg.norm(X - expected, axis=1) * 1000.0
+    units = rig_units(cameras)               # Pose2Sim's .trc is in metres
+    expected = from_m(trc_to_world(trc).reshape(-1, 3), units)
+    diff_mm = to_mm(np.linalg.norm(X - expected, axis=1), units)
     ok = np.isfinite(X[:, 0])
     err = reprojection_error(X, points, rig)
 

@@ -42,6 +42,8 @@ def add_reference_arguments(parser):
                         "(--labels; for a 3D reference also the data folder's labels.csv), "
                         'which are left out by default')
     parser.add_argument('--rig', help="rig file (default: the recording's)")
+    from monet_ros.commands.common import add_rig_units_argument
+    add_rig_units_argument(parser)
     parser.add_argument('--px-thresholds', default='5,10,20', help='2D PCK thresholds (px)')
     parser.add_argument('--mm-thresholds', default='25,50,100', help='3D PCK thresholds (mm)')
 
@@ -112,7 +114,8 @@ def run_reference(args):
         px = _thresholds(args.px_thresholds, '--px-thresholds')
         mm = _thresholds(args.mm_thresholds, '--mm-thresholds')
         options = label_options_from_args(args)
-        index = recording_index(args.data[0], rig=args.rig, camera_map=options.camera_map)
+        index = recording_index(args.data[0], rig=args.rig, camera_map=options.camera_map,
+                                rig_units=args.rig_units)
         references = {}
         with tempfile.TemporaryDirectory(prefix='monet-eval-') as tmp:
             for n, path in enumerate(args.checkpoints):
@@ -130,7 +133,7 @@ def run_reference(args):
                 out = Path(tmp) / f'run{n}'
                 process_recording(index.bag, path, out, rig=args.rig, device=args.device,
                                   progress=False, exports=('csv', 'npz'),
-                                  camera_map=options.camera_map)
+                                  camera_map=options.camera_map, rig_units=args.rig_units)
                 table = read_anipose_csv(out / 'keypoints3d.csv')
                 det = np.load(out / 'detections2d.npz')
                 names = [c.name for c in index.cameras]
@@ -167,6 +170,7 @@ def run_reference(args):
     print(f'reference: {args.reference} ({ref.kind}, {rows[0]["joints_3d"]} joints in 3D'
           + two_d + (f'; not in the model: {", ".join(ref.unused)}' if ref.unused else '')
           + ')')
+    print(f'3D errors in mm (the rig and the 3D in {ref.units}, converted)')
     if ref.alignment:
         print(f'reference time: {alignment_text(ref.alignment)}')
     from monet_ros.commands.info import _ranges

@@ -7,7 +7,9 @@ player read.
         [--format jpeg|png] [--camera-map cam_01=cam01] [--start-ns N] [--timing container]
 
 - SESSION_DIR holds one video per camera (any file OpenCV/FFmpeg decodes: .mp4, .avi,
-  .mkv, .mov, ...) or one folder of images per camera (.png/.jpg). A camera of the
+  .mkv, .mov, ...), one folder of images per camera (.png/.jpg), or one folder per camera
+  holding its video (sleap-anipose's layout SESSION/back/minimal_back.mp4: the folder's
+  name is the entry's, its subfolders such as calibration_images/ are not read). A camera of the
   calibration (any monet_ros.geometry.load_rig format) is matched to the entry whose name
   contains the camera name, as anipose does (the longest camera name wins, so cam1 does
   not take cam10's file); --camera-map renames calibration cameras first (Pose2Sim's
@@ -29,7 +31,9 @@ player read.
 - Topics per camera NAME: /NAME/image_raw/compressed (CompressedImage, the default;
   --format jpeg|png, png is lossless) or, with --raw, /NAME/image_raw (Image rgb8,
   lossless), /NAME/camera_info every frame (K, D, size; frame NAME_optical), and one
-  /tf_static (world -> NAME_optical).
+  /tf_static (world -> NAME_optical), in metres as ROS has it (REP 103): a calibration in
+  mm or cm (its `units`, --rig-units, else the rule of monet_ros.geometry.units) is
+  converted, with a note.
 - Image size (monet_ros.io.rig_fit.fit_camera): the calibration's size must be the
   video's. When the video is the calibration scaled by s (both axes), K is scaled
   (c' = (c + 0.5) s - 0.5). When it differs by at most 16 px (codec padding: Pose2Sim's
@@ -65,6 +69,8 @@ def add_arguments(parser):
     p.add_argument('session', help='folder with one video (or image folder) per camera')
     p.add_argument('--calibration', required=True, help='calibration / rig file (any format '
                    'monet_ros.geometry.load_rig reads: anipose/Pose2Sim TOML, rig YAML, ...)')
+    from monet_ros.commands.common import add_rig_units_argument
+    add_rig_units_argument(p)
     p.add_argument('--out', required=True, help='output rosbag2 folder (must not exist)')
     p.add_argument('--fps', type=float, default=None, help='instant rate (default: the '
                    "videos'); video frames go to the instant nearest their container time")
@@ -230,16 +236,18 @@ def _timing_notes(placers, files, fps, timing, fps_given):
 
 def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, raw=False,
                   fmt='jpeg', quality=90, camera_map=(), start_ns=DEFAULT_START_NS,
-                  max_frames=0, progress=True, timing='container'):
-    """Write the recording (module docstring). Returns a dict: cameras (Camera list as
-    written), files {camera: path}, instants, stamps (first, last), fps, notes, skipped
-    {camera: frames not imported: before instant 0 by offsets, beyond --max-frames},
-    missing {camera: instants without its view}, dropped {camera: frames sharing an
-    instant with an earlier one}, counts {camera: frames read}. Raises ImportVideoError
+                  max_frames=0, progress=True, timing='container', rig_units=None):
+    """Write the recording (module docstring). rig_units: the calibration's length unit
+    when the file states none. Returns a dict: cameras (Camera list as written, in m),
+    files {camera: path}, instants, stamps (first, last), fps, notes, skipped {camera:
+    frames not imported: before instant 0 by offsets, beyond --max-frames}, missing
+    {camera: instants without its view}, dropped {camera: frames sharing an instant with an
+    earlier one}, counts {camera: frames read}. Raises ImportVideoError
     (a ValueError) naming the file or option."""
     from tqdm import tqdm
 
     from monet_ros.geometry import load_rig
+    from monet_ros.geometry.units import rescale
     from monet_ros.io import BagWriter
     from monet_ros.io.frame_sources import FrameSource, session_entries
     from monet_ros.io.rig_fit import fit_camera
@@ -250,7 +258,7 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
         raise ImportVideoError(f'{out}: output exists; choose a new folder')
     rename = dict(parse_name_map(camera_map, 'camera'))
     cameras = [c.replace(name=rename.get(c.name, c.name), topic=None)
-               for c in load_rig(calibration)]
+               for c in load_rig(calibration, units=rig_units)]
     names = [c.name for c in cameras]
     entries = session_entries(session)
     files = {cam: entries[e] for cam, e in match_camera_names(names, list(entries)).items()}
@@ -283,6 +291,10 @@ def import_videos(session, calibration, out, fps=None, offsets=(), resize=1.0, r
             total = min(total, int(max_frames))
         period = 1e9 / rate
         stamps = []
+        if final[0].units != 'm':
+            notes.append(f'{calibration} is in {final[0].units}: /tf_static written in metres '
+                         '(ROS REP 103); 3D from this recording is in m')
+            final = rescale(final, 'm')
         with BagWriter(out) as writer:
             writer.write_tf_static(int(start_ns), final)
             bar = tqdm(total=total or None, desc='monet import videos', unit='instant',
@@ -352,7 +364,7 @@ def run(args):
                                fmt=args.format or 'jpeg', quality=args.quality,
                                camera_map=args.camera_map, start_ns=args.start_ns,
                                max_frames=args.max_frames, progress=not args.quiet,
-                               timing=args.timing)
+                               timing=args.timing, rig_units=args.rig_units)
     except (ImportVideoError, LabelError, RigError, BagWriterError, ValueError,
             OSError) as error:
         print(f'{prog}: {error}', file=sys.stderr)

@@ -31,6 +31,8 @@ def add_arguments(parser):
     from monet_ros.commands.labels import add_label_arguments
     parser.add_argument('rec', help='recording: rosbag2 folder, .mcap or `monet synth` folder')
     parser.add_argument('--rig', help="rig file (default: the recording's)")
+    from monet_ros.commands.common import add_rig_units_argument
+    add_rig_units_argument(parser)
     parser.add_argument('--labels', help='labels CSV (stamp- or frame-keyed) to check against '
                         'the recording and list')
     parser.add_argument('--skeleton', default=None, help='skeleton preset or YAML for '
@@ -49,7 +51,8 @@ def run(args):
 
     try:
         options = label_options_from_args(args)
-        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map)
+        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map,
+                                rig_units=args.rig_units)
         labels = report = None
         if args.labels:
             rows = read_label_rows(args.labels)
@@ -70,7 +73,7 @@ def run(args):
     for info in sorted(index.reader.topics.values(), key=lambda t: t.name):
         count = '?' if info.count is None else info.count
         print(f'  {info.name}  {info.msgtype}  {count} messages', file=out)
-    print('cameras:', file=out)
+    print(f'cameras (rig length unit {index.cameras[0].units}):', file=out)
     for cam in index.cameras:
         print(f'  {cam.name}  {cam.width}x{cam.height}  fx {cam.K[0, 0]:.1f} fy '
               f'{cam.K[1, 1]:.1f}  image topic {index.topics[cam.name]}', file=out)

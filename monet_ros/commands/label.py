@@ -41,6 +41,8 @@ def add_arguments(parser):
                         metavar='FORMAT=PATH', help='existing labels in another format to '
                         f'load ({", ".join(sorted(FORMATS))}; repeatable)')
     parser.add_argument('--rig', help="rig file (default: the recording's)")
+    from monet_ros.commands.common import add_rig_units_argument
+    add_rig_units_argument(parser)
     parser.add_argument('--skeleton', default='human14', help='skeleton preset or YAML')
     parser.add_argument('--model', help='detector checkpoint: suggestions from its 3D output, '
                         'pre-filled peaks and per-instant disagreement')
@@ -97,7 +99,8 @@ def run(args):
     if args.model:
         from monet_ros.models.checkpoint import read_checkpoint
         read_checkpoint(args.model)        # a bad file is named before the recording loads
-    session = LabelSession(args.rec, args.labels, rig=args.rig, skeleton=args.skeleton,
+    session = LabelSession(args.rec, args.labels, rig=args.rig, rig_units=args.rig_units,
+                           skeleton=args.skeleton,
                            imports=_imports(args.imports),
                            options=label_options_from_args(args), config=config)
     predictor = None

@@ -33,6 +33,7 @@ def label_options_from_args(args):
 
 
 def add_arguments(parser):
+    from monet_ros.geometry.pose2sim import POSE_MODELS
     from monet_ros.labels_import import FORMATS
     sub = parser.add_subparsers(dest='labels_command', metavar='ACTION')
     sub.required = True
@@ -43,6 +44,8 @@ def add_arguments(parser):
     imp.add_argument('--rec', required=True, help='recording (rosbag2 folder, .mcap or '
                      '`monet synth` folder) whose instants and cameras the labels refer to')
     imp.add_argument('--rig', help="rig file (default: the recording's)")
+    from monet_ros.commands.common import add_rig_units_argument
+    add_rig_units_argument(imp)
     imp.add_argument('--out', required=True, help='output labels CSV (stamp_ns,camera,...)')
     imp.add_argument('--skeleton', default=None, help='skeleton preset or YAML (default: the '
                      'keypoints found in the labels, in their order)')
@@ -51,6 +54,9 @@ def add_arguments(parser):
     imp.add_argument('--min-score', type=float, default=0.0,
                      help='drop points whose likelihood/score is below this (anipose, SLEAP '
                      'predictions; counted)')
+    imp.add_argument('--pose-model', choices=tuple(POSE_MODELS), default=None,
+                     help="openpose: the keypoint names (default: the --skeleton's when it "
+                     'has as many, else the one model with that many)')
     add_label_arguments(imp)
 
 
@@ -63,12 +69,17 @@ def run(args):
 
     try:
         options = label_options_from_args(args)
-        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map)
+        index = recording_index(args.rec, rig=args.rig, camera_map=options.camera_map,
+                                rig_units=args.rig_units)
         cameras = [c.name for c in index.cameras]
+        skeleton = tuple(load_skeleton(args.skeleton).keypoints) if args.skeleton else None
+        extra = (dict(pose_model=args.pose_model, keypoints=skeleton)
+                 if args.format == 'openpose' else None)
         result = import_labels(args.format, args.path, cameras=cameras, camera=args.camera,
-                               min_score=args.min_score, camera_map=dict(options.camera_map))
-        if args.skeleton:
-            keypoints = tuple(load_skeleton(args.skeleton).keypoints)
+                               min_score=args.min_score, camera_map=dict(options.camera_map),
+                               options=extra)
+        if skeleton:
+            keypoints = skeleton
         else:
             mapped = dict(options.keypoint_map)
             keypoints = tuple(dict.fromkeys(mapped.get(k, k) for k in result.keypoints))

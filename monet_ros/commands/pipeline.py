@@ -50,6 +50,8 @@ def add_arguments(parser):
                         'synthetic recording generated (once) in --workdir')
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
                         '/tf_static, or the rig.yaml beside a synthetic recording)')
+    from monet_ros.commands.common import add_rig_units_argument
+    add_rig_units_argument(parser)
     parser.add_argument('--model', help='detector checkpoint (default with no --bag: a small '
                         'net trained once for the synthetic recording)')
     parser.add_argument('--skeleton', default='human14',
@@ -375,6 +377,7 @@ def run(args):
         with until_shutdown():
             try:
                 fusion = FusionNode(overrides=dict(rig=str(rig), cameras=cameras,
+                                                   rig_units=args.rig_units or '',
                                                    skeleton=args.skeleton, threads=0,
                                                    # lockstep: every frame, however late
                                                    **({'max_queue_ms': 0.0}
@@ -386,6 +389,7 @@ def run(args):
                 # 2) before their processes start; with lockstep the detector waits for the
                 # previous frame's 3D itself
                 detector_params = dict(rig=str(rig), cameras=tuple(cameras),
+                                       rig_units=args.rig_units or '',
                                        model=str(args.model),
                                        transport=image_transport(args.bag, fusion.cameras),
                                        device=args.device, backend=args.backend,

@@ -105,6 +105,7 @@ class GroundTruthScore:
 
     def __init__(self, ground_truth, rig, skeleton='human14'):
         from monet_ros.geometry import load_rig
+        from monet_ros.geometry.units import rig_units, to_mm
         from monet_ros.skeleton import load_skeleton
 
         data = np.load(ground_truth, allow_pickle=False)
@@ -113,6 +114,7 @@ class GroundTruthScore:
         self.stamps = np.asarray(data[stamp_key], np.int64)
         self.points = np.asarray(data[point_key], np.float64)
         self.cameras = load_rig(rig)
+        self.mm = to_mm(1.0, rig_units(self.cameras))      # ground truth in the rig's unit
         self.skeleton = load_skeleton(skeleton)
         self.keypoints = list(self.skeleton.keypoints)
         index = {k: i for i, k in enumerate(self.keypoints)}
@@ -139,10 +141,10 @@ class GroundTruthScore:
                 self.unmatched += 1
             return
         truth = self.points[t]
-        err = np.linalg.norm(result.X - truth, axis=1) * 1000.0            # (C,) NaN = none
+        err = np.linalg.norm(result.X - truth, axis=1) * self.mm           # (C,) NaN = none
         d_direct = err[self.pairs].sum(axis=1)
         d_cross = (np.linalg.norm(result.X[self.pairs] - truth[self.pairs[:, ::-1]], axis=2)
-                   * 1000.0).sum(axis=1)
+                   * self.mm).sum(axis=1)
         swapped = np.where(np.isfinite(d_direct), d_cross < d_direct, np.nan)
         err2d = None
         if len(result.points2d) == len(self.cameras):
@@ -152,7 +154,7 @@ class GroundTruthScore:
             self.err3d.append(err)
             if filtered is not None:
                 self.filtered3d.append(np.linalg.norm(np.asarray(filtered) - truth, axis=1)
-                                       * 1000.0)
+                                       * self.mm)
             self.swapped.append(swapped)
             if err2d is not None:
                 self.err2d.append(err2d)

@@ -76,6 +76,8 @@ def learner_node(args, rig, summary):
                      device=args.device or 'auto')
     if args.rig and not Path(args.rig).is_dir() and Path(args.rig).suffix != '.mcap':
         overrides['rig'] = str(rig)
+    if args.rig_units:
+        overrides['rig_units'] = args.rig_units
     node = LearnerNode(overrides=overrides)
     node.listeners.append(AnnouncementLog(summary))
     return node

@@ -1,13 +1,16 @@
 """`monet process`: the detector + fusion core over a recording, offline and as fast as
 possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 MCAP.
 
-    monet process REC... --model CKPT --out OUT [--jobs N] [--rig RIG] [--heatmaps] [--threads N]
-        [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx] [--filter none|kalman|optim]
+    monet process REC... --model CKPT --out OUT [--jobs N] [--rig RIG] [--rig-units m|cm|mm]
+        [--heatmaps] [--threads N] [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx]
+        [--filter none|kalman|optim]
 
 Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
 (monet_ros.io.export_results): keypoints3d.csv (anipose's 3D CSV layout),
 keypoints3d.trc (OpenSim / Pose2Sim), keypoints.nwb (NWB + ndx-pose, 3D and the 2D
-detections per camera) and detections2d.npz (2D detections + crop cameras).
+detections per camera) and detections2d.npz (2D detections + crop cameras). 3D is in the
+rig's length unit (--rig-units, the file's, else the rule of monet_ros.geometry.units; a
+recording's /tf_static rig: m), stated in every file.
 
 --filter kalman|optim smooths the 3D over the whole recording (monet_ros.temporal): the
 analysis files then hold the filtered points and the MCAP also /monet/keypoints3d_filtered
@@ -33,6 +36,7 @@ HELP = 'run detector + fusion over a recording offline, write keypoints3d to an 
 
 
 def add_arguments(parser):
+    from monet_ros.commands.common import add_rig_units_argument
     parser.add_argument('bag', nargs='+', help='recording(s): rosbag2 folder or .mcap (with '
                         'several, --out is their parent: OUT/<recording name>/ each)')
     parser.add_argument('--jobs', type=int, default=1,
@@ -43,6 +47,7 @@ def add_arguments(parser):
                         'written atomically: a failed run leaves nothing behind)')
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
                         '/tf_static)')
+    add_rig_units_argument(parser)
     parser.add_argument('--cameras', nargs='+', help='cameras to use (default: all)')
     parser.add_argument('--camera-map', action='append', default=[], metavar='SRC=DST',
                         help="rename --rig cameras to the recording's (e.g. cam_01=cam01)")
@@ -121,7 +126,8 @@ def view_problem(image, camera):
 
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
                       skeleton=None, progress=True, backend='torch', threads=0, exports=(),
-                      trc_axes='xyz', camera_map=(), precision='float32', filter_config=None):
+                      trc_axes='xyz', camera_map=(), precision='float32', filter_config=None,
+                      rig_units=None):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
@@ -132,12 +138,16 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     {format: path}; figures['summary']: per-joint dropout and inlier views).
     filter_config: a temporal.FilterConfig; with a method other than 'none' the exports
     hold the filtered points and figures['filter'] is the temporal.Smoothed.
+    rig_units: the length unit of a rig file that states none (geometry.read_rig);
+    figures['units'] is the rig's unit, that of the 3D outputs.
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
     from monet_ros.commands.common import atomic_output_dir, check_new_output
+    from monet_ros.commands.filter_options import check_filter_units
     from monet_ros.crop_rule import TrackedCrops
     from monet_ros.fusion import fuse_heatmaps
+    from monet_ros.geometry.units import rig_units as units_of
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.io.export_results import ResultsCollector
     from monet_ros.io.images import to_rgb8
@@ -149,11 +159,12 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     config = config or ProcessConfig()
     fusion_config = config_subset(config, FusionConfig)
     check_new_output(out, 'monet process')
-    rig_cameras, frame_id = load_node_rig(rig or bag)
+    rig_cameras, frame_id = load_node_rig(rig or bag, rig_units)
     if rig is not None and Path(rig).is_file():    # a calibration file: fit it to the images
         from monet_ros.io.rig_fit import fit_rig_to_bag
         rig_cameras, _ = fit_rig_to_bag(rig_cameras, open_bag(bag), camera_map)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
+    check_filter_units(filter_config, units_of(cameras))     # before the work
     if config.min_views > len(cameras):
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
@@ -231,6 +242,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     figures['exports'] = {fmt: Path(out) / Path(path).relative_to(staging)
                           for fmt, path in written.items()}
     figures['summary'] = collector.summary()
+    figures['units'] = cameras[0].units
     figures['seconds'] = time.perf_counter() - start
     figures['mean_error'], figures['mean_views'] = errors.mean, num_views.mean
     figures['report'] = reader.report
@@ -256,7 +268,7 @@ def run(args):
                    skeleton=args.skeleton, backend=args.backend,
                    exports=parse_formats(args.export), trc_axes=args.trc_axes,
                    camera_map=parse_name_map(args.camera_map), precision=args.precision,
-                   filter_config=filter_config)
+                   filter_config=filter_config, rig_units=args.rig_units)
     if len(args.bag) > 1:         # several recordings: worker processes (process_many.py)
         from monet_ros.commands.process_many import run_many
         return run_many(args, options, process_recording)
@@ -271,7 +283,7 @@ def run(args):
           f'{figures["seconds"]:.1f} s ({fps:.1f} frames/s); mean reprojection error '
           f'{figures["mean_error"]:.2f} px; mean inlier views '
           f'{0.0 if figures["mean_views"] != figures["mean_views"] else figures["mean_views"]:.2f}'
-          f' -> {args.out}')
+          f' -> {args.out} (3D in {figures["units"]}, the rig\'s unit)')
     for name, count in sorted(skipped.items()):
         print(f'monet process: skipped {count} views of {name}: '
               f'{figures["skip_reasons"][name]}', file=sys.stderr)

@@ -28,11 +28,13 @@ class TrainRunOptions:
 
 
 def add_arguments(parser):
+    from monet_ros.commands.common import add_rig_units_argument
     parser.add_argument('data', help='recording: `monet synth` output folder, rosbag2 folder '
                         'or .mcap file')
     parser.add_argument('--out', required=True, help='output folder (checkpoints, log)')
     parser.add_argument('--rig', help="rig file (default: the data folder's rig.yaml, else "
                         "the bag's CameraInfo + /tf_static)")
+    add_rig_units_argument(parser)
     parser.add_argument('--labels', help="labels CSV, stamp_ns- or frame-keyed (default: the "
                         "data folder's labels.csv); checked against the recording, see "
                         '--camera-map / --skip-bad-labels')
@@ -106,7 +108,8 @@ def run(args):
     recording = load_recording(args.data, rig=args.rig, labels=args.labels,
                                ground_truth=args.ground_truth, skeleton=args.skeleton,
                                max_instants=options.max_instants or None,
-                               label_options=label_options_from_args(args))
+                               label_options=label_options_from_args(args),
+                               rig_units=args.rig_units)
     notes = ([f'monet train: {recording.read_report.notice(args.data)}']
              if recording.read_report.notice(args.data) else [])
     notes += [f'monet train: note: {note}' for note in recording.rig_notes]
@@ -180,12 +183,13 @@ def run(args):
         parts = find_recording_parts(args.data)
         figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
                                 held_path, recording,
-                                label_options_from_args(args).camera_map)
+                                label_options_from_args(args).camera_map, args.rig_units)
         summary['holdout'] = {'instants': held.tolist(), **figures}
         print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
               f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '
-              f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.0f} mm, mean '
-              f'{figures["mm_mean"]:.0f} mm, coverage {100 * figures["coverage"]:.0f}% '
+              f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.1f} mm, mean '
+              f'{figures["mm_mean"]:.1f} mm (rig in {recording.cameras[0].units}), coverage '
+              f'{100 * figures["coverage"]:.0f}% '
               '(as monet process runs the model)', file=sys.stderr)
     print(json.dumps(summary, indent=1))
     distributed.shutdown()

@@ -39,8 +39,9 @@ def hold_out(recording, n, out):
     return held, path
 
 
-def score_holdout(bag, rig, model, labels_path, recording, camera_map=()):
-    """Figures (evaluation.reference.score) of `model` on the held-out labels."""
+def score_holdout(bag, rig, model, labels_path, recording, camera_map=(), rig_units=None):
+    """Figures (evaluation.reference.score) of `model` on the held-out labels (3D errors in
+    mm whatever the rig's unit; rig_units: that of a rig file that states none)."""
     from monet_ros.commands.process import process_recording
     from monet_ros.evaluation.reference import load_reference, score
     from monet_ros.io.export_tables import read_anipose_csv
@@ -52,7 +53,7 @@ def score_holdout(bag, rig, model, labels_path, recording, camera_map=()):
     with tempfile.TemporaryDirectory(prefix='monet-holdout-') as tmp:
         out = Path(tmp) / 'p'
         process_recording(bag, model, out, rig=rig, progress=False, exports=('csv', 'npz'),
-                          camera_map=camera_map)
+                          camera_map=camera_map, rig_units=rig_units)
         table = read_anipose_csv(out / 'keypoints3d.csv')
         det = np.load(out / 'detections2d.npz')
     names = list(det['cameras'])

@@ -1,19 +1,27 @@
 """`monet triangulate`: 3D keypoints from another tool's 2D detections and a calibration.
 
-    monet triangulate POINTS2D... --rig CAL --out OUT [--format auto|dlc|sleap|anipose|
-        frames] [--filter none|kalman|optim] [--fps F] [--skeleton human14]
+    monet triangulate POINTS2D... --rig CAL [--rig-units m|cm|mm] --out OUT
+        [--format auto|dlc|sleap|anipose|openpose|frames] [--pose-model BODY_25B]
+        [--filter none|kalman|optim] [--fps F]
+        [--skeleton human14]
         [--camera-map SRC=DST] [--threshold-px 15] [--confidence-threshold 0.1]
         [--min-views 2] [--method exclusion|ransac] [--export csv,trc,nwb,npz]
 
 POINTS2D: what `monet labels import` reads (DeepLabCut / Lightning Pose prediction CSV or
-H5 per camera, SLEAP analysis H5 per camera, an anipose pose-2d folder) or a frame-indexed
+H5 per camera, SLEAP analysis H5 per camera, an anipose pose-2d folder, OpenPose /
+Pose2Sim JSON folders: monet_ros.labels_import.openpose) or a frame-indexed
 table frame,camera,keypoint,u,v[,score] (monet_ros.labels_import.points2d); the score /
 likelihood is the detection confidence. Triangulation is the fusion's (fusion.fuse_points:
 views below --confidence-threshold, NaN and missing views left out, confidence-weighted
 robust DLT with worst-view exclusion or RANSAC, cheirality-checked), batched over all
 frames at once. Writes into OUT (atomically) the files of `monet process`:
 keypoints3d.csv (anipose's layout), keypoints3d.trc, keypoints.nwb (monet_ros.io.
-export_results), and with --filter the filtered points (monet_ros.temporal).
+export_results), and with --filter the filtered points (monet_ros.temporal). The 3D
+points are in the rig's length unit (--rig-units, the file's, or the rule of
+monet_ros.geometry.units), stated in every output. The rows are
+the source's frames from the first to the last one seen, numbered as the source numbers
+them: CSV fnum = source frame (anipose's meaning), TRC Frame# = frame + 1, TRC Time and
+NWB timestamps = frame / --fps (a table that starts at frame 10 starts at 10 / fps s).
 """
 from pathlib import Path
 import sys
@@ -24,16 +32,22 @@ HELP = '3D keypoints from 2D detections of other tools (DeepLabCut, SLEAP, anipo
 
 
 def add_arguments(parser):
+    from monet_ros.commands.common import add_rig_units_argument
     from monet_ros.commands.filter_options import add_filter_arguments
+    from monet_ros.geometry.pose2sim import POSE_MODELS
     from monet_ros.labels_import.points2d import FORMATS
     parser.add_argument('points2d', nargs='+', help='2D tables: per-camera DeepLabCut / '
-                        'SLEAP files, an anipose pose-2d folder, or a frame,camera,keypoint,'
-                        'u,v[,score] CSV')
+                        'SLEAP files, an anipose pose-2d folder, OpenPose / Pose2Sim JSON '
+                        'folders (one per camera), or a frame,camera,keypoint,u,v[,score] CSV')
     parser.add_argument('--rig', required=True, help='calibration (rig YAML, Pose2Sim / '
                         'anipose TOML, ...)')
+    add_rig_units_argument(parser)
     parser.add_argument('--out', required=True, help='output folder (must not exist)')
     parser.add_argument('--format', choices=FORMATS, default='auto',
                         help='2D table format (default: detected from the files)')
+    parser.add_argument('--pose-model', choices=tuple(POSE_MODELS), default=None,
+                        help="keypoint names of OpenPose JSON (default: the --skeleton's "
+                        'names when it has as many, else the one model with that many)')
     parser.add_argument('--fps', type=float, default=None,
                         help='frame rate (Hz) of the 2D frames: their times (needed by '
                         '--filter; default 30 without a filter)')
@@ -59,16 +73,21 @@ def add_arguments(parser):
 
 def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, camera_map=None,
                        fusion_config=None, filter_config=None, exports=('csv', 'trc', 'nwb'),
-                       trc_axes='xyz', progress=False):
-    """Triangulate (and filter) 2D tables; write `out`. Returns a dict of figures: frames,
-    cameras, keypoints, rows, counts (cells, missing, low_score, triangulated, per-joint
-    not triangulated), exports {format: path}, filter (temporal.Smoothed or None), notes.
+                       trc_axes='xyz', progress=False, rig_units=None, pose_model=None):
+    """Triangulate (and filter) 2D tables; write `out`. rig_units: the length unit of a rig
+    file that states none (None: the rule of geometry.units); pose_model: keypoint names of
+    OpenPose JSON (read_points2d). Returns a dict of figures:
+    frames, cameras, keypoints, rows, counts (cells, missing, low_score, triangulated,
+    per-joint not triangulated), exports {format: path}, filter (temporal.Smoothed or
+    None), notes, units (the rig's length unit, that of arrays['X']).
     progress: optim's iterations as a tqdm bar.
     Raises ValueError / LabelError / ConfigError / OSError naming the file or option."""
     from monet_ros.commands.common import atomic_output_dir, check_new_output
+    from monet_ros.commands.filter_options import check_filter_units
     from monet_ros.config import ConfigError
     from monet_ros.fusion import FusionConfig, fuse_frames
     from monet_ros.geometry import load_rig
+    from monet_ros.geometry.units import rig_units as units_of
     from monet_ros.io.export_results import write_results
     from monet_ros.labels_import.points2d import read_points2d
     from monet_ros.skeleton import load_skeleton
@@ -86,11 +105,13 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
         fps = 30.0
         notes.append('--fps not given: times in the outputs assume 30 frames/s')
     check_new_output(out, 'monet triangulate')
-    rig_cameras = load_rig(rig)
+    rig_cameras = load_rig(rig, units=rig_units)
+    check_filter_units(filter_config, units_of(rig_cameras))     # before the work
     names = [c.name for c in rig_cameras]
     sk = load_skeleton(skeleton) if skeleton else None
     pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,
-                        camera_map=camera_map)
+                        camera_map=camera_map, pose_model=pose_model)
+    notes += pts.notes
     used = [v for v in range(len(names)) if np.isfinite(pts.points[:, v]).any()]
     if len(used) < max(2, fusion_config.min_views):
         raise ValueError(f'{", ".join(map(str, paths))}: detections in '
@@ -105,8 +126,8 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     present = np.isfinite(points).all(-1)
     low = present & ~(np.nan_to_num(score, nan=-1.0) >= fusion_config.confidence_threshold)
     a = fuse_frames(points, score, cameras, fusion_config)
-    frames = pts.frames - pts.frames[0]
-    a['stamps'] = np.round(frames * (1e9 / fps)).astype(np.int64)
+    # source time: frame / fps from the source's frame 0 (export_tables TIME_BASE)
+    a['stamps'] = np.round(pts.frames * (1e9 / fps)).astype(np.int64)
     a['conf2d'] = score
     a['K_heat'] = np.broadcast_to(np.stack([c.K for c in cameras]), (T, V, 3, 3))
     missing_points = ~np.isfinite(a['X']).all(-1)
@@ -119,14 +140,16 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
         staging.mkdir(parents=True, exist_ok=True)
         written = write_results(staging, exports, cameras, pts.keypoints, a,
                                 edges=sk.bone_indices if sk else None, trc_axes=trc_axes,
-                                smoothed=smoothed)
+                                smoothed=smoothed, fnum=pts.frames, origin_ns=0, rate_hz=fps)
     counts = dict(cells=T * V * C, missing=int((~present).sum()), low_score=int(low.sum()),
                   points=T * C, triangulated=int((~missing_points).sum()),
                   not_triangulated=dict(zip(pts.keypoints,
                                             missing_points.sum(axis=0).tolist())))
-    return dict(frames=T, first_frame=int(pts.frames[0]), cameras=[c.name for c in cameras],
+    return dict(frames=T, first_frame=int(pts.frames[0]), last_frame=int(pts.frames[-1]),
+                fps=fps, cameras=[c.name for c in cameras],
                 keypoints=pts.keypoints, rows=pts.rows, nan_rows=pts.nan_rows, fmt=pts.fmt,
                 counts=counts, filter=smoothed, notes=notes, arrays=a,
+                units=rig_cameras[0].units,
                 exports={f: Path(out) / Path(p).relative_to(staging)
                          for f, p in written.items()})
 
@@ -146,13 +169,18 @@ def run(args):
                              skeleton=args.skeleton,
                              camera_map=dict(parse_name_map(args.camera_map)),
                              fusion_config=fusion, filter_config=filt, exports=exports,
-                             trc_axes=args.trc_axes, progress=not args.quiet)
+                             trc_axes=args.trc_axes, progress=not args.quiet,
+                             rig_units=args.rig_units, pose_model=args.pose_model)
     n = fig['counts']
     name = 'monet triangulate'
     print(f'{name}: {fig["frames"]} frames (from frame {fig["first_frame"]}) x '
           f'{len(fig["cameras"])} cameras ({", ".join(fig["cameras"])}) x '
           f'{len(fig["keypoints"])} keypoints from {fig["rows"]} {fig["fmt"]} rows; '
-          f'{n["triangulated"]} of {n["points"]} points triangulated')
+          f'{n["triangulated"]} of {n["points"]} points triangulated (3D in '
+          f'{fig["units"]}, the rig\'s unit)')
+    print(f'{name}: source frames {fig["first_frame"]}..{fig["last_frame"]} kept in the '
+          f'exports: keypoints3d.csv fnum = frame, TRC Frame# = frame + 1, TRC Time and NWB '
+          f'timestamps = frame / {fig["fps"]:g} s')
     nan = f', {fig["nan_rows"]} of them NaN' if fig['nan_rows'] else ''
     print(f'{name}: skipped views: {n["missing"]} of {n["cells"]} missing (no detection'
           f'{nan}), '

@@ -8,9 +8,10 @@ load_reference(path, index, keypoints, ...) -> Reference on the recording's inst
 - TRC: row Frame# N is at (N - 1) / DataRate s after the recording's first instant
   (the recording imported from the same videos from their first frame; the Time column
   is not used: Pose2Sim writes Frame# / DataRate, OpenSim (Frame# - 1) / DataRate); Units
-  mm / cm / m converted to metres; axes='yzx' undoes a Y-up file (Pose2Sim);
+  mm / cm / m converted to the rig's unit; axes='yzx' undoes a Y-up file (Pose2Sim);
 - anipose CSV: rows at their stamp_ns when present, else at fnum / reference_fps s after
-  the first instant (default: the recording's median frame period);
+  the first instant (default: the recording's median frame period); in the rig's unit (as
+  anipose writes them), or in the unit of monet's sidecar (export_tables.read_csv_units);
 - rows are put on the recording's instants by time (align_rows): at the same rate the
   nearest row within half a frame period; at another rate resampled by linear
   interpolation in time (or refused); rows outside the recording are counted
@@ -28,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
+from monet_ros.geometry.units import check_units, convert, rig_units, to_mm
 from monet_ros.labels import LabelError
 
 PX_THRESHOLDS = (5.0, 10.0, 20.0)
 MM_THRESHOLDS = (25.0, 50.0, 100.0)
-UNITS = {'m': 1.0, 'mm': 1e-3, 'cm': 1e-2}
 LABEL_FORMATS = ('labels', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'dannce')
 
 
@@ -40,9 +41,10 @@ LABEL_FORMATS = ('labels', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'dannce'
 class Reference:
     """source; keypoints (C, the model's order); stamps (T,) recording instants;
     points2d (T, V, C, 2) px: the labels, or for a 3D reference its projection into the
-    cameras (project_reference); X (T, C, 3) metres (NaN = none); unused: reference
-    keypoint names the model lacks; kind '2d' (labels, X triangulated) or '3d'; alignment:
-    how 3D rows were put on the instants (align_rows' info), None for labels."""
+    cameras (project_reference); X (T, C, 3) in `units` (the rig's length unit, NaN =
+    none); unused: reference keypoint names the model lacks; kind '2d' (labels, X
+    triangulated) or '3d'; alignment: how 3D rows were put on the instants (align_rows'
+    info), None for labels."""
     source: str
     keypoints: tuple
     stamps: np.ndarray
@@ -51,6 +53,7 @@ class Reference:
     kind: str
     unused: tuple = field(default_factory=tuple)
     alignment: dict = None
+    units: str = 'm'
 
 
 def guess_format(path):
@@ -196,7 +199,7 @@ def alignment_text(info):
 
 
 def project_reference(X, cameras):
-    """(T, C, 3) world points (metres) -> (T, V, C, 2) pixels: each camera's projection
+    """(T, C, 3) world points (the cameras' unit) -> (T, V, C, 2) pixels: each camera's projection
     (Camera.project, with lens distortion) of the reference, NaN for NaN points, points
     behind the camera and points outside the image (pixel-edge box -0.5 .. size - 0.5).
     Occlusion is not known: every point inside an image counts as seen there."""
@@ -245,7 +248,7 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
     rate_policy: 'resample' or 'refuse' a 3D reference at another rate (align_rows).
     Raises LabelError (or ExportError) naming the file and what does not fit."""
     from monet_ros.geometry.triangulation import triangulate
-    from monet_ros.io.export_tables import read_anipose_csv, read_trc
+    from monet_ros.io.export_tables import read_anipose_csv, read_csv_units, read_trc
     from monet_ros.labels import LabelOptions, read_label_rows, resolve_labels
 
     options = options or LabelOptions()
@@ -254,13 +257,15 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
     fmt = guess_format(path) if fmt == 'auto' else fmt
     stamps = np.asarray(index.stamps, np.int64)
     T, V, C = len(stamps), len(index.cameras), len(keypoints)
+    units = rig_units(index.cameras)
     if fmt in ('trc', 'anipose3d'):
         if fmt == 'trc':
             trc = read_trc(path, axes=axes)
-            scale = UNITS.get(trc['units'].lower())
-            if scale is None:
+            try:
+                scale = convert(1.0, check_units(trc['units'].lower()), units)
+            except ValueError:
                 raise LabelError(f'{path}:3: field Units: {trc["units"]!r}, expected m, cm '
-                                 'or mm')
+                                 'or mm') from None
             if not (np.isfinite(trc['rate']) and trc['rate'] > 0):
                 raise LabelError(f'{path}:3: field DataRate: {trc["rate"]!r}, needed to '
                                  "put the rows on the recording's time")
@@ -272,6 +277,9 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
         else:
             table = read_anipose_csv(path)
             names, values = table['keypoints'], table['X']
+            stated = read_csv_units(path)            # monet's sidecar, else the rig's unit
+            if stated is not None:
+                values = convert(values, stated, units)
             period = 1e9 / reference_fps if reference_fps else None
             if table['stamps_ns'] is not None:
                 ref_stamps = table['stamps_ns']
@@ -283,7 +291,7 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
         X, info = align_rows(path, ref_stamps, _take(values, pick, (3,)), stamps,
                              ref_period_ns=period, policy=rate_policy)
         return Reference(str(path), keypoints, stamps, project_reference(X, index.cameras),
-                         X, '3d', unused, info)
+                         X, '3d', unused, info, units)
     if fmt not in LABEL_FORMATS:
         raise LabelError(f'unknown reference format {fmt!r}; one of trc, anipose3d, '
                          f'{", ".join(LABEL_FORMATS)}')
@@ -309,7 +317,7 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
     labelled = np.flatnonzero(np.isfinite(points2d[..., 0]).any(axis=(1, 2)))
     for t in labelled:
         X[t] = triangulate(points2d[t], index.cameras)
-    return Reference(str(path), keypoints, stamps, points2d, X, '2d', unused)
+    return Reference(str(path), keypoints, stamps, points2d, X, '2d', unused, units=units)
 
 
 def _pct(values, thresholds):
@@ -321,7 +329,8 @@ def _pct(values, thresholds):
 def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
           mm_thresholds=MM_THRESHOLDS, instants=None):
     """Figures of a prediction against a Reference. stamps (N,) of the predicted instants
-    (a subset of the reference's); X (N, C, 3) metres; points2d (N, V, C, 2) source px;
+    (a subset of the reference's); X (N, C, 3) in reference.units (the rig's; the 3D
+    errors are reported in mm whatever the unit); points2d (N, V, C, 2) source px;
     instants: (T,) bool of the reference's instants to score (default all). An instant /
     joint the prediction lacks (not processed, or not triangulated) counts against
     coverage, not in the error statistics. 2D figures are on the labelled views, or for a
@@ -338,7 +347,7 @@ def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
     ref_X[~keep_t] = np.nan
     has_ref = np.isfinite(ref_X).all(-1)
     has_pred = np.isfinite(pred_X).all(-1)
-    mm = np.linalg.norm(pred_X - ref_X, axis=-1)[has_ref & has_pred] * 1000.0
+    mm = to_mm(np.linalg.norm(pred_X - ref_X, axis=-1)[has_ref & has_pred], reference.units)
     out = dict(reference=reference.source, kind=reference.kind,
                instants_scored=int(has_ref.any(-1).sum()), joints_3d=int(has_ref.sum()),
                coverage=float((has_ref & has_pred).sum() / has_ref.sum()) if has_ref.any()

@@ -8,6 +8,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from monet_ros.geometry.units import UNITS, per_metre, rig_units
+
 # Accepted distortion vector lengths (OpenCV: 4, 5, 8, 12; 14 = tilted sensor, unsupported).
 DIST_LENGTHS = (0, 4, 5, 8, 12)
 _ROTATION_TOL = 1e-6
@@ -165,7 +167,9 @@ class Camera:
 
     Arrays are float64 and read-only: K (3, 3) upper triangular (skew K[0, 1] allowed,
     positive focal lengths, K[2] = [0, 0, 1]), dist (0 | 4 | 5 | 8 | 12,), R (3, 3) rotation,
-    t (3,). width, height in pixels; topic is the image topic (optional).
+    t (3,). width, height in pixels; topic is the image topic (optional); units is the
+    rig's length unit, that of t and of the world points ('m', 'cm' or 'mm';
+    geometry.units).
     """
 
     name: str
@@ -176,6 +180,7 @@ class Camera:
     width: int
     height: int
     topic: str | None = None
+    units: str = 'm'
     _d12: np.ndarray = field(init=False, repr=False)
     _P: np.ndarray = field(init=False, repr=False)
     _distorted: bool = field(init=False, repr=False)
@@ -213,6 +218,8 @@ class Camera:
             object.__setattr__(self, key, int(value))
         if self.topic is not None and not isinstance(self.topic, str):
             raise CameraError(name, 'topic', f'must be a string or None, got {self.topic!r}')
+        if self.units not in UNITS:
+            raise CameraError(name, 'units', f'must be one of {UNITS}, got {self.units!r}')
         d12 = np.zeros(12)
         d12[:dist.size] = dist
         P = K @ np.hstack([R, t[:, None]])
@@ -227,6 +234,7 @@ class Camera:
             return NotImplemented
         return (self.name == other.name and self.width == other.width
                 and self.height == other.height and self.topic == other.topic
+                and self.units == other.units
                 and all(np.array_equal(getattr(self, k), getattr(other, k))
                         for k in ('K', 'dist', 'R', 't')))
 
@@ -327,7 +335,8 @@ _STACK_CACHE = {}  # id-tuple -> (cameras tuple, stacked dict); cameras are immu
 def stack_cameras(cameras):
     """Stacked parameters of a rig: dict of K (V, 3, 3), R (V, 3, 3), t (V, 3), P (V, 3, 4),
     Rt (V, 3, 4) = [R | t], K_inv (V, 3, 3), d12 (V, 12) (distortion padded to 12
-    coefficients), model (d12 as _model_terms gives it).
+    coefficients), model (d12 as _model_terms gives it), per_metre (float: the cameras'
+    length unit per metre, geometry.units; ValueError when their units differ).
     The last few rigs are cached (Cameras are immutable): do not modify the arrays."""
     cameras = tuple(cameras)
     key = tuple(id(c) for c in cameras)
@@ -342,6 +351,7 @@ def stack_cameras(cameras):
     for array in stacked.values():
         array.setflags(write=False)
     stacked['model'] = _model_terms(stacked['d12'])  # (coefficients, flags) of _distort
+    stacked['per_metre'] = per_metre(rig_units(cameras))
     if len(_STACK_CACHE) >= 16:
         _STACK_CACHE.pop(next(iter(_STACK_CACHE)))
     _STACK_CACHE[key] = (cameras, stacked)

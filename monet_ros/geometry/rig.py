@@ -32,10 +32,19 @@ from monet_ros.geometry.rig_fields import (  # noqa: F401 - RigError & co. are p
     opencv_distortion,
 )
 from monet_ros.geometry.rig_opencv import _load_opencv
+from monet_ros.geometry.units import (
+    UNITS,
+    check_units,
+    infer_units,
+    note_inferred,
+    rig_units,
+    with_units,
+)
 
 # ----------------------------------------------------------------------------- formats
 
 def _load_project_yaml(path, data):
+    """(cameras, frame_id, stated units or None) of a project rig YAML mapping."""
     frame_id = data.get('frame_id', DEFAULT_FRAME_ID)
     if not isinstance(frame_id, str) or not frame_id:
         raise RigError(path, 'frame_id', f'must be a non-empty string, got {frame_id!r}')
@@ -56,7 +65,7 @@ def _load_project_yaml(path, data):
             cameras.append(_project_camera(path, prefix, name, entry))
         except RigError as exc:     # name the camera too, not only its index
             raise RigError(path, exc.field, f'camera {name!r}: {exc.message}') from None
-    return _check_unique(path, cameras), frame_id
+    return _check_unique(path, cameras), frame_id, data.get('units')
 
 
 def _project_camera(path, prefix, name, entry):
@@ -99,7 +108,8 @@ def _load_camera_info_yaml(path, data):
 
 def _load_toml(path):
     """anipose / Pose2Sim calibration.toml: [cam_N] sections in numeric order; name, size
-    [w, h], matrix (3x3), distortions (OpenCV), rotation (Rodrigues 3-vector), translation."""
+    [w, h], matrix (3x3), distortions (OpenCV), rotation (Rodrigues 3-vector), translation;
+    [metadata] units (written by monet; anipose's own files have none) -> stated units."""
     try:
         data = tomllib.loads(Path(path).read_text())
     except tomllib.TOMLDecodeError as exc:
@@ -127,7 +137,9 @@ def _load_toml(path):
                      _require(path, section, 'translation', prefix), [(3,)]),
             width=_size(path, prefix + 'size[0]', size[0]),
             height=_size(path, prefix + 'size[1]', size[1])))
-    return _check_unique(path, cameras), DEFAULT_FRAME_ID
+    metadata = data.get('metadata')
+    units = metadata.get('units') if isinstance(metadata, dict) else None
+    return _check_unique(path, cameras), DEFAULT_FRAME_ID, units
 
 
 def _load_dannce_mat(path, image_size=None):
@@ -179,21 +191,49 @@ def _load_dannce_mat(path, image_size=None):
 
 # ----------------------------------------------------------------------------- public API
 
-def read_rig(path, image_size=None):
+def read_rig(path, image_size=None, units=None):
     """Load a rig file of any supported format -> (cameras list[Camera], frame_id str).
 
-    Formats: project rig YAML (frame_id + cameras), anipose / Pose2Sim calibration.toml,
-    ROS camera_info YAML (one camera, identity extrinsics unless R/t are given), OpenCV
-    FileStorage YAML/XML (OpenCV's sample names too), DANNCE label3d .mat. image_size=(w, h):
-    the size for files that store none (DANNCE, stereo_calib's intrinsics.yml).
-    Files larger than MAX_RIG_BYTES (MAX_MAT_BYTES for .mat) are refused unread."""
-    path = Path(path)
+    Formats: project rig YAML (frame_id + units + cameras), anipose / Pose2Sim
+    calibration.toml, ROS camera_info YAML (one camera, identity extrinsics unless R/t are
+    given), OpenCV FileStorage YAML/XML (OpenCV's sample names too), DANNCE label3d .mat.
+    image_size=(w, h): the size for files that store none (DANNCE, stereo_calib's
+    intrinsics.yml). Files larger than MAX_RIG_BYTES (MAX_MAT_BYTES for .mat) are refused
+    unread.
+
+    Length unit (every Camera's `units`, geometry.units): the one the file states (rig
+    YAML `units`, [metadata] units of a TOML written by monet), else `units` ('m', 'cm',
+    'mm': --rig-units), else the rule of geometry.units.infer_units (noted in one line on
+    stderr). RigError (field 'units') for a bad unit, or when `units` differs from the
+    file's."""
+    cameras, frame_id, stated = _read_rig(Path(path), image_size)
+    if units is not None:
+        try:
+            check_units(units, 'rig units')
+        except ValueError as error:
+            raise RigError(path, 'units', str(error).split(': ', 1)[1]) from None
+    if stated is not None:
+        if not isinstance(stated, str) or stated not in UNITS:
+            raise RigError(path, 'units', f'must be one of {", ".join(UNITS)}, got {stated!r}')
+        if units is not None and units != stated:
+            raise RigError(path, 'units', f'the file states {stated!r} but {units!r} was given '
+                           '(--rig-units / rig_units): leave the option out or fix the file')
+        units = stated
+    elif units is None:
+        units, reason = infer_units(cameras)
+        if reason is not None:
+            note_inferred(path, units, reason)
+    return with_units(cameras, units), frame_id
+
+
+def _read_rig(path, image_size):
+    """(cameras, frame_id, units the file states or None) of any supported format."""
     if not path.is_file():
         raise RigError(path, None, 'no such file' if not path.exists() else 'not a file')
     suffix = path.suffix.lower()
     _check_file_size(path, MAX_MAT_BYTES if suffix == '.mat' else MAX_RIG_BYTES)
     if suffix == '.mat':
-        return _load_dannce_mat(path, image_size)
+        return (*_load_dannce_mat(path, image_size), None)
     try:
         head = path.read_bytes()[:4096]
         text = path.read_text()
@@ -203,22 +243,23 @@ def read_rig(path, image_size=None):
         return _load_toml(path)
     if head.lstrip().startswith((b'%YAML:', b'<?xml', b'<opencv_storage')) \
             or b'!!opencv-matrix' in head or suffix == '.xml':
-        return _load_opencv(path, image_size)
+        return (*_load_opencv(path, image_size), None)
     if suffix in ('.yaml', '.yml', ''):
         data = load_yaml_text(path, text)
         if isinstance(data, dict) and 'cameras' in data:
             return _load_project_yaml(path, data)
         if isinstance(data, dict) and 'camera_matrix' in data:
-            return _load_camera_info_yaml(path, data)
+            return (*_load_camera_info_yaml(path, data), None)
         raise RigError(path, 'cameras', 'unknown rig format: a YAML rig needs `cameras` '
                        '(project rig) or `camera_matrix` (ROS camera_info)')
     raise RigError(path, None, f'unknown rig format {suffix!r} (expected .yaml/.yml rig or '
                    'camera_info, .toml anipose/Pose2Sim, OpenCV .yaml/.xml, DANNCE .mat)')
 
 
-def load_rig(path, image_size=None):
-    """Load a rig file (any supported format) -> list[Camera] (see read_rig)."""
-    return read_rig(path, image_size=image_size)[0]
+def load_rig(path, image_size=None, units=None):
+    """Load a rig file (any supported format) -> list[Camera] (see read_rig; units: the
+    rig's length unit when the file states none)."""
+    return read_rig(path, image_size=image_size, units=units)[0]
 
 
 def _num(x):
@@ -239,11 +280,14 @@ def _mat(m):
 
 
 def save_rig(path, cameras, frame_id=DEFAULT_FRAME_ID):
-    """Write cameras as a project rig YAML; load_rig(path) returns equal cameras (exact)."""
+    """Write cameras as a project rig YAML (with their length unit, `units`); load_rig(path)
+    returns equal cameras (exact). ValueError for no cameras or mixed units."""
     if not cameras:
         raise ValueError('save_rig needs at least one camera')
+    units = rig_units(cameras)
     lines = ['# monet_ros rig file: x_pixel ~ K (R X + t), world (frame_id) -> camera.',
              f'frame_id: {yaml.safe_dump(str(frame_id), default_style=chr(39)).strip()}',
+             f"units: '{units}'   # length unit of t and of the 3D points (m, cm or mm)",
              'cameras:']
     for cam in cameras:
         lines += [f'  - name: {yaml.safe_dump(cam.name, default_style=chr(39)).strip()}',
@@ -277,8 +321,9 @@ def save_anipose_toml(path, cameras, metadata=None):
     """Write cameras as an anipose / aniposelib calibration.toml: [cam_N] name, size
     [w, h], matrix (3x3), distortions (OpenCV order, at least 5 values), rotation
     (Rodrigues vector, world -> camera), translation; then [metadata] (str / number
-    values). load_rig(path) gives the same cameras back (rotation to ~1e-15). Written
-    atomically (a .tmp file renamed)."""
+    values) with `units`, the cameras' length unit (anipose ignores it; load_rig reads it).
+    load_rig(path) gives the same cameras back (rotation to ~1e-15). Written atomically (a
+    .tmp file renamed)."""
     import cv2
 
     if not cameras:
@@ -294,7 +339,8 @@ def save_anipose_toml(path, cameras, metadata=None):
                   f'rotation = {_toml_value(cv2.Rodrigues(np.asarray(cam.R))[0].ravel())}',
                   f'translation = {_toml_value(np.asarray(cam.t))}', '']
     lines.append('[metadata]')
-    lines += [f'{key} = {_toml_value(value)}' for key, value in (metadata or {}).items()]
+    metadata = {**(metadata or {}), 'units': rig_units(cameras)}
+    lines += [f'{key} = {_toml_value(value)}' for key, value in metadata.items()]
     path = Path(path)
     tmp = path.with_name(path.name + '.tmp')
     tmp.write_text('\n'.join(lines) + '\n')

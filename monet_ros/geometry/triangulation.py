@@ -51,12 +51,18 @@ def dlt_rows(ideal, P):
     return ideal[..., None] * P[:, None, 2:3, :] - P[:, None, 0:2, :]
 
 
-def solve_dlt(B, w):
+def solve_dlt(B, w, per_metre=1.0):
     """Weighted DLT from rows B (V, N, 2, 4) and weights w (..., V, N) -> X (..., N, 3).
 
     Stacks A (..., N, 2V, 4) with zero rows for zero weights and solves all keypoints (and
-    leading batch entries) with ONE batched np.linalg.svd; NaN where < 2 weighted views."""
+    leading batch entries) with ONE batched np.linalg.svd; NaN where < 2 weighted views.
+    per_metre: the rig's length unit per metre (stack_cameras' 'per_metre'): the system is
+    solved in metres and X returned in the rig's unit, so a rig in mm gives the points of
+    the same rig in m x 1000 (a homogeneous DLT weighs X against its 4th coordinate by the
+    unit; in metres it is cv2.triangulatePoints' and Pose2Sim's)."""
     V, N = B.shape[:2]
+    if per_metre != 1.0:
+        B = np.concatenate([B[..., :3], B[..., 3:] / per_metre], axis=-1)
     A = w[..., None, None] * B  # (..., V, N, 2, 4)
     A = np.moveaxis(A, -4, -3).reshape(*A.shape[:-4], N, 2 * V, 4)
     n_views = np.sum(w > 0, axis=-2)  # (..., N)
@@ -66,6 +72,8 @@ def solve_dlt(B, w):
     h = vh[..., -1, :]
     with np.errstate(divide='ignore', invalid='ignore'):
         X = h[..., :3] / h[..., 3:]
+    if per_metre != 1.0:
+        X = X * per_metre
     X[n_views < 2] = np.nan
     return X
 
@@ -95,12 +103,12 @@ def triangulate(points2d, cameras, weights=None):
     _, ideal, w = _prepare(points2d, cameras, weights)
     rig = stack_cameras(cameras)
     B = dlt_rows(ideal, rig['P'])
-    X = solve_dlt(B, w)
+    X = solve_dlt(B, w, rig['per_metre'])
     behind = _behind(rig, X, w > 0)
     if behind.any():
         cols = np.flatnonzero(behind.any(axis=0))
         w_cols = np.where(behind[:, cols], 0.0, w[:, cols])
-        X_cols = solve_dlt(B[:, cols], w_cols)
+        X_cols = solve_dlt(B[:, cols], w_cols, rig['per_metre'])
         X_cols[_behind(rig, X_cols, w_cols > 0).any(axis=0)] = np.nan
         X[cols] = X_cols
     return X
@@ -157,7 +165,7 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
             used = current[:, todo].copy()
             used[worst, np.arange(todo.size)] = False
             used = used[None]
-        Xs = solve_dlt(B[:, todo], w[None, :, todo] * used)  # (S, n, 3)
+        Xs = solve_dlt(B[:, todo], w[None, :, todo] * used, rig['per_metre'])  # (S, n, 3)
         err = _view_errors(rig, Xs, obs[:, todo])  # (S, V, n)
         err[_behind(rig, Xs, used)] = np.inf  # cheirality: a view behind is an outlier
         mean = _mean_used_error(err, used)
@@ -218,7 +226,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     mean_inl = np.where(inl, err, 0.0).sum(axis=1) / np.maximum(count, 1)
     score = np.where(valid & np.isfinite(mean_inl), count - mean_inl / (threshold_px * 2), -1)
     best_inl = inl[np.argmax(score, axis=0), :, cols].T  # (V, n)
-    Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+    Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl, rig['per_metre'])
     for _ in range(2):  # re-select the inliers of the refined point, refine again
         err_r = _view_errors(rig, Xr, obs[:, todo])
         err_r[_behind(rig, Xr, np.ones(err_r.shape, bool))] = np.inf
@@ -227,7 +235,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
         if np.array_equal(new_inl, best_inl):
             break
         best_inl = new_inl
-        Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl)
+        Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl, rig['per_metre'])
     ok = (best_inl.sum(axis=0) >= max(2, min_views)) & np.isfinite(Xr).all(axis=-1)
     ok &= ~_behind(rig, Xr, best_inl).any(axis=0)
     X[todo[ok]] = Xr[ok]
@@ -378,7 +386,7 @@ def select_candidates(points2d, cameras, weights=None, threshold_px=15.0, max_hy
     # refine: weighted DLT on the supporters, then the nearest candidates of that point
     Bc = np.take_along_axis(B, choice[:, :, None, None, None], axis=2)[:, :, 0]
     wc = np.take_along_axis(w, choice[:, :, None], axis=2)[:, :, 0]
-    Xr = solve_dlt(Bc, wc * chosen)
+    Xr = solve_dlt(Bc, wc * chosen, rig['per_metre'])
     near_r, dist_r = _nearest_candidates(rig, Xr, obs, avail)
     with np.errstate(invalid='ignore'):
         support_r = (dist_r < threshold_px) & (depths(rig, Xr) > 0)

@@ -3,9 +3,10 @@
 write_nwb(path, result) writes one NWBFile holding, in processing module 'behavior':
 - Skeletons with one Skeleton (nodes = keypoints, edges = the skeleton's bones when given);
 - MultiCameraPoseEstimation 'monet_pose': one PoseEstimationSeries per keypoint with the
-  3D points (T, 3) in the rig's world frame (metres), confidence = mean peak value of the
-  inlier views, timestamps = seconds from the first instant (export_tables.TIME_BASE: the
-  TRC Time of the same instant); and one
+  3D points (T, 3) in the rig's world frame and unit (unit 'meters', 'centimeters' or
+  'millimeters', Camera.units), confidence = mean peak value of the
+  inlier views, timestamps = seconds from the time origin (export_tables.TIME_BASE: the
+  TRC Time of the same instant; for 2D tables source frame / fps); and one
   PoseEstimation per camera ('<camera>_2d', device = a CalibratedCamera with K, R, t, dist
   of the source image) whose PoseEstimationSeries hold the 2D detections (T, 2) in source
   image pixels with the heatmap peak value as confidence (NaN where not detected).
@@ -13,8 +14,10 @@ With a filter (`--filter kalman|optim`) the 3D series hold the filtered points a
 confidence, and the module also holds two TimeSeries (T, C), columns in keypoint order:
 'filter_change_mm' (|filtered - raw|, mm) and 'filter_bridged' (1 where the raw point was
 missing and the filter bridged the gap).
-session_start_time = the first stamp (UTC, to the microsecond: datetime's resolution), so
-session_start_time + timestamp is the header stamp within 1 us. Read back with
+session_start_time = the time origin (the first stamp, or origin_ns when given; UTC, to the
+microsecond: datetime's resolution), so session_start_time + timestamp is the header stamp
+within 1 us. With fnum (the source's frame numbers, `monet triangulate`) the module also
+holds a TimeSeries 'source_frame' (T,) of them. Read back with
 pynwb.NWBHDF5IO (ndx_pose imported).
 """
 from datetime import datetime, timedelta, timezone
@@ -25,11 +28,14 @@ import numpy as np
 
 
 def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidence2d,
-              edges=None, description='monet_ros multiview keypoints', filtered=None):
+              edges=None, description='monet_ros multiview keypoints', filtered=None,
+              fnum=None, origin_ns=None):
     """keypoints (C,); stamps_ns (T,); X (T, C, 3); score (T, C); cameras: V Camera;
     points2d (T, V, C, 2) source px; confidence2d (T, V, C); filtered: None or dict(method,
-    change_mm (T, C), bridged (T, C)) when X is a filter's output. Atomic (tmp +
-    os.replace)."""
+    change_mm (T, C), bridged (T, C)) when X is a filter's output. X and the cameras' t are
+    in the cameras' length unit (Camera.units), stated as the 3D series' unit; fnum: None or
+    (T,) int source frame numbers (recorded as 'source_frame'); origin_ns: the time origin
+    (int ns, default the first stamp). Atomic (tmp + os.replace)."""
     from ndx_pose import (
         CalibratedCamera,
         MultiCameraPoseEstimation,
@@ -41,12 +47,14 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
     from pynwb import NWBHDF5IO, NWBFile, TimeSeries
 
     import monet_ros
-    from monet_ros.io.export_tables import export_times
+    from monet_ros.geometry.units import NWB_NAMES, rig_units
+    from monet_ros.io.export_tables import export_times, source_frames
 
     stamps = np.asarray(stamps_ns, dtype=np.int64)
+    origin = origin_ns if origin_ns is not None else int(stamps[0]) if len(stamps) else None
     start = datetime.fromtimestamp(0, tz=timezone.utc) + timedelta(
-        microseconds=int(stamps[0]) // 1000) if len(stamps) else datetime.now(timezone.utc)
-    times = export_times(stamps)
+        microseconds=int(origin) // 1000) if origin is not None else datetime.now(timezone.utc)
+    times = export_times(stamps, origin_ns)
     nwb = NWBFile(session_description=description, identifier=f'monet-{int(stamps[0])}'
                   if len(stamps) else 'monet', session_start_time=start)
     behavior = nwb.create_processing_module('behavior', 'keypoints from monet_ros')
@@ -55,13 +63,19 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
                                          dtype='uint8'))
     behavior.add(Skeletons(skeletons=[skeleton]))
     version = getattr(monet_ros, '__version__', '')
+    if fnum is not None:
+        behavior.add(TimeSeries(
+            name='source_frame', data=source_frames(stamps, fnum), unit='frames',
+            timestamps=times, description="the source's frame number of each instant "
+            '(0-based video frame, as the 2D tables number it)'))
     per_camera = []
     for v, cam in enumerate(cameras):
         device = CalibratedCamera(name=cam.name, intrinsic_matrix=np.asarray(cam.K),
                                   rotation_matrix=np.asarray(cam.R),
                                   translation_vector=np.asarray(cam.t),
                                   distortion_coefficients=np.asarray(cam.dist),
-                                  description=f'{cam.width}x{cam.height} px')
+                                  description=f'{cam.width}x{cam.height} px; '
+                                  f'translation in {NWB_NAMES[cam.units]}')
         nwb.add_device(device)
         series = [PoseEstimationSeries(
             name=k, data=np.asarray(points2d[:, v, c], float), unit='pixels',
@@ -75,7 +89,7 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
             source_software='monet_ros', source_software_version=str(version),
             skeleton=skeleton))
     series3d = [PoseEstimationSeries(
-        name=k, data=np.asarray(X[:, c], float), unit='meters',
+        name=k, data=np.asarray(X[:, c], float), unit=NWB_NAMES[rig_units(cameras)],
         reference_frame='rig world frame', confidence=np.asarray(score[:, c], float),
         confidence_definition='mean heatmap peak value of the inlier views',
         timestamps=times) for c, k in enumerate(keypoints)]

@@ -2,11 +2,12 @@
 beside the recording output (no ROS): anipose CSV and TRC (export_tables), NWB with
 ndx-pose (export_nwb) and the 2D detections with their crop cameras (detections2d.npz).
 
-detections2d.npz: stamps_ns (T,), cameras (V,), keypoints (C,), points2d (T, V, C, 2)
-decoded peaks in SOURCE image pixels (NaN = view missing or below the confidence
-threshold), confidence (T, V, C) heatmap peak values, inliers (T, V, C) bool (views used
-by the triangulation), K_heat (T, V, 3, 3) the heatmap's virtual camera (crop + scale of
-the source camera: K_heat = S K, NaN where the view is missing), heat_size (2,) (w, h).
+detections2d.npz: stamps_ns (T,), fnum (T,) frame numbers (the CSV's), cameras (V,),
+keypoints (C,), points2d (T, V, C, 2) decoded peaks in SOURCE image pixels (NaN = view
+missing or below the confidence threshold), confidence (T, V, C) heatmap peak values,
+inliers (T, V, C) bool (views used by the triangulation), K_heat (T, V, 3, 3) the
+heatmap's virtual camera (crop + scale of the source camera: K_heat = S K, NaN where the
+view is missing), heat_size (2,) (w, h).
 With the rig, points2d and K_heat let 2D accuracy be scored against labels.
 
 write_results(...) writes the same files from arrays (`monet triangulate`); with a
@@ -103,16 +104,25 @@ class ResultsCollector:
 
 
 def write_results(folder, formats, cameras, keypoints, a, edges=None, trc_axes='xyz',
-                  smoothed=None, heat_size=None):
+                  smoothed=None, heat_size=None, fnum=None, origin_ns=None, rate_hz=None):
     """Write the chosen formats into `folder` -> {format: path}.
+
+    fnum (T,) int, origin_ns, rate_hz: the source's frame numbers, time origin (ns) and
+    frame rate (Hz) when the source has them (2D tables: `monet triangulate`), kept in every
+    export (CSV fnum, TRC Frame# / Time / DataRate, NWB timestamps and 'source_frame', npz
+    fnum); None = counted from the stamps (export_tables TIME_BASE, SOURCE_FRAMES).
 
     cameras: V Camera; keypoints (C,); a: dict of arrays as ResultsCollector.arrays gives
     (stamps (T,), X (T, C, 3), error, ncams, score (T, C), points2d (T, V, C, 2), conf2d,
     inliers (T, V, C), K_heat (T, V, 3, 3)); smoothed: a temporal.Smoothed of the same
     frames: csv, trc and nwb then hold the filtered points (with their confidence, change
-    and bridged flags); npz always holds the 2D detections."""
-    from monet_ros.io.export_tables import write_anipose_csv, write_trc
+    and bridged flags); npz always holds the 2D detections. Every file states the length
+    unit of the cameras (Camera.units), that of X: TRC Units, NWB unit, the CSV's sidecar
+    keypoints3d.units.json."""
+    from monet_ros.geometry.units import rig_units
+    from monet_ros.io.export_tables import source_frames, write_anipose_csv, write_trc
     folder = Path(folder)
+    units = rig_units(cameras)
     names = [c.name for c in cameras]
     X, error, ncams, score = a['X'], a['error'], a['ncams'], a['score']
     extra = filtered = None
@@ -124,15 +134,18 @@ def write_results(folder, formats, cameras, keypoints, a, edges=None, trc_axes='
     out = {}
     if 'csv' in formats:
         out['csv'] = write_anipose_csv(folder / FILE_NAMES['csv'], keypoints, a['stamps'], X,
-                                       error, ncams, score, extra=extra)
+                                       error, ncams, score, extra=extra, units=units,
+                                       fnum=fnum)
     if 'trc' in formats:
         out['trc'] = write_trc(folder / FILE_NAMES['trc'], keypoints, a['stamps'], X,
-                               axes=trc_axes)
+                               axes=trc_axes, units=units, fnum=fnum, origin_ns=origin_ns,
+                               rate_hz=rate_hz)
     if 'npz' in formats:
         path = folder / FILE_NAMES['npz']
         tmp = folder / ('.tmp_' + FILE_NAMES['npz'])
         with open(tmp, 'wb') as f:
             np.savez_compressed(f, stamps_ns=a['stamps'], cameras=np.array(names),
+                                fnum=source_frames(a['stamps'], fnum),
                                 keypoints=np.array(keypoints),
                                 points2d=a['points2d'], confidence=a['conf2d'],
                                 inliers=a['inliers'], K_heat=a['K_heat'],
@@ -143,5 +156,5 @@ def write_results(folder, formats, cameras, keypoints, a, edges=None, trc_axes='
         from monet_ros.io.export_nwb import write_nwb
         out['nwb'] = write_nwb(folder / FILE_NAMES['nwb'], keypoints, a['stamps'], X, score,
                                cameras, a['points2d'], a['conf2d'], edges=edges,
-                               filtered=filtered)
+                               filtered=filtered, fnum=fnum, origin_ns=origin_ns)
     return out

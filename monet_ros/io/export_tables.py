@@ -2,7 +2,8 @@
 (writers and readers; no ROS).
 
 anipose CSV (what `anipose triangulate` writes, one row per frame): for every keypoint K
-the columns K_x, K_y, K_z (world units of the rig, metres here), K_error (mean
+the columns K_x, K_y, K_z (the rig's length unit, stated in the sidecar file
+<name>.units.json: csv_units_path), K_error (mean
 reprojection error of the inlier views, px), K_ncams (inlier views), K_score (mean peak
 confidence), then fnum (frame number); monet adds stamp_ns (header stamp, ns) at the end.
 With a filter (`--filter kalman|optim`) the points are the filtered ones, K_score their
@@ -18,15 +19,23 @@ TRC (OpenSim's marker file, the layout Pose2Sim writes; tab separated):
     Frame#  Time  <marker 1>  ''  ''  <marker 2> ...
     ''  ''  X1 Y1 Z1 X2 ...
     then one row per frame: Frame# (1-based), Time (s), X Y Z per marker.
-monet writes the rig's world frame as it is (Units m); Pose2Sim's demo .trc is Y-up
+monet writes the rig's world frame as it is (Units: the rig's unit, m / cm / mm);
+Pose2Sim's demo .trc is Y-up
 (trc(X, Y, Z) = world(Y, Z, X)): pass axes='yzx' for OpenSim's convention. Frame numbers
 count instants from the first processed one at the median frame period, so a gap in the
 recording is a gap in Frame#; the rate is the median stamp period's, snapped to 0.001 Hz
 when within 1e-4 Hz.
 
 One time base for every export (TIME_BASE): time of an instant = (its header stamp - the
-first exported instant's stamp) / 1e9 s, so the first instant is 0.0: TRC Time, the NWB
-timestamps (export_nwb) and stamp_ns - stamp_ns[0] of the CSV / npz are the same numbers.
+time origin) / 1e9 s. The origin is the first exported instant's stamp (a recording,
+`monet process`: the first instant is 0.0) unless the writer is given origin_ns: 2D tables
+(`monet triangulate`) have stamps = source frame / fps (+ a start time the source gives)
+and origin 0, so an export's time is its source's (video frame 10 at 30 fps: 0.333 s). TRC
+Time and the NWB timestamps (export_nwb) are the same numbers.
+Frame numbers (SOURCE_FRAMES): CSV fnum = the source's frame number (anipose's meaning,
+0-based) when the writer is given fnum (2D tables: the tables' own frame numbers, a table
+that starts late keeps them), else counted from the stamps as above; TRC Frame# = fnum + 1
+(OpenSim's 1-based numbering, as Pose2Sim writes frame 0 as Frame# 1).
 (Pose2Sim writes Time = Frame# / DataRate, one period later; readers here place TRC rows
 by Frame#, which both agree on.)
 """
@@ -39,7 +48,8 @@ import numpy as np
 from monet_ros.labels import frame_period_ns
 
 FIELDS = ('x', 'y', 'z', 'error', 'ncams', 'score')
-TIME_BASE = 'seconds from the first exported instant (its header stamp); first instant 0.0'
+TIME_BASE = ('seconds from the time origin: the first exported instant, or frame 0 of the '
+             'source for 2D tables (frame / fps)')
 EXTRA_FIELDS = ('change_mm', 'bridged')
 AXES = {'xyz': (0, 1, 2), 'yzx': (1, 2, 0)}
 
@@ -58,11 +68,27 @@ def frame_numbers(stamps_ns):
     return np.round((stamps - stamps[0]) / period).astype(np.int64)
 
 
-def export_times(stamps_ns):
-    """(T,) seconds of each instant from the first one (TIME_BASE): the time column of
-    every export."""
+def export_times(stamps_ns, origin_ns=None):
+    """(T,) seconds of each instant from the time origin (TIME_BASE): origin_ns (int ns),
+    default the first stamp. The time column of every export."""
     stamps = np.asarray(stamps_ns, dtype=np.int64)
-    return (stamps - stamps[0]) / 1e9 if len(stamps) else np.zeros(0)
+    if not len(stamps):
+        return np.zeros(0)
+    return (stamps - (stamps[0] if origin_ns is None else np.int64(origin_ns))) / 1e9
+
+
+def source_frames(stamps_ns, fnum=None):
+    """(T,) int frame numbers of the exported instants (SOURCE_FRAMES in the module
+    docstring): fnum as given (the source's own), else frame_numbers(stamps_ns).
+    Raises ExportError when fnum is not T integers."""
+    if fnum is None:
+        return frame_numbers(stamps_ns)
+    out = np.asarray(fnum)
+    if out.shape != (len(stamps_ns),) or (out.size and not np.issubdtype(out.dtype,
+                                                                          np.integer)):
+        raise ExportError(f'fnum: expected {len(stamps_ns)} integer frame numbers, got '
+                          f'shape {out.shape} {out.dtype}')
+    return out.astype(np.int64)
 
 
 def _cell(x, integer=False):
@@ -76,16 +102,42 @@ def _atomic_writer(path):
     return path, path.with_name(path.name + '.tmp')
 
 
-def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=None):
-    """Write anipose's 3D CSV. X (T, C, 3); error, ncams, score (T, C); extra: None or
-    {field: (T, C)} for fields of EXTRA_FIELDS (module docstring). Atomic."""
+def csv_units_path(path):
+    """The sidecar of a 3D CSV that states its units: keypoints3d.csv -> keypoints3d.units.json
+    (anipose's CSV layout has no place for them)."""
+    path = Path(path)
+    return path.with_name(path.stem + '.units.json')
+
+
+def read_csv_units(path):
+    """The length unit ('m', 'cm', 'mm') a 3D CSV's sidecar states, or None without one.
+    ExportError naming the sidecar when it is unreadable or states another unit."""
+    import json
+
+    from monet_ros.geometry.units import check_units
+    side = csv_units_path(path)
+    if not side.is_file():
+        return None
+    try:
+        return check_units(json.loads(side.read_text())['length_unit'])
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        raise ExportError(f'{side}: field length_unit: unreadable ({error})') from None
+
+
+def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=None,
+                      units='m', fnum=None):
+    """Write anipose's 3D CSV. X (T, C, 3) in `units` (the rig's length unit, written to
+    the sidecar csv_units_path(path)); error, ncams, score (T, C); extra: None or
+    {field: (T, C)} for fields of EXTRA_FIELDS (module docstring); fnum: None or (T,) int
+    the source's frame numbers (source_frames). Atomic."""
+    import json
     extra = {f: np.asarray(v, float) for f, v in (extra or {}).items()}
     bad = [f for f in extra if f not in EXTRA_FIELDS]
     if bad:
         raise ExportError(f'{path}: unknown extra column {bad[0]!r}; one of {EXTRA_FIELDS}')
     X = np.asarray(X, float)
     T, C = X.shape[:2]
-    fnum = frame_numbers(stamps_ns)
+    fnum = source_frames(stamps_ns, fnum)
     path, tmp = _atomic_writer(path)
     with open(tmp, 'w', newline='', encoding='utf-8') as f:
         w = csv.writer(f, lineterminator='\n')
@@ -100,6 +152,12 @@ def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=
             for field, values in extra.items():
                 row += [_cell(values[t, c], field == 'bridged') for c in range(C)]
             w.writerow(row + [int(fnum[t]), int(stamps_ns[t])])
+    side, side_tmp = _atomic_writer(csv_units_path(path))
+    side_tmp.write_text(json.dumps({
+        'file': path.name, 'length_unit': units,
+        'columns': {'<keypoint>_x, _y, _z': units, '<keypoint>_error': 'px',
+                    '<keypoint>_change_mm': 'mm', 'stamp_ns': 'ns'}}, indent=1) + '\n')
+    os.replace(side_tmp, side)
     os.replace(tmp, path)
     return path
 
@@ -155,18 +213,22 @@ def read_anipose_csv(path):
                 extra={f: out[f] for f in present})
 
 
-def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m'):
-    """Write a TRC marker file (module docstring). X (T, C, 3) world; axes 'xyz' (as is) or
-    'yzx' (Y-up as Pose2Sim / OpenSim: trc = world(Y, Z, X)). Atomic."""
+def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m', fnum=None,
+              origin_ns=None, rate_hz=None):
+    """Write a TRC marker file (module docstring). X (T, C, 3) world in `units` (the
+    rig's, the header's Units); axes 'xyz' (as is) or 'yzx' (Y-up as Pose2Sim / OpenSim:
+    trc = world(Y, Z, X)); fnum (T,) source frame numbers (Frame# = fnum + 1) and origin_ns
+    (Time origin): None = counted from the first stamp (TIME_BASE, SOURCE_FRAMES); rate_hz:
+    DataRate when known (default: the median stamp period's). Atomic."""
     if axes not in AXES:
         raise ExportError(f'axes must be one of {sorted(AXES)}, got {axes!r}')
     X = np.asarray(X, float)[..., list(AXES[axes])]
     T, C = X.shape[:2]
     period = frame_period_ns(stamps_ns)
-    rate = 1e9 / period if period > 0 else 0.0
+    rate = float(rate_hz) if rate_hz else 1e9 / period if period > 0 else 0.0
     if abs(rate - round(rate, 3)) < 1e-4:      # integer-ns periods: 16666667 ns -> 60 Hz
         rate = round(rate, 3)
-    fnum = frame_numbers(stamps_ns) + 1
+    fnum = source_frames(stamps_ns, fnum) + 1
     path, tmp = _atomic_writer(path)
     rate_text = f'{rate:g}'
     lines = [f'PathFileType\t4\t(X/Y/Z)\t{path.name}',
@@ -176,7 +238,7 @@ def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m'):
              f'{int(fnum[0]) if T else 1}\t{T}',
              'Frame#\tTime\t' + ''.join(f'{k}\t\t\t' for k in keypoints)[:-1],
              '\t\t' + '\t'.join(f'{a}{c + 1}' for c in range(C) for a in 'XYZ')]
-    times = export_times(stamps_ns)
+    times = export_times(stamps_ns, origin_ns)
     for t in range(T):
         time = float(times[t])
         lines.append(f'{int(fnum[t])}\t{time!r}\t'

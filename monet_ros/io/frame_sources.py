@@ -84,6 +84,11 @@ class FrameSource:
             self.kind = 'images'
             files = sorted(f for f in self.path.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
             if not files:
+                videos = _videos_in(self.path)
+                if len(videos) > 1:
+                    raise FrameSourceError(
+                        f'{self.path}: {len(videos)} videos ({", ".join(v.name for v in videos)})'
+                        ': a camera folder holds one video (or its images)')
                 raise FrameSourceError(f'{self.path}: no image ({", ".join(IMAGE_SUFFIXES)})')
             numbers = [frame_number(f) for f in files]
             self.numbered = all(n is not None for n in numbers)
@@ -182,8 +187,19 @@ class FrameSource:
             self.capture.release()
 
 
+def _videos_in(folder):
+    """The video files directly inside a folder, sorted by name."""
+    return sorted(f for f in folder.iterdir() if f.is_file()
+                  and f.suffix.lower() in VIDEO_SUFFIXES)
+
+
 def session_entries(session):
-    """{name: path} of the videos and image folders in a session folder."""
+    """{name: path} of the cameras' sources in a session folder: a video file (name = its
+    file name), a folder of images (name = the folder's), or a folder holding its camera's
+    video (sleap-anipose's layout <session>/<camera>/<video>.mp4: name = the folder's,
+    path = the video; its subfolders, e.g. calibration_images/, are not looked into). A
+    folder holding several videos is an entry too: FrameSource names them if a camera is
+    matched to it. Raises FrameSourceError when there is none."""
     session = Path(session)
     if not session.is_dir():
         raise FrameSourceError(f'{session}: not a folder')
@@ -194,7 +210,10 @@ def session_entries(session):
         elif entry.is_dir() and any(f.suffix.lower() in IMAGE_SUFFIXES
                                     for f in entry.iterdir()):
             out[entry.name] = entry
+        elif entry.is_dir() and _videos_in(entry):
+            videos = _videos_in(entry)
+            out[entry.name] = videos[0] if len(videos) == 1 else entry
     if not out:
-        raise FrameSourceError(f'{session}: no video ({", ".join(VIDEO_SUFFIXES)}) or image '
-                               'folder')
+        raise FrameSourceError(f'{session}: no video ({", ".join(VIDEO_SUFFIXES)}), image '
+                               'folder or folder holding one video per camera')
     return out

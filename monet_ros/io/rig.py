@@ -60,12 +60,12 @@ def recording_image_size(path):
     return next(iter(sizes.values())) if len(set(sizes.values())) == 1 else None
 
 
-def _rig_file_sized_by(path, rig_file):
-    """load_rig(rig_file); a calibration file that stores no image size (OpenCV's
-    stereo_calib intrinsics.yml) takes the size of the recording's images."""
+def _rig_file_sized_by(path, rig_file, units=None):
+    """load_rig(rig_file, units=units); a calibration file that stores no image size
+    (OpenCV's stereo_calib intrinsics.yml) takes the size of the recording's images."""
     from monet_ros.geometry import RigError, load_rig
     try:
-        return load_rig(rig_file)
+        return load_rig(rig_file, units=units)
     except RigError as error:
         if error.field != 'image_width' or 'stores no image size' not in error.message:
             raise
@@ -74,15 +74,16 @@ def _rig_file_sized_by(path, rig_file):
             raise RigError(error.path, error.field, error.message + '; the recording does '
                            'not give one either (no images, or cameras of different sizes)') \
                 from None
-        return load_rig(rig_file, image_size=size)
+        return load_rig(rig_file, image_size=size, units=units)
 
 
-def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None):
+def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None, units=None):
     """list[Camera] of a bag, sorted by name (see rig_and_frame_from_bag)."""
-    return rig_and_frame_from_bag(path, rig_file, world_frame, camera_info_topics)[0]
+    return rig_and_frame_from_bag(path, rig_file, world_frame, camera_info_topics, units)[0]
 
 
-def rig_and_frame_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None):
+def rig_and_frame_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None,
+                           units=None):
     """(list[Camera] sorted by name, root frame) of a bag; the root frame is the TF frame
     the camera poses are expressed in (None with rig_file).
 
@@ -93,10 +94,12 @@ def rig_and_frame_from_bag(path, rig_file=None, world_frame=None, camera_info_to
     the CameraInfo's header.frame_id to world_frame (default: the common root frame). A
     TF transform parent -> child is the child's pose: x_parent = R x_child + t; the camera
     gets world -> camera R_c = R^T, t_c = -R^T t. Camera.topic = the camera's image topic.
-    path: a bag path or a BagReader. Raises RigFromBagError naming what is missing.
+    path: a bag path or a BagReader. units: the rig's length unit ('m', 'cm', 'mm') when
+    the rig file states none (see geometry.read_rig); a rig from /tf_static is in metres
+    (ROS REP 103) unless units says otherwise. Raises RigFromBagError naming what is missing.
     """
     if rig_file is not None:
-        return _rig_file_sized_by(path, rig_file), None
+        return _rig_file_sized_by(path, rig_file, units), None
     reader = path if isinstance(path, BagReader) else open_bag(path)
     info_topics = sorted(camera_info_topics or reader.topics_of_type(CAMERA_INFO))
     if not info_topics:
@@ -150,8 +153,9 @@ def rig_and_frame_from_bag(path, rig_file=None, world_frame=None, camera_info_to
             raise RigFromBagError(f'bag {reader.path}: frame {frame!r} of camera {name} does '
                                   f'not chain to {world_frame!r} (its root is {root!r})')
         roots[name] = root
-        cameras.append(camera_from_camera_info(msg, name, Rwc.T, -Rwc.T @ twc,
-                                               topic=_image_topic(reader, name)))
+        camera = camera_from_camera_info(msg, name, Rwc.T, -Rwc.T @ twc,
+                                         topic=_image_topic(reader, name))
+        cameras.append(camera.replace(units=units) if units else camera)
     if len(set(roots.values())) > 1:
         raise RigFromBagError(f'bag {reader.path}: cameras are in different TF trees '
                               f'{roots}; pass world_frame or a rig file')

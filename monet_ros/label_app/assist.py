@@ -9,6 +9,7 @@ import numpy as np
 
 from monet_ros.geometry.camera import project_views
 from monet_ros.geometry.triangulation import reprojection_error, triangulate, triangulate_robust
+from monet_ros.geometry.units import from_m
 
 
 def assist_instant(points, cameras, threshold_px=15.0, flag_px=10.0):
@@ -77,15 +78,16 @@ def assist_to_json(result, names, keypoints):
 def epipolar_polyline(source, uv, target, near=0.05, far=50.0, samples=96):
     """The epipolar curve, in `target`'s image, of the pixel `uv` of camera `source`: the
     3D ray through uv (lens distortion undone, Camera.undistort_normalized) sampled at
-    `samples` log-spaced depths in [near, far] (metres along the source's optical axis)
-    and projected with target.project (its distortion applied: a curve, not a straight
-    line). Points behind the target camera or farther than one image size outside its
-    image are cut; returns a list of polylines, each a list of [u, v] (empty when the ray
-    never shows in the target's view)."""
+    `samples` log-spaced depths in [near, far] (metres along the source's optical axis,
+    whatever the rig's unit: converted with source.units) and projected with
+    target.project (its distortion applied: a curve, not a straight line). Points behind
+    the target camera or farther than one image size outside its image are cut; returns a
+    list of polylines, each a list of [u, v] (empty when the ray never shows in the
+    target's view)."""
     xy = source.undistort_normalized(source.pixels_to_normalized(np.asarray(uv, np.float64)))
     if not np.isfinite(xy).all():
         return []
-    depths = np.geomspace(near, far, samples)
+    depths = np.geomspace(from_m(near, source.units), from_m(far, source.units), samples)
     ray = np.array([xy[0], xy[1], 1.0])
     X = (depths[:, None] * ray[None, :] - source.t[None, :]) @ source.R      # R^T (d - t)
     Xc = target.to_camera(X)

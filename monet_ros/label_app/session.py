@@ -78,7 +78,8 @@ class LabelSession:
     written stamp-keyed); rig: rig file (default: the recording's); skeleton: preset name
     or YAML; imports: (format, path) pairs of existing labels (monet_ros.labels_import
     formats) merged in (the table's own points win); options: LabelOptions (camera /
-    keypoint name maps, skip_bad); config: LabelConfig.
+    keypoint name maps, skip_bad); config: LabelConfig; rig_units: the length unit of a
+    rig file that states none (geometry.read_rig).
 
     Attributes: cameras (V Camera), stamps (T,) int64 ns, skeleton, keypoints (C names),
     labels {stamp_ns: (V, C, 2) float64 px, NaN = unlabelled}, report (one line: rows used /
@@ -88,7 +89,7 @@ class LabelSession:
     """
 
     def __init__(self, rec, labels_path, rig=None, skeleton='human14', imports=(),
-                 options=None, config=None):
+                 options=None, config=None, rig_units=None):
         from monet_ros.labels import LabelOptions
         from monet_ros.learning.recording_index import recording_index
         from monet_ros.skeleton import load_skeleton
@@ -101,7 +102,8 @@ class LabelSession:
                               'expected a labels CSV file')
         self.skeleton = load_skeleton(skeleton)
         self.keypoints = tuple(self.skeleton.keypoints)
-        index = recording_index(rec, rig=rig, camera_map=self.options.camera_map)
+        index = recording_index(rec, rig=rig, camera_map=self.options.camera_map,
+                                rig_units=rig_units)
         self.rec = str(rec)
         self.notes = list(index.notes or ())
         self.cameras = list(index.cameras)

@@ -6,7 +6,7 @@ import_labels(fmt, paths, cameras=..., camera=None, min_score=0.0, camera_map=No
 -> ImportResult(rows, keypoints, note). Errors are monet_ros.labels.LabelError naming the
 file and the row / field.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from monet_ros.labels import LabelError
@@ -15,10 +15,13 @@ from monet_ros.labels import LabelError
 @dataclass
 class ImportResult:
     """rows: LabelRow list; keypoints: names in the source's order; note: what was left
-    out on purpose (e.g. points below --min-score), '' when nothing."""
+    out on purpose (e.g. points below --min-score), '' when nothing; frame_counts:
+    {source: frames} for the files that declare their length (a SLEAP analysis file's
+    frame axis, a prediction table's rows), whatever their last detection."""
     rows: list
     keypoints: tuple
     note: str = ''
+    frame_counts: dict = field(default_factory=dict)
 
 
 def camera_for(source_name, cameras=(), camera=None, camera_map=None):
@@ -61,15 +64,18 @@ FORMATS = {
     'anipose': _load('anipose', 'import_anipose'),
     'sleap': _load('sleap', 'import_sleap'),
     'dannce': _load('dannce', 'import_dannce'),
+    'openpose': _load('openpose', 'import_openpose'),   # OpenPose / Pose2Sim JSON folders
     'frames': _frames_csv,
     'stamps': _frames_csv,
 }
 
 
-def import_labels(fmt, paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
+def import_labels(fmt, paths, cameras=(), camera=None, min_score=0.0, camera_map=None,
+                  options=None):
     """ImportResult of labels files in format `fmt` (see FORMATS). paths: a path or a list
     (files, or folders searched for the format's files); cameras: the recording's camera
-    names (to match file / video names to cameras)."""
+    names (to match file / video names to cameras); options: the format's own keyword
+    arguments (openpose: pose_model, keypoints)."""
     if fmt not in FORMATS:
         raise LabelError(f'unknown labels format {fmt!r}; one of {", ".join(sorted(FORMATS))}')
     paths = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)]
@@ -77,4 +83,5 @@ def import_labels(fmt, paths, cameras=(), camera=None, min_score=0.0, camera_map
         if not p.exists():
             raise LabelError(f'{p}: no such file or folder')
     return FORMATS[fmt](paths, cameras=tuple(cameras), camera=camera,
-                        min_score=float(min_score), camera_map=camera_map or {})
+                        min_score=float(min_score), camera_map=camera_map or {},
+                        **(options or {}))

@@ -14,8 +14,11 @@ Layout (DeepLabCut's published format, a pandas DataFrame):
 Frame index = the last number in the image name (img0042.png -> 42); camera = the
 recording camera whose name the video folder contains (Lightning Pose multiview:
 labeled-data/<session>_<view>/...), else the one in the file name
-(CollectedData_<view>.csv). Empty / NaN cells are unlabelled keypoints. With several
-individuals the keypoint is named '<individual>/<bodypart>'.
+(CollectedData_<view>.csv). Empty / NaN x or y cells are unlabelled keypoints; an empty
+/ NaN likelihood beside a point is no score (the point is kept, as from a table without
+likelihoods). A prediction table's length is its rows (last frame number + 1), whatever
+its last detection. With several individuals the keypoint is named
+'<individual>/<bodypart>'.
 """
 import csv
 import math
@@ -58,8 +61,10 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
 
     columns: list of tuples whose last two levels are (bodypart, coord) and, with 3 levels
     after the scorer, the individual before them; index: per row an image path / parts
-    tuple / frame number; values (N, K) float. Returns (rows, keypoints, dropped) where
-    dropped counts points below min_score."""
+    tuple / frame number; values (N, K) float. Returns (rows, keypoints, dropped, frames)
+    where dropped counts points below min_score (a NaN likelihood is no score: kept) and
+    frames is the table's frame count (largest frame number + 1) when the index is frame
+    numbers (predictions), else None."""
     levels = [tuple(c) for c in columns]
     groups = {}
     for k, col in enumerate(levels):
@@ -100,16 +105,21 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
             if not (math.isfinite(u) and math.isfinite(v)):
                 continue
             score = float(values[r, coords['likelihood']]) if 'likelihood' in coords else None
+            if score is not None and math.isnan(score):
+                score = None                    # an empty likelihood cell: no score
             if score is not None and not score >= min_score:
                 dropped += 1
                 continue
             rows.append(LabelRow(str(source), line, None, frame, cam, name, float(u),
                                  float(v), where, score))
-    return rows, tuple(groups), dropped
+    numbered = len(index) and all(isinstance(k, (int, np.integer)) for k in index)
+    frames = int(max(index)) + 1 if numbered else None
+    return rows, tuple(groups), dropped, frames
 
 
 def read_dlc_csv(path, **kwargs):
-    """(rows, keypoints, dropped) of a DeepLabCut / Lightning Pose CSV table."""
+    """(rows, keypoints, dropped, frames) of a DeepLabCut / Lightning Pose CSV table
+    (table_rows)."""
     try:
         with open(path, newline='', encoding='utf-8-sig') as handle:
             lines = list(csv.reader(handle))
@@ -155,7 +165,8 @@ def read_dlc_csv(path, **kwargs):
 
 
 def read_dlc_h5(path, **kwargs):
-    """(rows, keypoints, dropped) of a DeepLabCut H5 table (pandas / PyTables)."""
+    """(rows, keypoints, dropped, frames) of a DeepLabCut H5 table (pandas / PyTables;
+    table_rows)."""
     import pandas as pd
     try:
         frame = pd.read_hdf(path)
@@ -193,12 +204,14 @@ def import_dlc(paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
 def import_dlc_files(files, cameras=(), camera=None, min_score=0.0, camera_map=None):
     """ImportResult of DeepLabCut-layout tables (CSV or H5), one after the other; points
     below min_score are left out and counted in the note."""
-    rows, keypoints, dropped = [], {}, 0
+    rows, keypoints, dropped, counts = [], {}, 0, {}
     for f in files:
-        r, k, d = read_dlc_file(f, cameras=cameras, camera=camera, min_score=min_score,
-                                camera_map=camera_map)
+        r, k, d, n = read_dlc_file(f, cameras=cameras, camera=camera, min_score=min_score,
+                                   camera_map=camera_map)
         rows += r
         keypoints.update(dict.fromkeys(k))
         dropped += d
+        if n is not None:
+            counts[str(f)] = n
     note = f'{dropped} points below --min-score {min_score} left out' if dropped else ''
-    return ImportResult(rows, tuple(keypoints), note)
+    return ImportResult(rows, tuple(keypoints), note, counts)

@@ -2,10 +2,15 @@
 
 Reads any 2D table `monet labels import` reads (the same readers): DeepLabCut / Lightning
 Pose prediction CSV / H5 (likelihood = score), SLEAP analysis H5 (point_scores = score),
-anipose pose-2d folders, and the frame-indexed points table frame,camera,keypoint,u,v
-[,score] (monet_ros.labels, read_label_rows(points=True)). A source without scores gets
-score 1. Frames are the tables' frame indices (0-based video frames); the arrays cover
-every frame from the first to the last one seen.
+anipose pose-2d folders, OpenPose / Pose2Sim JSON folders (c = score; labels_import.
+openpose), and the frame-indexed points table frame,camera,keypoint,u,v
+[,score] (monet_ros.labels, read_label_rows(points=True)). A detection without a score (a
+source without scores, an empty / NaN likelihood or score cell beside a point) gets score
+1, counted in the notes. Frames are the tables' frame indices (0-based video frames, kept
+as numbered: a table that starts at frame 10 starts there); the arrays cover every frame
+from the first to the last one seen. Per-camera files of one recording must have one
+length: a file's declared frame count (a SLEAP file's frame axis, a prediction table's
+rows), else its last frame + 1.
 """
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -15,14 +20,19 @@ import numpy as np
 from monet_ros.labels import LabelError, read_label_rows
 from monet_ros.labels_import import ImportResult, import_labels
 
-FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'frames')
+FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'openpose', 'frames')
+READ = ('DeepLabCut / Lightning Pose prediction .csv or .h5 per camera, SLEAP analysis .h5 '
+        'per camera, an anipose pose-2d folder, OpenPose / Pose2Sim JSON folders (one per '
+        'camera), or a frame,camera,keypoint,u,v[,score] .csv')
 
 
 @dataclass
 class Points2D:
-    """frames (T,) int frame indices; cameras (V,) names; keypoints (C,); points (T, V, C,
-    2) px (NaN = missing); score (T, V, C) (NaN = missing); fmt: the format read;
-    rows: detections read; nan_rows: rows with NaN u / v (missing)."""
+    """frames (T,) int frame indices (the source's numbers); cameras (V,) names; keypoints
+    (C,); points (T, V, C, 2) px (NaN = missing); score (T, V, C) (NaN = missing); fmt: the
+    format read; rows: detections read; nan_rows: rows with NaN u / v (missing);
+    unscored: detections without a score (given score 1); notes: what the reader left out
+    or decided, one line each."""
     frames: np.ndarray
     cameras: tuple
     keypoints: tuple
@@ -31,6 +41,8 @@ class Points2D:
     fmt: str
     rows: int
     nan_rows: int
+    unscored: int = 0
+    notes: tuple = ()
 
 
 def _h5_is_sleap(path):
@@ -43,15 +55,23 @@ def _h5_is_sleap(path):
 
 
 def detect_format(paths):
-    """The format of 2D table paths (list of Path): dlc, sleap, anipose or frames.
-    Raises LabelError naming the file when it is none of them."""
+    """The format of 2D table paths (list of Path): dlc, sleap, anipose, openpose or
+    frames. Raises LabelError naming the file and the formats read when it is none."""
     first = paths[0]
     if first.is_dir():
         h5 = sorted(first.rglob('*.h5'))
         if h5:
             return 'sleap' if _h5_is_sleap(h5[0]) else 'anipose'
-        return 'dlc'
+        if any(f.suffix.lower() == '.csv' and ('DLC' in f.name or
+                                               f.name.startswith('CollectedData'))
+               for f in first.rglob('*')):
+            return 'dlc'
+        if next(first.rglob('*.json'), None) is not None:
+            return 'openpose'
+        raise LabelError(f'{first}: no 2D tables found in the folder; read: {READ}')
     suffix = first.suffix.lower()
+    if suffix == '.json':
+        return 'openpose'
     if suffix in ('.h5', '.hdf5'):
         return 'sleap' if _h5_is_sleap(first) else 'dlc'
     if suffix == '.csv':
@@ -66,17 +86,19 @@ def detect_format(paths):
             return 'frames'
         raise LabelError(f'{first}:1: first field {head!r}: neither a DeepLabCut table '
                          "('scorer') nor a points table ('frame,camera,keypoint,u,v[,score]')")
-    raise LabelError(f'{first}: not a 2D table (.csv, .h5 or an anipose pose-2d folder)')
+    raise LabelError(f'{first}: not a 2D table; read: {READ}')
 
 
-def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
+def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
+                  pose_model=None):
     """Points2D of 2D tables.
 
     paths: a path or list (files, or a folder); cameras: the rig's camera names (V, in
     rig order: the output's order; cameras with no detection stay NaN); fmt: one of
     FORMATS; keypoints: names fixing the output's keypoints and order (a detection of
     another keypoint is an error), None = the sources' keypoints in their order;
-    camera_map: {source camera: rig camera}.
+    camera_map: {source camera: rig camera}; pose_model: the keypoint names of OpenPose
+    JSON (a name of geometry.pose2sim.POSE_MODELS; labels_import.openpose).
     Raises LabelError (one line naming the file and field) for an unknown camera or
     keypoint, a wrong column set, a (frame, camera, keypoint) given twice, per-camera
     files of different lengths, or nothing to read."""
@@ -95,7 +117,10 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
         rows = [replace(r, camera=camera_map.get(r.camera, r.camera)) for r in rows]
         result = ImportResult(rows, tuple(dict.fromkeys(r.keypoint for r in rows)))
     else:
-        result = import_labels(fmt, paths, cameras=cameras, camera_map=camera_map)
+        options = dict(pose_model=pose_model, keypoints=keypoints) if fmt == 'openpose' \
+            else None
+        result = import_labels(fmt, paths, cameras=cameras, camera_map=camera_map,
+                               options=options)
     rows = result.rows
     if not rows:
         raise LabelError(f'{", ".join(map(str, paths))}: no 2D detections found')
@@ -109,7 +134,7 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
         if r.keypoint not in kindex:
             raise LabelError(f'{r.place}: field keypoint: {r.keypoint!r} is not a keypoint '
                              f'of the skeleton ({", ".join(names)})')
-    _check_lengths(rows)
+    _check_lengths(rows, result.frame_counts)
     frame = np.array([r.frame for r in rows], np.int64)
     first, last = int(frame.min()), int(frame.max())
     T, V, C = last - first + 1, len(cameras), len(names)
@@ -127,17 +152,29 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None):
     points = np.full((T, V, C, 2), np.nan)
     score = np.full((T, V, C), np.nan)
     uv = np.array([(r.u, r.v) for r in rows], np.float64)
-    s = np.array([1.0 if r.score is None else r.score for r in rows], np.float64)
+    s = np.array([np.nan if r.score is None else r.score for r in rows], np.float64)
+    present = np.isfinite(uv).all(-1)
+    unscored = present & np.isnan(s)
+    s[unscored] = 1.0                   # no score: as a source without scores
     points[t, v, c] = uv
     score[t, v, c] = s
-    nan_rows = int((~np.isfinite(uv).all(-1)).sum())
+    nan_rows = int((~present).sum())
+    notes = [result.note] if result.note else []
+    if unscored.any():
+        notes.append(f'{int(unscored.sum())} of {int(present.sum())} detections have no score '
+                     '(no score column, or an empty / NaN likelihood or score cell): score 1 '
+                     'used')
     return Points2D(frames=np.arange(first, last + 1), cameras=cameras, keypoints=names,
-                    points=points, score=score, fmt=fmt, rows=len(rows), nan_rows=nan_rows)
+                    points=points, score=score, fmt=fmt, rows=len(rows), nan_rows=nan_rows,
+                    unscored=int(unscored.sum()), notes=tuple(notes))
 
 
-def _check_lengths(rows):
+def _check_lengths(rows, frame_counts=None):
     """Per-camera files (each file one camera) must cover the same frames: LabelError
-    naming two files whose frame counts (last frame + 1) differ."""
+    naming two files whose frame counts differ. A file's count is its declared one
+    (frame_counts {source: frames}: a SLEAP file's frame axis, a prediction table's rows),
+    else its last frame + 1."""
+    frame_counts = frame_counts or {}
     by_source = {}
     for r in rows:
         entry = by_source.setdefault(r.source, [set(), -1])
@@ -145,7 +182,7 @@ def _check_lengths(rows):
         entry[1] = max(entry[1], r.frame)
     if len(by_source) < 2 or any(len(cams) > 1 for cams, _ in by_source.values()):
         return
-    lengths = {src: last + 1 for src, (_, last) in by_source.items()}
+    lengths = {src: frame_counts.get(src, last + 1) for src, (_, last) in by_source.items()}
     if len(set(lengths.values())) > 1:
         (a, na), (b, nb) = sorted(lengths.items(), key=lambda kv: kv[1])[::len(lengths) - 1]
         raise LabelError(f'{a}: {na} frames but {b}: {nb} frames; the per-camera files of '

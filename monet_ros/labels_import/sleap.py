@@ -8,9 +8,12 @@ of the documented shapes):
   track has an instance;
 - node_names (nodes,), track_names (tracks,): byte strings;
 - point_scores: documented (frames, nodes, tracks) -> read (tracks, nodes, frames);
-  optional, used by --min-score and as the detection score of `monet triangulate`;
+  optional, used by --min-score and as the detection score of `monet triangulate`; a NaN
+  score of a present point (e.g. a user-placed point) is no score: the point is kept;
 - video_path: the video the file belongs to (its name gives the camera).
-The frame axis is the video's frame index. With several tracks the keypoint is named
+The frame axis is the video's frame index; its length is the file's frame count (the
+video's), even when the animal is missing from the last frames. With several tracks the
+keypoint is named
 '<track>/<node>'.
 """
 from pathlib import Path
@@ -28,7 +31,9 @@ def _text(value):
 
 
 def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
-    """(rows, keypoints, dropped) of one SLEAP analysis HDF5 file."""
+    """(rows, keypoints, dropped, frames) of one SLEAP analysis HDF5 file: LabelRow list,
+    keypoint names, points below min_score left out, the file's frame count. Raises
+    LabelError naming the file and field."""
     import h5py
     try:
         handle = h5py.File(path, 'r')
@@ -72,17 +77,18 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
     dropped = 0
     score = scores.transpose(2, 0, 1) if scores is not None else None   # (frames, tracks, nodes)
     if score is not None and min_score > 0:
-        low = ok & ~(score >= min_score)
+        low = ok & ~(score >= min_score) & ~np.isnan(score)     # NaN: no score, kept
         dropped = int(low.sum())
         ok &= ~low
     rows = []
     for frame, track, node in zip(*np.nonzero(ok)):
         u, v = points[frame, track, node]
+        s = None if score is None else float(score[frame, track, node])
         rows.append(LabelRow(str(path), int(frame) + 1, None, int(frame), cam,
                              keypoints[track * len(nodes) + node], float(u), float(v),
                              f'frame {frame} track {names[track]} node {nodes[node]}',
-                             None if score is None else float(score[frame, track, node])))
-    return rows, tuple(keypoints), dropped
+                             None if s is None or np.isnan(s) else s))
+    return rows, tuple(keypoints), dropped, n_frames
 
 
 def import_sleap(paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
@@ -91,11 +97,12 @@ def import_sleap(paths, cameras=(), camera=None, min_score=0.0, camera_map=None)
         files += sorted(p.rglob('*.h5')) + sorted(p.rglob('*.hdf5')) if p.is_dir() else [p]
     if not files:
         raise LabelError(f'{", ".join(map(str, paths))}: no SLEAP analysis .h5 file found')
-    rows, keypoints, dropped = [], {}, 0
+    rows, keypoints, dropped, counts = [], {}, 0, {}
     for f in files:
-        r, k, d = read_sleap(f, cameras, camera, min_score, camera_map)
+        r, k, d, n = read_sleap(f, cameras, camera, min_score, camera_map)
         rows += r
         keypoints.update(dict.fromkeys(k))
         dropped += d
+        counts[str(f)] = n
     note = f'{dropped} points below --min-score {min_score} left out' if dropped else ''
-    return ImportResult(rows, tuple(keypoints), note)
+    return ImportResult(rows, tuple(keypoints), note, counts)

@@ -67,6 +67,9 @@ class LearnerConfig(TrainConfig):
                          'its architecture and keypoints define the network')
     rig: str = setting('', "rig file for all bags ('' = each folder's rig.yaml, else the "
                        "bag's CameraInfo + /tf_static)")
+    rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
+                             "'' = the file's, else the rule of geometry.units)",
+                             choices=('', 'm', 'cm', 'mm'))
     labels: str = setting('', "labels CSV (stamp_ns,camera,keypoint,u,v) for all bags "
                           "('' = each folder's labels.csv, else none)")
     skeleton: str = setting('human14', 'keypoint names (preset or YAML) when no initial model '
@@ -223,7 +226,8 @@ def load_bags(config, keypoints):
     """The concatenated Recording of config.bags (keypoints: names, heatmap channel order)."""
     from monet_ros.learning.recording import load_recording
     return concatenate_recordings([
-        load_recording(bag, rig=config.rig or None, labels=config.labels or None,
+        load_recording(bag, rig=config.rig or None, rig_units=config.rig_units or None,
+                       labels=config.labels or None,
                        skeleton=list(keypoints), max_instants=config.max_instants or None,
                        shared_labels=bool(config.labels) and len(config.bags) > 1)
         for bag in config.bags])

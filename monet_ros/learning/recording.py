@@ -111,7 +111,7 @@ def find_recording_parts(path):
 
 def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='human14',
                    slop_ns=0, max_instants=None, name=None, label_options=None,
-                   shared_labels=False):
+                   shared_labels=False, rig_units=None):
     """Decode a recording (rosbag2 folder, .mcap, or a `monet synth` output folder) into memory.
 
     rig: rig file (default: the folder's rig.yaml, else CameraInfo + /tf_static of the bag);
@@ -124,7 +124,8 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     The returned recording's `label_report` says how many rows were used / skipped.
     shared_labels: the labels file covers several recordings (the learner's bags): rows
     whose stamp lies outside this recording's time span are left to the others (counted as
-    'other recordings', not errors).
+    'other recordings', not errors). rig_units: the length unit of a rig file that states
+    none (geometry.read_rig).
     A rig file's cameras are renamed by label_options.camera_map and fitted to the images
     (monet_ros.io.rig_fit: a full-resolution calibration for a half-resolution recording is
     scaled); `rig_notes` says what was adapted.
@@ -143,7 +144,7 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     keypoints = tuple(load_skeleton(skeleton).keypoints) if isinstance(skeleton, (str, Path)) \
         else tuple(skeleton)
     reader = open_bag(parts['bag'])
-    cameras = rig_from_bag(reader, rig_file=rig)
+    cameras = rig_from_bag(reader, rig_file=rig, units=rig_units)
     rig_notes = []
     if rig is not None:       # a calibration file: names mapped, size fitted to the images
         from monet_ros.io.rig_fit import fit_rig_to_bag

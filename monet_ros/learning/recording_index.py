@@ -28,17 +28,18 @@ def image_topic(reader, cam):
     return topic
 
 
-def recording_index(path, rig=None, slop_ns=0, camera_map=()):
+def recording_index(path, rig=None, slop_ns=0, camera_map=(), rig_units=None):
     """RecordingIndex of a recording (rosbag2 folder, .mcap, or `monet synth` folder), read
     without decoding images. A rig file's cameras are renamed by camera_map and fitted to
-    the images (io.rig_fit; `notes` says how). Raises RecordingError naming the bag when it
+    the images (io.rig_fit; `notes` says how); rig_units: the length unit of a rig file
+    that states none (geometry.read_rig). Raises RecordingError naming the bag when it
     has no instant."""
     from monet_ros.io import iter_multiview_frames, open_bag, rig_from_bag
     from monet_ros.learning.recording import RecordingError, find_recording_parts
 
     parts = find_recording_parts(path)
     reader = open_bag(parts['bag'])
-    cameras = list(rig_from_bag(reader, rig_file=rig or parts['rig']))
+    cameras = list(rig_from_bag(reader, rig_file=rig or parts['rig'], units=rig_units))
     notes = []
     if rig or parts['rig']:
         from monet_ros.io.rig_fit import fit_rig_to_bag

@@ -33,6 +33,7 @@ from monet_ros.atomic import sha256_file
 from monet_ros.config import MAX_THREADS, ConfigError, setting, validate_config
 from monet_ros.crop_rule import TrackedCrops, TrackedRule
 from monet_ros.error_text import error_line
+from monet_ros.geometry.units import UNITS
 from monet_ros.io import (
     camera_from_camera_info,
     camera_info_from_camera,
@@ -79,6 +80,9 @@ class DetectorConfig:
                                        'several cameras are batched in one forward pass')
     rig: str = setting('', 'rig file or recording: camera names, image topics and the '
                        'extrinsics used to crop around /monet/keypoints3d (optional)')
+    rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
+                             "'' = the file's, else the rule of geometry.units); must match "
+                             "the fusion node's", choices=('',) + UNITS)
     image_topic: str = setting('', 'image topic template, {camera} = name (default: the rig '
                                'camera topic, else /{camera}/image_raw)',
                                template_fields=('camera',))
@@ -184,7 +188,7 @@ def camera_slots(config, owner='detector'):
     camera_info topics; no network is loaded), as the detector node subscribes them.
     Raises ConfigError (no rig and no cameras, unknown camera) or OSError (rig file)."""
     if config.rig:
-        rig, _ = load_node_rig(config.rig)
+        rig, _ = load_node_rig(config.rig, config.rig_units)
         rig_cameras = select_cameras(owner, rig, config.cameras)
         names = [c.name for c in rig_cameras]
     elif not config.cameras:
@@ -311,6 +315,8 @@ class DetectorNode(Node):
             R = slot.rig_camera.R if slot.rig_camera is not None else None
             t = slot.rig_camera.t if slot.rig_camera is not None else None
             slot.camera = camera_from_camera_info(msg, slot.name, R, t)
+            if slot.rig_camera is not None:        # the rig's extrinsics: its length unit
+                slot.camera = slot.camera.replace(units=slot.rig_camera.units)
             slot.info_key = key
         except ValueError as error:
             self.bad_message(slot, slot.info_topic, error)

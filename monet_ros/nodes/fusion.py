@@ -13,6 +13,10 @@ jump): the filtered ones on keypoints3d (and the skeleton markers), the raw ones
 keypoints3d_raw. A bridged joint (predicted, no accepted measurement this frame) keeps
 num_views of the raw fusion (0 when not triangulated), so it stays recognisable.
 
+Units: keypoints3d, the markers and /tf_static are in the rig's length unit (`rig_units`,
+the rig file's `units`, else the rule of geometry.units), stated in /diagnostics (`units`)
+and the start log; the filter's mm and m/s^2 parameters are converted into it.
+
 When the node falls behind (more heatmaps arrive than it fuses, e.g. 16 cameras on 2 cores),
 it keeps its outputs fresh instead of queueing: a frame any of whose heatmaps or camera_info
 waited longer than `max_queue_ms` in the input queue (from its reception by the middleware,
@@ -39,8 +43,9 @@ from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
-from monet_ros.config import MAX_THREADS, ConfigError, config_subset, setting
+from monet_ros.config import MAX_THREADS, ConfigError, config_subset, derive_checked, setting
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
+from monet_ros.geometry.units import UNITS, from_m, rig_units
 from monet_ros.io import (
     header_stamp_ns,
     image_msg_to_heatmaps,
@@ -91,6 +96,10 @@ STALE = object()
 class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     rig: str = setting('', 'rig file (any format load_rig reads) or a recording whose '
                        'camera_info + /tf_static give the rig; required')
+    rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
+                             "'' = the file's, else the rule of geometry.units): keypoints3d, "
+                             'the markers and /tf_static are in the rig unit',
+                             choices=('',) + UNITS)
     cameras: tuple[str, ...] = setting((), 'rig cameras to fuse (default: all of the rig)')
     skeleton: str = setting('human14', 'skeleton preset or YAML path: heatmap channel order '
                             'and bones of /monet/skeleton')
@@ -122,7 +131,8 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     marker_labels: bool = setting(False, 'also label the skeleton joints with their names')
     camera_markers: bool = setting(True, 'publish the rig cameras as frustums on rig_markers '
                                    '(latched)')
-    camera_marker_depth: float = setting(0.2, 'frustum depth of the camera markers (m)',
+    camera_marker_depth: float = setting(0.2, 'frustum depth of the camera markers (m, '
+                                         'whatever the rig unit)',
                                          minimum=0.0, exclusive_minimum=True)
     publish_tf: bool = setting(True, 'publish the rig on /tf_static (frame_id -> '
                                '<camera>_optical) when tf2_msgs is installed')
@@ -131,16 +141,21 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
                            maximum=MAX_THREADS)
 
 
-def derive(config):
+def derive(config, units='m'):
     """What the parameters of a FusionNodeConfig feed (no ROS), built before they are used
     at start and before a live change is applied (monet_ros.nodes.params): the core's
-    FusionConfig, the live filter (built even while it is off, so switching it on cannot
-    fail), the durations in ns and the outlier score's scale. Raises ConfigError naming a
-    field (the filter), ArithmeticError or ValueError (a duration beyond what a float or
-    int64 holds); derive_checked turns those into an error naming the parameter."""
+    FusionConfig, the live filter in the rig's length unit `units` ('m', 'cm', 'mm'; built
+    even while it is off, so switching it on cannot fail), the camera markers' depth in
+    that unit, the durations in ns and the outlier score's scale. units None (the rig not
+    loaded yet: the node's first check) leaves out what depends on it (filter and
+    marker_depth None). Raises ConfigError naming a field (the filter's numbers in
+    `units`), ArithmeticError or ValueError (a duration beyond what a float or int64
+    holds); derive_checked turns those into an error naming the parameter."""
+    known = units is not None
     return SimpleNamespace(
         core=config_subset(config, FusionConfig),
-        filter=LiveFilter(config_subset(config, LiveFilterConfig)),
+        filter=LiveFilter(config_subset(config, LiveFilterConfig), units) if known else None,
+        marker_depth=from_m(config.camera_marker_depth, units) if known else None,
         slop_ns=int(config.slop_ms * 1e6),
         max_queue_ns=config.max_queue_ms * 1e6,
         diagnostics_period_ns=int(config.diagnostics_period_s * 1e9),     # rclpy's timer
@@ -175,11 +190,9 @@ class CameraStats:
 class FusionNode(Node):
     def __init__(self, overrides=None, node_name='fusion', **kwargs):
         super().__init__(node_name, **node_namespace(kwargs))
+        self.units = None    # the rig's length unit, known once the rig is loaded
         self.config = config = declare_config(self, FusionNodeConfig, overrides, live=LIVE,
-                                              on_change=self.apply_live, derive=derive)
-        self.derived = derived = derive(config)
-        self.core_config = derived.core
-        self.live_filter = derived.filter if config.filter else None
+                                              on_change=self.apply_live, derive=self.derive)
         self.filter_counts = dict(resets=0, restarts=0, gated=0)  # of replaced filters
         self.timer = StageTimer()  # per-stage wall time, reported in /diagnostics
         if config.threads:
@@ -187,8 +200,14 @@ class FusionNode(Node):
             torch.set_num_threads(config.threads)
         if not config.rig:
             raise ConfigError(self.get_name(), 'rig', 'is required (a rig file or recording)')
-        rig, rig_frame = load_node_rig(config.rig)
+        rig, rig_frame = load_node_rig(config.rig, config.rig_units)
         self.cameras = select_cameras(self.get_name(), rig, config.cameras, minimum=2)
+        self.units = rig_units(self.cameras)
+        # checked again with the rig unit: the filter and marker depth in it (ConfigError
+        # naming the parameter, as a live change would be refused)
+        self.derived = derived = derive_checked(self.get_name(), config, self.derive)
+        self.core_config = derived.core
+        self.live_filter = derived.filter if config.filter else None
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
@@ -203,7 +222,7 @@ class FusionNode(Node):
         self.last_result = None
         self.last_stamp_ns = None
         # callables(stamp_ns, result, filtered) (the pipeline's summary and score):
-        # filtered (C, 3) m the live filter's keypoints3d, None with the filter off
+        # filtered (C, 3) the live filter's keypoints3d (rig unit), None with it off
         self.listeners = []
         self.first_heard = None   # monotonic time of the first heatmap (of any camera)
         self.sync = StampSynchronizer(self.names, slop_ns=derived.slop_ns,
@@ -230,19 +249,26 @@ class FusionNode(Node):
             self.pub_rig = self.create_publisher(MarkerArray, RIG_MARKERS, LATCHED)
             self.pub_rig.publish(marker_array(
                 self.get_clock().now().nanoseconds, self.frame_id,
-                frustum_marker_specs(self.cameras, config.camera_marker_depth)))
+                frustum_marker_specs(self.cameras, derived.marker_depth,
+                                     scale=from_m(0.005, self.units))))
         self.create_timer(0.02, self.on_poll)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
-            f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}')
+            f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}, '
+            f'3D in {self.units} (the rig unit)')
+
+    def derive(self, config):
+        """derive(config) in this node's rig unit (None before the rig is loaded: the start
+        check of declare_config, without the filter; checked again once it is)."""
+        return derive(config, self.units)
 
     def apply_live(self, config):
         """Use a changed config (a live parameter was set) from the next frame on."""
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
-        derived = derive(config)     # checked already (declare_config): cannot fail here
+        derived = self.derive(config)    # checked already (declare_config): cannot fail
         self.core_config = derived.core
         self.sync.min_keys = config.min_views
         if self.live_filter is None or self.live_filter.config != derived.filter.config:
@@ -436,6 +462,7 @@ class FusionNode(Node):
             self.pub_skeleton.publish(skeleton_marker_array(
                 group.stamp_ns, self.frame_id, X, self.skeleton.bone_indices,
                 ns=self.marker_ns, lifetime_ns=self.derived.marker_lifetime_ns,
+                scale=from_m(0.03, self.units),
                 names=self.skeleton.keypoints if self.config.marker_labels else None))
         self.timer.add('publish', time.perf_counter() - start)
         for listener in self.listeners:
@@ -505,6 +532,7 @@ class FusionNode(Node):
             message=f'{self.frames} frames fused ({self.partial_frames} with missing cameras)',
             values=[KeyValue(key=k, value=str(v)) for k, v in (
                 ('frames', self.frames), ('partial_frames', self.partial_frames),
+                ('units', self.units),
                 ('dropped_frames', self.sync.stats.dropped), ('stale_frames', self.stale_frames),
                 ('late_views', self.sync.stats.late),
                 ('time_resets', self.sync.stats.resets),

@@ -5,9 +5,10 @@ MIN_FRAMES = 10        # confident frames needed before the other frames are not
 
 
 def bone_lengths(X, edges, confident=None):
-    """(B,) median length (m) of each bone (a, b) in `edges` over the frames where both
-    ends of X (T, C, 3) are finite and, when given, confident (T, C) bool; when fewer than
-    MIN_FRAMES frames are confident for a bone, over every frame with both ends finite.
+    """(B,) median length (the points' unit) of each bone (a, b) in `edges` over the frames
+    where both ends of X (T, C, 3) are finite and, when given, confident (T, C) bool; when
+    fewer than MIN_FRAMES frames are confident for a bone, over every frame with both ends
+    finite.
     NaN for a bone never seen. The median ignores the frames where one end was
     triangulated on the wrong limb."""
     X = np.asarray(X, np.float64)

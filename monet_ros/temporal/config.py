@@ -4,8 +4,11 @@ its synthetic set (human14 subject, 8-camera ring, 1 px noise, 10% gross outlier
 dropped views, 30 frames/s); the figures are in README.md (3D filters).
 """
 from dataclasses import dataclass
+from types import SimpleNamespace
 
 from monet_ros.config import setting, validate_config
+from monet_ros.geometry.units import from_m, from_mm
+from monet_ros.temporal.cv_kalman import V0, model_numbers
 
 METHODS = ('none', 'kalman', 'optim')
 LOSSES = ('soft_l1', 'huber', 'cauchy', 'linear')
@@ -13,7 +16,8 @@ LOSSES = ('soft_l1', 'huber', 'cauchy', 'linear')
 
 @dataclass(frozen=True)
 class FilterConfig:
-    """Which filter and its parameters (validated on construction; errors name the field).
+    """Which filter and its parameters (validated on construction, their Kalman numbers
+    in a rig's unit by in_units; errors name the field).
 
     method: 'none' (frame-by-frame robust triangulation as fused), 'kalman' (per-joint
     constant-velocity Kalman filter + Rauch-Tung-Striebel smoother with Mahalanobis
@@ -51,8 +55,23 @@ class FilterConfig:
 
     def __post_init__(self):
         validate_config(self)
-        # the Kalman model's numbers (variances, gate, covariance over a max_gap_s step):
-        # a value whose square overflows or underflows to 0 is a ConfigError naming it
-        from monet_ros.temporal.cv_kalman import model_numbers
-        model_numbers(self, 'measurement_noise_mm', 'acceleration_m_s2', 'gate_sigma',
-                      'max_gap_s')
+
+    def in_units(self, units):
+        """The physical settings in a rig's length unit ('m', 'cm', 'mm'; the one place
+        they are converted), checked there: noise (measurement_noise_mm), acceleration
+        (acceleration_m_s2, units/s^2), bone (bone_mm), v0 (cv_kalman.V0, units/s),
+        step (optim's projection-derivative step, 10 um), and the Kalman model's r2
+        (units^2), q ((units/s^2)^2) and gate2 (cv_kalman.model_numbers: the variances,
+        the gate and the covariance over a max_gap_s step in this unit). Raises ConfigError
+        naming the field whose number cannot be used in this unit (e.g.
+        measurement_noise_mm 1e155: its square in mm^2 overflows), ValueError for an
+        unknown unit."""
+        physical = SimpleNamespace(noise=from_mm(self.measurement_noise_mm, units),
+                                   acceleration=from_m(self.acceleration_m_s2, units),
+                                   bone=from_mm(self.bone_mm, units), v0=from_m(V0, units),
+                                   step=from_mm(0.01, units))
+        physical.r2, physical.q, physical.gate2 = model_numbers(
+            self, units, ('measurement_noise_mm', physical.noise),
+            ('acceleration_m_s2', physical.acceleration), 'gate_sigma', 'max_gap_s',
+            physical.v0)
+        return physical

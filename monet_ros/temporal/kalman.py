@@ -19,13 +19,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from monet_ros.geometry.units import to_mm
 from monet_ros.temporal import cv_kalman
 from monet_ros.temporal.gaps import bridgeable, frames_for
 
 
 @dataclass
 class KalmanResult:
-    """X (T, C, 3) smoothed positions (m), NaN where not bridged; accepted (T, C): a
+    """X (T, C, 3) smoothed positions (the rig's unit), NaN where not bridged; accepted (T, C): a
     measurement was used; rejected (T, C): a measurement was gated out; bridged (T, C):
     no measurement used, filled from its neighbours (gap <= max_gap_s); sd_mm (T, C)
     posterior standard deviation per axis (mm)."""
@@ -36,13 +37,15 @@ class KalmanResult:
     sd_mm: np.ndarray
 
 
-def kalman_smooth(X, stamps_ns, config, noise_scale=None):
-    """RTS-smoothed KalmanResult of raw points X (T, C, 3) metres (NaN = missing) at
-    stamps_ns (T,) increasing. config: temporal.FilterConfig (measurement_noise_mm,
-    acceleration_m_s2, gate_sigma, max_gap_s); noise_scale (T, C) >= 1 or None: factor on
+def kalman_smooth(X, stamps_ns, config, noise_scale=None, units='m'):
+    """RTS-smoothed KalmanResult of raw points X (T, C, 3) in `units` (the rig's length
+    unit, 'm', 'cm' or 'mm'; NaN = missing) at stamps_ns (T,) increasing. config:
+    temporal.FilterConfig (measurement_noise_mm, acceleration_m_s2: mm and m/s^2 whatever
+    the units, gate_sigma, max_gap_s); noise_scale (T, C) >= 1 or None: factor on
     the measurement noise of each point (smooth_points gives 1 + (mean reprojection error /
     reprojection_px)^2, so a point triangulated with a stray view counts less). Raises
-    ValueError on bad shapes or stamps."""
+    ValueError on bad shapes or stamps or an unknown unit, ConfigError naming the setting
+    whose number cannot be used in `units` (FilterConfig.in_units)."""
     X = np.asarray(X, np.float64)
     stamps = np.asarray(stamps_ns, np.int64)
     if X.ndim != 3 or X.shape[-1] != 3 or len(stamps) != len(X):
@@ -50,11 +53,10 @@ def kalman_smooth(X, stamps_ns, config, noise_scale=None):
     if len(stamps) > 1 and np.any(np.diff(stamps) <= 0):
         raise ValueError('stamps must increase')
     T, C = X.shape[:2]
-    r2 = (config.measurement_noise_mm / 1000.0) ** 2
+    physical = config.in_units(units)      # converted and checked (ConfigError)
+    r2, q, gate2 = physical.r2, physical.q, physical.gate2
     scale2 = np.ones((T, C)) if noise_scale is None else \
         np.nan_to_num(np.asarray(noise_scale, np.float64), nan=1.0, posinf=1.0) ** 2
-    q = config.acceleration_m_s2 ** 2
-    gate2 = config.gate_sigma ** 2
     max_gap = frames_for(config.max_gap_s, stamps)
     dts = np.diff(stamps) / 1e9
     # the forward pass is the live filter's step (temporal.cv_kalman), per-point noise
@@ -75,7 +77,7 @@ def kalman_smooth(X, stamps_ns, config, noise_scale=None):
         ok = valid & init & (d2 <= gate2)
         new = valid & (~init | (unseen > max_gap)) & ~ok
         p, v, P = cv_kalman.update(p, v, P, y, S, ok)
-        cv_kalman.start(p, v, P, X[k], new, rk)
+        cv_kalman.start(p, v, P, X[k], new, rk, physical.v0)
         init |= new
         used = ok | new
         accepted[k], rejected[k], restart[k] = used, valid & ~used, new
@@ -98,6 +100,6 @@ def kalman_smooth(X, stamps_ns, config, noise_scale=None):
     bridged = bridgeable(accepted, max_gap)
     keep = accepted | bridged
     out = np.where(keep[..., None], xs[:, :, 0], np.nan)
-    sd = np.where(keep, np.sqrt(np.maximum(Ps[:, :, 0, 0], 0.0)) * 1000.0, np.nan)
+    sd = np.where(keep, to_mm(np.sqrt(np.maximum(Ps[:, :, 0, 0], 0.0)), units), np.nan)
     return KalmanResult(X=out, accepted=accepted, rejected=rejected, bridged=bridged,
                         sd_mm=sd)

@@ -29,13 +29,12 @@ from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
 
 from monet_ros.geometry.camera import project_views, stack_cameras
-
-_H = 1e-5          # m: central-difference step of the projection derivative
+from monet_ros.geometry.units import rig_units
 
 
 @dataclass
 class OptimResult:
-    """X (T, C, 3) optimised (m), NaN where not kept; support (T, C) in [0, 1]: mean
+    """X (T, C, 3) optimised (the rig's unit), NaN where not kept; support (T, C) in [0, 1]: mean
     over the views used of score x the robust loss weight of their residual (0: no view,
     a bridged frame); cost (final objective), iterations, status (least_squares')."""
     X: np.ndarray
@@ -74,6 +73,8 @@ def build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths,
     V = len(cameras)
     points2d = np.asarray(points2d, np.float64)
     score = np.asarray(score, np.float64)
+    physical = config.in_units(rig_units(cameras))     # mm, m/s^2 -> the rig's unit
+    step = physical.step
     index = np.full((T, C), -1, np.int64)
     index[keep] = np.arange(keep.sum())
     N = int(keep.sum())
@@ -96,7 +97,7 @@ def build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths,
     dt1 = t_sec[st + 1] - t_sec[st]
     dt2 = t_sec[st + 2] - t_sec[st + 1]
     coef = np.stack([2 / (dt1 * (dt1 + dt2)), -2 / (dt1 * dt2), 2 / (dt2 * (dt1 + dt2))],
-                    -1) / config.acceleration_m_s2                          # (S, 3)
+                    -1) / physical.acceleration                             # (S, 3)
     s_idx = np.stack([index[st, sc], index[st + 1, sc], index[st + 2, sc]], -1)
     # bone terms
     edges = np.asarray(edges, np.int64).reshape(-1, 2)
@@ -108,7 +109,7 @@ def build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths,
     bt, bb = np.nonzero(both)
     ba, bo = index[bt, edges[bb, 0]], index[bt, edges[bb, 1]]
     bl = lengths[bb]
-    bone_m = config.bone_mm / 1000.0
+    bone_sd = physical.bone
     n_smooth, n_bone = 3 * len(st), len(bt)
     m = n_reproj + n_smooth + n_bone
 
@@ -135,7 +136,7 @@ def build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths,
         Xv = x.reshape(N, 3)
         r_rep = ((project(Xv[on]) - uv) * ow[:, None]).reshape(-1)
         acc = (coef[:, :, None] * Xv[s_idx]).sum(1)                       # (S, 3)
-        r_bone = (np.linalg.norm(Xv[ba] - Xv[bo], axis=-1) - bl) / bone_m
+        r_bone = (np.linalg.norm(Xv[ba] - Xv[bo], axis=-1) - bl) / bone_sd
         return np.concatenate([r_rep, acc.reshape(-1), r_bone])
 
     def jacobian(x):
@@ -143,12 +144,12 @@ def build_problem(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths,
         P = Xv[on]
         J = np.empty((len(on), 2, 3))
         for k in range(3):
-            step = np.zeros(3)
-            step[k] = _H
-            J[:, :, k] = (project(P + step) - project(P - step)) / (2 * _H)
+            h = np.zeros(3)
+            h[k] = step
+            J[:, :, k] = (project(P + h) - project(P - h)) / (2 * step)
         r_data = (J * ow[:, None, None]).reshape(-1)
         d = Xv[ba] - Xv[bo]
-        u = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12) / bone_m
+        u = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12) / bone_sd
         b_data = np.concatenate([u, -u], -1).reshape(-1)
         data = np.concatenate([r_data, s_data, b_data])
         return csr_matrix((data, (rows, cols)), shape=(m, 3 * N))
@@ -166,11 +167,12 @@ def optimise(X0, keep, points2d, score, cameras, stamps_ns, edges, lengths, conf
              progress=False):
     """OptimResult.
 
-    X0 (T, C, 3) start (m; finite where keep); keep (T, C) bool: the joints/frames to
-    solve for (observed or bridged); points2d (T, V, C, 2) detections in source px (NaN =
-    missing); score (T, V, C); cameras: V Camera; stamps_ns (T,) increasing; edges (B, 2)
-    keypoint index pairs; lengths (B,) m (NaN: bone left out); config:
-    temporal.FilterConfig (reprojection_px, loss, acceleration_m_s2, bone_mm,
+    X0 (T, C, 3) start (the cameras' length unit, Camera.units; finite where keep); keep
+    (T, C) bool: the joints/frames to solve for (observed or bridged); points2d
+    (T, V, C, 2) detections in source px (NaN = missing); score (T, V, C); cameras: V
+    Camera; stamps_ns (T,) increasing; edges (B, 2) keypoint index pairs; lengths (B,)
+    in rig units (NaN: bone left out); config: temporal.FilterConfig (reprojection_px,
+    loss, acceleration_m_s2 and bone_mm: m/s^2 and mm whatever the rig's unit,
     confidence_threshold, max_iterations); progress: a tqdm bar of the iterations on
     stderr."""
     import sys

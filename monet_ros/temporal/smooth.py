@@ -12,6 +12,7 @@ import time
 import numpy as np
 
 from monet_ros.geometry.camera import project_views
+from monet_ros.geometry.units import rig_units, to_mm
 from monet_ros.temporal.bones import bone_lengths
 from monet_ros.temporal.config import FilterConfig
 from monet_ros.temporal.kalman import kalman_smooth
@@ -22,7 +23,7 @@ from monet_ros.temporal.optim import optimise
 class Smoothed:
     """A filter's output over T frames and C keypoints.
 
-    method: FilterConfig.method; X (T, C, 3) filtered points (m), NaN where nothing was
+    method: FilterConfig.method; X (T, C, 3) filtered points (units), NaN where nothing was
     kept; raw (T, C, 3) the input; score (T, C) confidence in [0, 1] (kalman: the fused
     confidence where the point was accepted, 0 where gated out or bridged; optim: mean over
     the views of score x robust loss weight, 0 where no view supports it); error (T, C)
@@ -30,7 +31,8 @@ class Smoothed:
     ncams (T, C) those views; change_mm (T, C) |filtered - raw| (mm, NaN where either is
     missing); bridged (T, C) bool: filtered point where the raw one was missing (a gap of
     at most max_gap_s); rejected (T, C) bool: raw point the Kalman gate left out;
-    lengths (B,) bone lengths used (m); seconds: wall time; notes: what was left out."""
+    lengths (B,) bone lengths used (units); seconds: wall time; notes: what was left out;
+    units: the rig's length unit ('m', 'cm', 'mm'), that of X, raw and lengths."""
     method: str
     X: np.ndarray
     raw: np.ndarray
@@ -43,6 +45,7 @@ class Smoothed:
     lengths: np.ndarray
     seconds: float = 0.0
     notes: list = field(default_factory=list)
+    units: str = 'm'
 
     def summary(self):
         """One line: the filter, points kept / bridged / rejected / emptied, median and
@@ -78,7 +81,9 @@ def smooth_points(X, score, points2d, conf2d, cameras, stamps_ns, edges=(),
                   config=None, error=None, progress=False):
     """Smoothed of a recording.
 
-    X (T, C, 3) frame-by-frame triangulated points (m, NaN = missing); score (T, C) their
+    X (T, C, 3) frame-by-frame triangulated points (in the cameras' length unit,
+    Camera.units: the filters' mm and m/s^2 settings are converted to it; NaN = missing);
+    score (T, C) their
     confidence; points2d (T, V, C, 2) the detections (source px, NaN = missing); conf2d
     (T, V, C) their scores; cameras: V Camera; stamps_ns (T,) increasing; edges: (B, 2)
     keypoint index pairs of the skeleton's bones (optim's bone term; none: no bone term);
@@ -104,7 +109,8 @@ def smooth_points(X, score, points2d, conf2d, cameras, stamps_ns, edges=(),
                                    config.threshold_px)[0]
     noise = 1.0 + (np.nan_to_num(np.asarray(error, np.float64), nan=0.0)
                    / config.reprojection_px) ** 2
-    kalman = kalman_smooth(X, stamps_ns, config, noise)
+    units = rig_units(cameras)
+    kalman = kalman_smooth(X, stamps_ns, config, noise, units)
     rejected = kalman.rejected
     lengths = np.zeros(0)
     if config.method == 'kalman':
@@ -130,9 +136,9 @@ def smooth_points(X, score, points2d, conf2d, cameras, stamps_ns, edges=(),
     error, ncams = reprojection_stats(out, points2d, conf2d, cameras,
                                       config.confidence_threshold, config.threshold_px)
     with np.errstate(invalid='ignore'):
-        change = np.linalg.norm(out - X, axis=-1) * 1000.0
+        change = to_mm(np.linalg.norm(out - X, axis=-1), units)
     return Smoothed(method=config.method, X=out, raw=X, score=np.where(finite, conf, np.nan),
                     error=np.where(finite, error, np.nan),
                     ncams=np.where(finite, ncams, 0), change_mm=change,
                     bridged=finite & ~raw_ok, rejected=rejected & raw_ok, lengths=lengths,
-                    seconds=time.perf_counter() - start, notes=notes)
+                    seconds=time.perf_counter() - start, notes=notes, units=units)

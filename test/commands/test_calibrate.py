@@ -125,6 +125,10 @@ def test_known_intrinsics_and_names_from_the_calibration(session, tmp_path, caps
     assert code == 0, err
     cams = {c.name: c for c in load_rig(out)}
     ref = {c.name: c for c in load_rig(reference)}
+    # the board is in mm (24 mm squares): the rule says so, the calibration states it
+    assert 'camera centres up to' in err and 'the calibration is taken as mm' in err
+    assert 'units = "mm"' in out.read_text()
+    assert {c.units for c in cams.values()} == {'mm'}
     for name in ('back', 'mid'):
         np.testing.assert_array_equal(cams[name].K, ref[name].K)
         np.testing.assert_array_equal(cams[name].dist, ref[name].dist)

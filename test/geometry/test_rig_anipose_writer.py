@@ -24,7 +24,7 @@ def test_round_trip_of_a_synthetic_rig(tmp_path):
     save_anipose_toml(path, cameras, {'error_px': 0.25, 'board': 'charuco "8 x 11"'})
     assert_same_cameras(cameras, load_rig(path))
     data = tomllib.loads(path.read_text())
-    assert data['metadata'] == {'error_px': 0.25, 'board': 'charuco "8 x 11"'}
+    assert data['metadata'] == {'error_px': 0.25, 'board': 'charuco "8 x 11"', 'units': 'm'}
     assert data['cam_0']['name'] == 'cam0' and data['cam_0']['size'] == [640, 480]
     assert len(data['cam_4']['distortions']) == 5
 

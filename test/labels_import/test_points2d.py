@@ -1,5 +1,6 @@
 """2D tables as arrays for `monet triangulate`: the frame-indexed points table (optional
-score, empty / NaN cells = missing), DeepLabCut predictions with likelihood, duplicates."""
+score, empty / NaN u, v = missing, empty / NaN score = no score), DeepLabCut predictions
+with likelihood, duplicates."""
 import numpy as np
 import pytest
 
@@ -18,7 +19,11 @@ def test_points_table_with_and_without_scores(tmp_path):
     np.testing.assert_array_equal(p.frames, [3, 4, 5])
     assert p.points.shape == (3, 3, 2, 2) and p.rows == 3 and p.nan_rows == 1
     np.testing.assert_array_equal(p.points[0, 0, 0], [10.5, 20.25])
-    assert p.score[0, 0, 0] == 0.9 and np.isnan(p.score[2, 1, 1])
+    assert p.score[0, 0, 0] == 0.9
+    # a point with an empty / NaN score cell has no score: kept with score 1, counted
+    assert p.score[2, 1, 1] == 1.0 and p.unscored == 1
+    assert p.notes == ('1 of 2 detections have no score (no score column, or an empty / '
+                       'NaN likelihood or score cell): score 1 used',)
     assert np.isnan(p.points[1, 1, 0]).all() and np.isnan(p.points[:, 2]).all()
     plain = tmp_path / 'plain.csv'
     plain.write_text('frame,camera,keypoint,u,v\n0,a,head,1,2\n0,b,head,3,4\n')

@@ -213,8 +213,10 @@ FLOAT_FIELDS = [name for name, value in vars(LiveFilterConfig()).items()
 
 def run_extreme_steps(live):
     """Frames at the shortest (1 ns) and longest (filter_reset_s) steps, with a NaN, a
-    far outlier and two agreeing jumps: (J, 3) outputs of every frame."""
+    far outlier and two agreeing jumps, in the filter's unit: (J, 3) outputs of every
+    frame."""
     rng = np.random.default_rng(0)
+    scale = {'m': 1.0, 'cm': 100.0, 'mm': 1000.0}[live.units]
     X = rng.uniform(-1, 1, (5, 3))
     longest = int(live.config.filter_reset_s * 1e9)
     stamps = np.cumsum([T0, 1, longest, 1, max(longest, 1), 1, 33_000_000, 1])
@@ -223,28 +225,37 @@ def run_extreme_steps(live):
         frame = X + 0.01 * k
         frame[0] = np.nan if k == 2 else frame[0]
         frame[1] += 50.0 if k in (3, 4) else 0.0
-        outs.append(live.update(int(stamp), frame)[0])
+        outs.append(live.update(int(stamp), frame * scale)[0])
     return np.array(outs)
 
 
+# The settings keep their units and are checked once converted into the rig's (LiveFilter
+# units): 1e155 mm is a usable noise in a metre rig, an overflow in a millimetre one.
+@pytest.mark.parametrize('units', ['m', 'cm', 'mm'])
 @pytest.mark.parametrize('name', FLOAT_FIELDS)
-@pytest.mark.parametrize('value', [TINY, 1e-200, HUGE, FLOAT_MAX])
-def test_extreme_settings_are_refused_by_name_or_filter_finitely(name, value):
+@pytest.mark.parametrize('value', [TINY, 1e-200, 1e-160, 1e146, 1e155, HUGE, FLOAT_MAX])
+def test_extreme_settings_are_refused_by_name_or_filter_finitely(units, name, value):
     try:
         config = LiveFilterConfig(filter=True, **{name: value})
     except ConfigError as error:       # outside the declared range (none here is)
         assert error.field == name
         return
+    per_mm = {'m': 1e-3, 'cm': 0.1, 'mm': 1.0}[units]
     try:
-        live = LiveFilter(config)
+        live = LiveFilter(config, units)
     except ConfigError as error:
         assert error.field == name, error
         assert repr(value) in str(error) or f'{value!r}'.replace('e+', 'e') in str(error)
-        # what overflowed, computed independently in Python floats
-        noise_m2 = (config.filter_noise_mm / 1e3) ** 2 if value < 1e150 else float('inf')
-        assert name != 'filter_noise_mm' or not 0 < noise_m2 < float('inf')
+        # what overflowed, computed independently in Python floats: the noise's variance in
+        # the rig unit, or the covariance of a restart from two measurements 1 ns apart
+        try:
+            pair = 2 * (config.filter_noise_mm * per_mm) ** 2 / 1e-18
+        except OverflowError:
+            pair = float('inf')
+        assert name != 'filter_noise_mm' or not 0 < pair < float('inf')
         return
-    assert live.r2 == (config.filter_noise_mm * 1e-3) ** 2 > 0
+    assert live.units == units
+    assert live.r2 == pytest.approx((config.filter_noise_mm * per_mm) ** 2) and live.r2 > 0
     out = run_extreme_steps(live)
     seen = ~np.isnan(out)
     assert np.isfinite(out[seen]).all(), (name, value)
@@ -257,3 +268,15 @@ def test_the_reported_value_is_refused_naming_it():
         LiveFilter(LiveFilterConfig(filter_noise_mm=1e200))
     with pytest.raises(ConfigError, match="'filter_acceleration': 1e\\+200"):
         LiveFilter(LiveFilterConfig(filter_acceleration=1e200))
+    # in the rig unit: usable in metres, not in millimetres
+    assert LiveFilter(LiveFilterConfig(filter_noise_mm=1e146)).r2 == pytest.approx(1e286)
+    with pytest.raises(ConfigError, match=r"'filter_noise_mm': 1e\+146 mm gives a non-finite "
+                       'restart covariance in mm'):
+        LiveFilter(LiveFilterConfig(filter_noise_mm=1e146), 'mm')
+    with pytest.raises(ConfigError, match=r"'filter_noise_mm': 1e\+155 gives a measurement "
+                       r'variance of inf mm\^2'):
+        LiveFilter(LiveFilterConfig(filter_noise_mm=1e155), 'mm')
+    with pytest.raises(ConfigError, match=r"'filter_max_speed': filter_max_speed 1e\+306 m/s "
+                       r'.* non-finite reach in mm'):
+        LiveFilter(LiveFilterConfig(filter_max_speed=1e306), 'mm')
+    LiveFilter(LiveFilterConfig(filter_max_speed=1e306), 'm')
