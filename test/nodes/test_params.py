@@ -137,6 +137,25 @@ def test_every_extreme_value_is_refused_by_name_or_gives_finite_numbers(config_c
             assert -2 ** 63 <= item < 2 ** 63, (key, item)
 
 
+def test_the_fusion_filter_and_markers_are_checked_in_the_rig_unit():
+    # the settings keep their units (mm, m/s^2, m) and are checked converted into the
+    # rig's: usable in a metre rig, refused naming the parameter in a millimetre one
+    from monet_ros.config import derive_checked
+    from monet_ros.nodes.fusion import FusionNodeConfig, derive
+    noise = FusionNodeConfig(filter_noise_mm=1e146)
+    assert derive_checked('fusion', noise, derive).filter.r2 == pytest.approx(1e286)
+    with pytest.raises(ConfigError, match=r"^fusion: parameter 'filter_noise_mm': 1e\+146 mm "
+                       'gives a non-finite restart covariance in mm$'):
+        derive_checked('fusion', noise, lambda c: derive(c, 'mm'))
+    depth = FusionNodeConfig(camera_marker_depth=1e306)
+    assert derive_checked('fusion', depth, derive).marker_depth == 1e306
+    with pytest.raises(ConfigError, match=r"^fusion: parameter 'camera_marker_depth': "):
+        derive_checked('fusion', depth, lambda c: derive(c, 'mm'))
+    # the rig not loaded yet (the node's first check): what depends on its unit left out
+    unknown = derive(noise, None)
+    assert unknown.filter is None and unknown.marker_depth is None
+
+
 def test_start_and_live_refusals_name_the_parameter(make_node):
     from monet_ros.nodes.fusion import LIVE, FusionNodeConfig, derive
     node = make_node('filter_noise_mm:=1e200')
