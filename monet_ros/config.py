@@ -14,12 +14,17 @@ ROS parameter declarations of the nodes (monet_ros/nodes/params.py)::
 
 Supported field types: str, int, float, bool and tuple[str | int | float, ...].
 """
-from dataclasses import field, fields
+from dataclasses import field, fields, is_dataclass, replace
 import math
 import string
 import typing
 
+import numpy as np
+
 SCALAR_TYPES = (str, int, float, bool)
+# Most CPU threads a `threads` setting may ask for (torch refuses more than int32 with a bare
+# "Overflow when unpacking long"; far fewer already exhaust a machine).
+MAX_THREADS = 1024
 
 
 class ConfigError(ValueError):
@@ -170,5 +175,97 @@ def config_from_mapping(config_cls, values, source='<mapping>'):
     return config_cls(**values)
 
 
-__all__ = ['check_template', 'ConfigError', 'coerce_value', 'config_from_mapping',
-           'config_subset', 'field_kind', 'setting', 'validate_config']
+INT64_MAX = 2 ** 63 - 1
+_WALK_DEPTH = 4
+
+
+def non_finite(value, path='', depth=0):
+    """The first number in `value` a consumer cannot use, as 'path = value', or None.
+
+    Walks dicts, lists, tuples, dataclasses and plain objects' attributes (a few levels):
+    a float or numpy float array must be finite, an int must fit int64 (durations in ns go
+    to rcl and to numpy as int64)."""
+    if isinstance(value, bool) or value is None or isinstance(value, str):
+        return None
+    if isinstance(value, (int, np.integer)):
+        return None if -INT64_MAX - 1 <= int(value) <= INT64_MAX else \
+            f'{path or "value"} = {float(value):.3g} (beyond int64)'
+    if isinstance(value, (float, np.floating)):
+        return None if math.isfinite(value) else f'{path or "value"} = {float(value)!r}'
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind in 'fc' and not np.isfinite(value).all():
+            return f'{path or "value"} has non-finite entries'
+        return None
+    if depth >= _WALK_DEPTH:
+        return None
+    if isinstance(value, dict):
+        items = value.items()
+    elif isinstance(value, (list, tuple)):
+        items = enumerate(value)
+    elif is_dataclass(value):
+        items = ((f.name, getattr(value, f.name)) for f in fields(value))
+    elif hasattr(value, '__dict__') and not isinstance(value, type):
+        items = vars(value).items()
+    else:
+        return None
+    for key, item in items:
+        found = non_finite(item, f'{path}.{key}' if path else str(key), depth + 1)
+        if found:
+            return found
+    return None
+
+
+def _derive_problem(derive, config):
+    """(None, derived) when derive(config) succeeds with usable numbers, else
+    (ConfigError or reason text, None)."""
+    try:
+        with np.errstate(all='ignore'):
+            derived = derive(config)
+    except ConfigError as error:
+        return error, None
+    except (ArithmeticError, ValueError, TypeError, RuntimeError, MemoryError) as error:
+        text = ' '.join(str(error).split()) or type(error).__name__
+        return f'{type(error).__name__}: {text}', None
+    found = non_finite(derived)
+    if found:
+        return f'it gives {found}', None
+    return None, derived
+
+
+def derive_checked(owner, config, derive, base=None, blame=None):
+    """derive(config) -> what the settings feed (filter matrices, durations in ns, ...),
+    refused unless it can be used: ConfigError naming a parameter when derive raises or its
+    result holds a non-finite float or an int beyond int64 (see non_finite).
+
+    owner: the node or command named in the error. base: the config the change is made
+    from (default: the dataclass's defaults); the fields that differ from it are the
+    suspects, and the first one that fails on its own (set on `base`) is named, else all
+    are. blame: names to try first (e.g. the parameters just set). A ConfigError raised
+    by derive keeps its field. Returns the derived value."""
+    problem, derived = _derive_problem(derive, config)
+    if problem is None:
+        return derived
+    if isinstance(problem, ConfigError):
+        raise ConfigError(owner, problem.field, problem.message) from None
+    base = type(config)() if base is None else base
+    names = [f.name for f in fields(config) if f.init]
+    suspects = [n for n in names if getattr(config, n) != getattr(base, n)]
+    order = [n for n in (blame or ()) if n in suspects] + \
+        [n for n in suspects if n not in (blame or ())]
+    for name in order:
+        try:
+            alone = replace(base, **{name: getattr(config, name)})
+        except ConfigError:
+            continue
+        if _derive_problem(derive, alone)[0] is not None:
+            raise ConfigError(owner, name, f'{getattr(config, name)!r} cannot be used: '
+                              f'{problem}') from None
+    named = order[0] if order else 'unknown'
+    others = ', '.join(order[1:])
+    raise ConfigError(owner, named, f'{getattr(config, named, None)!r} cannot be used'
+                      f'{" together with " + others if others else ""}: {problem}') from None
+
+
+__all__ = ['MAX_THREADS', 'check_template', 'ConfigError', 'coerce_value', 'config_from_mapping',
+           'config_subset', 'derive_checked', 'field_kind', 'non_finite', 'setting',
+           'validate_config']

@@ -1,12 +1,15 @@
 """Typed config dataclasses: coercion and validation errors that name the field."""
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+import math
 
+import numpy as np
 import pytest
 
 from monet_ros.config import (
     ConfigError,
     config_from_mapping,
     config_subset,
+    derive_checked,
     setting,
     validate_config,
 )
@@ -57,3 +60,55 @@ def test_bad_values_name_the_field(changes, field, text):
 def test_unknown_key_in_mapping():
     with pytest.raises(ConfigError, match="'treshold_px': unknown parameter in f.yaml"):
         config_from_mapping(Full, {'treshold_px': 1.0}, source='f.yaml')
+
+
+@dataclass(frozen=True)
+class Timing:
+    period_s: float = setting(1.5, 'a timer period', minimum=0.0, exclusive_minimum=True)
+    steps: float = setting(10.0, 'steps of the period', minimum=0.0)
+    gain: float = setting(2.0, 'gain', minimum=0.0)
+
+    def __post_init__(self):
+        validate_config(self)
+
+
+def timing_numbers(config):
+    """What Timing feeds: a period in int ns, the span of all steps (s), a squared gain."""
+    if config.gain > 1e6:
+        raise ConfigError('Timing', 'gain', 'must be <= 1e6 for what it feeds')
+    return {'period_ns': int(config.period_s * 1e9), 'span_s': config.period_s * config.steps,
+            'gain2': np.float64(config.gain) ** 2}
+
+
+@pytest.mark.parametrize('changes, field, text', [
+    (dict(period_s=1e200), 'period_s', 'period_ns = 1e+209 (beyond int64)'),
+    (dict(period_s=1.7976931348623157e308), 'period_s', 'OverflowError: cannot convert float'),
+    (dict(steps=1.7976931348623157e308), 'steps', 'span_s = inf'),
+    (dict(gain=1e7), 'gain', 'must be <= 1e6 for what it feeds'),   # derive's own error
+])
+def test_derived_numbers_that_overflow_name_the_parameter(changes, field, text):
+    config = Timing(**changes)        # inside the declared ranges
+    with pytest.raises(ConfigError) as info:
+        derive_checked('node', config, timing_numbers)
+    assert info.value.field == field and text in str(info.value), str(info.value)
+    assert str(info.value).startswith(f"node: parameter '{field}': ")
+
+
+def test_derived_numbers_blame_the_changed_parameter_of_a_product():
+    # period 1e300 s x 10 steps is fine, x 1e10 steps overflows: a change of steps from a
+    # config with that period names steps; a change of the period from many steps, period
+    big = Timing(period_s=1e8, steps=1e300)
+    assert math.isfinite(derive_checked('n', big, timing_numbers)['span_s'])
+    with pytest.raises(ConfigError) as info:
+        derive_checked('n', replace(big, steps=1.7e308), timing_numbers, base=big,
+                       blame=['steps'])
+    assert info.value.field == 'steps'
+    many = Timing(steps=1e308)
+    with pytest.raises(ConfigError) as info:
+        derive_checked('n', replace(many, period_s=1e3), timing_numbers, base=many)
+    assert info.value.field == 'period_s'
+
+
+def test_usable_derived_numbers_are_returned():
+    derived = derive_checked('n', Timing(period_s=2.5, gain=3.0), timing_numbers)
+    assert derived == {'period_ns': 2_500_000_000, 'span_s': 25.0, 'gain2': 9.0}

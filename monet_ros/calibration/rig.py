@@ -81,6 +81,19 @@ def stack_detections(detections):
     return np.stack([d.corners for d in detections])
 
 
+def board_notes(detections):
+    """'; ...' sentences on a camera's frames whose board was seen mirrored or that hold
+    markers not fitting the board (CameraDetections.mirrored / hint), or ''."""
+    notes = ''
+    if detections.mirrored:
+        notes += (f'; the board is seen mirrored (left-right) in {len(detections.mirrored)} '
+                  'frames: a mirror, or a camera that flips its images; flip its images '
+                  'and run again (a mirrored view has no camera model)')
+    if detections.hint:
+        notes += f'; {detections.hint}'
+    return notes
+
+
 def calibrate_rig(detections, board, config=CalibrationConfig(), fixed_intrinsics=None):
     """Calibrate the cameras of `detections` (list of CameraDetections, frames paired by
     index: instant f of every camera is corners[f]).
@@ -88,7 +101,9 @@ def calibrate_rig(detections, board, config=CalibrationConfig(), fixed_intrinsic
     fixed_intrinsics: {name: Camera} whose K and dist are kept (extrinsics only are fit);
     every camera must be in it. Cameras with fewer than 3 board views (no intrinsics) or
     no shared view with the largest connected group are left out with a warning.
-    Raises ValueError when fewer than one camera can be calibrated."""
+    Raises ValueError when fewer than two cameras can be calibrated (naming why each other
+    one is left out: too few board views, a board seen mirrored, markers that do not fit
+    the board spec)."""
     names = [d.name for d in detections]
     corners = stack_detections(detections)
     C, F = corners.shape[:2]
@@ -114,7 +129,7 @@ def calibrate_rig(detections, board, config=CalibrationConfig(), fixed_intrinsic
             intrinsics[c] = (np.array(cam.K), dist)
             continue
         if views < 3:
-            left_out[d.name] = f'{views} board views (intrinsics need 3)'
+            left_out[d.name] = f'{views} board views (intrinsics need 3)' + board_notes(d)
             continue
         fit = calibrate_intrinsics(corners[c], board, d.size, config.distortion,
                                    config.square_pixels, config.fix_principal_point)
@@ -138,6 +153,13 @@ def calibrate_rig(detections, board, config=CalibrationConfig(), fixed_intrinsic
         for i in other:
             left_out[names[usable[i]]] = 'no board view shared with ' + ', '.join(
                 names[g] for g in group)
+    if len(group) < 2:
+        raise ValueError(f'only camera {names[group[0]]!r} can be calibrated; a rig needs 2 ('
+                         + '; '.join(f'{n}: {r}' for n, r in left_out.items()) + ')')
+    for c in group:
+        if detections[c].mirrored:
+            warnings.append(f'camera {names[c]!r}:{board_notes(detections[c])[1:]} (those '
+                            'frames are not used)')
     for name, reason in left_out.items():
         warnings.append(f'camera {name!r} is NOT calibrated: {reason}')
     root, extrinsics, tree = chain_extrinsics(poses, group)

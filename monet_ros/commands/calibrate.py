@@ -20,10 +20,13 @@ ChArUco or checkerboard images / videos.
   fields as options (--board-x 8 --board-y 11 --square-length 24 --marker-length 18.75
   --marker-bits 4 --dict-size 1000 [--board-type charuco|checkerboard]).
 - Steps (monet_ros.calibration): detect corners (tqdm progress; every frame without a
-  board is counted), per-camera intrinsics, spanning-tree extrinsics, one joint bundle
+  board is counted, a board seen only mirrored and an unreadable image (named) apart; when a
+  camera finds no board, markers that do not fit the board spec are named with the fields
+  to check), per-camera intrinsics, spanning-tree extrinsics, one joint bundle
   adjustment with a robust loss. Translations are in the board's unit: --rig-units names
   it (m, cm, mm), else the rule of monet_ros.geometry.units picks it from the camera
   spread (noted); the outputs state it (rig YAML `units`, TOML [metadata] units).
+- Fewer than 2 cameras calibrated: exit 2, with why for each camera left out.
 - Output: --out as anipose calibration.toml (--format anipose, the default), the project
   rig YAML (--format rig) or both (--format both: --out and --out with .yaml); a summary
   per camera and pair, the board's geometry triangulated back, loud warnings, and a PNG
@@ -175,7 +178,7 @@ def _sources(args, names):
         if p.is_dir() and not any(f.suffix.lower() in IMAGE_SUFFIXES for f in p.iterdir()):
             raise ValueError(f'INPUT {path} (camera {name!r}): no image '
                              f'({", ".join(IMAGE_SUFFIXES)}) in the folder')
-        sources.append(FrameSource(p))
+        sources.append(FrameSource(p, skip_unreadable=True))
     return sources
 
 
@@ -201,13 +204,15 @@ def open_inputs(args, names):
 
 
 def detect_all(args, board, names, sources):
-    """CameraDetections of every input (tqdm progress per camera unless --quiet)."""
+    """(CameraDetections of every input (tqdm progress per camera unless --quiet), {camera:
+    [why each unreadable image is, naming the file]})."""
     from monet_ros.calibration.detect import BoardDetector, detect_frames
     try:
         detector = BoardDetector(board)
-        return [detect_frames(n, _frames(s), board, total=s.count or None,
-                              progress=not args.quiet, detector=detector)
-                for n, s in zip(names, sources)]
+        detections = [detect_frames(n, _frames(s), board, total=s.count or None,
+                                    progress=not args.quiet, detector=detector)
+                      for n, s in zip(names, sources)]
+        return detections, {n: list(s.unreadable) for n, s in zip(names, sources)}
     finally:
         for s in sources:
             s.close()
@@ -262,10 +267,18 @@ def run(args):
             print(f'monet calibrate: note: {source.order_note}', file=sys.stderr)
     print(f'monet calibrate: board {board.describe()}; cameras '
           + ', '.join(f'{n} <- {p}' for n, p in zip(names, args.inputs)), file=sys.stderr)
-    detections = detect_all(args, board, names, sources)
+    detections, unreadable = detect_all(args, board, names, sources)
     for d in detections:
+        found = len(d.no_board) - len(d.mirrored) - len(d.unreadable)
         print(f'monet calibrate: {d.name}: {len(d.corners)} frames, board in '
-              f'{d.frames_with_board}, no board in {len(d.no_board)}', file=sys.stderr)
+              f'{d.frames_with_board}, no board in {found}'
+              + (f', board only mirrored in {len(d.mirrored)}' if d.mirrored else '')
+              + (f', unreadable {len(d.unreadable)}' if d.unreadable else ''),
+              file=sys.stderr)
+        for why in unreadable[d.name]:
+            print(f'monet calibrate: {d.name}: unreadable: {why}', file=sys.stderr)
+        if d.hint:
+            print(f'monet calibrate: {d.name}: no board view: {d.hint}', file=sys.stderr)
     if args.timestamps:
         times = read_timestamps(args.timestamps, names, {d.name: len(d.corners)
                                                           for d in detections})

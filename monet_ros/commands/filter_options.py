@@ -1,7 +1,9 @@
 """The --filter options of `monet process` and `monet triangulate` (one spelling for both):
 the fields of monet_ros.temporal.FilterConfig as command-line options."""
+from contextlib import contextmanager
 from dataclasses import fields
 
+from monet_ros.config import ConfigError
 from monet_ros.temporal import LOSSES, METHODS, FilterConfig
 
 FILTER_TOPIC = '/monet/keypoints3d_filtered'
@@ -32,12 +34,39 @@ def add_filter_arguments(parser):
 
 def filter_config_from_args(args, confidence_threshold, threshold_px):
     """FilterConfig of the options above; the fusion's thresholds decide which views count.
-    Raises ConfigError naming the field."""
+    Its Kalman numbers depend on the rig's unit: check_filter_units checks them once the
+    rig is loaded. Raises ValueError naming the option (ConfigError naming the field for
+    the others)."""
     values = {name: getattr(args, option[2:].replace('-', '_'))
               for option, name in _OPTIONS.items()}
-    return FilterConfig(method=args.filter, loss=args.loss,
-                        confidence_threshold=confidence_threshold, threshold_px=threshold_px,
-                        **values)
+    with _options_named():
+        return FilterConfig(method=args.filter, loss=args.loss,
+                            confidence_threshold=confidence_threshold,
+                            threshold_px=threshold_px, **values)
+
+
+def check_filter_units(filter_config, units):
+    """Check the numbers of `filter_config` (None or a temporal.FilterConfig) in the rig's
+    length unit `units` ('m', 'cm', 'mm') before any work (FilterConfig.in_units, where
+    kalman and optim convert them); nothing for None or method 'none'. Raises ValueError
+    naming the option, e.g. --measurement-noise-mm 1e200, whose square overflows (1e155
+    only with a rig in mm)."""
+    if filter_config is not None and filter_config.method != 'none':
+        with _options_named():
+            filter_config.in_units(units)
+
+
+@contextmanager
+def _options_named():
+    """A ConfigError of a FilterConfig field raised inside becomes a ValueError naming the
+    option the user typed (others pass as they are)."""
+    try:
+        yield
+    except ConfigError as error:
+        option = next((o for o, n in _OPTIONS.items() if n == error.field), None)
+        if option is None or error.owner != FilterConfig.__name__:
+            raise
+        raise ValueError(f'{option}: {error.message}') from None
 
 
 def write_filtered(writer, frame_id, smoothed, stamps_ns, topic=FILTER_TOPIC):

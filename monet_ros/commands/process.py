@@ -149,8 +149,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from tqdm import tqdm
 
     from monet_ros.commands.common import atomic_output_dir, check_new_output
+    from monet_ros.commands.filter_options import check_filter_units
     from monet_ros.crop_rule import TrackedCrops
     from monet_ros.fusion import fuse_heatmaps
+    from monet_ros.geometry.units import rig_units as units_of
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.io.export_results import ResultsCollector
     from monet_ros.io.images import to_rgb8
@@ -167,6 +169,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
         from monet_ros.io.rig_fit import fit_rig_to_bag
         rig_cameras, _ = fit_rig_to_bag(rig_cameras, open_bag(bag), camera_map)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
+    check_filter_units(filter_config, units_of(cameras))     # before the work
     if config.min_views > len(cameras):
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')

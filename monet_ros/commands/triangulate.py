@@ -83,9 +83,11 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     progress: optim's iterations as a tqdm bar.
     Raises ValueError / LabelError / ConfigError / OSError naming the file or option."""
     from monet_ros.commands.common import atomic_output_dir, check_new_output
+    from monet_ros.commands.filter_options import check_filter_units
     from monet_ros.config import ConfigError
     from monet_ros.fusion import FusionConfig, fuse_frames
     from monet_ros.geometry import load_rig
+    from monet_ros.geometry.units import rig_units as units_of
     from monet_ros.io.export_results import write_results
     from monet_ros.labels_import.points2d import read_points2d
     from monet_ros.skeleton import load_skeleton
@@ -104,6 +106,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
         notes.append('--fps not given: times in the outputs assume 30 frames/s')
     check_new_output(out, 'monet triangulate')
     rig_cameras = load_rig(rig, units=rig_units)
+    check_filter_units(filter_config, units_of(rig_cameras))     # before the work
     names = [c.name for c in rig_cameras]
     sk = load_skeleton(skeleton) if skeleton else None
     pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,

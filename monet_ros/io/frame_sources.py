@@ -39,8 +39,25 @@ def frame_number(path):
     return int(match.group(1)) if match else None
 
 
+_JPEG_SUFFIXES = ('.jpg', '.jpeg')
+_JPEG_END = b'\xff\xd9'
+
+
 def _imread(path):
+    """rgb uint8 (H, W, 3) of an image file; FrameSourceError naming it when it cannot be
+    read or is a truncated JPEG (no end-of-image marker: OpenCV decodes what is there and
+    fills the rest with grey, with only a libjpeg warning on stderr)."""
     import cv2
+    path = Path(path)
+    if path.suffix.lower() in _JPEG_SUFFIXES:
+        try:
+            with open(path, 'rb') as stream:
+                stream.seek(max(0, path.stat().st_size - 4096))
+                tail = stream.read().rstrip(b'\x00\r\n\t ')
+        except OSError as error:
+            raise FrameSourceError(f'{path}: cannot read the image ({error.strerror})') from None
+        if not tail.endswith(_JPEG_END):
+            raise FrameSourceError(f'{path}: truncated JPEG (no end-of-image marker)')
     image = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if image is None:
         raise FrameSourceError(f'{path}: cannot read the image')
@@ -53,11 +70,14 @@ class FrameSource:
     Attributes: path, width, height, count (frames; a video's is the container's
     estimate), fps (a video's nominal rate, None for images), kind ('video' / 'images'),
     numbered (image folder whose names all carry a distinct number), position (frames
-    read). Raises FrameSourceError naming the file."""
+    read). Raises FrameSourceError naming the file; with skip_unreadable an image file that
+    cannot be read (or a truncated JPEG) is instead a frame whose image is None, its reason
+    appended to `unreadable` (the size comes from the first readable image)."""
 
-    def __init__(self, path):
+    def __init__(self, path, skip_unreadable=False):
         import cv2
         self.path = Path(path)
+        self.skip_unreadable, self.unreadable = skip_unreadable, []
         self.position, self.capture, self.order_note = 0, None, None
         self._last_ms, self.intervals_ms, self.times_ok = None, [np.inf, 0.0], True
         if self.path.is_dir():
@@ -85,7 +105,17 @@ class FrameSource:
                 self.files, self.numbers = files, list(range(len(files)))
                 self.order_note = (f'{self.path}: file names carry no frame number: frames '
                                    'taken in name order (a missing file would shift the rest)')
-            first = _imread(self.files[0])
+            first = failure = None
+            for file in self.files if skip_unreadable else self.files[:1]:
+                try:
+                    first = _imread(file)
+                    break
+                except FrameSourceError as error:
+                    if not skip_unreadable:
+                        raise
+                    failure = error
+            if first is None:
+                raise FrameSourceError(f'{self.path}: no image is readable ({failure})')
             self.height, self.width = first.shape[:2]
             self.count, self.fps = len(self.files), None
             return
@@ -119,7 +149,14 @@ class FrameSource:
             if self.position >= len(self.files):
                 return None
             key = self.numbers[self.position]
-            image = _imread(self.files[self.position])
+            try:
+                image = _imread(self.files[self.position])
+            except FrameSourceError as error:
+                if not self.skip_unreadable:
+                    raise
+                self.unreadable.append(str(error))
+                self.position += 1
+                return key, None
         else:
             ok, image = self.capture.read()
             if not ok:

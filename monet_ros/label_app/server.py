@@ -29,6 +29,8 @@ Every response carries guard.CSP. Errors are JSON {error: message} with status 4
 request), 404 (no such instant, camera or keypoint), 409 (version conflict), 413, 421, 403.
 """
 from importlib import resources
+import json
+import re
 import secrets
 import threading
 
@@ -44,6 +46,34 @@ from monet_ros.label_app.session import NAME_CHARS, VersionConflict, short
 TOKEN_MARK = '__MONET_TOKEN__'
 # Most bytes of a refused (413) body read and dropped; a client sending more sees a reset.
 DISCARD_BYTES = 1 << 30
+# Deepest nesting of arrays / objects a JSON body may have (the API's bodies have 4:
+# {labels: {camera: {keypoint: [u, v]}}}); deeper ones are refused before parsing, so that
+# neither the parser nor an error message recurses without bound.
+JSON_DEPTH = 32
+_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"')
+
+
+def json_depth(data):
+    """Deepest nesting of arrays and objects in JSON bytes (brackets inside strings are
+    not counted; unbalanced input gives a depth the parser then refuses)."""
+    text = np.frombuffer(_JSON_STRING.sub(b'""', data), np.uint8)
+    if not text.size:
+        return 0
+    step = np.isin(text, (ord('['), ord('{'))).astype(np.int64) \
+        - np.isin(text, (ord(']'), ord('}')))
+    return int(np.cumsum(step).max(initial=0))
+
+
+def parse_json_body(data):
+    """A request body's JSON; ValueError (400) naming the body when it is nested deeper
+    than JSON_DEPTH or is not JSON."""
+    depth = json_depth(data)
+    if depth > JSON_DEPTH:
+        raise ValueError(f'body: JSON nested {depth} levels deep (at most {JSON_DEPTH})')
+    try:
+        return json.loads(data)
+    except (ValueError, RecursionError) as error:
+        raise ValueError(f'body: not valid JSON ({error})') from None
 
 
 def static_folder():
@@ -87,7 +117,7 @@ def create_app(session, hosts, predictor=None, token=None):
         # reaches it is refused rather than parsed cut
         if len(request.get_data(cache=True)) >= limit and request.content_length is None:
             raise RequestEntityTooLarge()
-        body = request.get_json()                 # 400 if not JSON
+        body = parse_json_body(request.get_data(cache=True))         # 400 if not JSON
         if not isinstance(body, dict):
             raise ValueError(f'expected a JSON object, got {type(body).__name__}')
         return body
@@ -98,10 +128,13 @@ def create_app(session, hosts, predictor=None, token=None):
             raise ValueError('expected a JSON body {"labels": {camera: {keypoint: [u, v]}}}')
         return body, session.points_from_json(body['labels'])
 
+    # the longest name a request may carry: NAME_CHARS, or the rig's / skeleton's longest
+    name_chars = max([NAME_CHARS, *map(len, session.names), *map(len, session.keypoints)])
+
     def name_field(body, field, what='a name'):
         value = body.get(field)
-        if not isinstance(value, str) or len(value) > NAME_CHARS:
-            raise ValueError(f'{field}: expected {what} (a string of at most {NAME_CHARS} '
+        if not isinstance(value, str) or len(value) > name_chars:
+            raise ValueError(f'{field}: expected {what} (a string of at most {name_chars} '
                              f'characters), got {short(value)}')
         return value
 

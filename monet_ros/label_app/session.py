@@ -41,11 +41,17 @@ def short(value, chars=60):
 
 def coordinate(value, where):
     """A JSON number (int or float, not a bool or string) as float; ValueError naming
-    `where` otherwise (finiteness is checked by the caller, with the image bounds)."""
+    `where` otherwise, an integer too large for a float included (finiteness is checked by
+    the caller, with the image bounds)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f'{where} must be a number, got {short(value)} '
                          f'({type(value).__name__})')
-    return float(value)
+    try:
+        return float(value)
+    except OverflowError:
+        digits = len(str(abs(value)))
+        raise ValueError(f'{where} must be a finite number, got a {digits}-digit integer') \
+            from None
 
 
 @dataclass(frozen=True)

@@ -41,7 +41,7 @@ import time
 import numpy as np
 
 from monet_ros.atomic import atomic_write, sha256_file
-from monet_ros.config import ConfigError, setting
+from monet_ros.config import MAX_THREADS, ConfigError, setting
 from monet_ros.learning.config import LOSS_TERMS, MODES, TrainConfig
 from monet_ros.models.detector import PRECISIONS
 
@@ -99,7 +99,8 @@ class LearnerConfig(TrainConfig):
                                      minimum=1)
     keep_checkpoints: int = setting(5, 'unannounced checkpoints kept besides the announced one '
                                     '(older ones are deleted; 0 = keep all)', minimum=0)
-    threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0)
+    threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0,
+                           maximum=MAX_THREADS)
     # Redefined with the learner's meaning and defaults:
     steps: int = setting(0, 'stop after this many training steps (0 = run until stopped)',
                          minimum=0)

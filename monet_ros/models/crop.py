@@ -73,11 +73,16 @@ def _area_shrunk_region(image, box, S):
     re-expressed in that region's pixels; p is the largest power of two with the warp then
     shrinking by less than 2x. Unchanged when the crop shrinks by less than 2x.
     A region that needs a few more columns/rows than the image has is padded by replication
-    (under one shrunk pixel at the image border)."""
-    fx, fy = _power_of_two_at_most(1.0 / S[0, 0]), _power_of_two_at_most(1.0 / S[1, 1])
+    (under one shrunk pixel at the image border); p is at most the image's side, so the
+    region is at most twice the image whatever the box (a box far larger than the image is
+    warped from the image shrunk by that much)."""
+    h, w = image.shape[:2]
+    # never by more than the image's side: a box many times the image (a huge tracked
+    # margin) would otherwise pad the region to one shrunk pixel of that size (GBs)
+    fx = min(_power_of_two_at_most(1.0 / S[0, 0]), _power_of_two_at_most(w))
+    fy = min(_power_of_two_at_most(1.0 / S[1, 1]), _power_of_two_at_most(h))
     if fx < 2 and fy < 2:
         return image, S
-    h, w = image.shape[:2]
     if box[2] <= 0 or box[3] <= 0 or box[0] >= w or box[1] >= h:
         return image, S  # the box lies outside the image: the crop is black anyway
     x0, nx = _integer_span(box[0], box[2], fx, w)

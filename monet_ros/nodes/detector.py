@@ -21,6 +21,7 @@ import json
 from pathlib import Path
 import sys
 import time
+from types import SimpleNamespace
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
@@ -29,7 +30,7 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, PointCloud2
 from std_msgs.msg import String
 
 from monet_ros.atomic import sha256_file
-from monet_ros.config import ConfigError, setting, validate_config
+from monet_ros.config import MAX_THREADS, ConfigError, setting, validate_config
 from monet_ros.crop_rule import TrackedCrops, TrackedRule
 from monet_ros.error_text import error_line
 from monet_ros.geometry.units import UNITS
@@ -129,7 +130,7 @@ class DetectorConfig:
                                         minimum=0.0)
     device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
     threads: int = setting(0, 'CPU threads of the network (torch and onnxruntime; 0 = their '
-                           'default)', minimum=0)
+                           'default)', minimum=0, maximum=MAX_THREADS)
     backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
                            'exported to ONNX once, cached beside the checkpoint)',
                            choices=('torch', 'onnxruntime'))
@@ -141,6 +142,29 @@ class DetectorConfig:
 
     def __post_init__(self):
         validate_config(self)
+
+
+# The widest image side a crop box is checked against (px): what a margin feeds must stay
+# finite for any camera.
+WIDEST_IMAGE_PX = 2.0 ** 16
+
+
+def derive(config):
+    """What the parameters of a DetectorConfig feed (no ROS), built before they are used at
+    start and before a live change is applied (monet_ros.nodes.params): the crop rule, the
+    flush timer's period, the stamp tolerance in ns, the widest tracked box and trim
+    distance (px) for an image WIDEST_IMAGE_PX wide, the debug image period (s). Raises
+    ArithmeticError or ValueError where a value overflows; derive_checked names the
+    parameter."""
+    return SimpleNamespace(
+        rule=DetectorNode.tracked_rule(config),
+        flush_period_ns=int(DetectorNode.flush_period_s(config) * 1e9),
+        batch_wait_s=config.batch_wait_ms / 1e3,
+        slop_ns=int(round(config.slop_ms * 1e6)),
+        widest_box_px=WIDEST_IMAGE_PX * (1.0 + 2.0 * config.track_margin),
+        widest_trim_px=WIDEST_IMAGE_PX * config.track_trim,
+        debug_period_s=1.0 / config.debug_image_rate_hz,
+        lockstep_timeout_s=config.lockstep_timeout_s)
 
 
 class CameraSlot:
@@ -191,7 +215,8 @@ class DetectorNode(Node):
     def __init__(self, overrides=None, node_name='detector', **kwargs):
         super().__init__(node_name, **node_namespace(kwargs))
         self.config = config = declare_config(self, DetectorConfig, overrides, live=LIVE,
-                                              on_change=self.apply_live)
+                                              on_change=self.apply_live, derive=derive)
+        self.derived = derive(config)
         if config.threads:
             import torch
             torch.set_num_threads(config.threads)
@@ -226,14 +251,14 @@ class DetectorNode(Node):
                  self.create_publisher(CameraInfo, DEBUG_CAMERA_INFO.format(camera=slot.name),
                                        STREAM_OUT))
                 if config.debug_image else None)
-        self.tracker = TrackedCrops(self.tracked_rule(config))
+        self.tracker = TrackedCrops(self.derived.rule)
         self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
         self.create_subscription(String, MODEL, self.on_model, LATCHED)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
         self.unpublished = set()      # image topics already reported as without publisher
         self.started = time.monotonic()
-        self.flush_timer = self.create_timer(self.flush_period_s(config), self.flush)
+        self.flush_timer = self.create_timer(self.derived.flush_period_ns / 1e9, self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
         self.batches = self.incomplete_batches = 0
         self.awaiting_keypoints = None    # lockstep: stamp of the frame whose 3D is awaited
@@ -263,9 +288,10 @@ class DetectorNode(Node):
 
     def apply_live(self, config):
         """Use a changed config (a live parameter was set) from the next frame."""
-        self.config = config
-        self.tracker.rule = self.tracked_rule(config)
-        self.flush_timer.timer_period_ns = int(self.flush_period_s(config) * 1e9)
+        derived = derive(config)     # checked already (declare_config): cannot fail here
+        self.tracker.rule = derived.rule
+        self.flush_timer.timer_period_ns = derived.flush_period_ns
+        self.config, self.derived = config, derived
 
     def load_detector(self, path):
         if not Path(path).is_file():
@@ -323,7 +349,7 @@ class DetectorNode(Node):
     def flush(self):
         """Run an incomplete batch when a frame waited longer than batch_wait_ms."""
         oldest = self.oldest_arrival()
-        if oldest is not None and time.monotonic() - oldest >= self.config.batch_wait_ms / 1e3:
+        if oldest is not None and time.monotonic() - oldest >= self.derived.batch_wait_s:
             self.process(incomplete=True)
 
     def take_batch(self, incomplete):
@@ -332,7 +358,7 @@ class DetectorNode(Node):
         The newest instant every camera has; with `incomplete` (batch_wait_ms passed) and
         no such instant, the newest frame of each camera that has one."""
         chosen = newest_common_instant([[f[0] for f in s.frames] for s in self.slots],
-                                       int(round(self.config.slop_ms * 1e6)))
+                                       self.derived.slop_ns)
         if chosen is None:
             if not incomplete:
                 return []
@@ -454,7 +480,7 @@ class DetectorNode(Node):
         """<cam>/debug_image + its camera_info, at most debug_image_rate_hz, only when
         someone subscribes (so it costs nothing otherwise)."""
         now = time.monotonic()
-        if (now - slot.last_debug < 1.0 / self.config.debug_image_rate_hz
+        if (now - slot.last_debug < self.derived.debug_period_s
                 or not (pubs[0].get_subscription_count() or pubs[1].get_subscription_count())):
             return
         slot.last_debug = now

@@ -33,6 +33,7 @@ import copy
 from dataclasses import dataclass
 import sys
 import time
+from types import SimpleNamespace
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
@@ -42,7 +43,7 @@ from rclpy.qos import ReliabilityPolicy
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
-from monet_ros.config import ConfigError, config_subset, setting
+from monet_ros.config import MAX_THREADS, ConfigError, config_subset, derive_checked, setting
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
 from monet_ros.geometry.units import UNITS, from_m, rig_units
 from monet_ros.io import (
@@ -64,7 +65,7 @@ from monet_ros.nodes.names import (
     TF_STATIC,
     node_namespace,
 )
-from monet_ros.nodes.params import declare_config
+from monet_ros.nodes.params import declare_config, duration_msg_ns
 from monet_ros.nodes.qos import HEATMAPS_IN, LATCHED, STREAM_OUT
 from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.nodes.tf import rig_tf_message, tf_message_class
@@ -136,7 +137,30 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     publish_tf: bool = setting(True, 'publish the rig on /tf_static (frame_id -> '
                                '<camera>_optical) when tf2_msgs is installed')
     threads: int = setting(1, 'torch CPU threads for heatmap decoding (0 = leave as is); one '
-                           'thread is fastest for these small tensors', minimum=0)
+                           'thread is fastest for these small tensors', minimum=0,
+                           maximum=MAX_THREADS)
+
+
+def derive(config, units='m'):
+    """What the parameters of a FusionNodeConfig feed (no ROS), built before they are used
+    at start and before a live change is applied (monet_ros.nodes.params): the core's
+    FusionConfig, the live filter in the rig's length unit `units` ('m', 'cm', 'mm'; built
+    even while it is off, so switching it on cannot fail), the camera markers' depth in
+    that unit, the durations in ns and the outlier score's scale. units None (the rig not
+    loaded yet: the node's first check) leaves out what depends on it (filter and
+    marker_depth None). Raises ConfigError naming a field (the filter's numbers in
+    `units`), ArithmeticError or ValueError (a duration beyond what a float or int64
+    holds); derive_checked turns those into an error naming the parameter."""
+    known = units is not None
+    return SimpleNamespace(
+        core=config_subset(config, FusionConfig),
+        filter=LiveFilter(config_subset(config, LiveFilterConfig), units) if known else None,
+        marker_depth=from_m(config.camera_marker_depth, units) if known else None,
+        slop_ns=int(config.slop_ms * 1e6),
+        max_queue_ns=config.max_queue_ms * 1e6,
+        diagnostics_period_ns=int(config.diagnostics_period_s * 1e9),     # rclpy's timer
+        marker_lifetime_ns=duration_msg_ns(config.marker_lifetime_s),
+        outlier_scale=config.threshold_px * 2)      # triangulation's tie-break divides by it
 
 
 class CameraStats:
@@ -166,9 +190,9 @@ class CameraStats:
 class FusionNode(Node):
     def __init__(self, overrides=None, node_name='fusion', **kwargs):
         super().__init__(node_name, **node_namespace(kwargs))
+        self.units = None    # the rig's length unit, known once the rig is loaded
         self.config = config = declare_config(self, FusionNodeConfig, overrides, live=LIVE,
-                                              on_change=self.apply_live)
-        self.core_config = config_subset(config, FusionConfig)
+                                              on_change=self.apply_live, derive=self.derive)
         self.filter_counts = dict(resets=0, restarts=0, gated=0)  # of replaced filters
         self.timer = StageTimer()  # per-stage wall time, reported in /diagnostics
         if config.threads:
@@ -179,8 +203,11 @@ class FusionNode(Node):
         rig, rig_frame = load_node_rig(config.rig, config.rig_units)
         self.cameras = select_cameras(self.get_name(), rig, config.cameras, minimum=2)
         self.units = rig_units(self.cameras)
-        self.live_filter = LiveFilter(config_subset(config, LiveFilterConfig), self.units) \
-            if config.filter else None
+        # checked again with the rig unit: the filter and marker depth in it (ConfigError
+        # naming the parameter, as a live change would be refused)
+        self.derived = derived = derive_checked(self.get_name(), config, self.derive)
+        self.core_config = derived.core
+        self.live_filter = derived.filter if config.filter else None
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
@@ -195,10 +222,10 @@ class FusionNode(Node):
         self.last_result = None
         self.last_stamp_ns = None
         # callables(stamp_ns, result, filtered) (the pipeline's summary and score):
-        # filtered (C, 3) m the live filter's keypoints3d, None with the filter off
+        # filtered (C, 3) the live filter's keypoints3d (rig unit), None with it off
         self.listeners = []
         self.first_heard = None   # monotonic time of the first heatmap (of any camera)
-        self.sync = StampSynchronizer(self.names, slop_ns=int(config.slop_ms * 1e6),
+        self.sync = StampSynchronizer(self.names, slop_ns=derived.slop_ns,
                                       timeout_s=config.timeout_s, min_keys=config.min_views)
         self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.names}
         inputs = copy.copy(HEATMAPS_IN)
@@ -222,8 +249,7 @@ class FusionNode(Node):
             self.pub_rig = self.create_publisher(MarkerArray, RIG_MARKERS, LATCHED)
             self.pub_rig.publish(marker_array(
                 self.get_clock().now().nanoseconds, self.frame_id,
-                frustum_marker_specs(self.cameras, from_m(config.camera_marker_depth,
-                                                          self.units),
+                frustum_marker_specs(self.cameras, derived.marker_depth,
                                      scale=from_m(0.005, self.units))))
         self.create_timer(0.02, self.on_poll)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
@@ -232,19 +258,24 @@ class FusionNode(Node):
             f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}, '
             f'3D in {self.units} (the rig unit)')
 
+    def derive(self, config):
+        """derive(config) in this node's rig unit (None before the rig is loaded: the start
+        check of declare_config, without the filter; checked again once it is)."""
+        return derive(config, self.units)
+
     def apply_live(self, config):
         """Use a changed config (a live parameter was set) from the next frame on."""
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
-        self.core_config = config_subset(config, FusionConfig)
+        derived = self.derive(config)    # checked already (declare_config): cannot fail
+        self.core_config = derived.core
         self.sync.min_keys = config.min_views
-        filter_config = config_subset(config, LiveFilterConfig)
-        if self.live_filter is None or self.live_filter.config != filter_config:
+        if self.live_filter is None or self.live_filter.config != derived.filter.config:
             # switched on, off or retuned: a fresh state from the next frame
             self.keep_filter_counts()
-            self.live_filter = LiveFilter(filter_config, self.units) if config.filter else None
-        self.config = config
+            self.live_filter = derived.filter if config.filter else None
+        self.config, self.derived = config, derived
 
     def keep_filter_counts(self):
         if self.live_filter is not None:
@@ -257,7 +288,7 @@ class FusionNode(Node):
         max_queue_ms between its reception by the middleware and its callback (the node is
         behind). False when off (0) or when the middleware gives no reception time (0)."""
         received = (info or {}).get('received_timestamp') or 0
-        limit_ns = self.config.max_queue_ms * 1e6
+        limit_ns = self.derived.max_queue_ns
         return bool(limit_ns and received) and time.time_ns() - received > limit_ns
 
     def on_message(self, name, kind, msg, info=None):
@@ -430,7 +461,7 @@ class FusionNode(Node):
         if self.pub_skeleton.get_subscription_count():
             self.pub_skeleton.publish(skeleton_marker_array(
                 group.stamp_ns, self.frame_id, X, self.skeleton.bone_indices,
-                ns=self.marker_ns, lifetime_ns=int(self.config.marker_lifetime_s * 1e9),
+                ns=self.marker_ns, lifetime_ns=self.derived.marker_lifetime_ns,
                 scale=from_m(0.03, self.units),
                 names=self.skeleton.keypoints if self.config.marker_labels else None))
         self.timer.add('publish', time.perf_counter() - start)

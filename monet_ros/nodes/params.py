@@ -3,9 +3,14 @@
 Every field becomes a declared parameter with its description, default, constraints (as
 text and as a structured floating_point_range / integer_range) and is read back, coerced
 and validated by constructing the dataclass, so a bad value is a ConfigError naming the
-parameter, raised at start. Fields named in `live` stay settable at run time
+parameter, raised at start. A value inside its declared range can still be unusable for what
+it feeds (filter_noise_mm 1e200: its square overflows; a duration in s beyond int64 ns): the
+node's `derive(config)` computes that (the filter's numbers, durations in ns, ...) and the
+value is refused unless it succeeds with finite numbers (monet_ros.config.derive_checked),
+at start and at every live change alike. Fields named in `live` stay settable at run time
 (`ros2 param set`, rcl_interfaces/srv/SetParameters): a change is validated through the same
-dataclass (plus the node's own check) and takes effect on the next frame; every other
+dataclass and derive (plus the node's own check) and takes effect on the next frame; a refused
+change says which parameter and why, and the node goes on with its old values. Every other
 parameter is read-only. An empty list has no ROS type: it is declared unset (`ros2 param
 dump` writes `null`), and `null`, `~`, '' and `[]` all load back as an empty list.
 """
@@ -22,7 +27,8 @@ from rcl_interfaces.msg import (
 )
 from rclpy.exceptions import InvalidParameterValueException
 
-from monet_ros.config import ConfigError, field_kind
+from monet_ros.config import ConfigError, derive_checked, field_kind
+from monet_ros.error_text import error_line
 
 _ROS_TYPES = {
     (str, False): ParameterType.PARAMETER_STRING,
@@ -98,15 +104,17 @@ def parameter_value(config_cls, name, value):
     return value
 
 
-def declare_config(node, config_cls, overrides=None, live=(), on_change=None):
+def declare_config(node, config_cls, overrides=None, live=(), on_change=None, derive=None):
     """Declare one parameter per field of `config_cls` on `node`, read them back and
     return the validated config instance.
 
     overrides: optional {name: value} applied on top of the parameters (used when nodes
     are built in-process, e.g. by `monet pipeline`). live: names that may change at run
     time; on each accepted change `on_change(new_config)` is called (it may raise
-    ConfigError to refuse it) and must make the node use the new config. Raises ConfigError
-    naming the parameter (unknown override names included).
+    ConfigError to refuse it) and must make the node use the new config, changing nothing
+    when it raises. derive: config -> what the parameters feed, checked at start and before
+    each change (derive_checked). Raises ConfigError naming the parameter (unknown override
+    names included).
     """
     overrides = dict(overrides or {})
     names = [f.name for f in fields(config_cls) if f.init]
@@ -140,14 +148,27 @@ def declare_config(node, config_cls, overrides=None, live=(), on_change=None):
         config = config_cls(**values)
     except ConfigError as error:
         raise ConfigError(node.get_name(), error.field, error.message) from None
+    if derive is not None:
+        derive_checked(node.get_name(), config, derive)
     if live:
         node.add_on_set_parameters_callback(
-            lambda params: _set_live(node, config_cls, live, on_change, params))
+            lambda params: _set_live(node, config_cls, live, on_change, params, derive))
     return config
 
 
-def _set_live(node, config_cls, live, on_change, params):
-    """on_set_parameters callback: validate the change through the config, then apply."""
+def duration_msg_ns(seconds):
+    """A duration in s as int ns that a builtin_interfaces/Duration (int32 seconds) holds.
+    Raises OverflowError (inf) or ValueError (beyond int32 seconds)."""
+    ns = int(seconds * 1e9)
+    if not 0 <= ns // 1_000_000_000 < 2 ** 31:
+        raise ValueError(f'{seconds!r} s does not fit a Duration message (int32 seconds)')
+    return ns
+
+
+def _set_live(node, config_cls, live, on_change, params, derive=None):
+    """on_set_parameters callback: validate the change through the config and what it
+    feeds (derive), then apply. Any failure refuses the change with its reason (naming the
+    parameter); nothing raised here may reach rclpy, which would end the node."""
     changes = {}
     for param in params:
         if param.name not in live:
@@ -156,9 +177,17 @@ def _set_live(node, config_cls, live, on_change, params):
         changes[param.name] = parameter_value(config_cls, param.name, param.value)
     try:
         new = replace(node.config, **changes)
+        if derive is not None:
+            derive_checked(node.get_name(), new, derive, base=node.config, blame=changes)
         if on_change is not None:
             on_change(new)
     except ConfigError as error:
+        named = '' if error.field in changes else \
+            f'parameter {", ".join(map(repr, changes))}: '
         return SetParametersResult(successful=False,
-                                   reason=f'parameter {error.field!r}: {error.message}')
+                                   reason=f'{named}parameter {error.field!r}: {error.message}')
+    except Exception as error:  # noqa: BLE001 - refused, never the end of the node
+        return SetParametersResult(
+            successful=False, reason=f'parameter {", ".join(map(repr, changes))}: '
+            f'cannot be applied: {type(error).__name__}: {error_line(error)}')
     return SetParametersResult(successful=True)

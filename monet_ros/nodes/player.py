@@ -21,6 +21,7 @@ import struct
 import sys
 import threading
 import time
+from types import SimpleNamespace
 
 from builtin_interfaces.msg import Time
 from rclpy.node import Node
@@ -85,6 +86,24 @@ class PlayerConfig:
         validate_config(self)
 
 
+def waitable_s(seconds):
+    """`seconds` as a threading wait timeout; ValueError beyond threading.TIMEOUT_MAX."""
+    if not 0 <= seconds <= threading.TIMEOUT_MAX:
+        raise ValueError(f'{seconds!r} s is beyond the longest wait ({threading.TIMEOUT_MAX:.3g}'
+                         ' s)')
+    return seconds
+
+
+def derive(config):
+    """What the parameters of a PlayerConfig feed (no ROS), checked at start
+    (monet_ros.nodes.params): the start offset in ns, the start delay as a wait, the wall
+    seconds per recorded second (0 = as fast as possible). Raises ArithmeticError or
+    ValueError where a value overflows; derive_checked names the parameter."""
+    return SimpleNamespace(offset_ns=int(config.start_offset_s * 1e9),
+                           start_delay_s=waitable_s(config.start_delay_s),
+                           pace=1.0 / config.rate if config.rate > 0 else 0.0)
+
+
 _CDR_STAMP = struct.Struct('<iI')
 
 
@@ -122,7 +141,8 @@ def message_class(msgtype):
 class PlayerNode(Node):
     def __init__(self, overrides=None, node_name='player', **kwargs):
         super().__init__(node_name, **node_namespace(kwargs))
-        self.config = config = declare_config(self, PlayerConfig, overrides)
+        self.config = config = declare_config(self, PlayerConfig, overrides, derive=derive)
+        self.derived = derive(config)
         if not config.bag:
             raise ConfigError(self.get_name(), 'bag', 'is required (a recording path)')
         self.reader = open_bag(config.bag)
@@ -247,7 +267,7 @@ class PlayerNode(Node):
         try:
             if self.config.wait_for_subscribers:
                 self.wait_for_subscribers()
-            if self.stopping.wait(self.config.start_delay_s):
+            if self.stopping.wait(self.derived.start_delay_s):
                 return
             while not self.stopping.is_set():
                 self.play_once(self.loops * self.loop_shift_ns)
@@ -284,7 +304,7 @@ class PlayerNode(Node):
         # log time and stamp of the current image frame (the stamp carries over from the
         # previous pass: lockstep gates a pass's first frame on the last one before it)
         frame_log, frame_stamp = None, self.last_frame_stamp
-        offset_ns = int(self.config.start_offset_s * 1e9)
+        offset_ns = self.derived.offset_ns
         for item in self.reader.messages(list(self.pubs), decode=False):
             if self.stopping.is_set():
                 return
@@ -295,9 +315,9 @@ class PlayerNode(Node):
             if start_wall is None:
                 start_wall, start_log = time.monotonic(), item.log_time_ns
             if self.config.rate > 0:
-                due = start_wall + (item.log_time_ns - start_log) / 1e9 / self.config.rate
+                due = start_wall + (item.log_time_ns - start_log) / 1e9 * self.derived.pace
                 delay = due - time.monotonic()
-                if delay > 0 and self.stopping.wait(delay):
+                if delay > 0 and self.stopping.wait(min(delay, threading.TIMEOUT_MAX)):
                     return
             image = item.topic in self.image_set
             if shift_ns == 0 and image:

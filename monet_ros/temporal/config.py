@@ -8,7 +8,7 @@ from types import SimpleNamespace
 
 from monet_ros.config import setting, validate_config
 from monet_ros.geometry.units import from_m, from_mm
-from monet_ros.temporal.cv_kalman import V0
+from monet_ros.temporal.cv_kalman import V0, model_numbers
 
 METHODS = ('none', 'kalman', 'optim')
 LOSSES = ('soft_l1', 'huber', 'cauchy', 'linear')
@@ -16,7 +16,8 @@ LOSSES = ('soft_l1', 'huber', 'cauchy', 'linear')
 
 @dataclass(frozen=True)
 class FilterConfig:
-    """Which filter and its parameters (validated on construction; errors name the field).
+    """Which filter and its parameters (validated on construction, their Kalman numbers
+    in a rig's unit by in_units; errors name the field).
 
     method: 'none' (frame-by-frame robust triangulation as fused), 'kalman' (per-joint
     constant-velocity Kalman filter + Rauch-Tung-Striebel smoother with Mahalanobis
@@ -57,10 +58,20 @@ class FilterConfig:
 
     def in_units(self, units):
         """The physical settings in a rig's length unit ('m', 'cm', 'mm'; the one place
-        they are converted): noise (measurement_noise_mm), acceleration
+        they are converted), checked there: noise (measurement_noise_mm), acceleration
         (acceleration_m_s2, units/s^2), bone (bone_mm), v0 (cv_kalman.V0, units/s),
-        step (optim's projection-derivative step, 10 um)."""
-        return SimpleNamespace(noise=from_mm(self.measurement_noise_mm, units),
-                               acceleration=from_m(self.acceleration_m_s2, units),
-                               bone=from_mm(self.bone_mm, units), v0=from_m(V0, units),
-                               step=from_mm(0.01, units))
+        step (optim's projection-derivative step, 10 um), and the Kalman model's r2
+        (units^2), q ((units/s^2)^2) and gate2 (cv_kalman.model_numbers: the variances,
+        the gate and the covariance over a max_gap_s step in this unit). Raises ConfigError
+        naming the field whose number cannot be used in this unit (e.g.
+        measurement_noise_mm 1e155: its square in mm^2 overflows), ValueError for an
+        unknown unit."""
+        physical = SimpleNamespace(noise=from_mm(self.measurement_noise_mm, units),
+                                   acceleration=from_m(self.acceleration_m_s2, units),
+                                   bone=from_mm(self.bone_mm, units), v0=from_m(V0, units),
+                                   step=from_mm(0.01, units))
+        physical.r2, physical.q, physical.gate2 = model_numbers(
+            self, units, ('measurement_noise_mm', physical.noise),
+            ('acceleration_m_s2', physical.acceleration), 'gate_sigma', 'max_gap_s',
+            physical.v0)
+        return physical

@@ -12,6 +12,8 @@ Lengths are in the rig's unit (m above; callers convert their settings, geometry
 """
 import numpy as np
 
+from monet_ros.config import ConfigError
+
 V0 = 2.0     # m/s: velocity standard deviation of a joint when it (re)starts (callers
              # pass it in rig units: geometry.units.from_m(V0, units))
 
@@ -59,3 +61,52 @@ def as_matrices(P):
     row0 = np.stack([P[..., 0, :], P[..., 1, :]], axis=-1)
     row1 = np.stack([P[..., 1, :], P[..., 2, :]], axis=-1)
     return np.stack([row0, row1], axis=-2)
+
+
+def model_numbers(config, units, noise, acceleration, gate, step, v0):
+    """(r2 units^2, q (units/s^2)^2, gate2) of a filter config in a rig's length unit `units`
+    ('m', 'cm', 'mm'), checked against what the step computes from them: r2 and gate2
+    finite and > 0, q finite, and a joint's covariance (started as `start` does) predicted
+    over `step` and its innovation variance finite.
+
+    noise, acceleration: (field, value) pairs: the config's field (mm, m/s^2 whatever the
+    rig's unit) and its value converted into `units` by the caller (units, units/s^2;
+    geometry.units), so that the numbers checked are those the filter uses; gate (sigmas)
+    and step (s: the longest step the filter predicts over): field names; v0: the velocity
+    prior of a (re)started joint (units/s, from_m(V0, units)). Raises ConfigError naming the
+    field (e.g. a noise of 1e200 mm: its square overflows in any unit; 1e155 mm overflows
+    in a mm rig only; 1e-200 mm underflows to 0)."""
+    owner = type(config).__name__
+    (noise, noise_units), (acceleration, acceleration_units) = noise, acceleration
+    values = {name: getattr(config, name) for name in (noise, acceleration, gate, step)}
+    with np.errstate(all='ignore'):
+        r2 = np.float64(noise_units) ** 2
+        q = np.float64(acceleration_units) ** 2
+        gate2 = np.float64(values[gate]) ** 2
+        v02 = np.float64(v0) ** 2
+    for name, value, what, unit in (
+            (noise, r2, 'measurement variance', f'{units}^2'),
+            (acceleration, q, 'process noise variance', f'({units}/s^2)^2'),
+            (gate, gate2, 'squared gate', '')):
+        positive = name != acceleration
+        if not np.isfinite(value) or (positive and not value > 0):
+            raise ConfigError(owner, name, f'{values[name]!r} gives a {what} of '
+                              f'{float(value)!r} {unit}'.rstrip() + ' (must be finite'
+                              f'{" and > 0" if positive else ""})')
+    dt = np.float64(values[step])
+    with np.errstate(all='ignore'):
+        twice = 2 * r2
+        _, P = predict(np.zeros((1, 3)), np.zeros((1, 3)), np.array([[r2], [0.0], [v02]]),
+                       dt, q)
+        long_step = not np.isfinite(dt ** 4 * 2 * v02)
+        innovation = P[0] + r2
+    if not (np.isfinite(P).all() and np.isfinite(innovation).all()):
+        if not np.isfinite(twice):       # the innovation variance of a fresh joint alone
+            raise ConfigError(owner, noise, f'{values[noise]!r} gives a measurement variance '
+                              f'of {float(r2)!r} {units}^2 whose innovation variance (twice '
+                              'it) is not finite (lower it)')
+        name = step if long_step else acceleration
+        raise ConfigError(owner, name, f'{acceleration} {values[acceleration]!r} m/s^2 over a '
+                          f'step of {step} {values[step]!r} s gives a non-finite covariance '
+                          f'in {units} (lower one of them)')
+    return float(r2), float(q), float(gate2)

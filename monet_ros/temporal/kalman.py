@@ -44,7 +44,8 @@ def kalman_smooth(X, stamps_ns, config, noise_scale=None, units='m'):
     the units, gate_sigma, max_gap_s); noise_scale (T, C) >= 1 or None: factor on
     the measurement noise of each point (smooth_points gives 1 + (mean reprojection error /
     reprojection_px)^2, so a point triangulated with a stray view counts less). Raises
-    ValueError on bad shapes or stamps or an unknown unit."""
+    ValueError on bad shapes or stamps or an unknown unit, ConfigError naming the setting
+    whose number cannot be used in `units` (FilterConfig.in_units)."""
     X = np.asarray(X, np.float64)
     stamps = np.asarray(stamps_ns, np.int64)
     if X.ndim != 3 or X.shape[-1] != 3 or len(stamps) != len(X):
@@ -52,12 +53,10 @@ def kalman_smooth(X, stamps_ns, config, noise_scale=None, units='m'):
     if len(stamps) > 1 and np.any(np.diff(stamps) <= 0):
         raise ValueError('stamps must increase')
     T, C = X.shape[:2]
-    physical = config.in_units(units)
-    r2 = physical.noise ** 2
+    physical = config.in_units(units)      # converted and checked (ConfigError)
+    r2, q, gate2 = physical.r2, physical.q, physical.gate2
     scale2 = np.ones((T, C)) if noise_scale is None else \
         np.nan_to_num(np.asarray(noise_scale, np.float64), nan=1.0, posinf=1.0) ** 2
-    q = physical.acceleration ** 2
-    gate2 = config.gate_sigma ** 2
     max_gap = frames_for(config.max_gap_s, stamps)
     dts = np.diff(stamps) / 1e9
     # the forward pass is the live filter's step (temporal.cv_kalman), per-point noise

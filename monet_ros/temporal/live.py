@@ -37,7 +37,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from monet_ros.config import setting, validate_config
+from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.geometry.units import from_m, from_mm
 from monet_ros.temporal import cv_kalman
 
@@ -88,6 +88,40 @@ class LiveFilterConfig:
         validate_config(self)
 
 
+def filter_numbers(config, units, noise, acceleration, max_speed, v0):
+    """(r2 units^2, q (units/s^2)^2, gate2) of a LiveFilterConfig in a rig's length unit
+    `units`, from its settings converted into that unit by LiveFilter (noise units,
+    acceleration units/s^2, max_speed units/s, v0 units/s), checked against what the
+    filter computes from them: the variances and the gate squared are finite and > 0 (r2,
+    gate2), and a joint's covariance predicted over the longest step the filter takes
+    (filter_reset_s), its innovation variance, the reach of filter_max_speed over the
+    oldest candidate's age (LOST_AFTER + 1 steps or filter_max_gap_s) and the covariance
+    of a restart from two measurements 1 ns apart are finite. Raises ConfigError naming
+    the field otherwise (e.g. filter_noise_mm 1e200: its square overflows; 1e-200: it
+    underflows to 0; 1e155 overflows in a mm rig only)."""
+    owner = type(config).__name__
+    r2, q, gate2 = cv_kalman.model_numbers(config, units, ('filter_noise_mm', noise),
+                                           ('filter_acceleration', acceleration),
+                                           'filter_gate', 'filter_reset_s', v0)
+    step = np.float64(config.filter_reset_s)
+    with np.errstate(all='ignore'):
+        # a candidate is at most LOST_AFTER frames old, or filter_max_gap_s
+        horizon = (LOST_AFTER + 1) * max(step, np.float64(config.filter_max_gap_s))
+        reach = np.float64(max_speed) * horizon + config.filter_gate * np.sqrt(2 * r2)
+        pair = 2 * r2 / 1e-9 ** 2
+    if not np.isfinite(reach):
+        name = 'filter_max_speed' if np.isfinite(horizon) else \
+            'filter_max_gap_s' if config.filter_max_gap_s > step else 'filter_reset_s'
+        raise ConfigError(owner, name, f'filter_max_speed {config.filter_max_speed!r} m/s '
+                          f'over {LOST_AFTER + 1} x max(filter_reset_s {float(step)!r} s, '
+                          f'filter_max_gap_s {config.filter_max_gap_s!r} s) gives a '
+                          f'non-finite reach in {units} (lower one of them)')
+    if not np.isfinite(pair):
+        raise ConfigError(owner, 'filter_noise_mm', f'{config.filter_noise_mm!r} mm gives a '
+                          f'non-finite restart covariance in {units}')
+    return float(r2), float(q), float(gate2)
+
+
 class LiveFilter:
     """Per-joint constant-velocity Kalman filter with gating (see the module docstring).
 
@@ -95,19 +129,21 @@ class LiveFilter:
     NaN = not triangulated) -> (filtered (J, 3), measured (J,) bool: an accepted
     measurement this frame; False where the output is a prediction or NaN). The settings
     keep their units (filter_noise_mm mm, filter_acceleration m/s^2, filter_max_speed m/s)
-    whatever the rig's: converted here, once. Counters: resets (time jumps), restarts
-    (joints restarted after a gap, LOST_AFTER gated measurements or from a pair), gated
-    (measurements rejected as outliers), frames. ValueError for an unknown unit.
+    whatever the rig's: converted here, once, and checked in the rig unit
+    (filter_numbers). Counters: resets (time jumps), restarts (joints restarted after a
+    gap, LOST_AFTER gated measurements or from a pair), gated (measurements rejected as
+    outliers), frames. Raises ConfigError naming the field when the config's numbers
+    cannot be used in `units`, ValueError for an unknown unit.
     """
 
     def __init__(self, config=LiveFilterConfig(), units='m'):
         self.config = config
         self.units = units
-        self.r2 = from_mm(config.filter_noise_mm, units) ** 2
-        self.q = from_m(config.filter_acceleration, units) ** 2
         self.max_speed = from_m(config.filter_max_speed, units)
         self.v0 = from_m(cv_kalman.V0, units)
-        self.gate2 = config.filter_gate ** 2
+        self.r2, self.q, self.gate2 = filter_numbers(
+            config, units, from_mm(config.filter_noise_mm, units),
+            from_m(config.filter_acceleration, units), self.max_speed, self.v0)
         self.joints = None
         self.last_ns = None
         self.resets = self.restarts = self.gated = self.frames = 0
@@ -129,7 +165,7 @@ class LiveFilter:
     def within_reach(self, X, origin, origin_ns, stamp_ns):
         """(J,) bool: X within filter_max_speed x the elapsed time + gate x sqrt(2 r2) of
         origin (J, 3) measured at origin_ns (J,) (False where either is NaN)."""
-        reach = self.max_speed * (stamp_ns - origin_ns) * 1e-9 \
+        reach = self.max_speed * ((stamp_ns - origin_ns) * 1e-9) \
             + self.config.filter_gate * np.sqrt(2 * self.r2)
         with np.errstate(invalid='ignore'):
             return np.linalg.norm(X - origin, axis=1) <= reach

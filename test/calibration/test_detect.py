@@ -77,3 +77,35 @@ def test_frame_size_change_and_no_frames_are_errors(views):
                       CHARUCO, progress=False)
     with pytest.raises(ValueError, match="camera 'c': no frame"):
         detect_frames('c', [], CHARUCO, progress=False)
+
+
+def test_mirrored_board_is_found_apart_and_unreadable_frames_are_counted(views):
+    """Issue 37: a board seen through a mirror (left-right) is recognised as such, never
+    used; a frame the source could not read (None) is unreadable, not 'no board'."""
+    image = views['charuco', 35.0]
+    detector = BoardDetector(CHARUCO)
+    assert detector.detect_view(image)[1] == 'plain'
+    assert detector.detect_view(255 - image)[1] == 'inverted'
+    mirrored = np.ascontiguousarray(image[:, ::-1])
+    assert detector.detect_view(mirrored) == (None, 'mirrored')
+    assert detector.detect(mirrored) is None
+    result = detect_frames('c', [None, image, mirrored, None], CHARUCO, progress=False)
+    assert result.unreadable == [0, 3] and result.mirrored == [2]
+    assert result.no_board == [0, 2, 3] and result.frames_with_board == 1
+    assert result.size == (800, 600) and result.hint == ''
+    with pytest.raises(ValueError, match=r"camera 'c': no frame .* \(2 unreadable\)"):
+        detect_frames('c', [None, None], CHARUCO, progress=False)
+
+
+def test_markers_that_do_not_fit_the_board_are_diagnosed(views):
+    from dataclasses import replace
+    image = views['charuco', 0.0]
+    swapped = replace(CHARUCO, board_x=11, board_y=8)
+    result = detect_frames('c', [image], swapped, progress=False)
+    assert result.frames_with_board == 0
+    assert result.hint.startswith('44 DICT_4X4_1000 markers found (ids 0-43) that do not fit '
+                                  'a 11 x 8 board: check board_x 11, board_y 8 (swapped?)')
+    bits = detect_frames('c', [image], replace(CHARUCO, marker_bits=6), progress=False)
+    assert 'check marker_bits (6; these are 4)' in bits.hint
+    blank = np.full((600, 800), 150, np.uint8)
+    assert detect_frames('c', [blank], CHARUCO, progress=False).hint == ''

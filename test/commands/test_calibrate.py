@@ -207,3 +207,69 @@ def test_camera_names_from_paths(tmp_path):
         == ['back', 'mid']
     assert _short(['cam1', 'cam2']) == ['cam1', 'cam2']      # no separator: kept whole
     assert _short(['Cam_01.mp4', 'Cam_02.mp4']) == ['01', '02']
+
+
+# Issue 37: a camera that sees the board mirrored, a wrong board spec and a truncated JPEG
+# are said plainly; fewer than 2 calibrated cameras is exit 2. Four real images per camera.
+def first_images(session, camera, folder, count=4, flip=False):
+    folder.mkdir(parents=True)
+    for f in images(session, camera)[:count]:
+        if flip:                              # what a mirror (or a flipping camera) gives
+            cv2.imwrite(str(folder / f.name), cv2.flip(cv2.imread(str(f)), 1))
+        else:
+            (folder / f.name).symlink_to(f)
+    return folder
+
+
+def test_a_mirrored_camera_is_named_and_one_camera_is_no_rig(session, tmp_path, capsys):
+    back = first_images(session, 'back', tmp_path / 'back')
+    mid = first_images(session, 'mid', tmp_path / 'mid', flip=True)
+    code, out, err = run([back, mid, '--board', session / 'board.toml', '--out',
+                          tmp_path / 'c.toml'], capsys)
+    assert code == 2, err
+    assert 'mid: 4 frames, board in 0, no board in 0, board only mirrored in 4' in err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith("monet calibrate: error: only camera 'back' can be calibrated; a "
+                           'rig needs 2 (mid: 0 board views (intrinsics need 3); the board is '
+                           'seen mirrored (left-right) in 4 frames'), last
+    assert 'Traceback' not in err and not (tmp_path / 'c.toml').exists()
+
+
+@pytest.mark.parametrize('options, expected', [
+    (['--board-x', '11', '--board-y', '8', '--marker-bits', '4'],
+     '44 DICT_4X4_1000 markers found (ids 0-43) that do not fit a 11 x 8 board: check '
+     'board_x 11, board_y 8 (swapped?), square_length and marker_length'),
+    (['--board-x', '8', '--board-y', '11', '--marker-bits', '5'],
+     'markers of 4-bit dictionaries found, none of DICT_5X5_1000: check marker_bits (5; '
+     'these are 4) and dict_size'),
+    (['--board-x', '4', '--board-y', '5', '--marker-bits', '4'],
+     'DICT_4X4_1000 markers found with ids up to 43, but a 4 x 5 board has ids 0-9: check '
+     'board_x 4, board_y 5 and dict_size'),
+])
+def test_a_wrong_board_spec_names_the_fields_to_check(session, tmp_path, capsys, options,
+                                                      expected):
+    back = first_images(session, 'back', tmp_path / 'back', count=1)
+    mid = first_images(session, 'mid', tmp_path / 'mid', count=1)
+    spec = ['--square-length', '24', '--marker-length', '18.75', '--dict-size', '1000']
+    code, out, err = run([back, mid, *spec, *options, '--out', tmp_path / 'c.toml'], capsys)
+    assert code == 2, err
+    assert 'back: no board view: ' in err and expected in err, err
+    last = err.strip().splitlines()[-1]
+    assert last.startswith('monet calibrate: error: no camera has enough board views') \
+        and expected in last, last
+
+
+def test_a_truncated_jpeg_is_named_and_counted_unreadable(session, tmp_path, capsys):
+    back = first_images(session, 'back', tmp_path / 'back')
+    mid = first_images(session, 'mid', tmp_path / 'mid')
+    broken = sorted(back.iterdir())[1]
+    data = broken.read_bytes()
+    broken.unlink()
+    broken.write_bytes(data[:len(data) // 2])          # a copy cut short
+    assert cv2.imread(str(broken)) is not None         # OpenCV decodes it (grey below)
+    code, out, err = run([back, mid, '--board', session / 'board.toml', '--out',
+                          tmp_path / 'c.toml', '--no-report'], capsys)
+    assert code == 0, err
+    assert 'back: 4 frames, board in 3, no board in 0, unreadable 1' in err, err
+    assert f'back: unreadable: {broken}: truncated JPEG (no end-of-image marker)' in err
+    assert sorted(c.name for c in load_rig(tmp_path / 'c.toml')) == ['back', 'mid']

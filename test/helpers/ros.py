@@ -171,6 +171,23 @@ class RosHarness:
                              process)
         assert ok, f'no subscriber on {publisher.topic_name} after {timeout} s'
 
+    def call(self, srv_type, name, request, process=None, attempts=3):
+        """One service call -> its response; sent again (up to `attempts` times) when no
+        response comes: service_is_ready means the request side is matched, and a response
+        sent before the client's response reader is matched by the server is lost (DDS
+        discovery is not symmetric). Fails at once if `process` died."""
+        clients = self.__dict__.setdefault('_clients', {})
+        client = clients.get((srv_type, name))
+        if client is None:      # one client per service: discovered once, reused
+            client = clients[srv_type, name] = self.node.create_client(srv_type, name)
+        assert self.spin_until(client.service_is_ready, timeout=30, process=process), name
+        for _ in range(attempts):
+            future = client.call_async(request)
+            if self.spin_until(future.done, timeout=10, process=process):
+                return future.result()
+            client.remove_pending_request(future)
+        raise AssertionError(f'{name}: no response to {attempts} requests')
+
     def wait_for_publishers(self, topic, count=1, timeout=20.0, process=None):
         ok = self.spin_until(lambda: self.node.count_publishers(topic) >= count, timeout,
                              process)

@@ -6,9 +6,12 @@ Every refusal leaves the labels table byte for byte as it was."""
 import json
 import re
 
+import cv2
 from helpers.label_app import TOKEN_HEADER, label_server, page_token, request
 from helpers.recordings import noise_recording
+import numpy as np
 import pytest
+import yaml
 
 from monet_ros.label_app.guard import allowed_hosts, request_limit
 from monet_ros.skeleton import load_skeleton
@@ -212,3 +215,75 @@ def test_a_save_on_an_old_version_is_refused_and_changes_nothing(server):
     assert request(f'{url}/api/labels/1')[2]['version'] == saved['version']
     status, _, _ = change(url, 1, loaded['labels'], saved['version'])  # B, merged: accepted
     assert status == 200
+
+
+# Issue 37: a 400-digit JSON integer and a body nested 100,000 arrays deep were 500 with a
+# traceback; they are 400 naming the field / the body, and change nothing.
+def test_a_huge_integer_or_a_deep_body_is_400_naming_it(server):
+    url, labels, rig, stamps = server
+    before = labels.read_bytes()
+    cam = rig[0].name
+    token = {TOKEN_HEADER: page_token(url)}
+    version = request(f'{url}/api/labels/0')[2].get('version', '')
+    huge = '9' * 400
+    for path, method in (('/api/labels/0', 'PUT'), ('/api/triangulate', 'POST')):
+        raw = (f'{{"labels": {{"{cam}": {{"head": [{huge}, 2.0]}}}}, "version": "{version}"}}'
+               .encode())
+        status, _, answer = request(url + path, method, raw=raw, headers=token)
+        assert status == 400, (path, answer)
+        assert answer['error'] == (f'labels {cam}/head: u must be a finite number, got a '
+                                   '400-digit integer'), answer
+    deep = 100_000
+    for raw in (b'[' * deep + b']' * deep,
+                b'{"labels": ' + b'[' * deep + b']' * deep + b', "version": "x"}',
+                b'{"labels": ' + b'[' * 40 + b']' * 40 + b', "version": "x"}'):
+        assert len(raw) < request_limit([c.name for c in rig], load_skeleton('human14')
+                                        .keypoints)
+        status, _, answer = request(f'{url}/api/labels/0', 'PUT', raw=raw, headers=token)
+        depth = raw.count(b'[') + raw.startswith(b'{')
+        assert status == 400, answer
+        assert answer['error'] == f'body: JSON nested {depth} levels deep (at most 32)'
+    # brackets inside strings are text, not nesting
+    status, _, answer = request(f'{url}/api/labels/0', 'PUT', {
+        'labels': {}, 'version': '[' * 100}, headers=token)
+    assert status == 409 and 'another tab' in answer['error'], answer
+    assert labels.read_bytes() == before
+
+
+# Issue 37: keypoint names longer than 256 characters (a lab's own naming) get their
+# epipolar curves like any other.
+@pytest.fixture(scope='module')
+def long_names(tmp_path_factory):
+    root = tmp_path_factory.mktemp('long_names')
+    rig, stamps = noise_recording(root / 'bag', cameras=2, frames=2, width=W, height=H)
+    names = ['left_' + 'forepaw_' * 40, 'right_' + 'hindpaw_' * 45, 'tail']
+    assert min(map(len, names[:2])) > 256
+    skeleton = root / 'skeleton.yaml'
+    skeleton.write_text(yaml.safe_dump({'name': 'lab', 'keypoints': names,
+                                        'bones': [names[:2]]}))
+    labels = root / 'labels.csv'
+    with label_server(root / 'bag', labels, '--skeleton', str(skeleton)) as url:
+        yield url, rig, names
+
+
+def test_long_keypoint_names_get_epipolar_curves(long_names):
+    url, rig, names = long_names
+    a, b = rig
+    uv = [30.0, 20.0]
+    status, _, answer = request(f'{url}/api/epipolar', 'POST', {
+        'camera': b.name, 'keypoint': names[1], 'labels': {a.name: {names[1]: uv}}},
+        headers={TOKEN_HEADER: page_token(url)})
+    assert status == 200, answer
+    curve = np.array([p for line in answer[a.name] for p in line])
+    assert len(curve) > 10
+    # independently: undistorted by OpenCV, every point lies on the epipolar line F x of
+    # the undistorted click, F from the two cameras' K, R, t
+    R = b.R @ a.R.T
+    t = b.t - R @ a.t
+    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+    F = np.linalg.inv(b.K).T @ tx @ R @ np.linalg.inv(a.K)
+    click = cv2.undistortPoints(np.array([[uv]]), a.K, a.dist, P=a.K).reshape(2)
+    points = cv2.undistortPoints(curve[:, None], b.K, b.dist, P=b.K).reshape(-1, 2)
+    line = F @ np.array([*click, 1.0])
+    distance = np.abs(np.c_[points, np.ones(len(points))] @ line) / np.hypot(*line[:2])
+    assert distance.max() < 1e-3, distance.max()

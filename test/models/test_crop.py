@@ -96,3 +96,25 @@ def test_boxes_and_inverse_mapping():
     S = [crop_transform(b, (46, 46)) for b in boxes]
     cropped = np.stack([(np.c_[p, np.ones(2)] @ s.T)[:, :2] for p, s in zip(original, S)])
     np.testing.assert_allclose(crop_to_original(cropped, boxes, (46, 46)), original)
+
+
+def test_a_box_far_larger_than_the_image_stays_within_memory():
+    """Issue 37 (a live track_margin of 1e4): a crop box thousands of times the image was
+    padded to one shrunk pixel of the box's size (GBs); the region now stays within twice
+    the image. A moderate box beyond the image crops as before (brute force), and a huge
+    one gives the image as a dot of its mean at the crop's centre."""
+    import tracemalloc
+    image = np.full((120, 160, 3), 200, np.uint8)
+    huge = (-5e4, -4e4, 5e4 + 160, 4e4 + 120)
+    tracemalloc.start()
+    out = crop_images([image], np.array([huge]), (46, 46))[0]
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 20 * image.nbytes, peak
+    assert out.shape == (46, 46, 3) and out.max() <= 200
+    assert out[:20].max() == 0 and out[:, :20].max() == 0       # black beyond the image
+    wide = (-300.0, -200.0, 460.0, 320.0)
+    rng = np.random.default_rng(7)
+    textured = smooth_image(rng, 120, 160)
+    got = crop_images([textured], np.array([wide]), (46, 46), antialias=False)[0]
+    np.testing.assert_allclose(got, brute_force_crop(textured, wide, (46, 46)), atol=1.01)

@@ -87,17 +87,8 @@ def test_best_effort_heatmap_publisher_is_fused(ros_env, rig_file):
 
 
 def call(ros, srv_type, name, request, node):
-    """One service call; sent again (up to 3 times) when no response comes: service_is_ready
-    means the request side is matched, and a response sent before the client's response
-    reader is matched by the server is lost (DDS discovery is not symmetric)."""
-    client = ros.node.create_client(srv_type, name)
-    assert ros.spin_until(client.service_is_ready, timeout=30, process=node), name
-    for _ in range(3):
-        future = client.call_async(request)
-        if ros.spin_until(future.done, timeout=10, process=node):
-            return future.result()
-        client.remove_pending_request(future)
-    raise AssertionError(f'{name}: no response to 3 requests')
+    """One service call (RosHarness.call: sent again when no response comes)."""
+    return ros.call(srv_type, name, request, node)
 
 
 def set_request(**values):

@@ -1,7 +1,8 @@
 """The fusion executable with a rig in mm (an anipose TOML that states no unit, the
 `rig_units` parameter saying mm): keypoints3d in mm, the live filter's mm / m/s^2 settings
 converted (nothing gated on a still subject; before, a mm joint was gated nearly every
-frame), /diagnostics stating the unit."""
+frame), /diagnostics stating the unit; the filter's numbers checked in mm, at start and
+live (a noise usable in metres whose covariance overflows in mm is refused naming it)."""
 import re
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -9,9 +10,11 @@ from helpers.fusion_frames import Frame, fusion_statuses, publishers, run_frames
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import ring_rig
 import numpy as np
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from sensor_msgs.msg import PointCloud2
 
-from monet_ros.geometry import save_anipose_toml
+from monet_ros.geometry import save_anipose_toml, save_rig
 from monet_ros.geometry.units import rescale
 from monet_ros.io import cloud_to_keypoints3d, header_stamp_ns
 from monet_ros.nodes.qos import STREAM_OUT
@@ -63,3 +66,28 @@ def test_fusion_in_mm_filters_as_in_metres(ros_env, tmp_path):
         np.testing.assert_allclose(filtered[stamp]['X'], expected, atol=1e-2)
         np.testing.assert_allclose(expected / 1000.0, metres, atol=1e-9)
     assert in_mm.gated == in_m.gated == 0
+
+
+def test_the_filter_is_checked_in_the_rig_unit_at_start_and_live(ros_env, tmp_path):
+    # 1e146 mm: a restart covariance of 2e286 m^2 / 1e-18 s^2 in metres, inf in mm
+    path = tmp_path / 'rig.yaml'
+    save_rig(path, rescale(ring_rig(2), 'mm'))
+    params = dict(rig=str(path), filter=True)
+    with NodeProcess('fusion', ros_env, {**params, 'filter_noise_mm': 1e146}) as node:
+        assert node.wait(timeout=120) == 2, node.output()
+    lines = [line for line in node.stderr_path.read_text().splitlines() if line.strip()]
+    assert lines == ["fusion: error: parameter 'filter_noise_mm': 1e+146 mm gives a "
+                     'non-finite restart covariance in mm'], node.output()
+    with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
+        def set_noise(value):
+            request = SetParameters.Request(parameters=[Parameter(
+                name='filter_noise_mm', value=ParameterValue(
+                    type=ParameterType.PARAMETER_DOUBLE, double_value=value))])
+            return ros.call(SetParameters, '/monet/fusion/set_parameters', request,
+                            node).results[0]
+        refused = set_noise(1e146)
+        accepted = set_noise(1e5)
+        assert node.stop() == 0, node.output()
+    assert not refused.successful and refused.reason == (
+        "parameter 'filter_noise_mm': 1e+146 mm gives a non-finite restart covariance in mm")
+    assert accepted.successful, accepted.reason

@@ -5,6 +5,7 @@ frame-by-frame robust triangulation of the same 2D (fusion.fuse_points)."""
 import numpy as np
 import pytest
 
+from monet_ros.config import ConfigError
 from monet_ros.fusion import FusionConfig, fuse_frames
 from monet_ros.skeleton import load_skeleton
 from monet_ros.synth import RigConfig, Subject, make_rig
@@ -156,3 +157,73 @@ def test_a_joint_never_triangulated_or_started_late_is_no_error():
     assert np.isnan(result.X[:, 1]).all() and np.isnan(result.X[:25, 2]).all()
     assert np.allclose(result.X[25:, 2], X[25:, 2], atol=0.01)
     assert np.allclose(result.X[:, 0], X[:, 0], atol=0.01)
+
+
+# Issue 37: a Kalman setting whose square overflows (or underflows to 0) in the rig's unit
+# is refused naming it, as the live filter's; every accepted one smooths to finite points.
+# The settings keep their units (mm, m/s^2) and are checked once converted into the rig's:
+# measurement_noise_mm 1e155 is (1e152 m)^2 in a metre rig but (1e155 mm)^2 = inf in a
+# millimetre one; 1e-160 mm underflows to 0 only in metres.
+UNITS = ('m', 'cm', 'mm')
+
+
+@pytest.mark.parametrize('units', UNITS)
+@pytest.mark.parametrize('name', ['measurement_noise_mm', 'acceleration_m_s2', 'gate_sigma',
+                                  'max_gap_s'])
+@pytest.mark.parametrize('value', [5e-324, 1e-200, 1e-160, 1e155, 1e200,
+                                   1.7976931348623157e308])
+def test_extreme_kalman_settings_are_refused_by_name_or_smooth_finitely(units, name, value):
+    config = FilterConfig(method='kalman', **{name: value})     # inside the declared range
+    try:
+        physical = config.in_units(units)
+    except ConfigError as error:
+        assert error.field == name, str(error)
+        assert repr(value) in str(error), str(error)
+        return
+    # accepted: the numbers in the rig unit are usable (computed here in Python floats)
+    per_metre = {'m': 1.0, 'cm': 100.0, 'mm': 1000.0}[units]
+    noise = config.measurement_noise_mm * per_metre / 1000.0
+    assert 0 < physical.r2 < float('inf') and physical.r2 == pytest.approx(noise * noise)
+    rng = np.random.default_rng(1)
+    X = (rng.normal(0, 0.01, (6, 4, 3)) + [0.0, 0.0, 1.0]) * per_metre
+    X[2, 1] = np.nan
+    stamps = np.arange(6) * 33_000_000 + 10 ** 18
+    result = kalman_smooth(X, stamps, config, units=units)
+    seen = ~np.isnan(result.X)
+    assert seen.any() and np.isfinite(result.X[seen]).all(), (name, value)
+
+
+def test_a_noise_is_checked_in_the_rig_unit():
+    huge = FilterConfig(method='kalman', measurement_noise_mm=1e155)
+    assert huge.in_units('m').r2 == pytest.approx(1e304)
+    with pytest.raises(ConfigError, match=r"'measurement_noise_mm': 1e\+155 gives a "
+                       r'measurement variance of 1e\+308 cm\^2 whose innovation variance'):
+        huge.in_units('cm')             # finite, but twice it is not
+    with pytest.raises(ConfigError, match=r"^FilterConfig: parameter 'measurement_noise_mm': "
+                       r'1e\+155 gives a measurement variance of inf mm\^2 '):
+        huge.in_units('mm')
+    tiny = FilterConfig(method='kalman', measurement_noise_mm=1e-160)
+    with pytest.raises(ConfigError, match=r'of 0\.0 m\^2 \(must be finite and > 0\)'):
+        tiny.in_units('m')
+    assert tiny.in_units('mm').r2 > 0
+    with pytest.raises(ConfigError, match="'acceleration_m_s2': 1e\\+153 gives a process "
+                       r'noise variance of inf \(mm/s\^2\)\^2'):
+        FilterConfig(method='kalman', acceleration_m_s2=1e153).in_units('mm')
+
+
+@pytest.mark.parametrize('units, value', [('m', '1e200'), ('mm', '1e155')])
+def test_the_filter_options_name_the_option(tmp_path, capsys, units, value):
+    from monet_ros.cli import main
+    from monet_ros.geometry import save_rig
+    from monet_ros.geometry.units import rescale
+    rig = tmp_path / 'rig.yaml'
+    save_rig(rig, rescale(make_rig(RigConfig(num_cameras=3), seed=3), units))
+    code = main(['triangulate', str(tmp_path / 'absent.csv'), '--rig', str(rig), '--out',
+                 str(tmp_path / 'out'), '--fps', '30', '--filter', 'kalman',
+                 '--measurement-noise-mm', value])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    assert err[0] == (f'monet triangulate: error: --measurement-noise-mm: {float(value)!r} '
+                      f'gives a measurement variance of inf {units}^2 (must be finite and '
+                      '> 0)'), err
+    assert not (tmp_path / 'out').exists()

@@ -202,3 +202,81 @@ def test_an_outlier_after_a_missed_frame_cannot_throw_the_velocity_off():
     got, mask = run(f, stamps, measured)
     assert not mask[31, 0] and mask[32:, 0].all() and f.gated == 1
     assert np.abs(got[31:, 0] - truth[31:, 0]).max() < 0.03
+
+
+# Issue 37: values inside the declared ranges whose squares or products overflow (or
+# underflow to 0) are refused naming the field; every accepted one filters to finite output.
+TINY, HUGE, FLOAT_MAX = 5e-324, 1e200, 1.7976931348623157e308
+FLOAT_FIELDS = [name for name, value in vars(LiveFilterConfig()).items()
+                if isinstance(value, float)]
+
+
+def run_extreme_steps(live):
+    """Frames at the shortest (1 ns) and longest (filter_reset_s) steps, with a NaN, a
+    far outlier and two agreeing jumps, in the filter's unit: (J, 3) outputs of every
+    frame."""
+    rng = np.random.default_rng(0)
+    scale = {'m': 1.0, 'cm': 100.0, 'mm': 1000.0}[live.units]
+    X = rng.uniform(-1, 1, (5, 3))
+    longest = int(live.config.filter_reset_s * 1e9)
+    stamps = np.cumsum([T0, 1, longest, 1, max(longest, 1), 1, 33_000_000, 1])
+    outs = []
+    for k, stamp in enumerate(stamps):
+        frame = X + 0.01 * k
+        frame[0] = np.nan if k == 2 else frame[0]
+        frame[1] += 50.0 if k in (3, 4) else 0.0
+        outs.append(live.update(int(stamp), frame * scale)[0])
+    return np.array(outs)
+
+
+# The settings keep their units and are checked once converted into the rig's (LiveFilter
+# units): 1e155 mm is a usable noise in a metre rig, an overflow in a millimetre one.
+@pytest.mark.parametrize('units', ['m', 'cm', 'mm'])
+@pytest.mark.parametrize('name', FLOAT_FIELDS)
+@pytest.mark.parametrize('value', [TINY, 1e-200, 1e-160, 1e146, 1e155, HUGE, FLOAT_MAX])
+def test_extreme_settings_are_refused_by_name_or_filter_finitely(units, name, value):
+    try:
+        config = LiveFilterConfig(filter=True, **{name: value})
+    except ConfigError as error:       # outside the declared range (none here is)
+        assert error.field == name
+        return
+    per_mm = {'m': 1e-3, 'cm': 0.1, 'mm': 1.0}[units]
+    try:
+        live = LiveFilter(config, units)
+    except ConfigError as error:
+        assert error.field == name, error
+        assert repr(value) in str(error) or f'{value!r}'.replace('e+', 'e') in str(error)
+        # what overflowed, computed independently in Python floats: the noise's variance in
+        # the rig unit, or the covariance of a restart from two measurements 1 ns apart
+        try:
+            pair = 2 * (config.filter_noise_mm * per_mm) ** 2 / 1e-18
+        except OverflowError:
+            pair = float('inf')
+        assert name != 'filter_noise_mm' or not 0 < pair < float('inf')
+        return
+    assert live.units == units
+    assert live.r2 == pytest.approx((config.filter_noise_mm * per_mm) ** 2) and live.r2 > 0
+    out = run_extreme_steps(live)
+    seen = ~np.isnan(out)
+    assert np.isfinite(out[seen]).all(), (name, value)
+    assert seen[-1].all(), 'every joint measured in the last frame has an output'
+
+
+def test_the_reported_value_is_refused_naming_it():
+    with pytest.raises(ConfigError, match=r"'filter_noise_mm': 1e\+200 gives a measurement "
+                       r'variance of inf m\^2'):
+        LiveFilter(LiveFilterConfig(filter_noise_mm=1e200))
+    with pytest.raises(ConfigError, match="'filter_acceleration': 1e\\+200"):
+        LiveFilter(LiveFilterConfig(filter_acceleration=1e200))
+    # in the rig unit: usable in metres, not in millimetres
+    assert LiveFilter(LiveFilterConfig(filter_noise_mm=1e146)).r2 == pytest.approx(1e286)
+    with pytest.raises(ConfigError, match=r"'filter_noise_mm': 1e\+146 mm gives a non-finite "
+                       'restart covariance in mm'):
+        LiveFilter(LiveFilterConfig(filter_noise_mm=1e146), 'mm')
+    with pytest.raises(ConfigError, match=r"'filter_noise_mm': 1e\+155 gives a measurement "
+                       r'variance of inf mm\^2'):
+        LiveFilter(LiveFilterConfig(filter_noise_mm=1e155), 'mm')
+    with pytest.raises(ConfigError, match=r"'filter_max_speed': filter_max_speed 1e\+306 m/s "
+                       r'.* non-finite reach in mm'):
+        LiveFilter(LiveFilterConfig(filter_max_speed=1e306), 'mm')
+    LiveFilter(LiveFilterConfig(filter_max_speed=1e306), 'm')
