@@ -41,7 +41,8 @@ setup(
     zip_safe=True,
     maintainer='monet_ros developers',
     maintainer_email='dev@monet-ros.invalid',
-    description='Live multi-camera keypoint tracking with MONET (epipolar divergence).',
+    description='Live multi-camera 3D keypoint tracking after MONET (multiview semi-supervised '
+                'keypoint detection).',
     license='BSD-3-Clause',
     tests_require=['pytest'],
     entry_points={

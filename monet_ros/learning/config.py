@@ -100,6 +100,10 @@ class TrainConfig:
     epipolar_kernel_px: float = setting(1.0, 'L_E: scale of its Cauchy kernel (heatmap px): a '
                                         'view farther off its lines is pulled more gently',
                                         minimum=0.0, exclusive_minimum=True, maximum=1e3)
+    epipolar_agreement_px: float = setting(
+        2.0, 'L_E: two confident views agree (and may anchor others) when their peaks lie '
+        "within this many heatmap px of each other's epipolar lines", minimum=0.0,
+        exclusive_minimum=True, maximum=1e3)
     epipolar_fit_heat_px: float = setting(
         1.0, 'L_E starts (after the warm-up) at the first step where the median distance of '
         "the detector's peaks to the labels of its labelled crops is at most this many "

@@ -623,7 +623,8 @@ class Trainer:
         t = torch.as_tensor(batch.t[sl], **f32).reshape(B, k, 3)
         e = anchored_epipolar_terms(heat.reshape(B, k, *heat.shape[1:]), K, R, t,
                                     anchor_confidence=self.anchor_cutoff(labelled_peak),
-                                    kernel_px=self.config.epipolar_kernel_px)
+                                    kernel_px=self.config.epipolar_kernel_px,
+                                    agreement_px=self.config.epipolar_agreement_px)
         self.last_pair_share = float(e['used'].float().mean()) if e['used'].numel() else 0.0
         return {'E': reduce_anchored_terms(e, heat)}
 

@@ -187,12 +187,16 @@ def plans(trainer, steps):
 
 # temporal_epsilon 0: every jump counts (12x12 heatmaps move by less than the default 1 px)
 NEW_TERM = dict(batch_unlabeled=2, temporal_epsilon=0.0)
+# L_E from its first step and every confident view an anchor: an untrained net neither fits
+# its labels nor agrees across views
+L_E_NOW = dict(epipolar_fit_heat_px=1e3, epipolar_agreement_px=1e3)
 
 
 @pytest.mark.parametrize('mode, field, weight, extra', [
-    ('epipolar', 'lambda_e', 5.0, {}), ('monet', 'lambda_e', 5.0, {}),
+    ('epipolar', 'lambda_e', 5.0, L_E_NOW), ('monet', 'lambda_e', 5.0, L_E_NOW),
     ('monet', 'lambda_p', 1.0, {}), ('temporal_difference', 'lambda_t', 1.0, NEW_TERM),
-    ('reprojection', 'lambda_r', 1.0, NEW_TERM)])
+    ('reprojection', 'lambda_r', 1.0, NEW_TERM),
+    ('reprojection_epipolar', 'lambda_e', 5.0, dict(NEW_TERM, **L_E_NOW))])
 def test_a_terms_exact_control_has_the_identical_batch_plan(recording, mode, field, weight,
                                                             extra):
     """The run with a term's weight 0 draws the same instants and views at every step (and
@@ -207,7 +211,7 @@ def test_a_terms_exact_control_has_the_identical_batch_plan(recording, mode, fie
     (with_term, a), (control, b) = runs[weight], runs[0.0]
     kinds = [[kind for kind, _ in step] for step in with_term]
     term = {'lambda_e': 'E', 'lambda_p': 'B', 'lambda_t': 'T', 'lambda_r': 'R'}[field]
-    part = {'T': 'U', 'R': 'U'}.get(term, term)
+    part = 'U' if term in 'TR' or mode == 'reprojection_epipolar' else term
     assert sum(part in k for k in kinds) >= 3, kinds        # the term is in the plan
     assert kinds == [[kind for kind, _ in step] for step in control]
     for step_a, step_b in zip(with_term, control):
@@ -215,6 +219,27 @@ def test_a_terms_exact_control_has_the_identical_batch_plan(recording, mode, fie
             np.testing.assert_array_equal(pairs_a, pairs_b)
     assert a.rng.bit_generator.state == b.rng.bit_generator.state
     assert a.last_terms[term] > 0 and a.last_terms['loss'] != b.last_terms['loss']
+
+
+def test_l_e_added_to_l_r_keeps_l_r_s_plan_and_waits_for_a_fit(recording):
+    """reprojection_epipolar at lambda_e 0 is `reprojection` step for step (same crops,
+    same loss): L_E's exact control is the default recipe; and L_E does not start before the
+    detector fits its labelled crops (here: never, to 1e-9 heatmap px)."""
+    out = {}
+    for mode, lam in (('reprojection', 5.0), ('reprojection_epipolar', 0.0),
+                      ('reprojection_epipolar', 5.0)):
+        config = TrainConfig(mode=mode, steps=6, epipolar_warmup=0.5, lambda_e=lam,
+                             epipolar_fit_heat_px=1e-9, **dict(TINY, **NEW_TERM))
+        trainer = Trainer(config, TrainingData(recording, config, (48, 48), (12, 12)))
+        out[mode, lam] = (plans(trainer, 6), trainer)
+    (p_r, t_r), (p_c, t_c), (_, t_e) = out.values()
+    for step_a, step_b in zip(p_r, p_c):
+        assert [k for k, _ in step_a] == [k for k, _ in step_b]
+        for (_, a), (_, b) in zip(step_a, step_b):
+            np.testing.assert_array_equal(a, b)
+    assert t_r.last_terms['loss'] == t_c.last_terms['loss']
+    assert t_e.epipolar_started is None and 'E' not in t_e.last_terms
+    assert 'once the detector fits' in t_e.objective_text()
 
 
 def test_config_errors_name_the_field():

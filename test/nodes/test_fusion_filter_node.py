@@ -33,7 +33,8 @@ def test_filter_switched_on_live_publishes_filtered_and_raw(ros_env, rig_file):
     # restart looks the same to the filter), frame 10 follows it
     indices = list(range(9)) + [200, 201]
     frames = [Frame(rig, X, i, rng, noise=0.4) for i in indices]
-    params = dict(rig=str(path), timeout_s=2.0, input_reliability='reliable')
+    # every frame fused whole, however loaded the machine (run_frames resends until fused)
+    params = dict(rig=str(path), timeout_s=60.0, max_queue_ms=0.0, input_reliability='reliable')
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2, STREAM_OUT)
         raw = ros.collect('/monet/keypoints3d_raw', PointCloud2, STREAM_OUT)
