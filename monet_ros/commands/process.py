@@ -10,7 +10,8 @@ Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
 keypoints3d.trc (OpenSim / Pose2Sim), keypoints.nwb (NWB + ndx-pose, 3D and the 2D
 detections per camera) and detections2d.npz (2D detections + crop cameras). 3D is in the
 rig's length unit (--rig-units, the file's, else the rule of monet_ros.geometry.units; a
-recording's /tf_static rig: m), stated in every file.
+recording's /tf_static rig: m), stated in every file; the MCAP's messages are ROS messages,
+in metres (REP 103) whatever the rig's unit.
 
 --filter kalman|optim smooths the 3D over the whole recording (monet_ros.temporal): the
 analysis files then hold the filtered points and the MCAP also /monet/keypoints3d_filtered
@@ -155,6 +156,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from monet_ros.geometry.units import rig_units as units_of
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.io.export_results import ResultsCollector
+    from monet_ros.io.fields import keypoints_as_published
     from monet_ros.io.images import to_rgb8
     from monet_ros.io.multiview import image_topics
     from monet_ros.models import Detector
@@ -169,7 +171,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
         from monet_ros.io.rig_fit import fit_rig_to_bag
         rig_cameras, _ = fit_rig_to_bag(rig_cameras, open_bag(bag), camera_map)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
-    check_filter_units(filter_config, units_of(cameras))     # before the work
+    units = units_of(cameras)
+    check_filter_units(filter_config, units)     # before the work
     if config.min_views > len(cameras):
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
@@ -218,15 +221,15 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                                    fusion_config)
             writer.write_keypoints3d('/monet/keypoints3d', frame.stamp_ns, frame_id,
                                      result.X, result.confidence, result.reprojection_error,
-                                     result.num_views)
+                                     result.num_views, units=units)
             if config.heatmaps:
                 for cam, hm in zip(present, heat):
                     writer.write_heatmaps(f'/monet/{cam.name}/heatmaps', frame.stamp_ns, hm,
                                           cam.name)
             collector.add(frame.stamp_ns, present, result, heat_cameras)
             finite = np.isfinite(result.X).all(axis=1)
-            if config.track:
-                tracker.update(result.X, frame.stamp_ns)
+            if config.track:      # the numbers the detector node reads from the topic
+                tracker.update(keypoints_as_published(result.X, units), frame.stamp_ns)
             figures['frames'] += 1
             figures['views'] += len(present)
             errors.add(float(np.nanmean(result.reprojection_error)) if finite.any()
@@ -240,7 +243,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
             smoothed = smooth_points(a['X'], a['score'], a['points2d'], a['conf2d'], cameras,
                                      a['stamps'], edges or (), filter_config, error=a['error'],
                                      progress=progress)
-            write_filtered(writer, frame_id, smoothed, a['stamps'])
+            write_filtered(writer, frame_id, smoothed, a['stamps'], units)
         figures['filter'] = smoothed
         written = collector.write(staging, exports, edges=edges, trc_axes=trc_axes,
                                   smoothed=smoothed)

@@ -187,7 +187,7 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
                        for v, cam in enumerate(rig))
         # the cloud (best-effort in) is sent with every frame until the crops follow it
         for stamp in range(T0 + 100, T0 + 160):
-            cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))
+            cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X, units='m'))
             got = stream.roundtrip(stamp, images, node)
             if cropped_around_X(got):
                 break
@@ -349,7 +349,7 @@ def test_lockstep_waits_for_the_previous_frames_keypoints3d(ros_env, setup):
         stream.send(T0 + 1, images)
         assert not ros.spin_until(lambda: done(T0 + 1), timeout=1.0, process=node)
         X = np.random.default_rng(4).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))
-        cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))
+        cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X, units='m'))
         assert ros.spin_until(lambda: done(T0 + 1), timeout=30, process=node), node.output()
         rule = detector_boxes(first, rig, crop_boxes(rig, X.astype(np.float32)))
         for v, cam in enumerate(rig):       # cropped around the 3D it waited for
