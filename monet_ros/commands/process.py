@@ -156,7 +156,6 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from monet_ros.geometry.units import rig_units as units_of
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.io.export_results import ResultsCollector
-    from monet_ros.io.fields import keypoints_as_published
     from monet_ros.io.images import to_rgb8
     from monet_ros.io.multiview import image_topics
     from monet_ros.models import Detector
@@ -193,7 +192,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                    skip_reasons={}, seconds=0.0)
     errors, num_views = RunningMean(), RunningMean()
     collector = ResultsCollector(cameras, detector.keypoints)
-    tracker = TrackedCrops()          # the detector node's defaults (track_* parameters)
+    tracker = TrackedCrops(units=units)   # the detector node's defaults (track_* parameters)
     start = time.perf_counter()
     with atomic_output_dir(out) as staging, BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6))
@@ -228,8 +227,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                                           cam.name)
             collector.add(frame.stamp_ns, present, result, heat_cameras)
             finite = np.isfinite(result.X).all(axis=1)
-            if config.track:      # the numbers the detector node reads from the topic
-                tracker.update(keypoints_as_published(result.X, units), frame.stamp_ns)
+            if config.track:
+                tracker.update(result.X, frame.stamp_ns)
             figures['frames'] += 1
             figures['views'] += len(present)
             errors.add(float(np.nanmean(result.reprojection_error)) if finite.any()

@@ -136,15 +136,6 @@ def keypoints_from_metres(X, units):
     return convert(np.asarray(X, np.float64), 'm', units)
 
 
-def keypoints_as_published(X, units):
-    """(N, 3) points in `units` as a subscriber of /monet/keypoints3d reads them back into
-    `units`: converted to metres, rounded to the message's float32, converted back. An
-    offline run that follows the topic's numbers (monet process's crop rule) uses this to
-    crop exactly as the live detector does."""
-    metres = keypoints_to_metres(X, units).astype(np.float32).astype(np.float64)
-    return keypoints_from_metres(metres, units)
-
-
 def keypoint_cloud_fields(X, confidence=None, reprojection_error=None, num_views=None, *,
                           units):
     """PointCloud2 fields (no header) for N keypoints, in PROTOCOL.md's layout.

@@ -253,8 +253,9 @@ class DetectorNode(Node):
                  self.create_publisher(CameraInfo, DEBUG_CAMERA_INFO.format(camera=slot.name),
                                        STREAM_OUT))
                 if config.debug_image else None)
-        self.tracker = TrackedCrops(self.derived.rule)     # keypoints in the rig's unit
+        # keypoints3d (m) read into the rig's unit, that of the cameras they are projected with
         self.units = rig_units([s.rig_camera for s in self.slots if s.rig_camera is not None])
+        self.tracker = TrackedCrops(self.derived.rule, self.units)
         self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
         self.create_subscription(String, MODEL, self.on_model, LATCHED)

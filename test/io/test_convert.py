@@ -9,12 +9,12 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
+from monet_ros.crop_rule import TrackedCrops
 from monet_ros.geometry.units import rescale
 from monet_ros.io import BagWriter, convert, open_bag, rig_from_bag
 from monet_ros.io.fields import (
     camera_pose_transform,
     extrinsics_from_pose,
-    keypoints_as_published,
     matrix_to_quaternion,
     quaternion_to_matrix,
 )
@@ -153,10 +153,14 @@ def test_messages_are_in_metres_whatever_the_rig_unit(tmp_path):
     np.testing.assert_allclose(back_mm, on_topic * 1000.0, rtol=1e-15)
     np.testing.assert_allclose(convert.cloud_to_keypoints3d(msg, units='cm')['X'],
                                on_topic * 100.0, rtol=1e-15)
-    # the offline crop rule follows the very numbers a subscriber reads
-    np.testing.assert_array_equal(keypoints_as_published(X_mm, 'mm'), back_mm)
-    # a rig in m: identity (float32 rounding only)
-    np.testing.assert_array_equal(keypoints_as_published(X_m, 'm'), on_topic)
+    # the crop rule (offline: fed the rig-unit fusion) keeps the very numbers a subscriber
+    # reads, and keeps what it read as it is
+    for X, units, read in ((X_mm, 'mm', back_mm), (X_m, 'm', on_topic)):
+        tracker = TrackedCrops(units=units)
+        tracker.update(X)
+        np.testing.assert_array_equal(tracker.X, read)
+        tracker.update(read)
+        np.testing.assert_array_equal(tracker.X, read)
     # skeleton markers: m, the joint size in m
     bones = [[0, 1], [3, 4]]
     joints = convert.skeleton_marker_array(3, 'world', X_mm, bones, units='mm').markers[0]

@@ -326,6 +326,51 @@ def test_backend_and_precision_give_the_core_frame_and_report_stages(ros_env, se
             assert int(values[f'{stage}_calls']) >= 1
 
 
+def test_a_mm_rig_crops_around_keypoints3d_in_metres_as_a_metre_rig(ros_env, setup, tmp_path):
+    """/monet/keypoints3d is in metres (REP 103) whatever the rig's unit: a detector whose
+    rig is in mm reads it into mm before projecting, so its crops land on the subject
+    exactly where a metre rig's do (before, metres projected with mm cameras put the
+    subject near the camera centres)."""
+    from monet_ros.geometry.units import rescale
+
+    rig_m, _, first, _, images = setup
+    rig_mm = rescale(rig_m, 'mm')
+    path = tmp_path / 'rig_mm.yaml'
+    save_rig(path, rig_mm)
+    params = dict(rig=str(path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
+                  track_timeout_s=3600.0, device='cpu')
+    X = np.random.default_rng(5).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))   # m
+    # the metre rig's crops around the keypoints as the cloud carries them (float32 m)
+    rule = detector_boxes(first, rig_m, crop_boxes(rig_m, X.astype(np.float32)))
+    fixed = expected_box((100, 50, 400, 450), INPUT[1] / INPUT[0])
+    assert np.abs(rule - np.array([fixed, fixed])).max() > 20      # a different crop
+
+    def cropped_around_X(got):
+        return all(np.allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                               expected_K(cam.K, rule[v], 32, 24), rtol=1e-9)
+                   for v, cam in enumerate(rig_mm))
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = Stream(ros, rig_mm)
+        cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
+        stream.wait_matched(node)
+        ros.wait_for_subscribers(cloud_pub, process=node)
+        got = stream.roundtrip(T0, images, node)           # no keypoints yet: the box
+        for cam in rig_mm:
+            np.testing.assert_allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                                       expected_K(cam.K, fixed, 32, 24), rtol=1e-12)
+        # what fusion publishes for this subject: metres (a mm fusion converts at publish)
+        cloud = keypoints3d_to_cloud(T0, 'world', X * 1000.0, units='mm')
+        for stamp in range(T0 + 1, T0 + 61):    # best-effort in: sent with every frame
+            cloud_pub.publish(cloud)
+            got = stream.roundtrip(stamp, images, node)
+            if cropped_around_X(got):
+                break
+        assert node.stop(signal.SIGINT) == 0, node.output()
+    for v, cam in enumerate(rig_mm):
+        np.testing.assert_allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                                   expected_K(cam.K, rule[v], 32, 24), rtol=1e-9)
+
+
 def test_lockstep_waits_for_the_previous_frames_keypoints3d(ros_env, setup):
     """lockstep: a frame that arrives before the 3D of the previous processed frame waits
     for it, then is cropped around it (whatever order the messages arrive in); after
