@@ -338,7 +338,8 @@ def test_a_mm_rig_crops_around_keypoints3d_in_metres_as_a_metre_rig(ros_env, set
     path = tmp_path / 'rig_mm.yaml'
     save_rig(path, rig_mm)
     params = dict(rig=str(path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
-                  track_timeout_s=3600.0, device='cpu')
+                  track_timeout_s=3600.0, device='cpu', debug_image=True,
+                  debug_image_scale=1.0, debug_image_rate_hz=100.0)
     X = np.random.default_rng(5).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))   # m
     # the metre rig's crops around the keypoints as the cloud carries them (float32 m)
     rule = detector_boxes(first, rig_m, crop_boxes(rig_m, X.astype(np.float32)))
@@ -352,6 +353,7 @@ def test_a_mm_rig_crops_around_keypoints3d_in_metres_as_a_metre_rig(ros_env, set
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = Stream(ros, rig_mm)
         cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
+        overlays = ros.collect('/monet/cam1/debug_image', Image, 100)
         stream.wait_matched(node)
         ros.wait_for_subscribers(cloud_pub, process=node)
         got = stream.roundtrip(T0, images, node)           # no keypoints yet: the box
@@ -365,10 +367,23 @@ def test_a_mm_rig_crops_around_keypoints3d_in_metres_as_a_metre_rig(ros_env, set
             got = stream.roundtrip(stamp, images, node)
             if cropped_around_X(got):
                 break
+        tracked = stamp
+        for stamp in range(tracked + 1, tracked + 41):     # a debug image of a tracked frame
+            if any(header_stamp_ns(m) >= tracked for m in overlays):
+                break
+            stream.roundtrip(stamp, images, node)
         assert node.stop(signal.SIGINT) == 0, node.output()
     for v, cam in enumerate(rig_mm):
         np.testing.assert_allclose(np.reshape(got[cam.name][1].k, (3, 3)),
                                    expected_K(cam.K, rule[v], 32, 24), rtol=1e-9)
+    # the debug image's red crosses (the fused keypoints reprojected) are where the metre
+    # rig projects the subject (a peak's green dot may cover a few)
+    overlay = next(m for m in overlays if header_stamp_ns(m) >= tracked)
+    pixels = np.frombuffer(overlay.data, np.uint8).reshape(480, 640, 3)
+    uv = np.round(cv2_project(rig_m[1], X.astype(np.float32))).astype(int)
+    inside = ((uv >= 0) & (uv < [640, 480])).all(axis=1)
+    red = [tuple(pixels[y, x]) == (40, 40, 240) for x, y in uv[inside]]
+    assert inside.sum() >= 10 and sum(red) >= 0.7 * len(red), (sum(red), len(red))
 
 
 def test_lockstep_waits_for_the_previous_frames_keypoints3d(ros_env, setup):
