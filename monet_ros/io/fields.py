@@ -4,8 +4,9 @@ message-like object (rclpy, mcap_ros2 or rosbags decoded messages share attribut
 
 Lengths in messages are metres (ROS REP 103), whatever the rig's unit: the keypoint cloud
 is built from points in the rig's unit and read back into it (the `units` argument of
-keypoint_cloud_fields / cloud_to_keypoints3d, required), and a TF transform
-(camera_pose_transform) is in metres. These are the only conversions between the two.
+keypoint_cloud_fields / cloud_to_keypoints3d, required, which the builders of convert.py and
+writer.py pass on, the skeleton markers included), and a TF transform (camera_pose_transform)
+is in metres, as are the camera frustum markers (markers.frustum_marker_specs).
 """
 import numpy as np
 
