@@ -47,7 +47,8 @@ def write_only(config, path):
                                 f'{cam.name}_optical')
                 bag.write_camera_info(f'/{cam.name}/camera_info', int(stamp), cam,
                                       f'{cam.name}_optical')
-            bag.write_keypoints3d('/ground_truth/keypoints3d', int(stamp), 'world', X)
+            bag.write_keypoints3d('/ground_truth/keypoints3d', int(stamp), 'world', X,
+                                  units='m')
 
 
 def stages(config):

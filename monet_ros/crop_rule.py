@@ -22,6 +22,7 @@ import warnings
 import numpy as np
 
 from monet_ros.geometry import project_views, stack_cameras
+from monet_ros.geometry.units import check_units, convert
 from monet_ros.learning.dataset import boxes_from_points, fill_boxes
 
 SOURCES = ('tracked', 'labels', 'pseudo_labels', 'fixed', 'full', 'ground_truth')
@@ -114,18 +115,24 @@ class TrackedCrops:
     the next one. Keypoints are used while the image stamp is at most rule.timeout_ns newer
     than theirs (source stamps, not arrival times: a replay, live or offline, crops the same
     way at any speed); older, newer-than-the-image or too few finite points -> fallback.
+    units: the length unit of the keypoints and of the cameras they are projected with (the
+    rig's: 'm', 'cm', 'mm').
     """
 
-    def __init__(self, rule=None):
+    def __init__(self, rule=None, units='m'):
         self.rule = rule or TrackedRule()
+        self.units = check_units(units)
         self.X = None
         self.stamp_ns = None
 
     def update(self, X, stamp_ns=0):
-        """Keypoints (N, 3) fused for the instant `stamp_ns`; kept at float32 precision, as
-        /monet/keypoints3d carries them, so live and offline crop from the same numbers."""
-        X = np.asarray(X, np.float32).astype(np.float64).reshape(-1, 3)
-        self.X, self.stamp_ns = X, int(stamp_ns)
+        """Keypoints (N, 3) in `units` fused for the instant `stamp_ns`; kept as a subscriber
+        reads them from /monet/keypoints3d (metres at float32 precision, back in `units`),
+        so live and offline crop from the same numbers (points read from the topic are
+        kept as they are)."""
+        metres = convert(np.asarray(X, np.float64).reshape(-1, 3), self.units, 'm')
+        self.X = convert(metres.astype(np.float32).astype(np.float64), 'm', self.units)
+        self.stamp_ns = int(stamp_ns)
 
     def current(self, stamp_ns=None):
         """The keypoints to crop an image of `stamp_ns` around, or None."""

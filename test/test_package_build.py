@@ -121,7 +121,7 @@ def test_installed_fusion_and_pipeline_fuse_keypoints(ros_env, prefix, tmp_path)
     period = stamps[1] - stamps[0]
     for cloud in (from_pipeline[0], from_fusion[0]):
         assert (header_stamp_ns(cloud) - stamps[0]) % period == 0
-        assert cloud_to_keypoints3d(cloud)['X'].shape == (14, 3)
+        assert cloud_to_keypoints3d(cloud, units='m')['X'].shape == (14, 3)
     assert 'Traceback' not in pipeline.output() + fusion.output()
 
 

@@ -69,9 +69,10 @@ def _options_named():
         raise ValueError(f'{option}: {error.message}') from None
 
 
-def write_filtered(writer, frame_id, smoothed, stamps_ns, topic=FILTER_TOPIC):
-    """The filtered points of a temporal.Smoothed as /monet/keypoints3d messages (same
-    layout) on `topic`, one per instant of stamps_ns."""
+def write_filtered(writer, frame_id, smoothed, stamps_ns, units, topic=FILTER_TOPIC):
+    """The filtered points of a temporal.Smoothed (in the rig's length unit `units`) as
+    /monet/keypoints3d messages (same layout, metres) on `topic`, one per instant of
+    stamps_ns."""
     for t, stamp in enumerate(stamps_ns):
         writer.write_keypoints3d(topic, int(stamp), frame_id, smoothed.X[t], smoothed.score[t],
-                                 smoothed.error[t], smoothed.ncams[t])
+                                 smoothed.error[t], smoothed.ncams[t], units=units)

@@ -10,7 +10,8 @@ Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
 keypoints3d.trc (OpenSim / Pose2Sim), keypoints.nwb (NWB + ndx-pose, 3D and the 2D
 detections per camera) and detections2d.npz (2D detections + crop cameras). 3D is in the
 rig's length unit (--rig-units, the file's, else the rule of monet_ros.geometry.units; a
-recording's /tf_static rig: m), stated in every file.
+recording's /tf_static rig: m), stated in every file; the MCAP's messages are ROS messages,
+in metres (REP 103) whatever the rig's unit.
 
 --filter kalman|optim smooths the 3D over the whole recording (monet_ros.temporal): the
 analysis files then hold the filtered points and the MCAP also /monet/keypoints3d_filtered
@@ -169,7 +170,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
         from monet_ros.io.rig_fit import fit_rig_to_bag
         rig_cameras, _ = fit_rig_to_bag(rig_cameras, open_bag(bag), camera_map)
     cameras = select_cameras('monet process', rig_cameras, cameras or (), minimum=2)
-    check_filter_units(filter_config, units_of(cameras))     # before the work
+    units = units_of(cameras)
+    check_filter_units(filter_config, units)     # before the work
     if config.min_views > len(cameras):
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
@@ -190,7 +192,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                    skip_reasons={}, seconds=0.0)
     errors, num_views = RunningMean(), RunningMean()
     collector = ResultsCollector(cameras, detector.keypoints)
-    tracker = TrackedCrops()          # the detector node's defaults (track_* parameters)
+    tracker = TrackedCrops(units=units)   # the detector node's defaults (track_* parameters)
     start = time.perf_counter()
     with atomic_output_dir(out) as staging, BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6))
@@ -218,7 +220,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                                    fusion_config)
             writer.write_keypoints3d('/monet/keypoints3d', frame.stamp_ns, frame_id,
                                      result.X, result.confidence, result.reprojection_error,
-                                     result.num_views)
+                                     result.num_views, units=units)
             if config.heatmaps:
                 for cam, hm in zip(present, heat):
                     writer.write_heatmaps(f'/monet/{cam.name}/heatmaps', frame.stamp_ns, hm,
@@ -240,7 +242,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
             smoothed = smooth_points(a['X'], a['score'], a['points2d'], a['conf2d'], cameras,
                                      a['stamps'], edges or (), filter_config, error=a['error'],
                                      progress=progress)
-            write_filtered(writer, frame_id, smoothed, a['stamps'])
+            write_filtered(writer, frame_id, smoothed, a['stamps'], units)
         figures['filter'] = smoothed
         written = collector.write(staging, exports, edges=edges, trc_axes=trc_axes,
                                   smoothed=smoothed)

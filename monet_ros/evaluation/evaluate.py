@@ -17,6 +17,7 @@ from monet_ros.evaluation.report import EvalSummary
 from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
 from monet_ros.geometry import crop_transform
+from monet_ros.geometry.units import rig_units
 from monet_ros.learning.dataset import boxes_from_points
 from monet_ros.learning.pseudo_labels import project_to_views
 from monet_ros.models import decode_heatmaps
@@ -41,7 +42,7 @@ def detect_instants(detector, recording, instants, boxes, crop='tracked', rule=N
     cams = recording.cameras
     V, C = len(cams), recording.num_keypoints
     h, w = detector.heatmap_size
-    tracker = TrackedCrops(rule)
+    tracker = TrackedCrops(rule, rig_units(cams))
     fusion_config = fusion_config or FusionConfig()
     out = {k: np.empty((len(instants), V) + s) for k, s in (
         ('peaks_heat', (C, 2)), ('confidence', (C,)), ('points', (C, 2)), ('heat_K', (3, 3)),

@@ -17,6 +17,7 @@ from .fields import (
     heatmap_image_fields,
     image_msg_to_heatmaps,
     keypoint_cloud_fields,
+    keypoints_to_metres,
     split_stamp,
 )
 from .images import (
@@ -105,13 +106,13 @@ def heatmaps_to_image_msg(heatmaps, stamp, frame_id):
 
 
 def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error=None,
-                         num_views=None):
-    """(N, 3) keypoints -> sensor_msgs.msg.PointCloud2 with fields x y z confidence
-    reprojection_error (FLOAT32), num_views keypoint (UINT32), point_step 28;
-    inverse: cloud_to_keypoints3d."""
+                         num_views=None, *, units):
+    """(N, 3) keypoints in the rig's length unit `units` (required) -> sensor_msgs.msg.
+    PointCloud2 in metres with fields x y z confidence reprojection_error (FLOAT32),
+    num_views keypoint (UINT32), point_step 28; inverse: cloud_to_keypoints3d."""
     from sensor_msgs.msg import PointCloud2, PointField
 
-    f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views)
+    f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views, units=units)
     msg = PointCloud2(header=_header(stamp, frame_id), height=f['height'], width=f['width'],
                       fields=[PointField(name=n, offset=o, datatype=d, count=c)
                               for n, o, d, c in f['fields']],
@@ -122,13 +123,15 @@ def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error
 
 
 def skeleton_marker_array(stamp, frame_id, X, bone_indices, ns='monet', scale=0.03,
-                          lifetime_ns=0, names=None):
-    """(N, 3) keypoints + (B, 2) bone index pairs -> visualization_msgs.msg.MarkerArray
-    (a SPHERE_LIST of the finite joints and a LINE_LIST of bones with both ends finite;
-    with `names`, a text marker per finite joint). lifetime_ns: how long a viewer shows
-    them without an update (0 = forever)."""
-    return marker_array(stamp, frame_id, skeleton_marker_specs(X, bone_indices, ns=ns,
-                                                               scale=scale, names=names),
+                          lifetime_ns=0, names=None, *, units):
+    """(N, 3) keypoints in the rig's length unit `units` (required) + (B, 2) bone index
+    pairs -> visualization_msgs.msg.MarkerArray in metres (a SPHERE_LIST of the finite
+    joints and a LINE_LIST of bones with both ends finite; with `names`, a text marker per
+    finite joint). scale: joint size (m). lifetime_ns: how long a viewer shows them without
+    an update (0 = forever)."""
+    return marker_array(stamp, frame_id,
+                        skeleton_marker_specs(keypoints_to_metres(X, units), bone_indices,
+                                              ns=ns, scale=scale, names=names),
                         lifetime_ns)
 
 

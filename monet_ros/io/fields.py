@@ -1,8 +1,16 @@
 """Pure-numpy halves of the message conversions (no rclpy): stamps, CameraInfo,
 heatmap images and keypoint clouds as plain field dicts, and their inverse on any
 message-like object (rclpy, mcap_ros2 or rosbags decoded messages share attribute names).
+
+Lengths in messages are metres (ROS REP 103), whatever the rig's unit: the keypoint cloud
+is built from points in the rig's unit and read back into it (the `units` argument of
+keypoint_cloud_fields / cloud_to_keypoints3d, required, which the builders of convert.py and
+writer.py pass on, the skeleton markers included), and a TF transform (camera_pose_transform)
+is in metres, as are the camera frustum markers (markers.frustum_marker_specs).
 """
 import numpy as np
+
+from monet_ros.geometry.units import convert
 
 from .images import ImageDecodeError, image_fields, raw_image_array
 
@@ -114,15 +122,30 @@ def image_msg_to_heatmaps(msg):
 
 # ---------------------------------------------------------------- keypoints3d <-> PointCloud2
 
-def keypoint_cloud_fields(X, confidence=None, reprojection_error=None, num_views=None):
-    """PointCloud2 fields (no header) for N keypoints, in PROTOCOL.md's layout.
-
-    X (N, 3) world points, NaN where not triangulated; confidence, reprojection_error (N,)
-    float (NaN when None); num_views (N,) int (0 when None). `fields` is a list of
-    (name, offset, datatype, count) tuples."""
+def keypoints_to_metres(X, units):
+    """(N, 3) points in the rig's length unit `units` -> in metres, as float64 (the one
+    conversion of 3D points into messages)."""
     X = np.asarray(X, np.float64)
     if X.ndim != 2 or X.shape[1] != 3:
         raise ValueError(f'X must be (N, 3), got shape {X.shape}')
+    return convert(X, units, 'm')
+
+
+def keypoints_from_metres(X, units):
+    """(N, 3) points read from a message (metres) -> in the rig's length unit `units`
+    (float64; the one conversion of 3D points out of messages)."""
+    return convert(np.asarray(X, np.float64), 'm', units)
+
+
+def keypoint_cloud_fields(X, confidence=None, reprojection_error=None, num_views=None, *,
+                          units):
+    """PointCloud2 fields (no header) for N keypoints, in PROTOCOL.md's layout.
+
+    X (N, 3) world points in the rig's length unit `units` ('m', 'cm', 'mm'; required),
+    NaN where not triangulated: written in metres (REP 103); confidence,
+    reprojection_error (px) (N,) float (NaN when None); num_views (N,) int (0 when None).
+    `fields` is a list of (name, offset, datatype, count) tuples."""
+    X = keypoints_to_metres(X, units)
     n = X.shape[0]
 
     def column(value, fill, name):
@@ -184,16 +207,18 @@ def cloud_to_arrays(msg):
             for name in names}
 
 
-def cloud_to_keypoints3d(msg):
-    """/monet/keypoints3d PointCloud2 -> dict: X (N, 3) float64, confidence,
-    reprojection_error (N,) float64, num_views, keypoint (N,) int64.
+def cloud_to_keypoints3d(msg, *, units):
+    """/monet/keypoints3d PointCloud2 (metres) -> dict: X (N, 3) float64 in the length unit
+    `units` ('m', 'cm', 'mm'; required: that of the rig the points are used with),
+    confidence, reprojection_error (N,) float64, num_views, keypoint (N,) int64.
     Missing optional fields come back as NaN / 0; x, y, z are required."""
     cols = cloud_to_arrays(msg)
     missing = [k for k in ('x', 'y', 'z') if k not in cols]
     if missing:
         raise ValueError(f'PointCloud2 lacks field(s) {missing}')
     n = cols['x'].size
-    out = {'X': np.stack([cols['x'], cols['y'], cols['z']], axis=1).astype(np.float64)}
+    out = {'X': keypoints_from_metres(np.stack([cols['x'], cols['y'], cols['z']], axis=1),
+                                      units)}
     for name, fill, dtype in (('confidence', np.nan, np.float64),
                               ('reprojection_error', np.nan, np.float64),
                               ('num_views', 0, np.int64)):
@@ -235,10 +260,11 @@ def matrix_to_quaternion(R):
 
 def camera_pose_transform(camera):
     """World -> camera (R, t) of a Camera -> the TF transform parent(world) -> camera frame:
-    (translation = camera centre (3,), quaternion (x, y, z, w) of R^T)."""
+    (translation = camera centre (3,) in metres, from the camera's `units`; quaternion
+    (x, y, z, w) of R^T)."""
     R = np.asarray(camera.R, np.float64)
     t = np.asarray(camera.t, np.float64).reshape(3)
-    return -R.T @ t, matrix_to_quaternion(R.T)
+    return convert(-R.T @ t, getattr(camera, 'units', 'm'), 'm'), matrix_to_quaternion(R.T)
 
 
 def extrinsics_from_pose(translation, quaternion):

@@ -57,9 +57,12 @@ def frustum_corners(camera, depth):
 
 def frustum_marker_specs(cameras, depth=0.2, ns='cameras', scale=0.005):
     """One LINE_LIST per camera (centre to the 4 corners, the 4 image edges at `depth`
-    metres) with id 2i, and its name as text (id 2i + 1) at the centre."""
+    metres) with id 2i, and its name as text (id 2i + 1) at the centre; in metres whatever
+    the cameras' unit (REP 103: these become messages)."""
+    from monet_ros.geometry.units import rescale
+
     specs = []
-    for i, cam in enumerate(cameras):
+    for i, cam in enumerate(rescale(cameras, 'm')):
         corners = frustum_corners(cam, depth)
         centre = np.asarray(cam.center, np.float64)
         segments = [(centre, c) for c in corners]

@@ -21,6 +21,7 @@ from .fields import (
     camera_pose_transform,
     heatmap_image_fields,
     keypoint_cloud_fields,
+    keypoints_to_metres,
     split_stamp,
 )
 from .images import encode_compressed, image_fields
@@ -183,7 +184,8 @@ class BagWriter:
     def write_tf_static(self, stamp_ns, cameras, parent='world', child_suffix='_optical',
                         topic='/tf_static', log_time_ns=None):
         """One tf2_msgs/TFMessage with parent -> <camera.name><child_suffix> per camera:
-        the camera's pose in the parent frame (translation = centre, rotation = R^T)."""
+        the camera's pose in the parent frame (translation = centre in metres, whatever
+        the camera's unit; rotation = R^T)."""
         T = self._store.types
         transforms = []
         for cam in cameras:
@@ -201,9 +203,10 @@ class BagWriter:
         self.write(topic, 'tf2_msgs/msg/TFMessage', msg, _log(stamp_ns, log_time_ns))
 
     def write_keypoints3d(self, topic, stamp_ns, frame_id, X, confidence=None,
-                          reprojection_error=None, num_views=None, log_time_ns=None):
-        """(N, 3) keypoints -> sensor_msgs/PointCloud2 in the /monet/keypoints3d layout."""
-        f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views)
+                          reprojection_error=None, num_views=None, log_time_ns=None, *, units):
+        """(N, 3) keypoints in the rig's length unit `units` (required) ->
+        sensor_msgs/PointCloud2 in the /monet/keypoints3d layout, in metres (REP 103)."""
+        f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views, units=units)
         T = self._store.types
         fields = [T['sensor_msgs/msg/PointField'](name=n, offset=o, datatype=d, count=c)
                   for n, o, d, c in f.pop('fields')]
@@ -219,13 +222,15 @@ class BagWriter:
         self.write(topic, 'sensor_msgs/msg/Image', msg, _log(stamp_ns, log_time_ns))
 
     def write_skeleton_markers(self, topic, stamp_ns, frame_id, X, bone_indices, ns='monet',
-                               scale=0.03, log_time_ns=None):
-        """(N, 3) keypoints + (B, 2) bones -> visualization_msgs/MarkerArray (joints as a
-        SPHERE_LIST, bones as a LINE_LIST; NaN joints left out)."""
+                               scale=0.03, log_time_ns=None, *, units):
+        """(N, 3) keypoints in the rig's length unit `units` (required) + (B, 2) bones ->
+        visualization_msgs/MarkerArray in metres (joints as a SPHERE_LIST, bones as a
+        LINE_LIST; NaN joints left out; scale in m)."""
         T = self._store.types
         header = self._header(stamp_ns, frame_id)
         markers = []
-        for spec in skeleton_marker_specs(X, bone_indices, ns=ns, scale=scale):
+        for spec in skeleton_marker_specs(keypoints_to_metres(X, units), bone_indices, ns=ns,
+                                          scale=scale):
             points = [T['geometry_msgs/msg/Point'](x=float(p[0]), y=float(p[1]), z=float(p[2]))
                       for p in spec['points']]
             markers.append(T['visualization_msgs/msg/Marker'](

@@ -8,7 +8,9 @@ instants and never mixes two in one batch; a camera whose frame of that instant 
 come within `batch_wait_ms` is left out (the newest frame of each camera, counted as an
 incomplete batch). The crop
 follows the subject (projection of the latest /monet/keypoints3d, when the rig gives the
-extrinsics; monet_ros.crop_rule, the one crop rule), else `box`, else the full frame.
+extrinsics; monet_ros.crop_rule, the one crop rule), else `box`, else the full frame. The
+topic is in metres (REP 103): its points are read into the rig's length unit before they
+are projected with the rig's cameras (the crop, the debug image).
 The outputs keep the source stamp; the camera_info is the heatmap's virtual camera
 (K_heat = S K). A frame skipped (an older instant than the one processed, or pushed
 out of the PENDING_FRAMES) is counted as dropped; a bad
@@ -33,7 +35,7 @@ from monet_ros.atomic import sha256_file
 from monet_ros.config import MAX_THREADS, ConfigError, setting, validate_config
 from monet_ros.crop_rule import TrackedCrops, TrackedRule
 from monet_ros.error_text import error_line
-from monet_ros.geometry.units import UNITS
+from monet_ros.geometry.units import UNITS, rig_units
 from monet_ros.io import (
     camera_from_camera_info,
     camera_info_from_camera,
@@ -81,8 +83,8 @@ class DetectorConfig:
     rig: str = setting('', 'rig file or recording: camera names, image topics and the '
                        'extrinsics used to crop around /monet/keypoints3d (optional)')
     rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
-                             "'' = the file's, else the rule of geometry.units); must match "
-                             "the fusion node's", choices=('',) + UNITS)
+                             "'' = the file's, else the rule of geometry.units): "
+                             '/monet/keypoints3d (m) is read into it', choices=('',) + UNITS)
     image_topic: str = setting('', 'image topic template, {camera} = name (default: the rig '
                                'camera topic, else /{camera}/image_raw)',
                                template_fields=('camera',))
@@ -251,7 +253,9 @@ class DetectorNode(Node):
                  self.create_publisher(CameraInfo, DEBUG_CAMERA_INFO.format(camera=slot.name),
                                        STREAM_OUT))
                 if config.debug_image else None)
-        self.tracker = TrackedCrops(self.derived.rule)
+        # keypoints3d (m) read into the rig's unit, that of the cameras they are projected with
+        self.units = rig_units([s.rig_camera for s in self.slots if s.rig_camera is not None])
+        self.tracker = TrackedCrops(self.derived.rule, self.units)
         self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
         self.create_subscription(String, MODEL, self.on_model, LATCHED)
@@ -332,7 +336,7 @@ class DetectorNode(Node):
     def on_keypoints(self, msg):
         try:
             stamp = header_stamp_ns(msg)
-            self.tracker.update(cloud_to_keypoints3d(msg)['X'], stamp)
+            self.tracker.update(cloud_to_keypoints3d(msg, units=self.units)['X'], stamp)
         except ValueError as error:
             self.get_logger().warning(f'{self.resolve_topic_name(KEYPOINTS3D)}: bad message '
                                       f'({error})',

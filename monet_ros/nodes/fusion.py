@@ -13,9 +13,12 @@ jump): the filtered ones on keypoints3d (and the skeleton markers), the raw ones
 keypoints3d_raw. A bridged joint (predicted, no accepted measurement this frame) keeps
 num_views of the raw fusion (0 when not triangulated), so it stays recognisable.
 
-Units: keypoints3d, the markers and /tf_static are in the rig's length unit (`rig_units`,
-the rig file's `units`, else the rule of geometry.units), stated in /diagnostics (`units`)
-and the start log; the filter's mm and m/s^2 parameters are converted into it.
+Units: fusion and the live filter run in the rig's length unit (`rig_units`, the rig
+file's `units`, else the rule of geometry.units), stated in /diagnostics (`units`) and the
+start log; the filter's mm and m/s^2 parameters are converted into it. Everything
+published is in metres (ROS REP 103), whatever the rig's unit: keypoints3d,
+keypoints3d_raw, the skeleton and rig markers and /tf_static are converted at publish by
+monet_ros.io (the `units` argument of its builders; /diagnostics `topic_units`: m).
 
 When the node falls behind (more heatmaps arrive than it fuses, e.g. 16 cameras on 2 cores),
 it keeps its outputs fresh instead of queueing: a frame any of whose heatmaps or camera_info
@@ -45,7 +48,7 @@ from visualization_msgs.msg import MarkerArray
 
 from monet_ros.config import MAX_THREADS, ConfigError, config_subset, derive_checked, setting
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
-from monet_ros.geometry.units import UNITS, from_m, rig_units
+from monet_ros.geometry.units import UNITS, rig_units
 from monet_ros.io import (
     header_stamp_ns,
     image_msg_to_heatmaps,
@@ -97,8 +100,8 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     rig: str = setting('', 'rig file (any format load_rig reads) or a recording whose '
                        'camera_info + /tf_static give the rig; required')
     rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
-                             "'' = the file's, else the rule of geometry.units): keypoints3d, "
-                             'the markers and /tf_static are in the rig unit',
+                             "'' = the file's, else the rule of geometry.units): fusion "
+                             'and the filter run in it; the topics are in m (REP 103)',
                              choices=('',) + UNITS)
     cameras: tuple[str, ...] = setting((), 'rig cameras to fuse (default: all of the rig)')
     skeleton: str = setting('human14', 'skeleton preset or YAML path: heatmap channel order '
@@ -145,17 +148,17 @@ def derive(config, units='m'):
     """What the parameters of a FusionNodeConfig feed (no ROS), built before they are used
     at start and before a live change is applied (monet_ros.nodes.params): the core's
     FusionConfig, the live filter in the rig's length unit `units` ('m', 'cm', 'mm'; built
-    even while it is off, so switching it on cannot fail), the camera markers' depth in
-    that unit, the durations in ns and the outlier score's scale. units None (the rig not
-    loaded yet: the node's first check) leaves out what depends on it (filter and
-    marker_depth None). Raises ConfigError naming a field (the filter's numbers in
+    even while it is off, so switching it on cannot fail), the camera markers' depth (m:
+    the markers are published in metres), the durations in ns and the outlier score's
+    scale. units None (the rig not loaded yet: the node's first check) leaves out what
+    depends on it (filter None). Raises ConfigError naming a field (the filter's numbers in
     `units`), ArithmeticError or ValueError (a duration beyond what a float or int64
     holds); derive_checked turns those into an error naming the parameter."""
     known = units is not None
     return SimpleNamespace(
         core=config_subset(config, FusionConfig),
         filter=LiveFilter(config_subset(config, LiveFilterConfig), units) if known else None,
-        marker_depth=from_m(config.camera_marker_depth, units) if known else None,
+        marker_depth=float(config.camera_marker_depth),      # m, as the markers are
         slop_ns=int(config.slop_ms * 1e6),
         max_queue_ns=config.max_queue_ms * 1e6,
         diagnostics_period_ns=int(config.diagnostics_period_s * 1e9),     # rclpy's timer
@@ -222,7 +225,8 @@ class FusionNode(Node):
         self.last_result = None
         self.last_stamp_ns = None
         # callables(stamp_ns, result, filtered) (the pipeline's summary and score):
-        # filtered (C, 3) the live filter's keypoints3d (rig unit), None with it off
+        # filtered (C, 3) the live filter's keypoints (rig unit: not the topic's m), None
+        # with it off
         self.listeners = []
         self.first_heard = None   # monotonic time of the first heatmap (of any camera)
         self.sync = StampSynchronizer(self.names, slop_ns=derived.slop_ns,
@@ -249,14 +253,13 @@ class FusionNode(Node):
             self.pub_rig = self.create_publisher(MarkerArray, RIG_MARKERS, LATCHED)
             self.pub_rig.publish(marker_array(
                 self.get_clock().now().nanoseconds, self.frame_id,
-                frustum_marker_specs(self.cameras, derived.marker_depth,
-                                     scale=from_m(0.005, self.units))))
+                frustum_marker_specs(self.cameras, derived.marker_depth, scale=0.005)))
         self.create_timer(0.02, self.on_poll)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
             f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}, '
-            f'3D in {self.units} (the rig unit)')
+            f'3D in {self.units} (the rig unit), published in m')
 
     def derive(self, config):
         """derive(config) in this node's rig unit (None before the rig is loaded: the start
@@ -452,18 +455,18 @@ class FusionNode(Node):
         if self.live_filter is not None:
             self.pub_raw.publish(keypoints3d_to_cloud(
                 group.stamp_ns, self.frame_id, result.X, result.confidence,
-                result.reprojection_error, result.num_views))
+                result.reprojection_error, result.num_views, units=self.units))
         self.pub_points.publish(keypoints3d_to_cloud(
             group.stamp_ns, self.frame_id, X, result.confidence,
-            result.reprojection_error, result.num_views))
+            result.reprojection_error, result.num_views, units=self.units))
         # the skeleton markers (~2 ms a frame to build and serialize) only while someone
         # (RViz, a recorder) subscribes
         if self.pub_skeleton.get_subscription_count():
             self.pub_skeleton.publish(skeleton_marker_array(
                 group.stamp_ns, self.frame_id, X, self.skeleton.bone_indices,
-                ns=self.marker_ns, lifetime_ns=self.derived.marker_lifetime_ns,
-                scale=from_m(0.03, self.units),
-                names=self.skeleton.keypoints if self.config.marker_labels else None))
+                ns=self.marker_ns, lifetime_ns=self.derived.marker_lifetime_ns, scale=0.03,
+                names=self.skeleton.keypoints if self.config.marker_labels else None,
+                units=self.units))
         self.timer.add('publish', time.perf_counter() - start)
         for listener in self.listeners:
             listener(group.stamp_ns, result, X if self.live_filter is not None else None)
@@ -532,7 +535,7 @@ class FusionNode(Node):
             message=f'{self.frames} frames fused ({self.partial_frames} with missing cameras)',
             values=[KeyValue(key=k, value=str(v)) for k, v in (
                 ('frames', self.frames), ('partial_frames', self.partial_frames),
-                ('units', self.units),
+                ('units', self.units), ('topic_units', 'm'),
                 ('dropped_frames', self.sync.stats.dropped), ('stale_frames', self.stale_frames),
                 ('late_views', self.sync.stats.late),
                 ('time_resets', self.sync.stats.resets),

@@ -255,7 +255,7 @@ def write_frame(bag, cameras, stamp, images, X, num_views):
         bag.write_camera_info(f'/{cam.name}/camera_info', stamp, cam, frame_id)
     bag.write_keypoints3d(GROUND_TRUTH_TOPIC, stamp, FRAME_ID, X,
                           confidence=np.ones(len(X)), reprojection_error=np.zeros(len(X)),
-                          num_views=num_views)
+                          num_views=num_views, units='m')   # the subject is in m
 
 
 def render_views(scene, cameras, backgrounds, outlines, t, root):

@@ -46,7 +46,7 @@ def test_the_benchs_real_data_path_equals_monet_process(tmp_path, repo_root):
     assert monet(['process', str(data / 'recording'), '--model', str(checkpoint), '--out',
                   str(tmp_path / 'b'), '--quiet']) == 0
     written = {m.msg.header.stamp.sec * 10 ** 9 + m.msg.header.stamp.nanosec:
-               cloud_to_keypoints3d(m.msg)['X']
+               cloud_to_keypoints3d(m.msg, units='m')['X']
                for m in open_bag(tmp_path / 'b').messages('/monet/keypoints3d')}
     assert len(written) == recording.num_instants
     expected = np.stack([written[int(s)] for s in recording.stamps])

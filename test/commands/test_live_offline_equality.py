@@ -36,7 +36,7 @@ def test_process_and_lockstep_pipeline_agree_within_a_millimetre(ros_env, tmp_pa
     bag, rig = tmp_path / 'rec' / 'recording', tmp_path / 'rec' / 'rig.yaml'
     assert monet(['process', str(bag), '--rig', str(rig), '--model', str(model), '--out',
                   str(tmp_path / 'out'), '--quiet']) == 0
-    offline = {m.stamp_ns: cloud_to_keypoints3d(m.msg)['X'] for m in
+    offline = {m.stamp_ns: cloud_to_keypoints3d(m.msg, units='m')['X'] for m in
                open_bag(tmp_path / 'out').messages(['/monet/keypoints3d'])}
     stamps = [int(s) for s in rec.stamps]
     assert sorted(offline) == stamps
@@ -50,7 +50,7 @@ def test_process_and_lockstep_pipeline_agree_within_a_millimetre(ros_env, tmp_pa
         with NodeProcess('pipeline', ros_env, argv=argv) as proc:
             ros.spin_until(lambda: len(clouds) >= len(stamps), timeout=180, process=None)
             assert proc.wait(timeout=90) == 0, proc.output()
-    live = {header_stamp_ns(c): cloud_to_keypoints3d(c)['X'] for c in clouds}
+    live = {header_stamp_ns(c): cloud_to_keypoints3d(c, units='m')['X'] for c in clouds}
     assert sorted(live) == stamps, proc.output()
     for stamp in stamps:
         a, b = offline[stamp], live[stamp]

@@ -36,7 +36,7 @@ def test_lockstep_publishes_keypoints3d_for_every_frame(ros_env, tmp_path):
     assert [header_stamp_ns(c) for c in clouds] == stamps, proc.output()
     for cloud in clouds:
         assert cloud.header.frame_id == 'world'
-        assert cloud_to_keypoints3d(cloud)['X'].shape == (14, 3)
+        assert cloud_to_keypoints3d(cloud, units='m')['X'].shape == (14, 3)
     # the final summary line, and a quiet exit (no callback failing under a destroyed node)
     assert f'frames {len(stamps)} fused of {len(stamps)} played' in proc.output()
     assert 'never retrieved' not in proc.output()

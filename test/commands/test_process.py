@@ -33,7 +33,7 @@ def test_every_frame_is_written_and_equals_the_core_functions(tmp_path, capsys):
     detector = Detector.from_checkpoint(model, device='cpu', precision='auto')
     heat, heat_cams = detector.predict(frames, rig)
     result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cams]), rig, FusionConfig())
-    got = cloud_to_keypoints3d(clouds[0].msg)
+    got = cloud_to_keypoints3d(clouds[0].msg, units='m')
     np.testing.assert_allclose(got['X'], result.X.astype(np.float32), rtol=1e-4, atol=1e-4)
     np.testing.assert_array_equal(got['num_views'], result.num_views)
 

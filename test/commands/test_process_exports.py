@@ -24,7 +24,7 @@ def test_process_writes_analysis_files_equal_to_its_mcap(tmp_path, capsys):
     assert 'per-joint dropout (not triangulated): head ' in text
     assert 'mean inlier views per joint: head ' in text
     assert 'reprojection error measures agreement between the views used, not accuracy' in text
-    clouds = [cloud_to_keypoints3d(m.msg) for m in open_bag(out).messages(
+    clouds = [cloud_to_keypoints3d(m.msg, units='m') for m in open_bag(out).messages(
         ['/monet/keypoints3d'])]
     X_mcap = np.stack([c['X'] for c in clouds]).astype(np.float64)
     csv = read_anipose_csv(out / 'keypoints3d.csv')

@@ -25,9 +25,9 @@ def test_process_filter_writes_filtered_points_and_changes(tmp_path, capsys, met
     text = capsys.readouterr().out
     assert f'monet process: filter {method}: ' in text
     bag = open_bag(out)
-    raw = np.stack([cloud_to_keypoints3d(m.msg)['X'] for m in bag.messages(
+    raw = np.stack([cloud_to_keypoints3d(m.msg, units='m')['X'] for m in bag.messages(
         ['/monet/keypoints3d'])]).astype(np.float64)
-    filtered = [cloud_to_keypoints3d(m.msg) for m in open_bag(out).messages(
+    filtered = [cloud_to_keypoints3d(m.msg, units='m') for m in open_bag(out).messages(
         ['/monet/keypoints3d_filtered'])]
     assert len(filtered) == 6
     csv = read_anipose_csv(out / 'keypoints3d.csv')

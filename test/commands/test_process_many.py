@@ -9,7 +9,7 @@ from monet_ros.io import cloud_to_keypoints3d, open_bag
 
 
 def keypoints3d(out):
-    return [(m.stamp_ns, cloud_to_keypoints3d(m.msg))
+    return [(m.stamp_ns, cloud_to_keypoints3d(m.msg, units='m'))
             for m in open_bag(out).messages(['/monet/keypoints3d'])]
 
 

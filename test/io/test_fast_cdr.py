@@ -72,7 +72,8 @@ def test_live_bytes_from_rclpy_decode_in_place():
     assert np.shares_memory(np.frombuffer(fast.data, np.uint8), np.frombuffer(raw, np.uint8))
     camera = make_rig(RigConfig(num_cameras=2))[0]
     for msg, kind in [(camera_info_from_camera(camera, -1_000_000_000, 'x'), CameraInfo),
-                      (keypoints3d_to_cloud(42, 'world_frame', np.zeros((3, 3))), PointCloud2)]:
+                      (keypoints3d_to_cloud(42, 'world_frame', np.zeros((3, 3)), units='m'),
+                       PointCloud2)]:
         header = decode_header(serialize_message(msg))
         ref = deserialize_message(serialize_message(msg), kind).header
         assert (header.stamp.sec, header.stamp.nanosec, header.frame_id) == \

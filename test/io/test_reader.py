@@ -36,8 +36,9 @@ def test_round_trip_every_helper(tmp_path):
             bag.write_camera_info('/cam0/camera_info', s, cam, 'cam0_optical')
             bag.write_heatmaps('/monet/cam0/heatmaps', s, heat[k], 'cam0_heat')
             bag.write_keypoints3d('/monet/keypoints3d', s, 'world', X[k],
-                                  reprojection_error=np.arange(4.0))
-            bag.write_skeleton_markers('/monet/skeleton', s, 'world', X[k], [[0, 1], [2, 3]])
+                                  reprojection_error=np.arange(4.0), units='m')
+            bag.write_skeleton_markers('/monet/skeleton', s, 'world', X[k], [[0, 1], [2, 3]],
+                                       units='m')
     reader = open_bag(tmp_path / 'b')
     got = {}
     for m in reader.messages():
@@ -55,7 +56,7 @@ def test_round_trip_every_helper(tmp_path):
         np.testing.assert_array_equal(any_image_to_numpy(got['/cam0/png'][k].msg), rgb[k])
         np.testing.assert_array_equal(image_msg_to_heatmaps(got['/monet/cam0/heatmaps'][k].msg),
                                       heat[k])
-        cloud = cloud_to_keypoints3d(got['/monet/keypoints3d'][k].msg)
+        cloud = cloud_to_keypoints3d(got['/monet/keypoints3d'][k].msg, units='m')
         np.testing.assert_allclose(cloud['X'], X[k].astype(np.float32))
         np.testing.assert_array_equal(cloud['reprojection_error'], np.arange(4.0))
         markers = got['/monet/skeleton'][k].msg.markers

@@ -38,10 +38,11 @@ def write_sample_bag(path, frames=3):
             X = rng.normal(size=(5, 3))
             data['X'].append(X)
             bag.write_keypoints3d('/monet/keypoints3d', stamp, 'world', X,
-                                  confidence=np.ones(5), num_views=np.full(5, 2))
+                                  confidence=np.ones(5), num_views=np.full(5, 2), units='m')
             bag.write_compressed_image('/cam0/image_raw/compressed', stamp, data['rgb'][-2],
                                        'cam0_optical', fmt='png')
-            bag.write_skeleton_markers('/monet/skeleton', stamp, 'world', X, [[0, 1], [1, 2]])
+            bag.write_skeleton_markers('/monet/skeleton', stamp, 'world', X, [[0, 1], [1, 2]],
+                                       units='m')
     return cams, data
 
 
@@ -117,7 +118,7 @@ def test_mcap_library_validates_crcs_and_decodes(tmp_path):
         infos = [m.decoded_message for m in reader.iter_decoded_messages('/cam1/camera_info')]
     assert len(clouds) == 3
     for X, msg in zip(data['X'], clouds):
-        got = convert.cloud_to_keypoints3d(msg)
+        got = convert.cloud_to_keypoints3d(msg, units='m')
         np.testing.assert_allclose(got['X'], X.astype(np.float32))
         np.testing.assert_array_equal(got['num_views'], 2)
         assert np.isnan(got['reprojection_error']).all()
@@ -134,7 +135,7 @@ def test_writer_refuses_bad_use(tmp_path):
     with BagWriter(tmp_path / 'b') as bag:
         bag.write_image('/a', 1, np.zeros((2, 2, 3), np.uint8), 'f')
         with pytest.raises(BagWriterError, match='has type sensor_msgs/msg/Image'):
-            bag.write_keypoints3d('/a', 1, 'world', np.zeros((2, 3)))
+            bag.write_keypoints3d('/a', 1, 'world', np.zeros((2, 3)), units='m')
         with pytest.raises(BagWriterError, match='unknown message type'):
             bag.write('/b', 'nope_msgs/msg/Nope', b'', 1)
     with pytest.raises(BagWriterError, match='closed'):

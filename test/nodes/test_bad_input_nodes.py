@@ -187,12 +187,12 @@ def test_fusion_keeps_pre_1970_stamps_and_skips_a_2x2_view(ros_env, tmp_path):
 
         cloud = fused(BEFORE_1970)
         assert (cloud.header.stamp.sec, cloud.header.stamp.nanosec) == (-1, 0)
-        got = cloud_to_keypoints3d(cloud)
+        got = cloud_to_keypoints3d(cloud, units='m')
         np.testing.assert_allclose(got['X'], X, atol=0.01)
         assert (got['num_views'] == 3).all()
 
         cloud = fused(T0, tiny=('cam2',))
-        got = cloud_to_keypoints3d(cloud)
+        got = cloud_to_keypoints3d(cloud, units='m')
         np.testing.assert_allclose(got['X'], X, atol=0.01)     # the two good views
         assert (got['num_views'] == 2).all()
         assert ros.spin_until(lambda: int((diag_values(diagnostics, 'monet fusion: cam2')

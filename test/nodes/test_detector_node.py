@@ -187,7 +187,7 @@ def test_heatmaps_camera_info_stamps_tracking_and_hot_reload(ros_env, setup):
                        for v, cam in enumerate(rig))
         # the cloud (best-effort in) is sent with every frame until the crops follow it
         for stamp in range(T0 + 100, T0 + 160):
-            cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))
+            cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X, units='m'))
             got = stream.roundtrip(stamp, images, node)
             if cropped_around_X(got):
                 break
@@ -326,6 +326,66 @@ def test_backend_and_precision_give_the_core_frame_and_report_stages(ros_env, se
             assert int(values[f'{stage}_calls']) >= 1
 
 
+def test_a_mm_rig_crops_around_keypoints3d_in_metres_as_a_metre_rig(ros_env, setup, tmp_path):
+    """/monet/keypoints3d is in metres (REP 103) whatever the rig's unit: a detector whose
+    rig is in mm reads it into mm before projecting, so its crops land on the subject
+    exactly where a metre rig's do (before, metres projected with mm cameras put the
+    subject near the camera centres)."""
+    from monet_ros.geometry.units import rescale
+
+    rig_m, _, first, _, images = setup
+    rig_mm = rescale(rig_m, 'mm')
+    path = tmp_path / 'rig_mm.yaml'
+    save_rig(path, rig_mm)
+    params = dict(rig=str(path), model=str(first), box=[100.0, 50.0, 400.0, 450.0],
+                  track_timeout_s=3600.0, device='cpu', debug_image=True,
+                  debug_image_scale=1.0, debug_image_rate_hz=100.0)
+    X = np.random.default_rng(5).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))   # m
+    # the metre rig's crops around the keypoints as the cloud carries them (float32 m)
+    rule = detector_boxes(first, rig_m, crop_boxes(rig_m, X.astype(np.float32)))
+    fixed = expected_box((100, 50, 400, 450), INPUT[1] / INPUT[0])
+    assert np.abs(rule - np.array([fixed, fixed])).max() > 20      # a different crop
+
+    def cropped_around_X(got):
+        return all(np.allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                               expected_K(cam.K, rule[v], 32, 24), rtol=1e-9)
+                   for v, cam in enumerate(rig_mm))
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = Stream(ros, rig_mm)
+        cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
+        overlays = ros.collect('/monet/cam1/debug_image', Image, 100)
+        stream.wait_matched(node)
+        ros.wait_for_subscribers(cloud_pub, process=node)
+        got = stream.roundtrip(T0, images, node)           # no keypoints yet: the box
+        for cam in rig_mm:
+            np.testing.assert_allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                                       expected_K(cam.K, fixed, 32, 24), rtol=1e-12)
+        # what fusion publishes for this subject: metres (a mm fusion converts at publish)
+        cloud = keypoints3d_to_cloud(T0, 'world', X * 1000.0, units='mm')
+        for stamp in range(T0 + 1, T0 + 61):    # best-effort in: sent with every frame
+            cloud_pub.publish(cloud)
+            got = stream.roundtrip(stamp, images, node)
+            if cropped_around_X(got):
+                break
+        tracked = stamp
+        for stamp in range(tracked + 1, tracked + 41):     # a debug image of a tracked frame
+            if any(header_stamp_ns(m) >= tracked for m in overlays):
+                break
+            stream.roundtrip(stamp, images, node)
+        assert node.stop(signal.SIGINT) == 0, node.output()
+    for v, cam in enumerate(rig_mm):
+        np.testing.assert_allclose(np.reshape(got[cam.name][1].k, (3, 3)),
+                                   expected_K(cam.K, rule[v], 32, 24), rtol=1e-9)
+    # the debug image's red crosses (the fused keypoints reprojected) are where the metre
+    # rig projects the subject (a peak's green dot may cover a few)
+    overlay = next(m for m in overlays if header_stamp_ns(m) >= tracked)
+    pixels = np.frombuffer(overlay.data, np.uint8).reshape(480, 640, 3)
+    uv = np.round(cv2_project(rig_m[1], X.astype(np.float32))).astype(int)
+    inside = ((uv >= 0) & (uv < [640, 480])).all(axis=1)
+    red = [tuple(pixels[y, x]) == (40, 40, 240) for x, y in uv[inside]]
+    assert inside.sum() >= 10 and sum(red) >= 0.7 * len(red), (sum(red), len(red))
+
+
 def test_lockstep_waits_for_the_previous_frames_keypoints3d(ros_env, setup):
     """lockstep: a frame that arrives before the 3D of the previous processed frame waits
     for it, then is cropped around it (whatever order the messages arrive in); after
@@ -349,7 +409,7 @@ def test_lockstep_waits_for_the_previous_frames_keypoints3d(ros_env, setup):
         stream.send(T0 + 1, images)
         assert not ros.spin_until(lambda: done(T0 + 1), timeout=1.0, process=node)
         X = np.random.default_rng(4).uniform([-0.3, -0.3, 0.6], [0.3, 0.3, 1.5], (14, 3))
-        cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X))
+        cloud_pub.publish(keypoints3d_to_cloud(T0, 'world', X, units='m'))
         assert ros.spin_until(lambda: done(T0 + 1), timeout=30, process=node), node.output()
         rule = detector_boxes(first, rig, crop_boxes(rig, X.astype(np.float32)))
         for v, cam in enumerate(rig):       # cropped around the 3D it waited for

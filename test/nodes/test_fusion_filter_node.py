@@ -22,7 +22,7 @@ def rig_file(tmp_path):
 
 
 def by_stamp(clouds):
-    return {header_stamp_ns(c): cloud_to_keypoints3d(c) for c in clouds}
+    return {header_stamp_ns(c): cloud_to_keypoints3d(c, units='m') for c in clouds}
 
 
 def test_filter_switched_on_live_publishes_filtered_and_raw(ros_env, rig_file):

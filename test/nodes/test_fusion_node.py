@@ -62,7 +62,7 @@ def test_fuses_excludes_the_wrong_view_and_reports_true_errors(ros_env, rig_file
     for i, frame in enumerate(frames):
         cloud = got[frame.stamp]
         assert cloud.header.frame_id == 'world'
-        k = cloud_to_keypoints3d(cloud)
+        k = cloud_to_keypoints3d(cloud, units='m')
         assert (k['num_views'] == 3).all(), 'the wrong view must be excluded'
         np.testing.assert_array_equal(k['keypoint'], np.arange(14))
         expected = np.mean([frame.maxima[n] for n in good], axis=0)
@@ -117,7 +117,7 @@ def test_keeps_publishing_when_a_camera_goes_silent(ros_env, rig_file):
                               process=node), node.output()
         assert cam1().level == b'\x01'  # WARN
         assert node.stop(signal.SIGTERM) == 0, node.output()
-    late = cloud_to_keypoints3d(got[frames[-1].stamp])
+    late = cloud_to_keypoints3d(got[frames[-1].stamp], units='m')
     assert (late['num_views'] == 2).all()          # cam1 silent, cam2 wrong: 2 views left
     assert np.abs(late['X'] - X).max() < 1e-3
 

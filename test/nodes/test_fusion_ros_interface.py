@@ -67,7 +67,7 @@ def test_two_rigs_in_two_namespaces_each_fuse_only_their_own_heatmaps(ros_env, r
     assert not default, 'a namespaced fusion published on /monet/keypoints3d'
     for ns in truth:
         for cloud in clouds[ns]:
-            X = cloud_to_keypoints3d(cloud)['X']
+            X = cloud_to_keypoints3d(cloud, units='m')['X']
             assert np.abs(X - truth[ns]).max() < 1e-3, ns
 
 
@@ -82,7 +82,7 @@ def test_best_effort_heatmap_publisher_is_fused(ros_env, rig_file):
         wait_matched(ros, pubs, node)
         got = run_frames(ros, node, pubs, [Frame(rig, X, 0, rng, 0.0)], clouds)
         assert node.stop() == 0, node.output()
-    X_got = cloud_to_keypoints3d(next(iter(got.values())))['X']
+    X_got = cloud_to_keypoints3d(next(iter(got.values())), units='m')['X']
     assert np.abs(X_got - X).max() < 1e-3
 
 
@@ -153,9 +153,9 @@ def test_parameters_ranges_live_changes_and_dump_round_trip(ros_env, rig_file, t
         names = call(ros, GetParameters, f'{service}/get_parameters', GetParameters.Request(
             names=['min_views', 'threshold_px', 'slop_ms', 'cameras', 'rig']), node).values
         assert node.stop() == 0, node.output()
-    early = cloud_to_keypoints3d(before)
+    early = cloud_to_keypoints3d(before, units='m')
     assert np.abs(early['X'] - X).max() < 1e-3 and (early['num_views'] >= 2).all()
-    late = cloud_to_keypoints3d(after)
+    late = cloud_to_keypoints3d(after, units='m')
     assert np.isnan(late['X']).all() and (late['num_views'] == 0).all()
     for name, result in reasons.items():
         assert not result.successful, name

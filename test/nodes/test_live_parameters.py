@@ -128,7 +128,7 @@ def test_fusion_survives_every_extreme_value_and_still_fuses(ros_env, tmp_path):
         assert node.stop() == 0, node.output()
     assert 'Traceback' not in node.output()
     assert set(LIVE) <= {n for n, d in descriptors.items() if not d.read_only}
-    fused = cloud_to_keypoints3d(got)['X']
+    fused = cloud_to_keypoints3d(got, units='m')['X']
     assert np.abs(fused - X).max() < 1e-3      # the first filtered frame is the measurement
 
 

@@ -137,9 +137,10 @@ def test_every_extreme_value_is_refused_by_name_or_gives_finite_numbers(config_c
             assert -2 ** 63 <= item < 2 ** 63, (key, item)
 
 
-def test_the_fusion_filter_and_markers_are_checked_in_the_rig_unit():
-    # the settings keep their units (mm, m/s^2, m) and are checked converted into the
-    # rig's: usable in a metre rig, refused naming the parameter in a millimetre one
+def test_the_fusion_filter_is_checked_in_the_rig_unit_and_markers_in_metres():
+    # the filter settings keep their units (mm, m/s^2) and are checked converted into the
+    # rig's: usable in a metre rig, refused naming the parameter in a millimetre one; the
+    # camera markers are published in metres (REP 103), so their depth stays in m
     from monet_ros.config import derive_checked
     from monet_ros.nodes.fusion import FusionNodeConfig, derive
     noise = FusionNodeConfig(filter_noise_mm=1e146)
@@ -149,11 +150,10 @@ def test_the_fusion_filter_and_markers_are_checked_in_the_rig_unit():
         derive_checked('fusion', noise, lambda c: derive(c, 'mm'))
     depth = FusionNodeConfig(camera_marker_depth=1e306)
     assert derive_checked('fusion', depth, derive).marker_depth == 1e306
-    with pytest.raises(ConfigError, match=r"^fusion: parameter 'camera_marker_depth': "):
-        derive_checked('fusion', depth, lambda c: derive(c, 'mm'))
+    assert derive_checked('fusion', depth, lambda c: derive(c, 'mm')).marker_depth == 1e306
     # the rig not loaded yet (the node's first check): what depends on its unit left out
     unknown = derive(noise, None)
-    assert unknown.filter is None and unknown.marker_depth is None
+    assert unknown.filter is None and unknown.marker_depth == 0.2
 
 
 def test_start_and_live_refusals_name_the_parameter(make_node):

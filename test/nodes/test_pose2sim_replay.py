@@ -138,7 +138,7 @@ def test_replay_matches_pose2sim_triangulation(ros_env, shared_data, tmp_path):
     for cloud in clouds:
         frame = round((header_stamp_ns(cloud) - T0_NS) * 60 / 1e9)
         assert cloud.header.frame_id == 'world'
-        k = cloud_to_keypoints3d(cloud)
+        k = cloud_to_keypoints3d(cloud, units='m')
         confident = (detections[:, frame, :, 2] >= LIKELIHOOD_MIN).all(axis=0)
         errors.append(np.linalg.norm(k['X'] - truth[frame], axis=1)[confident])
     errors = np.concatenate(errors) * 1000   # mm

@@ -60,5 +60,5 @@ def test_recording_rooted_in_map_gives_keypoints_in_map(ros_env, tmp_path):
         assert ros.spin_until(lambda: tf, timeout=20, process=node)
         assert node.stop() == 0
     assert got.header.frame_id == 'map'
-    assert np.abs(cloud_to_keypoints3d(got)['X'] - X).max() < 1e-3
+    assert np.abs(cloud_to_keypoints3d(got, units='m')['X'] - X).max() < 1e-3
     assert {t.header.frame_id for t in tf[0].transforms} == {'map'}

@@ -219,7 +219,8 @@ def test_failed_run_leaves_nothing_and_the_rerun_works(tmp_path, process_inputs)
     out = tmp_path / 'out'
     with pytest.raises(RuntimeError, match='mid-run'):
         with atomic_output_dir(out) as staging, BagWriter(staging) as writer:
-            writer.write_keypoints3d('/monet/keypoints3d', T0, 'world', np.zeros((2, 3)))
+            writer.write_keypoints3d('/monet/keypoints3d', T0, 'world', np.zeros((2, 3)),
+                                     units='m')
             raise RuntimeError('failure mid-run')
     assert list(tmp_path.iterdir()) == []
     rec, model = process_inputs
