@@ -89,7 +89,8 @@ def test_two_processes_train_in_bfloat16_like_one(tmp_path):
 TRAIN = ['--mode', 'monet', '--epipolar-warmup', '0.25', '--architecture', 'small',
          '--input-size', '48', '--width', '16', '--batch-labelled', '4', '--batch-pseudo', '4',
          '--batch-unlabeled', '1', '--views-per-instant', '3', '--lr', '3e-3',
-         '--eval-fraction', '0.25', '--device', 'cpu', '--threads', '1', '--no-progress']
+         '--eval-fraction', '0.25', '--device', 'cpu', '--threads', '1', '--no-progress',
+         '--precision', 'float32']   # exact arithmetic: 1 and 2 processes comparable
 
 
 @pytest.fixture(scope='module')

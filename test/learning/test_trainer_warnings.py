@@ -78,7 +78,8 @@ def test_the_objective_in_words_names_each_weighted_term(recording):
                        lambda_r=2.0).objective_text() == 'L_L + 1 L_B + 2 L_R from step 3'
     assert trainer_for(recording, mode='supervised', steps=10).objective_text() == 'L_L'
     assert trainer_for(recording, mode='monet', steps=10, epipolar_warmup=0.0,
-                       lambda_p=0.0).objective_text() == 'L_L + 5 L_E'
+                       lambda_p=0.0).objective_text() == (
+        'L_L + 5 L_E once the detector fits its labelled crops (median <= 1 heatmap px)')
 
 
 def test_underfit_detector_warns_and_a_fitted_one_does_not(recording):
@@ -134,3 +135,16 @@ def test_learning_rate_schedule_warmup_then_cosine(recording):
     trainer = trainer_for(recording, mode='supervised', steps=12, lr_warmup_steps=4)
     seen = [trainer.step()['lr'] for _ in range(12)]
     np.testing.assert_allclose(seen, [3e-3 * trainer.config.lr_factor(k) for k in range(12)])
+
+
+def test_l_e_that_never_starts_is_said(recording, capfd):
+    """A detector that never fits its labelled crops to epipolar_fit_heat_px never gets L_E
+    (its anchors would be guesses): the run says so instead of reporting a mode it did not
+    train."""
+    trainer = trainer_for(recording, mode='epipolar', steps=6, epipolar_warmup=0.0,
+                          epipolar_fit_heat_px=1e-9)
+    summary = trainer.run(progress=False)
+    assert trainer.epipolar_started is None and 'E' not in trainer.last_terms
+    said = [w for w in summary['warnings'] if 'L_E never started' in w]
+    assert len(said) == 1 and 'epipolar_fit_heat_px' in said[0], summary['warnings']
+    assert 'L_E never started' in capfd.readouterr().err

@@ -25,8 +25,10 @@ def assert_one_line_exit_2(node, name, path):
     assert node.wait(timeout=120) == 2, node.output()
     lines = [line for line in node.stderr_path.read_text().splitlines() if line.strip()]
     assert len(lines) == 1, node.output()
-    assert lines[0].startswith(f'{name}: error: {path}: not a readable checkpoint'), lines
-    assert 'Weights only load failed' in lines[0] and '\x1b' not in lines[0]
+    # a pickle is refused as unsafe, without relaying torch's advice to load it anyway
+    assert lines[0].startswith(f'{name}: error: {path}: not a monet checkpoint'), lines
+    assert 'unsafe' in lines[0] and 'weights_only=False' not in lines[0], lines
+    assert '\x1b' not in lines[0]
     assert 'Traceback' not in node.output()
 
 
