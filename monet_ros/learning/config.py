@@ -76,7 +76,10 @@ class TrainConfig:
     mode: str = setting('reprojection', "training mode (a row of the paper's Table 1, or an "
                         "addition: reprojection, L_L + L_B on the labels' verified "
                         "optical-flow tracks + L_R towards the views' triangulated consensus "
-                        'on unlabeled instants, has the lowest error measured at the defaults)',
+                        'on unlabeled instants, has the lowest error measured at the defaults; '
+                        'reprojection_epipolar adds the anchored epipolar term L_E, a little '
+                        'better than its exact control on the synthetic rig; the symmetric '
+                        'L_E of the paper is not trained any more)',
                         choices=MODES)
     architecture: str = setting('small', 'detector architecture',
                                 choices=('small', 'cpm', 'hourglass'))
