@@ -28,7 +28,9 @@ def camera_for(source_name, cameras=(), camera=None, camera_map=None):
     """The recording camera a source name (video folder, file name, SLEAP video path)
     belongs to: `camera` when given; else an exact name or --camera-map entry; else the
     longest map source / recording camera name contained in it (as anipose matches
-    cameras to files); else the source name itself (the validator then names it)."""
+    cameras to files); else the longest recording camera name contained in it ignoring case
+    and separators (cam01_json -> cam_01); else the source name itself (the validator then
+    names it)."""
     if camera:
         return camera
     camera_map = dict(camera_map or {})
@@ -41,7 +43,19 @@ def camera_for(source_name, cameras=(), camera=None, camera_map=None):
     candidates += [(len(c), c) for c in cameras if c in name]
     if candidates:
         return max(candidates)[1]
+    # then ignoring case and separators: Pose2Sim's cam01_json folders for its calibration's
+    # cam_01 (the longest such name; none when two are equally long)
+    plain = _plain(name)
+    loose = sorted(((len(_plain(c)), c) for c in cameras if _plain(c) and _plain(c) in plain),
+                   reverse=True)
+    if loose and (len(loose) == 1 or loose[0][0] > loose[1][0]):
+        return loose[0][1]
     return name
+
+
+def _plain(name):
+    """A camera name without case and separators: 'Cam_01' -> 'cam01'."""
+    return ''.join(ch for ch in str(name).lower() if ch.isalnum())
 
 
 def _frames_csv(paths, **_):
