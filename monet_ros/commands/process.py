@@ -143,7 +143,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     exports: formats of monet_ros.io.export_results written inside `out` (figures['exports']:
     {format: path}; figures['summary']: per-joint dropout and inlier views).
     filter_config: a temporal.FilterConfig; with a method other than 'none' the exports
-    hold the filtered points and figures['filter'] is the temporal.Smoothed.
+    hold the filtered points, figures['filter'] is the temporal.Smoothed and
+    figures['filter_stamps'] (T,) ns the stamps of its rows.
     rig_units: the length unit of a rig file that states none (geometry.read_rig);
     figures['units'] is the rig's unit, that of the 3D outputs.
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
@@ -243,6 +244,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                                      a['stamps'], edges or (), filter_config, error=a['error'],
                                      progress=progress)
             write_filtered(writer, frame_id, smoothed, a['stamps'], units)
+            figures['filter_stamps'] = a['stamps']      # (T,) ns: the rows of smoothed
         figures['filter'] = smoothed
         written = collector.write(staging, exports, edges=edges, trc_axes=trc_axes,
                                   smoothed=smoothed)

@@ -111,6 +111,9 @@ def run(args):
     check_training_precision(config.precision, train_device)
     # which arithmetic runs, and why (auto: the CPU feature found); said with the notes
     precision_note = resolve_precision(config.precision, 'torch', train_device)[1]
+    if world.distributed and config.distill_rounds:
+        raise ValueError('--distill-rounds is not supported under torchrun (its teacher runs '
+                         'monet process in one process): train with --distill-rounds 0 there')
     if world.distributed and args.holdout_labelled:
         raise ValueError('--holdout-labelled is not supported under torchrun (train, then '
                          'score the held-out labels with `monet eval`)')
@@ -172,7 +175,17 @@ def run(args):
               + (f', {world.world_size} ranks ({world.backend}), {trainer.per_rank_batch} '
                  'crops per rank per step' if world.distributed else ''), file=sys.stderr)
     try:
-        summary = trainer.run(progress=not args.no_progress)
+        if config.distill_rounds:
+            from monet_ros.commands.train_distill import train_with_distillation
+            from monet_ros.learning.recording import find_recording_parts
+            parts = find_recording_parts(args.data)
+            summary = train_with_distillation(
+                trainer, parts['bag'], rig=args.rig or parts['rig'],
+                camera_map=label_options_from_args(args).camera_map,
+                rig_units=args.rig_units, skeleton=args.skeleton,
+                progress=not args.no_progress)
+        else:
+            summary = trainer.run(progress=not args.no_progress)
     except RuntimeError as error:
         # torch.save on a full disk: "enforce fail at inline_container.cc ... file write
         # failed" names neither the folder nor the disk.

@@ -21,8 +21,10 @@ MAX_BATCH = 4096
 MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 'monet',
          'bootstrap2_epipolar', 'epipolar', 'temporal_difference', 'reprojection',
          'reprojection_epipolar')
-# The loss terms a step can have: L_L, L_E, L_B, L_T, L_R (learning.losses.objective).
-LOSS_TERMS = ('L', 'E', 'B', 'T', 'R')
+# The loss terms a step can have: L_L, L_E, L_B, L_T, L_R, L_D (learning.losses.objective).
+LOSS_TERMS = ('L', 'E', 'B', 'T', 'R', 'D')
+# most distillation rounds (each runs the detector over the recording and trains on)
+MAX_DISTILL_ROUNDS = 5
 
 
 @dataclass(frozen=True)
@@ -217,6 +219,28 @@ class TrainConfig:
         'net): it does not fit its labels (raise lr or steps)', minimum=0.0,
         exclusive_minimum=True)
 
+    distill_rounds: int = setting(
+        0, "distillation rounds after the steps (issue 36; Lightning Pose 3D's route): each "
+        "runs the detector over the training recording as `monet process --filter optim` "
+        'does (tracked crops, fusion, bones + smoothness + robust reprojection), reprojects '
+        'the filtered 3D into every view as pseudo-labels (L_D, weighted and gated by the '
+        "filter's reprojection error) and trains distill_steps more steps with them; 0 = "
+        'none', minimum=0, maximum=MAX_DISTILL_ROUNDS)
+    distill_steps: int = setting(0, 'steps of each distillation round (0 = steps / 2); the '
+                                 'learning-rate schedule runs on', minimum=0)
+    batch_distill: int = setting(8, 'distillation rounds: distilled view crops per step (on '
+                                 'top of the other parts)', minimum=0, maximum=MAX_BATCH)
+    lambda_d: float = setting(1.0, 'weight of the distillation loss L_D (0: its exact control, '
+                              'the same rounds, teacher runs and crops)', minimum=0.0)
+    distill_gate_px: float = setting(8.0, 'L_D: a filtered point is a pseudo-label only where '
+                                     'its mean reprojection error over its inlier views is at '
+                                     'most this (px)', minimum=0.0, exclusive_minimum=True)
+    distill_min_views: int = setting(3, 'L_D: fewest inlier views of a filtered point used',
+                                     minimum=1)
+    distill_residual_px: float = setting(2.0, 'L_D: weight of a pseudo-label = 1 / (1 + '
+                                         '(reprojection error / this)^2)', minimum=0.0,
+                                         exclusive_minimum=True)
+
     def __post_init__(self):
         validate_config(self)
         if self.input_size and (self.input_size % 8 or self.input_size < 32):
@@ -249,6 +273,16 @@ class TrainConfig:
             return self.lr_decay ** ((step - warm) // self.lr_decay_every)
         progress = min(1.0, (step - warm) / max(1, self.steps - 1 - warm))
         return self.lr_final + (1.0 - self.lr_final) * 0.5 * (1.0 + math.cos(math.pi * progress))
+
+    @property
+    def distill_round_steps(self):
+        """Steps of each distillation round (distill_steps, 0 = steps / 2, at least 1)."""
+        return self.distill_steps or max(1, self.steps // 2)
+
+    @property
+    def total_steps(self):
+        """steps + distill_rounds x distill_round_steps: where a run with its rounds ends."""
+        return self.steps + self.distill_rounds * self.distill_round_steps
 
     @property
     def spec(self):

@@ -17,7 +17,7 @@ import torch
 from monet_ros.models import decode_heatmaps, render_heatmaps
 
 
-def masked_heatmap_mse(stages, points, sigma):
+def masked_heatmap_mse(stages, points, sigma, weights=None):
     """Squared error to Gaussian heatmaps, summed over the stages (intermediate supervision,
     as CPM).
 
@@ -26,7 +26,9 @@ def masked_heatmap_mse(stages, points, sigma):
     the squared error summed over the pixels of a heatmap and averaged over the labelled
     (sample, keypoint) heatmaps, like CPM's Euclidean loss (a sum over pixels), so that the
     paper's weights (lambda_e = 5 against this scale) apply. Returns a scalar (0, attached
-    to the graph, when nothing is labelled).
+    to the graph, when nothing is labelled). weights (B, C) (optional, >= 0): each labelled
+    heatmap's squared error times its weight (still averaged over the labelled count), e.g.
+    the distilled labels' confidence (L_D).
     """
     if not stages:
         raise ValueError('masked_heatmap_mse: no stages')
@@ -42,20 +44,26 @@ def masked_heatmap_mse(stages, points, sigma):
     if count == 0:
         return total
     weight = mask[..., None, None].to(target.dtype)
+    if weights is not None:
+        w = torch.as_tensor(weights, dtype=target.dtype, device=target.device)
+        if w.shape != (B, C):
+            raise ValueError(f'masked_heatmap_mse: weights must be {(B, C)}, got '
+                             f'{tuple(w.shape)}')
+        weight = weight * torch.nan_to_num(w, nan=0.0)[..., None, None]
     for stage in stages:
         err = (stage - target) ** 2 * weight
         total = total + err.sum() / count
     return total
 
 
-def objective(terms, lambda_e, lambda_p, lambda_t=0.0, lambda_r=0.0):
-    """L_L + lambda_e L_E + lambda_p L_B + lambda_t L_T + lambda_r L_R from a dict of present
-    terms ('L', 'E', 'B', 'T', 'R'). A term of weight 0 is left out (not multiplied by 0: a
-    non-finite value would still poison the sum), so a run with a weight of 0 is the exact
-    control of the run with that term."""
+def objective(terms, lambda_e, lambda_p, lambda_t=0.0, lambda_r=0.0, lambda_d=0.0):
+    """L_L + lambda_e L_E + lambda_p L_B + lambda_t L_T + lambda_r L_R + lambda_d L_D from a
+    dict of present terms ('L', 'E', 'B', 'T', 'R', 'D'). A term of weight 0 is left out (not
+    multiplied by 0: a non-finite value would still poison the sum), so a run with a weight of
+    0 is the exact control of the run with that term."""
     total = next(iter(terms.values())) * 0.0
     for key, weight in (('L', 1.0), ('E', lambda_e), ('B', lambda_p), ('T', lambda_t),
-                        ('R', lambda_r)):
+                        ('R', lambda_r), ('D', lambda_d)):
         if key in terms and weight != 0:
             total = total + weight * terms[key]
     return total

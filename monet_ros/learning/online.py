@@ -123,6 +123,10 @@ class LearnerConfig(TrainConfig):
         if self.publish_metric == 'labelled' and not self.validation_labels:
             raise ConfigError('LearnerConfig', 'publish_metric', 'labelled needs '
                               'validation_labels > 0 (held-out labelled instants)')
+        if self.distill_rounds:
+            raise ConfigError('LearnerConfig', 'distill_rounds', 'the online learner trains '
+                              'without rounds (it never stops to run the recording through '
+                              'the detector); distil offline with monet train --distill-rounds')
         if self.epipolar_warmup and not self.steps:
             raise ConfigError('LearnerConfig', 'epipolar_warmup', 'needs steps > 0 (a '
                               'fraction of the steps); use 0 for a learner that runs until '

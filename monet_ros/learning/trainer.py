@@ -393,6 +393,12 @@ class Trainer:
         # L_E starts at the first step after the warm-up whose labelled crops the detector
         # fits (epipolar_fit_heat_px); latched, saved with the state
         self.epipolar_started = None
+        # distillation (learning.distill): the round trained now (0: none yet) and its
+        # pseudo-labels (T, V, C, 2) px with weights (T, V, C); set_distilled
+        self.distill_round = 0
+        self.distilled = None
+        self.distilled_weight = None
+        self.distill_pool = np.zeros((0, 2), np.int64)
         self.last_checkpoint = None      # path of the latest checkpoints/step_N.pt written
         self._started = time.monotonic()
         self.warnings = []
@@ -471,6 +477,31 @@ class Trainer:
         if self.labelled_pool.size == 0:
             raise ValueError('no labelled view in the training split')
 
+    def set_distilled(self, points, weight, round_index):
+        """Start distillation round `round_index` (1-based) with its pseudo-labels: points
+        (T, V, C, 2) source px (NaN = none) and weight (T, V, C) (learning.distill.Distilled);
+        labelled cells and instants outside the training pools (held out, validation) never
+        get one. Its crops are the plan's 'D' part from the next step (batch_distill)."""
+        T, V, C, _ = self.data.labels.shape
+        points = np.array(points, np.float64)
+        weight = np.array(weight, np.float64)
+        if points.shape != (T, V, C, 2) or weight.shape != (T, V, C):
+            raise ValueError(f'set_distilled: points must be {(T, V, C, 2)} and weight '
+                             f'{(T, V, C)}, got {points.shape} and {weight.shape}')
+        off = np.isfinite(self.data.labels[..., 0]) | ~np.isfinite(weight) | (weight <= 0)
+        off[self.data.held_out] = True
+        off[self.data.validation_instants] = True
+        points[off] = np.nan
+        weight[off] = 0.0
+        self.distilled, self.distilled_weight = points, weight
+        self.distill_round = int(round_index)
+        self.distill_pool = np.argwhere(np.isfinite(points[..., 0]).any(axis=2))
+
+    @property
+    def distilled_count(self):
+        """Distilled pseudo-labels of the current round (view x keypoint cells)."""
+        return 0 if self.distilled is None else int(np.isfinite(self.distilled[..., 0]).sum())
+
     @property
     def pseudo_label_count(self):
         return int(np.isfinite(self.pseudo_only[..., 0]).sum())
@@ -542,6 +573,10 @@ class Trainer:
             parts.append(('B', self._sample(self.pseudo_pool, n_b)))
         if n_inst:
             parts.append(self._unlabeled_part(n_inst, k))
+        # a distillation round adds batch_distill crops of its pseudo-labels (also at
+        # lambda_d = 0: the round's exact control draws them too)
+        if self.distilled is not None and c.batch_distill and len(self.distill_pool):
+            parts.append(('D', self._sample(self.distill_pool, c.batch_distill)))
         return parts
 
     @property
@@ -581,6 +616,11 @@ class Trainer:
                 if kind == 'L' and self.spec.epipolar and self.epipolar_started is None \
                         and rng is not None and self.unlabeled_active:
                     self._check_epipolar_start(stages[-1][sl], heat_pts)
+            elif kind == 'D':
+                heat_pts = batch.to_heatmap(self.distilled[p[:, 0], p[:, 1]], sl)
+                terms['D'] = masked_heatmap_mse([s[sl] for s in stages], heat_pts,
+                                                self.config.sigma,
+                                                self.distilled_weight[p[:, 0], p[:, 1]])
             elif kind == 'U':
                 terms.update(self._unlabeled_terms([s[sl] for s in stages], batch, sl, p,
                                                    rest[0], labelled_peak))
@@ -702,7 +742,7 @@ class Trainer:
         parts = self._batch_plan()
         self.last_plan = parts
         terms = self._terms(parts, self.rng, c.augment)
-        loss = objective(terms, c.lambda_e, c.lambda_p, c.lambda_t, c.lambda_r)
+        loss = objective(terms, c.lambda_e, c.lambda_p, c.lambda_t, c.lambda_r, c.lambda_d)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         self.optimizer.step()
@@ -907,7 +947,11 @@ class Trainer:
             'last_terms': json.dumps(self.last_terms),
             'keypoints': json.dumps(list(self.keypoints)),
             'skeleton': json.dumps(self.skeleton_name),
+            'distill_round': self.distill_round,
         }
+        if self.distilled is not None:
+            state['distilled'] = torch.from_numpy(self.distilled)
+            state['distilled_weight'] = torch.from_numpy(self.distilled_weight)
         _atomic_torch_save(state, self.out_dir / 'trainer_state.pt')
         self.last_checkpoint = ckpt
         return ckpt
@@ -942,6 +986,9 @@ class Trainer:
         torch.set_rng_state(state['torch_rng'])
         trainer.pseudo = state['pseudo'].numpy().copy()
         trainer._update_pools()
+        if 'distilled' in state:
+            trainer.set_distilled(state['distilled'].numpy(), state['distilled_weight'].numpy(),
+                                  int(state.get('distill_round', 1)))
         trainer.last_terms = json.loads(state['last_terms'])
         trainer._truncate_log()
         return trainer
@@ -1096,6 +1143,7 @@ class Trainer:
                 'pseudo_labels': self.pseudo_label_count,
                 'pseudo_label_coverage': self.pseudo_label_coverage, 'last': self.last_terms,
                 'pseudo_label_gate': self.data.pseudo_gate,
+                'distill_round': self.distill_round, 'distilled_labels': self.distilled_count,
                 'fit': fit, 'validation': validation, 'bootstrap': self.bootstrap_stats,
                 'warnings': list(self.warnings)}
 
