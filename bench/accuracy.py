@@ -164,7 +164,22 @@ def train_and_evaluate(job):
         extra['pseudo_labels_initial'] = trainer.pseudo_label_count
         # share of the unlabeled train views x keypoints pseudo-labelled at the start
         extra['pseudo_label_coverage'] = trainer.pseudo_label_coverage
-        summary = trainer.run(progress=False)
+        if config.distill_rounds:     # as `monet train --distill-rounds` runs them
+            from monet_ros.commands.train_distill import train_with_distillation
+            from monet_ros.learning.distill import label_errors
+            folder = Path(out) / 'data' / rig
+            summary = train_with_distillation(
+                trainer, folder / 'recording', rig=folder / 'rig.yaml', skeleton='human14',
+                progress=False, say=lambda line: print(f'[{rig} {label}] {line}',
+                                                       file=sys.stderr, flush=True))
+            # the last round's pseudo-labels against the projected ground truth
+            _, truth = pseudo_label_truth(trainer, recording)
+            extra['distill'] = summary['distill']
+            extra['distill_precision'] = label_errors(trainer.distilled, truth)
+            print(f'[{rig} {label}] distilled pseudo-labels vs ground truth: '
+                  f'{extra["distill_precision"]}', file=sys.stderr, flush=True)
+        else:
+            summary = trainer.run(progress=False)
         extra['images_per_step'] = int(sum(len(p[1]) for p in trainer._batch_plan()))
         detector = Detector(trainer.model, trainer.metadata(), device=trainer.device)
     train_s = time.monotonic() - start
