@@ -44,6 +44,7 @@ import json
 import multiprocessing
 import os
 from pathlib import Path
+import shutil
 import sys
 import time
 
@@ -262,8 +263,18 @@ def run_job(job):
     config = dataclasses.replace(config, steps=steps, checkpoint_every=10 ** 6)
     said = []
     start = time.monotonic()
-    trainer = Trainer(config, data, warn=said.append)
-    summary = trainer.run(progress=False)
+    if config.distill_rounds:       # as `monet train --distill-rounds` runs them
+        from monet_ros.commands.train_distill import train_with_distillation
+        train_dir = tempfile.mkdtemp(prefix='monet-real-distill-')
+        trainer = Trainer(config, data, Path(train_dir), warn=said.append)
+        summary = train_with_distillation(
+            trainer, _STATE['bag'], skeleton='human14', progress=False,
+            say=lambda line: print(f'[{count} labels {mode}] {line}', file=sys.stderr,
+                                   flush=True))
+        shutil.rmtree(train_dir, ignore_errors=True)
+    else:
+        trainer = Trainer(config, data, warn=said.append)
+        summary = trainer.run(progress=False)
     train_s = time.monotonic() - start
     unlabelled = np.setdiff1d(np.arange(rec.num_instants), instants)
     with tempfile.TemporaryDirectory(prefix='monet-real-') as tmp:
@@ -281,7 +292,7 @@ def run_job(job):
                    'instants': instants.tolist(), 'fit_px': summary['fit']['median_px'],
                    'fit_heat': summary['fit']['median_heat'],
                    'pseudo_labels': summary['pseudo_labels'], 'warnings': said,
-                   'bootstrap': summary['bootstrap']})
+                   'bootstrap': summary['bootstrap'], 'distill': summary.get('distill')})
     print(f'[{count} labels {mode}] {steps} steps in {train_s:.0f} s: monet process 3D '
           f'median {fmt(result["median_mm"], ".0f")} mm, PCK@10 {result["pck10"]:.3f}; GT '
           f'crops {fmt(result["gt_crop"]["median_mm"], ".0f")} mm, fit '
