@@ -11,8 +11,9 @@ from monet_ros.learning.config import TrainConfig
 
 HELP = ('semi-supervised training from recordings + labels (modes: reprojection, the default '
         'and the most accurate measured: L_L + L_B + L_R; supervised, spatial, spatiotemporal, '
-        'bootstrap1, bootstrap2, monet, temporal_difference, and the ablations '
-        'bootstrap2_epipolar, epipolar)')
+        'bootstrap1, bootstrap2, monet, temporal_difference, reprojection_epipolar, and the '
+        'ablations bootstrap2_epipolar, epipolar; --distill-rounds N adds rounds of '
+        "distillation from the detector's own filtered 3D)")
 
 
 @dataclass(frozen=True)
