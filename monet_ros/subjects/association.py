@@ -1,0 +1,219 @@
+"""Which instances in different cameras are the same subject, in one frame (no ROS).
+
+Algorithm: greedy agglomerative clustering of the instances of all cameras on a
+pairwise epipolar affinity, with the cycle-consistency constraint of Dong et al.
+("Fast and Robust Multi-Person 3D Pose Estimation from Multiple Views", CVPR 2019,
+sec. 3.2: a subject has at most one instance per camera) kept by construction
+instead of by their convex relaxation:
+
+1. cost(a, b) between two instances of two different cameras = the median, over the
+   keypoints both see, of the symmetric epipolar distance (px, undistorted pixels:
+   the mean of the distances of each point to the other's epipolar line, as Dong et al.'s
+   geometric affinity before its exponential). Pairs with fewer than `min_common` common
+   keypoints have no cost (inf). The median makes one wrong keypoint harmless.
+2. Candidate pairs with cost <= threshold_px, cheapest first, merge their two clusters
+   when (a) the clusters share no camera and (b) the mean cost over every pair of their
+   instances that has a cost (average linkage) is <= threshold_px. So a third camera's
+   instance joins a subject only if it agrees with all of its views, not just one.
+3. A cluster with >= min_views instances is a subject; the others are left over
+   (counted, never silently dropped). Each subject is triangulated with the project's
+   robust triangulation (geometry.triangulate_robust: confidence-weighted DLT with
+   worst-view exclusion or RANSAC, cheirality), all subjects in one batched call.
+
+Epipolar distances are in pixels: the same for a rig in m or mm. Batched numpy: the
+costs of every instance pair and keypoint are one array; the only Python loop is over the
+accepted candidate pairs of step 2 (a few per subject and camera pair).
+"""
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+
+from monet_ros.config import setting, validate_config
+from monet_ros.geometry.camera import stack_cameras, undistort_views
+from monet_ros.geometry.epipolar import fundamental_from_params
+from monet_ros.geometry.triangulation import triangulate_robust
+
+METHODS = ('exclusion', 'ransac')
+
+
+@dataclass(frozen=True)
+class AssociationConfig:
+    """Settings of the association across cameras (validated; errors name the field)."""
+    threshold_px: float = setting(
+        15.0, 'association: largest median symmetric epipolar distance (px) between two '
+        'instances of one subject', minimum=0.0, exclusive_minimum=True)
+    min_common: int = setting(
+        3, 'association: fewest keypoints two instances must both see to be compared',
+        minimum=1)
+    confidence_threshold: float = setting(
+        0.1, 'detection score below which a keypoint is left out', minimum=0.0)
+    min_views: int = setting(2, 'fewest cameras (instances) of a subject', minimum=2)
+    triangulation_px: float = setting(
+        15.0, 'reprojection error (px) of an inlier view in the triangulation',
+        minimum=0.0, exclusive_minimum=True)
+    method: str = setting('exclusion', 'robust triangulation method', choices=METHODS)
+
+    def __post_init__(self):
+        validate_config(self)
+
+
+@dataclass
+class Association:
+    """One frame's subjects.
+
+    X (S, C, 3) triangulated keypoints (the rig's unit), NaN where not triangulated;
+    instance (S, V) int: the instance index of each subject in each camera, -1 = not seen;
+    inliers (S, V, C) bool: the views used per keypoint; cost (S,) mean epipolar cost (px)
+    of the subject's instance pairs; unmatched: instances (with >= 1 keypoint) in no
+    subject; instances: instances with >= 1 keypoint."""
+    X: np.ndarray
+    instance: np.ndarray
+    inliers: np.ndarray
+    cost: np.ndarray
+    unmatched: int
+    instances: int
+
+
+_F_CACHE = {}
+
+
+def pair_fundamentals(cameras):
+    """F (V, V, 3, 3) with x_b^T F[a, b] x_a = 0 for ideal pixels (zeros on the diagonal);
+    cached per rig (stack_cameras' cache key)."""
+    rig = stack_cameras(cameras)
+    key = id(rig['K'])
+    hit = _F_CACHE.get(key)
+    if hit is not None and hit[0] is rig['K']:
+        return hit[1]
+    V = len(rig['K'])
+    F = np.zeros((V, V, 3, 3))
+    a, b = np.array(list(combinations(range(V), 2))).T.reshape(2, -1)
+    F[a, b] = fundamental_from_params(rig['K'][a], rig['R'][a], rig['t'][a],
+                                      rig['K'][b], rig['R'][b], rig['t'][b])
+    F[b, a] = F[a, b].swapaxes(-1, -2)
+    F.setflags(write=False)
+    if len(_F_CACHE) >= 16:
+        _F_CACHE.pop(next(iter(_F_CACHE)))
+    _F_CACHE[key] = (rig['K'], F)
+    return F
+
+
+def pair_costs(ideal, present, view, F, min_common):
+    """Costs (M, M) between M instances: median symmetric epipolar distance (px) over the
+    keypoints both see; inf for the same camera, itself, or < min_common common keypoints.
+
+    ideal (M, C, 2) undistorted pixels; present (M, C) bool; view (M,) camera indices;
+    F (V, V, 3, 3) of pair_fundamentals."""
+    M, C = present.shape
+    h = np.concatenate([ideal, np.ones((M, C, 1))], axis=-1)         # (M, C, 3)
+    h = np.where(present[..., None], h, 0.0)
+    Fm = F[view[:, None], view[None, :]]                              # (M, M, 3, 3)
+    lines_b = np.einsum('abij,acj->abci', Fm, h)                      # in b's image
+    lines_a = np.einsum('abji,bcj->abci', Fm, h)                      # in a's image
+    num = np.abs(np.einsum('abci,bci->abc', lines_b, h))              # |x_b^T F x_a|
+    with np.errstate(invalid='ignore', divide='ignore'):
+        d = 0.5 * (num / np.linalg.norm(lines_b[..., :2], axis=-1)
+                   + num / np.linalg.norm(lines_a[..., :2], axis=-1))
+    common = present[:, None] & present[None, :]                      # (M, M, C)
+    d = np.where(common & np.isfinite(d), d, np.inf)
+    k = common.sum(axis=-1)
+    s = np.sort(d, axis=-1)
+    lo = np.take_along_axis(s, (np.maximum(k - 1, 0) // 2)[..., None], axis=-1)[..., 0]
+    hi = np.take_along_axis(s, np.minimum(k // 2, C - 1)[..., None], axis=-1)[..., 0]
+    with np.errstate(invalid='ignore'):                               # k = 0: inf
+        cost = 0.5 * (lo + hi)
+    bad = (k < min_common) | (view[:, None] == view[None, :])
+    return np.where(bad | ~np.isfinite(cost), np.inf, cost)
+
+
+def cluster_instances(cost, view, num_views, threshold_px):
+    """Cluster labels (M,) of instances by the greedy rule of the module docstring (steps
+    2): candidate pairs cheapest first, merged when their clusters share no camera and
+    their average linkage is <= threshold_px."""
+    M = len(view)
+    label = np.arange(M)
+    cams = np.zeros((M, num_views), bool)
+    cams[np.arange(M), view] = True
+    a, b = np.nonzero(np.triu(cost <= threshold_px, 1))
+    order = np.argsort(cost[a, b], kind='stable')
+    finite = np.isfinite(cost)
+    for i, j in zip(a[order], b[order]):
+        la, lb = label[i], label[j]
+        if la == lb or (cams[la] & cams[lb]).any():
+            continue
+        ma, mb = label == la, label == lb
+        block = cost[np.ix_(ma, mb)]
+        ok = finite[np.ix_(ma, mb)]
+        if block[ok].mean() > threshold_px:
+            continue
+        label[mb] = la
+        cams[la] |= cams[lb]
+    return label
+
+
+def associate(points2d, cameras, scores=None, config=None):
+    """Association of one frame's per-camera instances into subjects, triangulated.
+
+    points2d (V, N, C, 2) observed (distorted) pixels: N instance slots per camera (pad
+    with NaN: a camera with fewer instances leaves slots all NaN), C keypoints, NaN =
+    missing keypoint; the instance order of a camera means nothing. scores (V, N, C) or
+    None (all 1): keypoints below config.confidence_threshold are left out and the rest
+    weigh the triangulation. cameras: V geometry.Camera (one unit). config:
+    AssociationConfig (None: defaults). Algorithm: the module docstring.
+    Returns Association, subjects ordered by how many cameras see them (most first), then
+    by their first instance. Raises ValueError for bad shapes."""
+    config = config or AssociationConfig()
+    pts = np.asarray(points2d, np.float64)
+    V = len(cameras)
+    if pts.ndim != 4 or pts.shape[0] != V or pts.shape[-1] != 2:
+        raise ValueError(f'points2d must have shape (V={V}, N, C, 2), got {pts.shape}')
+    _, N, C, _ = pts.shape
+    w = np.ones((V, N, C)) if scores is None else np.asarray(scores, np.float64)
+    if w.shape != (V, N, C):
+        raise ValueError(f'scores must have shape {(V, N, C)}, got {w.shape}')
+    rig = stack_cameras(cameras)
+    present = np.isfinite(pts).all(-1) & (np.nan_to_num(w, nan=-1.0)
+                                          >= config.confidence_threshold)
+    present &= np.nan_to_num(w, nan=0.0) > 0
+    ideal = undistort_views(rig, np.where(present[..., None], pts, np.nan)
+                            .reshape(V, N * C, 2)).reshape(V, N, C, 2)
+    present &= np.isfinite(ideal).all(-1)
+    exists = present.any(-1)                                          # (V, N)
+    view, slot = np.nonzero(exists)
+    M = len(view)
+    empty = Association(np.zeros((0, C, 3)), np.zeros((0, V), int), np.zeros((0, V, C), bool),
+                        np.zeros(0), M, M)
+    if M < 2:
+        return empty
+    cost = pair_costs(ideal[view, slot], present[view, slot], view, pair_fundamentals(cameras),
+                      config.min_common)
+    label = cluster_instances(cost, view, V, config.threshold_px)
+    ids, first, size = np.unique(label, return_index=True, return_counts=True)
+    keep = size >= config.min_views
+    ids, first, size = ids[keep], first[keep], size[keep]
+    if not len(ids):
+        return empty
+    order = np.lexsort((first, -size))
+    ids = ids[order]
+    S = len(ids)
+    member = label[None, :] == ids[:, None]                          # (S, M)
+    instance = np.full((S, V), -1)
+    s_idx, m_idx = np.nonzero(member)
+    instance[s_idx, view[m_idx]] = slot[m_idx]
+    seen = instance >= 0
+    take = np.maximum(instance, 0).T                                  # (V, S)
+    sub_pts = pts[np.arange(V)[:, None], take]                        # (V, S, C, 2)
+    sub_w = np.where(present[np.arange(V)[:, None], take] & seen.T[..., None],
+                     w[np.arange(V)[:, None], take], 0.0)
+    sub_pts = np.where(sub_w[..., None] > 0, sub_pts, np.nan)
+    X, inl = triangulate_robust(sub_pts.reshape(V, S * C, 2), cameras,
+                                sub_w.reshape(V, S * C), threshold_px=config.triangulation_px,
+                                min_views=config.min_views, method=config.method)
+    finite = np.isfinite(cost)
+    pair = member[:, :, None] & member[:, None, :] & finite[None]     # (S, M, M)
+    with np.errstate(invalid='ignore'):
+        mean_cost = np.where(pair, cost[None], 0.0).sum((1, 2)) / pair.sum((1, 2))
+    return Association(X=X.reshape(S, C, 3), instance=instance,
+                       inliers=inl.reshape(V, S, C).transpose(1, 0, 2), cost=mean_cost,
+                       unmatched=int(M - member.sum()), instances=M)
