@@ -58,6 +58,9 @@ class AssociationConfig:
         validate_config(self)
 
 
+_DEFAULT = AssociationConfig()
+
+
 @dataclass
 class Association:
     """One frame's subjects.
@@ -108,13 +111,13 @@ def pair_costs(ideal, present, view, F, min_common):
     M, C = present.shape
     h = np.concatenate([ideal, np.ones((M, C, 1))], axis=-1)         # (M, C, 3)
     h = np.where(present[..., None], h, 0.0)
-    Fm = F[view[:, None], view[None, :]]                              # (M, M, 3, 3)
-    lines_b = np.einsum('abij,acj->abci', Fm, h)                      # in b's image
-    lines_a = np.einsum('abji,bcj->abci', Fm, h)                      # in a's image
-    num = np.abs(np.einsum('abci,bci->abc', lines_b, h))              # |x_b^T F x_a|
+    # the epipolar lines of every instance in every camera: (M, V, 3, C), one matmul
+    lines = F[view] @ h.swapaxes(-1, -2)[:, None]
+    lines_b = lines[:, view]                                          # (M, M, 3, C) in b
+    num = np.abs((lines_b * h.swapaxes(-1, -2)[None]).sum(-2))        # |x_b^T F x_a|
+    norm_b = np.hypot(lines_b[:, :, 0], lines_b[:, :, 1])             # (M, M, C)
     with np.errstate(invalid='ignore', divide='ignore'):
-        d = 0.5 * (num / np.linalg.norm(lines_b[..., :2], axis=-1)
-                   + num / np.linalg.norm(lines_a[..., :2], axis=-1))
+        d = 0.5 * num * (1 / norm_b + 1 / norm_b.swapaxes(0, 1))     # a's line of b
     common = present[:, None] & present[None, :]                      # (M, M, C)
     d = np.where(common & np.isfinite(d), d, np.inf)
     k = common.sum(axis=-1)
@@ -128,27 +131,31 @@ def pair_costs(ideal, present, view, F, min_common):
 
 
 def cluster_instances(cost, view, num_views, threshold_px):
-    """Cluster labels (M,) of instances by the greedy rule of the module docstring (steps
+    """Cluster labels (M,) of instances by the greedy rule of the module docstring (step
     2): candidate pairs cheapest first, merged when their clusters share no camera and
-    their average linkage is <= threshold_px."""
+    their average linkage (mean finite cost between their members) is <= threshold_px.
+    The linkage sums and counts between clusters are kept up to date on each merge."""
     M = len(view)
     label = np.arange(M)
     cams = np.zeros((M, num_views), bool)
     cams[np.arange(M), view] = True
+    finite = np.isfinite(cost)
+    total = np.where(finite, cost, 0.0)          # cost sums between clusters (by label)
+    count = finite.astype(np.float64)            # and how many pairs have a cost
     a, b = np.nonzero(np.triu(cost <= threshold_px, 1))
     order = np.argsort(cost[a, b], kind='stable')
-    finite = np.isfinite(cost)
-    for i, j in zip(a[order], b[order]):
+    for i, j in zip(a[order].tolist(), b[order].tolist()):
         la, lb = label[i], label[j]
         if la == lb or (cams[la] & cams[lb]).any():
             continue
-        ma, mb = label == la, label == lb
-        block = cost[np.ix_(ma, mb)]
-        ok = finite[np.ix_(ma, mb)]
-        if block[ok].mean() > threshold_px:
+        if total[la, lb] > threshold_px * count[la, lb]:
             continue
-        label[mb] = la
+        label[label == lb] = la
         cams[la] |= cams[lb]
+        total[la] += total[lb]
+        total[:, la] += total[:, lb]
+        count[la] += count[lb]
+        count[:, la] += count[:, lb]
     return label
 
 
@@ -163,7 +170,7 @@ def associate(points2d, cameras, scores=None, config=None):
     AssociationConfig (None: defaults). Algorithm: the module docstring.
     Returns Association, subjects ordered by how many cameras see them (most first), then
     by their first instance. Raises ValueError for bad shapes."""
-    config = config or AssociationConfig()
+    config = config or _DEFAULT
     pts = np.asarray(points2d, np.float64)
     V = len(cameras)
     if pts.ndim != 4 or pts.shape[0] != V or pts.shape[-1] != 2:

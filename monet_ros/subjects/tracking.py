@@ -32,7 +32,7 @@ class TrackerConfig:
     """Settings of the identity tracker (physical units whatever the rig's; validated,
     errors name the field)."""
     gate_mm: float = setting(
-        400.0, 'tracking: largest mean keypoint distance (mm) between a track\'s '
+        400.0, "tracking: largest mean keypoint distance (mm) between a track's "
         'prediction and a subject for them to be the same', minimum=0.0,
         exclusive_minimum=True)
     max_missed_s: float = setting(
