@@ -67,12 +67,16 @@ class Association:
 
     X (S, C, 3) triangulated keypoints (the rig's unit), NaN where not triangulated;
     instance (S, V) int: the instance index of each subject in each camera, -1 = not seen;
-    inliers (S, V, C) bool: the views used per keypoint; cost (S,) mean epipolar cost (px)
+    inliers (S, V, C) bool: the views used per keypoint; view_errors (S, V, C) px: their
+    reprojection errors (NaN elsewhere); score (S, C): mean score of the inlier views
+    (NaN where not triangulated); cost (S,) mean epipolar cost (px)
     of the subject's instance pairs; unmatched: instances (with >= 1 keypoint) in no
     subject; instances: instances with >= 1 keypoint."""
     X: np.ndarray
     instance: np.ndarray
     inliers: np.ndarray
+    view_errors: np.ndarray
+    score: np.ndarray
     cost: np.ndarray
     unmatched: int
     instances: int
@@ -190,7 +194,7 @@ def associate(points2d, cameras, scores=None, config=None):
     view, slot = np.nonzero(exists)
     M = len(view)
     empty = Association(np.zeros((0, C, 3)), np.zeros((0, V), int), np.zeros((0, V, C), bool),
-                        np.zeros(0), M, M)
+                        np.zeros((0, V, C)), np.zeros((0, C)), np.zeros(0), M, M)
     if M < 2:
         return empty
     cost = pair_costs(ideal[view, slot], present[view, slot], view, pair_fundamentals(cameras),
@@ -214,13 +218,21 @@ def associate(points2d, cameras, scores=None, config=None):
     sub_w = np.where(present[np.arange(V)[:, None], take] & seen.T[..., None],
                      w[np.arange(V)[:, None], take], 0.0)
     sub_pts = np.where(sub_w[..., None] > 0, sub_pts, np.nan)
-    X, inl = triangulate_robust(sub_pts.reshape(V, S * C, 2), cameras,
-                                sub_w.reshape(V, S * C), threshold_px=config.triangulation_px,
-                                min_views=config.min_views, method=config.method)
+    X, inl, err = triangulate_robust(sub_pts.reshape(V, S * C, 2), cameras,
+                                     sub_w.reshape(V, S * C),
+                                     threshold_px=config.triangulation_px,
+                                     min_views=config.min_views, method=config.method,
+                                     errors=True)
+    inl = inl.reshape(V, S, C).transpose(1, 0, 2)
+    n_inl = inl.sum(1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        score = np.where(inl, sub_w.transpose(1, 0, 2), 0.0).sum(1) / n_inl
+    score[n_inl == 0] = np.nan
     finite = np.isfinite(cost)
     pair = member[:, :, None] & member[:, None, :] & finite[None]     # (S, M, M)
     with np.errstate(invalid='ignore'):
         mean_cost = np.where(pair, cost[None], 0.0).sum((1, 2)) / pair.sum((1, 2))
     return Association(X=X.reshape(S, C, 3), instance=instance,
-                       inliers=inl.reshape(V, S, C).transpose(1, 0, 2), cost=mean_cost,
+                       inliers=inl, view_errors=err.reshape(V, S, C).transpose(1, 0, 2),
+                       score=score, cost=mean_cost,
                        unmatched=int(M - member.sum()), instances=M)
