@@ -11,10 +11,13 @@ instead of by their convex relaxation:
    the mean of the distances of each point to the other's epipolar line, as Dong et al.'s
    geometric affinity before its exponential). Pairs with fewer than `min_common` common
    keypoints have no cost (inf). The median makes one wrong keypoint harmless.
-2. Candidate pairs with cost <= threshold_px, cheapest first, merge their two clusters
+2. Candidate pairs with cost <= threshold_px, those with >= strong_common common
+   keypoints (or all of them) first, each group cheapest first, merge their two clusters
    when (a) the clusters share no camera and (b) the mean cost over every pair of their
    instances that has a cost (average linkage) is <= threshold_px. So a third camera's
-   instance joins a subject only if it agrees with all of its views, not just one.
+   instance joins a subject only if it agrees with all of its views, not just one; and a
+   partly hidden instance (few keypoints, whose median can agree with the wrong subject
+   by chance) joins only after the well-seen instances have formed their subjects.
 3. A cluster with >= min_views instances is a subject; the others are left over
    (counted, never silently dropped). Each subject is triangulated with the project's
    robust triangulation (geometry.triangulate_robust: confidence-weighted DLT with
@@ -46,6 +49,9 @@ class AssociationConfig:
     min_common: int = setting(
         3, 'association: fewest keypoints two instances must both see to be compared',
         minimum=1)
+    strong_common: int = setting(
+        6, 'association: instance pairs with this many common keypoints (or all) are '
+        'merged before the others', minimum=1)
     confidence_threshold: float = setting(
         0.1, 'detection score below which a keypoint is left out', minimum=0.0)
     min_views: int = setting(2, 'fewest cameras (instances) of a subject', minimum=2)
@@ -107,8 +113,9 @@ def pair_fundamentals(cameras):
 
 
 def pair_costs(ideal, present, view, F, min_common):
-    """Costs (M, M) between M instances: median symmetric epipolar distance (px) over the
-    keypoints both see; inf for the same camera, itself, or < min_common common keypoints.
+    """(cost (M, M), common (M, M) int) between M instances: the median symmetric epipolar
+    distance (px) over the keypoints both see (inf for the same camera, itself, or
+    < min_common common keypoints) and how many they both see.
 
     ideal (M, C, 2) undistorted pixels; present (M, C) bool; view (M,) camera indices;
     F (V, V, 3, 3) of pair_fundamentals."""
@@ -131,14 +138,15 @@ def pair_costs(ideal, present, view, F, min_common):
     with np.errstate(invalid='ignore'):                               # k = 0: inf
         cost = 0.5 * (lo + hi)
     bad = (k < min_common) | (view[:, None] == view[None, :])
-    return np.where(bad | ~np.isfinite(cost), np.inf, cost)
+    return np.where(bad | ~np.isfinite(cost), np.inf, cost), k
 
 
-def cluster_instances(cost, view, num_views, threshold_px):
+def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     """Cluster labels (M,) of instances by the greedy rule of the module docstring (step
-    2): candidate pairs cheapest first, merged when their clusters share no camera and
-    their average linkage (mean finite cost between their members) is <= threshold_px.
-    The linkage sums and counts between clusters are kept up to date on each merge."""
+    2): candidate pairs (the `strong` (M, M) bool ones first, then the others) cheapest
+    first, merged when their clusters share no camera and their average linkage (mean
+    finite cost between their members) is <= threshold_px. The linkage sums and counts
+    between clusters are kept up to date on each merge."""
     M = len(view)
     label = np.arange(M)
     cams = np.zeros((M, num_views), bool)
@@ -147,7 +155,8 @@ def cluster_instances(cost, view, num_views, threshold_px):
     total = np.where(finite, cost, 0.0)          # cost sums between clusters (by label)
     count = finite.astype(np.float64)            # and how many pairs have a cost
     a, b = np.nonzero(np.triu(cost <= threshold_px, 1))
-    order = np.argsort(cost[a, b], kind='stable')
+    weak = np.zeros(len(a), bool) if strong is None else ~strong[a, b]
+    order = np.lexsort((cost[a, b], weak))
     for i, j in zip(a[order].tolist(), b[order].tolist()):
         la, lb = label[i], label[j]
         if la == lb or (cams[la] & cams[lb]).any():
@@ -197,9 +206,10 @@ def associate(points2d, cameras, scores=None, config=None):
                         np.zeros((0, V, C)), np.zeros((0, C)), np.zeros(0), M, M)
     if M < 2:
         return empty
-    cost = pair_costs(ideal[view, slot], present[view, slot], view, pair_fundamentals(cameras),
-                      config.min_common)
-    label = cluster_instances(cost, view, V, config.threshold_px)
+    cost, common = pair_costs(ideal[view, slot], present[view, slot], view,
+                              pair_fundamentals(cameras), config.min_common)
+    label = cluster_instances(cost, view, V, config.threshold_px,
+                              common >= min(config.strong_common, C))
     ids, first, size = np.unique(label, return_index=True, return_counts=True)
     keep = size >= config.min_views
     ids, first, size = ids[keep], first[keep], size[keep]
