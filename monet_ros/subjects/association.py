@@ -228,11 +228,12 @@ def associate(points2d, cameras, scores=None, config=None):
     sub_w = np.where(present[np.arange(V)[:, None], take] & seen.T[..., None],
                      w[np.arange(V)[:, None], take], 0.0)
     sub_pts = np.where(sub_w[..., None] > 0, sub_pts, np.nan)
+    sub_ideal = np.where(sub_w[..., None] > 0, ideal[np.arange(V)[:, None], take], np.nan)
     X, inl, err = triangulate_robust(sub_pts.reshape(V, S * C, 2), cameras,
                                      sub_w.reshape(V, S * C),
                                      threshold_px=config.triangulation_px,
                                      min_views=config.min_views, method=config.method,
-                                     errors=True)
+                                     errors=True, ideal=sub_ideal.reshape(V, S * C, 2))
     inl = inl.reshape(V, S, C).transpose(1, 0, 2)
     n_inl = inl.sum(1)
     with np.errstate(invalid='ignore', divide='ignore'):
