@@ -18,14 +18,19 @@ instead of by their convex relaxation:
    instance joins a subject only if it agrees with all of its views, not just one; and a
    partly hidden instance (few keypoints, whose median can agree with the wrong subject
    by chance) joins only after the well-seen instances have formed their subjects.
-3. A cluster with >= min_views instances is a subject; the others are left over
+3. Repair of a chance pair: a two-instance cluster whose two instances each fit a
+   different larger cluster (no shared camera, mean cost <= threshold_px) is split into
+   them (two subjects that lie on one epipolar plane of two facing cameras agree in that
+   pair only, and that pair may form before either instance joins its own subject).
+4. A cluster with >= min_views instances is a subject; the others are left over
    (counted, never silently dropped). Each subject is triangulated with the project's
    robust triangulation (geometry.triangulate_robust: confidence-weighted DLT with
    worst-view exclusion or RANSAC, cheirality), all subjects in one batched call.
 
 Epipolar distances are in pixels: the same for a rig in m or mm. Batched numpy: the
 costs of every instance pair and keypoint are one array; the only Python loop is over the
-accepted candidate pairs of step 2 (a few per subject and camera pair).
+accepted candidate pairs of step 2 (a few per subject and camera pair) and the rare
+two-instance clusters of step 3.
 """
 from dataclasses import dataclass
 from itertools import combinations
@@ -169,6 +174,28 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
         total[:, la] += total[:, lb]
         count[la] += count[lb]
         count[:, la] += count[:, lb]
+    return _dissolve_pairs(label, cams, cost, finite, view, threshold_px)
+
+
+def _dissolve_pairs(label, cams, cost, finite, view, threshold_px):
+    """Step 3 of the module docstring: a two-instance cluster whose two instances each
+    fit a different larger cluster (no shared camera, mean cost <= threshold_px) is split
+    into them. Labels are changed in place and returned."""
+    ids, size = np.unique(label, return_counts=True)
+    big = ids[size > 2]
+    for pair in ids[size == 2]:
+        members = np.flatnonzero(label == pair)
+        target = []
+        for m in members:
+            fit = [(cost[m, label == b][finite[m, label == b]].mean(), b) for b in big
+                   if not cams[b, view[m]] and finite[m, label == b].any()]
+            fit = [f for f in fit if f[0] <= threshold_px]
+            target.append(min(fit)[1] if fit else None)
+        if None in target or target[0] == target[1]:
+            continue
+        for m, b in zip(members, target):
+            label[m] = b
+            cams[b, view[m]] = True
     return label
 
 
