@@ -66,6 +66,7 @@ def test_shuffled_instances_associate_and_keep_their_identities(crossing):
         gt = _owners(a, owner[k])
         assert sorted(gt.tolist()) == [0, 1], k       # every camera's instances right
         assert (a.instance >= 0).all()
+        assert len(set(ids.tolist())) == 2 and (ids >= 0).all()   # never shared
         for s in range(2):
             # the same instances put in GT order and triangulated plainly (DLT)
             ref = triangulate(points[k, np.arange(len(cams)), a.instance[s]], cams)
