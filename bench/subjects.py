@@ -13,9 +13,10 @@ Rows per subject count: identity switches and IDF1 (subjects.metrics, match with
 single-subject baseline on the same 2D: each subject's own instances (ground-truth
 association) triangulated alone with the same robust triangulation
 (geometry.triangulate_robust, 15 px exclusion); ratio = associated / baseline.
-Speed: association + tracking per frame (median and p90 over frames, ms; one BLAS
-thread), with os.getloadavg() and the CPU; a second timed pass at --cameras-speed cameras
-(default 8) is the target's setting (2 subjects x 14 keypoints x 8 cameras).
+Speed: association + tracking per frame (wall clock: median and p90 over frames, ms; and
+the CPU time of the thread, time.thread_time, median: on a shared machine the wall clock
+includes waiting for a core), one BLAS thread, with os.getloadavg() and the CPU; the
+target's setting is 2 subjects x 14 keypoints x 8 cameras (the default --cameras).
 
 usage: python bench/subjects.py [--frames 300] [--cameras 8] [--noise 1] [--seed 0]
 """
@@ -55,21 +56,24 @@ def cpu_name():
 
 
 def run(points, cameras, times, C):
-    """(X (T, H, C, 3), ids (T, H), per-frame seconds (T,)) of association + tracking."""
+    """(X (T, H, C, 3), ids (T, H), per-frame wall seconds (T,), per-frame CPU seconds of
+    this thread (T,)) of association + tracking."""
     T, V, N = points.shape[:3]
     tracker = SubjectTracker(C)
     H = max(1, N * V // 2)                       # most subjects a frame can hold
     X = np.full((T, H, C, 3), np.nan)
     ids = np.full((T, H), -1)
     spent = np.zeros(T)
+    cpu = np.zeros(T)
     for t in range(T):
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.thread_time()
         a = associate(points[t], cameras)
         got = tracker.step(a.X, round(times[t] * 1e9))
         spent[t] = time.perf_counter() - start
+        cpu[t] = time.thread_time() - start_cpu
         X[t, :len(got)], ids[t, :len(got)] = a.X, got
     used = max(1, int((ids >= 0).sum(1).max()))
-    return X[:, :used], ids[:, :used], spent
+    return X[:, :used], ids[:, :used], spent, cpu
 
 
 def baseline(points, owner, cameras, S, C):
@@ -110,14 +114,14 @@ def main(argv=None):
     print(f'# CPU: {cpu_name()}; loadavg at start {os.getloadavg()}')
     print('| subjects | closest pass (m) | hidden kp | IDSW | IDF1 | 3D error per subject '
           '(mm) | single-subject baseline (mm) | ratio | assoc+track ms/frame median '
-          '(p90) | frames/s |')
-    print('|---|---|---|---|---|---|---|---|---|---|')
+          '(p90) | CPU ms/frame median | frames/s |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|')
     for S in (1, 2, 3):
         subjects = make_subjects(sk, S, seed=args.seed)
         truth, hidden = subjects_occlusion(subjects, times, cameras)
         points, owner = shuffled_instances(truth, cameras, args.noise, seed=args.seed + S,
                                            hidden=hidden)
-        X, ids, spent = run(points, cameras, times, C)
+        X, ids, spent, cpu = run(points, cameras, times, C)
         scores = identity_scores(truth, X, ids, args.match_m)
         base = baseline(points, owner, cameras, S, C)
         base_err = [mean_error_mm(base[:, g], truth[:, g]) for g in range(S)]
@@ -134,7 +138,7 @@ def main(argv=None):
               f'{scores.idf1:.3f} | {", ".join(f"{e:.1f}" for e in err)} | '
               f'{", ".join(f"{b:.1f}" for b in base_err)} | {ratio} | '
               f'{np.median(ms):.2f} ({np.percentile(ms, 90):.2f}) | '
-              f'{1 / np.median(spent):.0f} |')
+              f'{1e3 * np.median(cpu):.2f} | {1 / np.median(spent):.0f} |')
     print(f'# loadavg at end {os.getloadavg()}')
 
 

@@ -153,9 +153,9 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     finite cost between their members) is <= threshold_px. The linkage sums and counts
     between clusters are kept up to date on each merge."""
     M = len(view)
-    label = np.arange(M)
-    cams = np.zeros((M, num_views), bool)
-    cams[np.arange(M), view] = True
+    label = list(range(M))                       # cluster of each instance
+    members = [[m] for m in range(M)]            # instances of each cluster
+    seen = [1 << int(v) for v in view]           # cameras of each cluster (bit mask)
     finite = np.isfinite(cost)
     total = np.where(finite, cost, 0.0)          # cost sums between clusters (by label)
     count = finite.astype(np.float64)            # and how many pairs have a cost
@@ -164,16 +164,21 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     order = np.lexsort((cost[a, b], weak))
     for i, j in zip(a[order].tolist(), b[order].tolist()):
         la, lb = label[i], label[j]
-        if la == lb or (cams[la] & cams[lb]).any():
+        if la == lb or seen[la] & seen[lb]:
             continue
         if total[la, lb] > threshold_px * count[la, lb]:
             continue
-        label[label == lb] = la
-        cams[la] |= cams[lb]
+        for m in members[lb]:
+            label[m] = la
+        members[la] += members[lb]
+        seen[la] |= seen[lb]
         total[la] += total[lb]
         total[:, la] += total[:, lb]
         count[la] += count[lb]
         count[:, la] += count[:, lb]
+    label = np.array(label)
+    cams = np.zeros((M, num_views), bool)        # cameras of each cluster, by label
+    cams[label, view] = True
     return _dissolve_pairs(label, cams, cost, finite, view, threshold_px)
 
 
@@ -199,6 +204,12 @@ def _dissolve_pairs(label, cams, cost, finite, view, threshold_px):
     return label
 
 
+def _empty(V, C, M):
+    """An Association without subjects, M instances all unmatched."""
+    return Association(np.zeros((0, C, 3)), np.zeros((0, V), int), np.zeros((0, V, C), bool),
+                       np.zeros((0, V, C)), np.zeros((0, C)), np.zeros(0), M, M)
+
+
 def associate(points2d, cameras, scores=None, config=None):
     """Association of one frame's per-camera instances into subjects, triangulated.
 
@@ -220,30 +231,27 @@ def associate(points2d, cameras, scores=None, config=None):
     if w.shape != (V, N, C):
         raise ValueError(f'scores must have shape {(V, N, C)}, got {w.shape}')
     rig = stack_cameras(cameras)
-    present = np.isfinite(pts).all(-1) & (np.nan_to_num(w, nan=-1.0)
-                                          >= config.confidence_threshold)
-    present &= np.nan_to_num(w, nan=0.0) > 0
+    # NaN scores compare False: missing
+    present = np.isfinite(pts).all(-1) & (w >= config.confidence_threshold) & (w > 0)
     ideal = undistort_views(rig, np.where(present[..., None], pts, np.nan)
                             .reshape(V, N * C, 2)).reshape(V, N, C, 2)
     present &= np.isfinite(ideal).all(-1)
     exists = present.any(-1)                                          # (V, N)
     view, slot = np.nonzero(exists)
     M = len(view)
-    empty = Association(np.zeros((0, C, 3)), np.zeros((0, V), int), np.zeros((0, V, C), bool),
-                        np.zeros((0, V, C)), np.zeros((0, C)), np.zeros(0), M, M)
     if M < 2:
-        return empty
+        return _empty(V, C, M)
     cost, common = pair_costs(ideal[view, slot], present[view, slot], view,
                               pair_fundamentals(cameras), config.min_common)
     label = cluster_instances(cost, view, V, config.threshold_px,
                               common >= min(config.strong_common, C))
-    ids, first, size = np.unique(label, return_index=True, return_counts=True)
-    keep = size >= config.min_views
-    ids, first, size = ids[keep], first[keep], size[keep]
+    size = np.bincount(label, minlength=M)
+    ids = np.flatnonzero(size >= config.min_views)
     if not len(ids):
-        return empty
-    order = np.lexsort((first, -size))
-    ids = ids[order]
+        return _empty(V, C, M)
+    first = np.full(M, M)
+    np.minimum.at(first, label, np.arange(M))                        # first instance
+    ids = ids[np.lexsort((first[ids], -size[ids]))]
     S = len(ids)
     member = label[None, :] == ids[:, None]                          # (S, M)
     instance = np.full((S, V), -1)

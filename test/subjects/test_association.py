@@ -179,3 +179,15 @@ def test_three_subjects_hiding_each_other():
     for k in range(len(times)):
         a = associate(points[k], cams)
         assert sorted(_owners(a, owner[k]).tolist()) == [0, 1, 2], k
+
+
+def test_frames_without_a_subject(crossing):
+    _, _, cams, points, _ = crossing
+    a = associate(np.full(points.shape[1:], np.nan), cams)
+    assert a.X.shape == (0, 14, 3) and a.instances == 0 and a.unmatched == 0
+    one = np.full(points.shape[1:], np.nan)
+    one[2] = points[0, 2]                                 # only cam2 sees anyone
+    a = associate(one, cams)
+    assert len(a.X) == 0 and a.instances == 2 and a.unmatched == 2
+    tracker = SubjectTracker(SKELETON.num_keypoints)
+    assert tracker.step(a.X, 1).shape == (0,) and tracker.births == 0
