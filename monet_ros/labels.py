@@ -26,7 +26,10 @@ instant, as `monet info` lists them) instead of `stamp_ns`::
 
 A 2D points table (`monet triangulate`, read with read_label_rows(path, points=True))
 is frame-indexed, may add a detection score column (frame,camera,keypoint,u,v,score) and
-may hold empty / NaN u, v or score for a missing detection.
+may hold empty / NaN u, v or score for a missing detection. A last `subject` column
+(frame,camera,keypoint,u,v[,score],subject; `monet triangulate --subjects`) labels the
+instance a detection belongs to within its camera and frame: the row's keypoint is read
+as '<subject>/<keypoint>', as the SLEAP and DeepLabCut readers name several instances.
 
 read_labels(path, keypoints) -> Labels: stamp_ns -> camera -> (C, 2) float64 array in
 keypoint order, NaN where unlabelled (stamp-keyed files only). write_labels(path, rows)
@@ -60,6 +63,7 @@ import numpy as np
 HEADER = ('stamp_ns', 'camera', 'keypoint', 'u', 'v')
 FRAME_HEADER = ('frame', 'camera', 'keypoint', 'u', 'v')
 SCORED_FRAME_HEADER = FRAME_HEADER + ('score',)
+SUBJECT_HEADERS = (FRAME_HEADER + ('subject',), SCORED_FRAME_HEADER + ('subject',))
 
 
 class LabelError(ValueError):
@@ -177,6 +181,8 @@ def read_label_rows(path, points=False):
                                  f'{",".join(HEADER)} or {",".join(FRAME_HEADER)}')
             header = tuple(h.strip() for h in header)
             allowed = (FRAME_HEADER, SCORED_FRAME_HEADER) if points else (HEADER, FRAME_HEADER)
+            if points and header in SUBJECT_HEADERS:
+                allowed = SUBJECT_HEADERS
             if header not in allowed:
                 raise LabelError(f'{path}:1: header is {",".join(header)!r}, expected '
                                  f'{",".join(allowed[0])!r} or {",".join(allowed[1])!r}')
@@ -264,7 +270,14 @@ def _parse_row(path, line, row, header, points=False):
     coords = []
     for name, text in (('u', u_text), ('v', v_text)):
         coords.append(_number(path, line, name, text, points))
-    score = _number(path, line, 'score', row[5].strip(), True) if len(header) > 5 else None
+    score = _number(path, line, 'score', row[5].strip(), True) \
+        if len(header) > 5 and header[5] == 'score' else None
+    if header[-1] == 'subject':
+        subject = row[-1].strip()
+        if not subject or '/' in subject:
+            raise LabelError(f'{path}:{line}: field subject: {subject!r} must be a '
+                             "non-empty name without '/'")
+        keypoint = f'{subject}/{keypoint}'
     stamp, frame = (value, None) if key == 'stamp_ns' else (None, value)
     return LabelRow(str(path), line, stamp, frame, camera, keypoint, coords[0], coords[1],
                     score=score)

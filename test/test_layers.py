@@ -7,7 +7,8 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / 'monet_ros'
-CORE = ('geometry', 'models', 'learning', 'synth', 'evaluation', 'calibration', 'temporal')
+CORE = ('geometry', 'models', 'learning', 'synth', 'evaluation', 'calibration', 'temporal',
+        'subjects')
 UPPER = ('monet_ros.nodes', 'monet_ros.commands', 'monet_ros.cli', 'rclpy')
 # Known loops still to mend (each by the work on its module): report writes the plots, the
 # plots take report's mode names.

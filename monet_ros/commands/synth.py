@@ -62,6 +62,10 @@ def add_arguments(parser):
     parser.add_argument('--occluders', type=int, default=d['occluders'].default,
                         help='static pillars (up to hip height) between the path and that '
                              'many cameras, hiding limbs from some views (default %(default)s)')
+    parser.add_argument('--subjects', type=int, default=d['subjects'].default,
+                        help='subjects (1-3) walking rings that pass and hide each other; '
+                        'with 2 or more, ground_truth.npz holds them all and points2d.csv '
+                        'their per-camera instances, shuffled (default %(default)s)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
@@ -79,7 +83,8 @@ def config_from_args(args):
         label_fraction=args.label_fraction, seed=args.seed, distortion=distortion,
         radius=args.radius, hfov_deg=args.hfov, noise=args.noise,
         label_occluded=not args.visible_labels_only, height_spread=args.height_spread,
-        occluders=args.occluders, distinct_sides=args.distinct_sides)
+        occluders=args.occluders, distinct_sides=args.distinct_sides,
+        subjects=args.subjects)
 
 
 def run(args):

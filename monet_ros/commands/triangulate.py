@@ -6,6 +6,7 @@
         [--skeleton human14]
         [--camera-map SRC=DST] [--threshold-px 15] [--confidence-threshold 0.1]
         [--min-views 2] [--method exclusion|ransac] [--export csv,trc,nwb,npz]
+        [--subjects N [--association-px 15] [--gate-mm 400] [--max-missed-s 0.5]]
 
 POINTS2D: what `monet labels import` reads (DeepLabCut / Lightning Pose prediction CSV or
 H5 per camera, SLEAP analysis H5 per camera, an anipose pose-2d folder, OpenPose /
@@ -22,6 +23,16 @@ monet_ros.geometry.units), stated in every output. The rows are
 the source's frames from the first to the last one seen, numbered as the source numbers
 them: CSV fnum = source frame (anipose's meaning), TRC Frame# = frame + 1, TRC Time and
 NWB timestamps = frame / --fps (a table that starts at frame 10 starts at 10 / fps s).
+
+--subjects N: several subjects (monet_ros.subjects). The tables hold per-camera instances:
+SLEAP tracks, DeepLabCut individuals, the points table's `subject` column (a label within
+one camera and frame only, never taken to mean the same subject elsewhere). Each frame's
+instances are associated across cameras by epipolar geometry and triangulated
+(subjects.association), then given identities over time (subjects.tracking); at most N
+subjects per frame are kept (those seen by the most cameras; the others are counted).
+keypoints3d.csv gains a `subject` column (one row per frame and subject), TRC is one file
+per subject (keypoints3d_subject<id>.trc), NWB one 3D series per subject. Not with
+--filter or --export npz.
 """
 from pathlib import Path
 import sys
@@ -67,20 +78,34 @@ def add_arguments(parser):
                         help='TRC axes: world as is, or yzx = Y-up as Pose2Sim/OpenSim')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     add_filter_arguments(parser)
-
+    parser.add_argument('--subjects', type=int, default=None, metavar='N',
+                        help='several subjects: per-camera instances associated across '
+                        'cameras and tracked over time; at most N per frame')
+    parser.add_argument('--association-px', type=float, default=15.0,
+                        help='--subjects: largest median epipolar distance (px) between two '
+                        'instances of one subject')
+    parser.add_argument('--gate-mm', type=float, default=400.0,
+                        help="--subjects: largest mean keypoint distance (mm) of a subject to "
+                        "a track's prediction")
+    parser.add_argument('--max-missed-s', type=float, default=0.5,
+                        help='--subjects: a track unseen for longer (s) ends')
 
 
 
 def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, camera_map=None,
                        fusion_config=None, filter_config=None, exports=('csv', 'trc', 'nwb'),
-                       trc_axes='xyz', progress=False, rig_units=None, pose_model=None):
+                       trc_axes='xyz', progress=False, rig_units=None, pose_model=None,
+                       subjects=None, tracker_config=None, association_px=15.0):
     """Triangulate (and filter) 2D tables; write `out`. rig_units: the length unit of a rig
     file that states none (None: the rule of geometry.units); pose_model: keypoint names of
     OpenPose JSON (read_points2d). Returns a dict of figures:
     frames, cameras, keypoints, rows, counts (cells, missing, low_score, triangulated,
     per-joint not triangulated), exports {format: path}, filter (temporal.Smoothed or
     None), notes, units (the rig's length unit, that of arrays['X']).
-    progress: optim's iterations as a tqdm bar.
+    progress: optim's iterations as a tqdm bar. subjects: None (one subject) or N (several:
+    the module docstring; tracker_config a subjects.TrackerConfig, association_px the
+    association's threshold), the dict then has 'subjects' (SubjectRows) and counts
+    per subject.
     Raises ValueError / LabelError / ConfigError / OSError naming the file or option."""
     from monet_ros.commands.common import atomic_output_dir, check_new_output
     from monet_ros.commands.filter_options import check_filter_units
@@ -109,6 +134,11 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     check_filter_units(filter_config, units_of(rig_cameras))     # before the work
     names = [c.name for c in rig_cameras]
     sk = load_skeleton(skeleton) if skeleton else None
+    if subjects is not None:
+        return _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_map,
+                                     fusion_config, filter_config, exports, trc_axes,
+                                     pose_model, subjects, tracker_config, association_px,
+                                     notes)
     pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,
                         camera_map=camera_map, pose_model=pose_model)
     notes += pts.notes
@@ -154,6 +184,81 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
                          for f, p in written.items()})
 
 
+def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_map,
+                          fusion_config, filter_config, exports, trc_axes, pose_model,
+                          num_subjects, tracker_config, association_px, notes):
+    """triangulate_points with --subjects (the module docstring)."""
+    from monet_ros.commands.common import atomic_output_dir
+    from monet_ros.config import ConfigError
+    from monet_ros.io.export_results import write_subject_results
+    from monet_ros.labels import LabelError
+    from monet_ros.labels_import.points2d import read_points2d
+    from monet_ros.subjects import AssociationConfig
+    from monet_ros.subjects.offline import instance_arrays, split_instances, track_subjects
+
+    if not num_subjects >= 1:
+        raise ConfigError('monet triangulate', 'subjects', f'must be >= 1, got {num_subjects}')
+    if filter_config.method != 'none':
+        raise ConfigError('monet triangulate', 'filter', f'--filter {filter_config.method} '
+                          'is not available with --subjects (per-subject filters are not '
+                          'written yet)')
+    if 'npz' in exports:
+        raise ConfigError('monet triangulate', 'export', 'npz is not written with '
+                          '--subjects; use csv, trc, nwb')
+    association = AssociationConfig(threshold_px=association_px,
+                                    confidence_threshold=fusion_config.confidence_threshold,
+                                    min_views=max(2, fusion_config.min_views),
+                                    triangulation_px=fusion_config.threshold_px,
+                                    method=fusion_config.method)
+    pts = read_points2d(paths, names, fmt, camera_map=camera_map, pose_model=pose_model)
+    notes += pts.notes
+    try:
+        instances, keypoints, index = split_instances(pts.keypoints,
+                                                      sk.keypoints if sk else None)
+    except ValueError as error:
+        raise LabelError(f'{", ".join(map(str, paths))}: {error}') from None
+    used = [v for v in range(len(names)) if np.isfinite(pts.points[:, v]).any()]
+    if len(used) < 2:
+        raise ValueError(f'{", ".join(map(str, paths))}: detections in {len(used)} '
+                         'camera(s); triangulation needs at least 2')
+    unused = [n for v, n in enumerate(names) if v not in used]
+    if unused:
+        notes.append(f'rig cameras without 2D detections, left out: {", ".join(unused)}')
+    cameras = [rig_cameras[v] for v in used]
+    points, score = instance_arrays(pts.points[:, used], pts.score[:, used], index)
+    stamps = np.round(pts.frames * (1e9 / fps)).astype(np.int64)
+    rows = track_subjects(points, score, cameras, stamps, num_subjects, association,
+                          tracker_config)
+    with atomic_output_dir(out) as staging:
+        staging.mkdir(parents=True, exist_ok=True)
+        written = write_subject_results(staging, exports, cameras, keypoints, rows, stamps,
+                                        pts.frames, edges=sk.bone_indices if sk else None,
+                                        trc_axes=trc_axes, origin_ns=0, rate_hz=fps)
+    return dict(frames=len(stamps), first_frame=int(pts.frames[0]),
+                last_frame=int(pts.frames[-1]), fps=fps, cameras=[c.name for c in cameras],
+                keypoints=keypoints, instance_names=instances, rows=pts.rows,
+                nan_rows=pts.nan_rows, fmt=pts.fmt, subjects=rows, notes=notes,
+                units=rig_cameras[0].units,
+                exports={f: Path(out) / Path(p).relative_to(staging)
+                         for f, p in written.items()})
+
+
+def _print_subjects(fig, name):
+    s = fig['subjects']
+    ids = np.unique(s.subject)
+    T = fig['frames']
+    print(f'{name}: {T} frames (from frame {fig["first_frame"]}) x {len(fig["cameras"])} '
+          f'cameras ({", ".join(fig["cameras"])}) x {len(fig["keypoints"])} keypoints, '
+          f'{len(fig["instance_names"])} instance slots per camera from {fig["rows"]} '
+          f'{fig["fmt"]} rows; 3D in {fig["units"]}, the rig\'s unit')
+    print(f'{name}: subjects: {len(ids)} identities ({", ".join(map(str, ids))}), '
+          f'{len(s.subject)} subject-frames, {s.births} births, {s.deaths} deaths; '
+          f'association + tracking {1e3 * s.seconds / max(T, 1):.2f} ms/frame')
+    print(f'{name}: skipped: {s.unmatched} of {s.instances} instances matched in no other '
+          f'camera, {s.extra} subjects beyond --subjects, {s.untracked} with too few '
+          'keypoints for a track')
+
+
 def run(args):
     from monet_ros.commands.filter_options import filter_config_from_args
     from monet_ros.fusion import FusionConfig
@@ -165,14 +270,27 @@ def run(args):
                           min_views=args.min_views, method=args.method)
     filt = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     exports = parse_formats(args.export)
+    tracker = None
+    if args.subjects is not None:
+        from monet_ros.subjects.tracking import TrackerConfig
+        tracker = TrackerConfig(gate_mm=args.gate_mm, max_missed_s=args.max_missed_s)
     fig = triangulate_points(args.points2d, args.rig, args.out, fmt=args.format, fps=args.fps,
                              skeleton=args.skeleton,
                              camera_map=dict(parse_name_map(args.camera_map)),
                              fusion_config=fusion, filter_config=filt, exports=exports,
                              trc_axes=args.trc_axes, progress=not args.quiet,
-                             rig_units=args.rig_units, pose_model=args.pose_model)
-    n = fig['counts']
+                             rig_units=args.rig_units, pose_model=args.pose_model,
+                             subjects=args.subjects, association_px=args.association_px,
+                             tracker_config=tracker)
     name = 'monet triangulate'
+    if args.subjects is not None:
+        _print_subjects(fig, name)
+        for note in fig['notes']:
+            print(f'{name}: note: {note}', file=sys.stderr)
+        for fmt, path in fig['exports'].items():
+            print(f'{name}: wrote {fmt}: {path}')
+        return 0
+    n = fig['counts']
     print(f'{name}: {fig["frames"]} frames (from frame {fig["first_frame"]}) x '
           f'{len(fig["cameras"])} cameras ({", ".join(fig["cameras"])}) x '
           f'{len(fig["keypoints"])} keypoints from {fig["rows"]} {fig["fmt"]} rows; '

@@ -21,9 +21,10 @@ from monet_ros.geometry.camera import project_views, stack_cameras, undistort_vi
 from monet_ros.timing import NO_TIMER
 
 
-def _prepare(points2d, cameras, weights, rig=None):
+def _prepare(points2d, cameras, weights, rig=None, ideal=None):
     """Validate shapes; -> (observed (V,N,2), ideal (V,N,2) with 0 at missing, w (V,N)).
-    rig: stack_cameras(cameras) when at hand."""
+    rig: stack_cameras(cameras) when at hand; ideal: undistort_views(rig, points2d) when
+    the caller has it already (a copy is made)."""
     obs = np.asarray(points2d, dtype=np.float64)
     V = len(cameras)
     if obs.ndim != 3 or obs.shape[0] != V or obs.shape[2] != 2:
@@ -36,7 +37,13 @@ def _prepare(points2d, cameras, weights, rig=None):
             raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
         if np.any(w < 0):
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
-    ideal = undistort_views(rig or stack_cameras(cameras), obs)
+    if ideal is None:
+        ideal = undistort_views(rig or stack_cameras(cameras), obs)
+    else:
+        ideal = np.array(ideal, dtype=np.float64)
+        if ideal.shape != obs.shape:
+            raise ValueError(f'ideal must have the shape of points2d {obs.shape}, got '
+                             f'{ideal.shape}')
     # missing: NaN input, zero/NaN weight, or a point the distortion model cannot invert
     missing = ~np.all(np.isfinite(ideal), axis=2) | ~np.isfinite(w) | (w <= 0)
     w = np.where(missing, 0.0, w)
@@ -245,7 +252,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
 
 def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_views=2,
                        method='exclusion', max_subsets=20, max_hypotheses=20, seed=0,
-                       timer=None, errors=False):
+                       timer=None, errors=False, ideal=None):
     """Outlier-robust triangulation, batched over keypoints.
 
     method='exclusion' (Pose2Sim's rule): triangulate with all available views; while the
@@ -262,7 +269,8 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     inlier error) wins and is refined by weighted DLT on its inliers; NaN with fewer than
     min_views inliers.
     timer: a monet_ros.timing.StageTimer to account 'undistort', 'triangulate' and
-    'errors' to.
+    'errors' to. ideal: (V, N, 2) the undistorted pixels of points2d (undistort_views)
+    when the caller has them (subjects.association), else None (undistorted here).
     Returns (X (N, 3), inlier_mask (V, N) bool of the views used), and with errors=True
     also view_errors (V, N): the reprojection errors (pixels, reprojection_error's) of the
     inlier views, NaN elsewhere (the exclusion search has them already)."""
@@ -273,7 +281,7 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     timer = timer or NO_TIMER
     rig = stack_cameras(cameras)
     with timer('undistort'):
-        obs, ideal, w = _prepare(points2d, cameras, weights, rig)
+        obs, ideal, w = _prepare(points2d, cameras, weights, rig, ideal)
     with timer('triangulate'):
         X, view_errors, inliers = _robust(obs, ideal, w, rig, threshold_px, min_views,
                                           method, max_subsets, max_hypotheses, seed)

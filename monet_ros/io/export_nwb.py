@@ -29,13 +29,17 @@ import numpy as np
 
 def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidence2d,
               edges=None, description='monet_ros multiview keypoints', filtered=None,
-              fnum=None, origin_ns=None):
+              fnum=None, origin_ns=None, subjects=None):
     """keypoints (C,); stamps_ns (T,); X (T, C, 3); score (T, C); cameras: V Camera;
-    points2d (T, V, C, 2) source px; confidence2d (T, V, C); filtered: None or dict(method,
-    change_mm (T, C), bridged (T, C)) when X is a filter's output. X and the cameras' t are
-    in the cameras' length unit (Camera.units), stated as the 3D series' unit; fnum: None or
-    (T,) int source frame numbers (recorded as 'source_frame'); origin_ns: the time origin
-    (int ns, default the first stamp). Atomic (tmp + os.replace)."""
+    points2d (T, V, C, 2) source px or None (no 2D series); confidence2d (T, V, C);
+    subjects: None, or several subjects [(identity, X (T, C, 3), score (T, C)), ...]
+    (X and score then unused, NaN where a subject is absent): one
+    MultiCameraPoseEstimation 'monet_pose_subject<identity>' per subject;
+    filtered: None or dict(method, change_mm (T, C), bridged (T, C)) when X is a filter's
+    output. X and the cameras' t are in the cameras' length unit (Camera.units), stated as
+    the 3D series' unit; fnum: None or (T,) int source frame numbers (recorded as
+    'source_frame'); origin_ns: the time origin (int ns, default the first stamp). Atomic
+    (tmp + os.replace)."""
     from ndx_pose import (
         CalibratedCamera,
         MultiCameraPoseEstimation,
@@ -78,6 +82,8 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
                                   description=f'{cam.width}x{cam.height} px; '
                                   f'translation in {NWB_NAMES[cam.units]}')
         nwb.add_device(device)
+        if points2d is None:
+            continue
         series = [PoseEstimationSeries(
             name=k, data=np.asarray(points2d[:, v, c], float), unit='pixels',
             reference_frame=f'{cam.name} source image, pixel centres on integers',
@@ -89,11 +95,14 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
             description=f'2D detections of {cam.name}', scorer='monet_ros detector',
             source_software='monet_ros', source_software_version=str(version),
             skeleton=skeleton))
-    series3d = [PoseEstimationSeries(
-        name=k, data=np.asarray(X[:, c], float), unit=NWB_NAMES[rig_units(cameras)],
-        reference_frame='rig world frame', confidence=np.asarray(score[:, c], float),
-        confidence_definition='mean heatmap peak value of the inlier views',
-        timestamps=times) for c, k in enumerate(keypoints)]
+    unit = NWB_NAMES[rig_units(cameras)]
+
+    def series3d(X, score):
+        return [PoseEstimationSeries(
+            name=k, data=np.asarray(X[:, c], float), unit=unit,
+            reference_frame='rig world frame', confidence=np.asarray(score[:, c], float),
+            confidence_definition='mean heatmap peak value of the inlier views',
+            timestamps=times) for c, k in enumerate(keypoints)]
     how = 'triangulated keypoints (robust DLT over inlier views)'
     if filtered is not None:
         how += f', filtered over time ({filtered["method"]})'
@@ -107,11 +116,15 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
             unit='n.a.', timestamps=times,
             description=f'1 where the raw point was missing and the filter bridged the gap '
             f'({order})'))
-    behavior.add(MultiCameraPoseEstimation(
-        name='monet_pose', pose_estimation_series=series3d, pose_estimations=per_camera,
-        description=how,
-        scorer='monet_ros fusion', source_software='monet_ros',
-        source_software_version=str(version), skeleton=skeleton))
+    poses = [('monet_pose', X, score, how)] if subjects is None else [
+        (f'monet_pose_subject{int(i)}', Xs, ss, f'{how}; subject {int(i)} (NaN where absent)')
+        for i, Xs, ss in subjects]
+    for name, Xs, ss, text in poses:
+        behavior.add(MultiCameraPoseEstimation(
+            name=name, pose_estimation_series=series3d(Xs, ss),
+            pose_estimations=per_camera or None, description=text,
+            scorer='monet_ros fusion', source_software='monet_ros',
+            source_software_version=str(version), skeleton=skeleton))
     path = Path(path)
     tmp = path.with_name(f'.{path.stem}.tmp.nwb')
     with NWBHDF5IO(str(tmp), 'w') as io:

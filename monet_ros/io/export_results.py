@@ -158,3 +158,53 @@ def write_results(folder, formats, cameras, keypoints, a, edges=None, trc_axes='
                                cameras, a['points2d'], a['conf2d'], edges=edges,
                                filtered=filtered, fnum=fnum, origin_ns=origin_ns)
     return out
+
+
+def write_subject_results(folder, formats, cameras, keypoints, rows, stamps_ns, fnum,
+                          edges=None, trc_axes='xyz', origin_ns=None, rate_hz=None):
+    """Write several subjects' points (`monet triangulate --subjects`) -> {format: path}.
+
+    rows: subjects.offline.SubjectRows (frame indices into stamps_ns (T,) / fnum (T,));
+    csv: keypoints3d.csv in anipose's layout with a `subject` column, one row per frame and
+    subject (frame order, then identity); trc: keypoints3d_subject<identity>.trc per
+    subject, every frame from the first to the last (empty cells where the subject is
+    absent); nwb: keypoints.nwb with one 3D series per subject (export_nwb, NaN where
+    absent; the 2D instances are not written). Formats and units as write_results; npz is
+    not written for several subjects (ValueError)."""
+    from monet_ros.geometry.units import rig_units
+    from monet_ros.io.export_tables import write_anipose_csv, write_trc
+    if 'npz' in formats:
+        raise ValueError('--export npz: not written with --subjects (its 2D arrays are per '
+                         'subject-less instance); use csv, trc, nwb')
+    folder = Path(folder)
+    units = rig_units(cameras)
+    stamps_ns = np.asarray(stamps_ns, np.int64)
+    fnum = np.asarray(fnum, np.int64)
+    order = np.lexsort((rows.subject, rows.frame))
+    frame = rows.frame[order].astype(np.int64)
+    out = {}
+    if 'csv' in formats:
+        out['csv'] = write_anipose_csv(folder / FILE_NAMES['csv'], keypoints, stamps_ns[frame],
+                                       rows.X[order], rows.error[order], rows.ncams[order],
+                                       rows.score[order], units=units, fnum=fnum[frame],
+                                       subject=rows.subject[order])
+    T, C = len(stamps_ns), len(keypoints)
+    per_subject = []
+    for ident in np.unique(rows.subject):
+        mine = rows.subject == ident
+        X = np.full((T, C, 3), np.nan)
+        score = np.full((T, C), np.nan)
+        X[rows.frame[mine]] = rows.X[mine]
+        score[rows.frame[mine]] = rows.score[mine]
+        per_subject.append((int(ident), X, score))
+    if 'trc' in formats:
+        for ident, X, _ in per_subject:
+            out[f'trc subject {ident}'] = write_trc(
+                folder / f'keypoints3d_subject{ident}.trc', keypoints, stamps_ns, X,
+                axes=trc_axes, units=units, fnum=fnum, origin_ns=origin_ns, rate_hz=rate_hz)
+    if 'nwb' in formats and T:
+        from monet_ros.io.export_nwb import write_nwb
+        out['nwb'] = write_nwb(folder / FILE_NAMES['nwb'], keypoints, stamps_ns, None, None,
+                               cameras, None, None, edges=edges, fnum=fnum,
+                               origin_ns=origin_ns, subjects=per_subject)
+    return out

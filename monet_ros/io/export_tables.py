@@ -125,11 +125,13 @@ def read_csv_units(path):
 
 
 def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=None,
-                      units='m', fnum=None):
+                      units='m', fnum=None, subject=None):
     """Write anipose's 3D CSV. X (T, C, 3) in `units` (the rig's length unit, written to
     the sidecar csv_units_path(path)); error, ncams, score (T, C); extra: None or
     {field: (T, C)} for fields of EXTRA_FIELDS (module docstring); fnum: None or (T,) int
-    the source's frame numbers (source_frames). Atomic."""
+    the source's frame numbers (source_frames); subject: None or (T,) int, a `subject`
+    column before fnum (several subjects: one row per frame and subject, the T rows then
+    repeat stamps and frame numbers). Atomic."""
     import json
     extra = {f: np.asarray(v, float) for f, v in (extra or {}).items()}
     bad = [f for f in extra if f not in EXTRA_FIELDS]
@@ -143,7 +145,7 @@ def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=
         w = csv.writer(f, lineterminator='\n')
         w.writerow([f'{k}_{field}' for k in keypoints for field in FIELDS]
                    + [f'{k}_{field}' for field in extra for k in keypoints]
-                   + ['fnum', 'stamp_ns'])
+                   + ([] if subject is None else ['subject']) + ['fnum', 'stamp_ns'])
         for t in range(T):
             row = []
             for c in range(C):
@@ -151,7 +153,8 @@ def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=
                         _cell(error[t, c]), _cell(ncams[t, c], True), _cell(score[t, c])]
             for field, values in extra.items():
                 row += [_cell(values[t, c], field == 'bridged') for c in range(C)]
-            w.writerow(row + [int(fnum[t]), int(stamps_ns[t])])
+            ident = [] if subject is None else [int(subject[t])]
+            w.writerow(row + ident + [int(fnum[t]), int(stamps_ns[t])])
     side, side_tmp = _atomic_writer(csv_units_path(path))
     side_tmp.write_text(json.dumps({
         'file': path.name, 'length_unit': units,
@@ -164,7 +167,8 @@ def write_anipose_csv(path, keypoints, stamps_ns, X, error, ncams, score, extra=
 
 def read_anipose_csv(path):
     """dict(keypoints, fnum (T,), stamps_ns (T,) or None, X (T, C, 3), error, ncams, score
-    (T, C), extra {field: (T, C)} of the EXTRA_FIELDS columns present) of an anipose 3D
+    (T, C), extra {field: (T, C)} of the EXTRA_FIELDS columns present, subject (T,) int or
+    None without a subject column: several subjects' rows) of an anipose 3D
     CSV (anipose's own or ours). Raises ExportError naming the file, line and column."""
     path = Path(path)
     try:
@@ -210,7 +214,7 @@ def read_anipose_csv(path):
     return dict(keypoints=tuple(keypoints), fnum=np.arange(T) if fnum is None else fnum,
                 stamps_ns=ints('stamp_ns'), X=np.stack([out['x'], out['y'], out['z']], -1),
                 error=out['error'], ncams=out['ncams'], score=out['score'],
-                extra={f: out[f] for f in present})
+                extra={f: out[f] for f in present}, subject=ints('subject'))
 
 
 def write_trc(path, keypoints, stamps_ns, X, axes='xyz', units='m', fnum=None,

@@ -12,6 +12,13 @@ Output folder DIR (must not exist or be empty):
                         in_image / occluded (T, V, C), labelled (T,) bool, camera_names,
                         keypoint_names
   DIR/README.md         what, seed, cameras, frames, labels, how to train / evaluate
+With --subjects N > 1 (SynthConfig.subjects) the images show N subjects; the ground-truth
+topic and labels.csv are subject 0's; ground_truth.npz adds subjects_keypoints3d
+(T, S, C, 3), subjects_keypoints2d (T, V, S, C, 2), subjects_in_image and
+subjects_occluded (T, V, S, C) (hidden by any subject's limbs), subject s in slot s (its
+identity); DIR/points2d.csv holds every subject's visible keypoints per camera as the
+frames table with a `subject` column whose instance labels are shuffled per camera and
+frame (`monet triangulate DIR/points2d.csv --subjects N`).
 """
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -33,6 +40,7 @@ from monet_ros.synth.render import (
 )
 from monet_ros.synth.rig import LAYOUTS, RigConfig, RigConfigError, make_rig
 from monet_ros.synth.subject import Subject, SubjectError
+from monet_ros.synth.subjects import PATH_RADII, make_subjects
 
 DEFAULT_START_NS = 1_767_225_600_000_000_000          # 2026-01-01T00:00:00Z
 GROUND_TRUTH_TOPIC = '/ground_truth/keypoints3d'
@@ -64,7 +72,10 @@ class SynthConfig:
     height (non-coplanar ring; 0 = coplanar); occluders: static pillars (up to hip height)
     between the subject's path and that many cameras, hiding legs from some views;
     distinct_sides: the subject's left limbs in their own colour (left and right limbs look
-    alike otherwise, the symmetric ambiguity of real subjects). All off by default: a seed's
+    alike otherwise, the symmetric ambiguity of real subjects); subjects: 1, or 2..3
+    subjects walking rings of synth.subjects.PATH_RADII that pass and hide each other
+    (subject 0 is the one of the ground-truth topic and labels.csv; ground_truth.npz holds
+    them all and points2d.csv their per-camera instances). All off by default: a seed's
     bytes do not change.
     """
 
@@ -87,6 +98,7 @@ class SynthConfig:
     height_spread: float = 0.0
     occluders: int = 0
     distinct_sides: bool = False
+    subjects: int = 1
     rig: RigConfig = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -118,6 +130,9 @@ class SynthConfig:
                 or not 0 <= self.occluders <= self.cameras:
             bad('occluders', f'must be an integer in 0..cameras ({self.cameras}), got '
                 f'{self.occluders!r}')
+        if isinstance(self.subjects, bool) or not isinstance(self.subjects, (int, np.integer)) \
+                or not 1 <= self.subjects <= len(PATH_RADII):
+            bad('subjects', f'must be an integer in 1..{len(PATH_RADII)}, got {self.subjects!r}')
         try:
             skeleton = load_skeleton(self.skeleton)
             subject = Subject(skeleton)
@@ -205,37 +220,77 @@ def plan(config):
     Returns a dict: cameras, skeleton, subject, stamps (T,), times (T,), keypoints3d
     (T, C, 3), A, B (T, P, 3) capsule axes (the subject's, then the occluders'), radii (P,),
     parts (P,) material names, keypoints2d (T, V, C, 2), in_image, occluded
-    (T, V, C), labelled (T,) bool, label_mask (T, V, C) bool, root (T, 3) on the ground.
+    (T, V, C), labelled (T,) bool, label_mask (T, V, C) bool, root (T, 3) on the ground;
+    all of subject 0 (occlusion by the other subjects included); and subjects_keypoints3d
+    (T, S, C, 3), subjects_keypoints2d (T, V, S, C, 2), subjects_in_image and
+    subjects_occluded (T, V, S, C) of every subject (A, B: every subject's capsules).
     """
     skeleton = load_skeleton(config.skeleton)
-    subject = Subject(skeleton, seed=config.seed)
+    subjects = [Subject(skeleton, seed=config.seed)] if config.subjects == 1 else \
+        make_subjects(skeleton, config.subjects, seed=config.seed)
+    subject = subjects[0]
     cameras = make_rig(config.rig, seed=config.seed)
     stamps = config.stamps()
     times = (stamps - stamps[0]) / 1e9
-    joints = subject.joints(times)
-    X = np.stack([joints[k] for k in skeleton.keypoints], axis=1)
-    A, B = subject.capsule_arrays(times, joints)
-    parts = sided_parts(subject.capsules) if config.distinct_sides else subject.parts
-    radii, attached = subject.radii, subject.attached
+    every = [s.joints(times) for s in subjects]
+    joints = every[0]
+    S, C = len(subjects), skeleton.num_keypoints
+    X_all = np.concatenate([np.stack([j[k] for k in skeleton.keypoints], axis=1)
+                            for j in every], axis=1)                     # (T, S C, 3)
+    X = X_all[:, :C]
+    caps = [s.capsule_arrays(times, j) for s, j in zip(subjects, every)]
+    A = np.concatenate([a for a, _ in caps], axis=1)
+    B = np.concatenate([b for _, b in caps], axis=1)
+    parts = (sided_parts(subject.capsules) if config.distinct_sides else subject.parts) * S
+    radii = np.concatenate([s.radii for s in subjects])
+    attached = np.zeros((len(radii), S * C), bool)                       # block diagonal
+    for k, s in enumerate(subjects):
+        P = len(s.radii)
+        attached[k * P:(k + 1) * P, k * C:(k + 1) * C] = s.attached
     if config.occluders:
         ends = occluder_capsules(cameras, config.occluders, X)           # (K, 2, 3)
         A = np.concatenate([A, np.broadcast_to(ends[:, 0], (len(A), *ends[:, 0].shape))], 1)
         B = np.concatenate([B, np.broadcast_to(ends[:, 1], (len(B), *ends[:, 1].shape))], 1)
         radii = np.concatenate([radii, np.full(len(ends), OCCLUDER_RADIUS)])
-        attached = np.concatenate([attached, np.zeros((len(ends), X.shape[1]), bool)])
+        attached = np.concatenate([attached, np.zeros((len(ends), S * C), bool)])
         parts = parts + ('occluder',) * len(ends)
-    uv, inside = in_image(cameras, X)
-    hidden = occlusion(cameras, X, A, B, radii, attached)
+    uv_all, inside_all = in_image(cameras, X_all)
+    hidden_all = occlusion(cameras, X_all, A, B, radii, attached)
+    uv, inside, hidden = uv_all[:, :, :C], inside_all[:, :, :C], hidden_all[:, :, :C]
     labelled = np.zeros(config.frames, bool)
     labelled[labelled_indices(config)] = True
     mask = inside & labelled[:, None, None]
     if not config.label_occluded:
         mask &= ~hidden
     root = joints[subject.root_joint] * [1.0, 1.0, 0.0]             # shadow centre
+    T, V = len(times), len(cameras)
     return dict(cameras=cameras, skeleton=skeleton, subject=subject, stamps=stamps,
                 times=times, keypoints3d=X, A=A, B=B, radii=radii, parts=parts,
                 keypoints2d=uv, in_image=inside,
-                occluded=hidden, labelled=labelled, label_mask=mask, root=root)
+                occluded=hidden, labelled=labelled, label_mask=mask, root=root,
+                subjects_keypoints3d=X_all.reshape(T, S, C, 3),
+                subjects_keypoints2d=uv_all.reshape(T, V, S, C, 2),
+                subjects_in_image=inside_all.reshape(T, V, S, C),
+                subjects_occluded=hidden_all.reshape(T, V, S, C))
+
+
+def write_instances_table(path, p, seed):
+    """The frames table (labels_import.points2d) with a `subject` column of every subject's
+    visible keypoints (in the image, not hidden): exact projections, the instance labels
+    i0, i1, ... in a random order per camera and frame (seeded), as a multi-animal
+    detector's labels; -> rows written."""
+    uv, ok = p['subjects_keypoints2d'], p['subjects_in_image'] & ~p['subjects_occluded']
+    T, V, S, C = ok.shape
+    names = [c.name for c in p['cameras']]
+    label = np.argsort(np.random.default_rng([int(seed), 0x4953]).random((T, V, S)), -1)
+    t, v, s, c = np.nonzero(ok)
+    lines = ['frame,camera,keypoint,u,v,score,subject']
+    keypoints = p['skeleton'].keypoints
+    lines += [f'{a},{names[b]},{keypoints[d]},{float(uv[a, b, e, d, 0])!r},'
+              f'{float(uv[a, b, e, d, 1])!r},1.0,i{label[a, b, e]}'
+              for a, b, e, d in zip(t.tolist(), v.tolist(), s.tolist(), c.tolist())]
+    Path(path).write_text('\n'.join(lines) + '\n')
+    return len(lines) - 1
 
 
 def _check_output(out):
@@ -301,7 +356,12 @@ def synthesize(config, out, progress=True):
         out / 'ground_truth.npz', stamps=stamps, keypoints3d=p['keypoints3d'],
         keypoints2d=p['keypoints2d'], in_image=p['in_image'], occluded=p['occluded'],
         labelled=p['labelled'], camera_names=np.array([c.name for c in cameras]),
-        keypoint_names=np.array(p['skeleton'].keypoints))
+        keypoint_names=np.array(p['skeleton'].keypoints),
+        **({} if config.subjects == 1 else {
+            k: p[k] for k in ('subjects_keypoints3d', 'subjects_keypoints2d',
+                              'subjects_in_image', 'subjects_occluded')}))
+    if config.subjects > 1:
+        write_instances_table(out / 'points2d.csv', p, config.seed)
     bag_bytes = sum(f.stat().st_size for f in bag_path.iterdir())
     result = SynthResult(out=out, frames=config.frames, cameras=len(cameras),
                          keypoints=p['skeleton'].num_keypoints,
@@ -334,6 +394,22 @@ def readme_text(config, p, result):
                      'only keypoints that project inside the image and are not hidden by '
                      'another limb')
     settings = '\n'.join(f'- {k}: {v}' for k, v in config.to_dict().items())
+    several = '' if config.subjects == 1 else f"""
+## Several subjects
+
+{config.subjects} subjects walk rings of {', '.join(f'{r:g}' for r in
+PATH_RADII[:config.subjects])} m and pass (and hide) each other. The ground-truth topic and
+`labels.csv` are subject 0's; `ground_truth.npz` adds subjects_keypoints3d (T, S, C, 3),
+subjects_keypoints2d (T, V, S, C, 2), subjects_in_image and subjects_occluded (T, V, S, C)
+(subject s = identity s); `points2d.csv` holds their visible keypoints per camera with a
+`subject` column of instance labels shuffled per camera and frame:
+
+```bash
+monet triangulate {result.out}/points2d.csv --rig {result.out}/rig.yaml \\
+    --subjects {config.subjects} --fps {config.fps:g} --skeleton {config.skeleton} \\
+    --out {result.out}/subjects3d
+```
+"""
     return f"""# Synthetic MONET recording
 
 Rendered by `monet synth` (monet_ros): a calibrated {config.layout} rig of {len(cams)} cameras
@@ -378,6 +454,7 @@ monet eval {result.out}/train_monet/model.pt --data {result.out} --out {result.o
 (`monet train --help` / `monet eval --help` list the options; the folder's rig.yaml,
 labels.csv and ground_truth.npz are found automatically.)
 
+{several}
 ## Settings
 
 {settings}

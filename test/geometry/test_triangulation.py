@@ -232,3 +232,19 @@ def test_points_the_distortion_cannot_invert_count_as_missing():
     out = triangulate(obs, cams)
     assert np.all(np.isfinite(out))
     np.testing.assert_allclose(out, triangulate(obs[1:], cams[1:]), atol=1e-9)
+
+
+def test_robust_with_the_callers_undistorted_points_is_the_same():
+    """triangulate_robust(ideal=undistort_views(...)) (subjects.association's call) gives
+    what it gives when it undistorts itself."""
+    from monet_ros.geometry import undistort_views
+    rng = np.random.default_rng(5)
+    cams = random_rig(rng, 4)
+    obs = _observe(cams, random_points(rng, 20)) + rng.normal(scale=0.5, size=(4, 20, 2))
+    obs[1, 3] = np.nan
+    a = triangulate_robust(obs, cams, errors=True)
+    b = triangulate_robust(obs, cams, errors=True, ideal=undistort_views(cams, obs))
+    for x, y in zip(a, b):
+        np.testing.assert_array_equal(x, y)
+    with pytest.raises(ValueError, match='ideal must have the shape'):
+        triangulate_robust(obs, cams, ideal=obs[:, :3])

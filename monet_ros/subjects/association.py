@@ -1,0 +1,284 @@
+"""Which instances in different cameras are the same subject, in one frame (no ROS).
+
+Algorithm: greedy agglomerative clustering of the instances of all cameras on a
+pairwise epipolar affinity, with the cycle-consistency constraint of Dong et al.
+("Fast and Robust Multi-Person 3D Pose Estimation from Multiple Views", CVPR 2019,
+sec. 3.2: a subject has at most one instance per camera) kept by construction
+instead of by their convex relaxation:
+
+1. cost(a, b) between two instances of two different cameras = the median, over the
+   keypoints both see, of the symmetric epipolar distance (px, undistorted pixels:
+   the mean of the distances of each point to the other's epipolar line, as Dong et al.'s
+   geometric affinity before its exponential). Pairs with fewer than `min_common` common
+   keypoints have no cost (inf). The median makes one wrong keypoint harmless.
+2. Candidate pairs with cost <= threshold_px, those with >= strong_common common
+   keypoints (or all of them) first, each group cheapest first, merge their two clusters
+   when (a) the clusters share no camera and (b) the mean cost over every pair of their
+   instances that has a cost (average linkage) is <= threshold_px. So a third camera's
+   instance joins a subject only if it agrees with all of its views, not just one; and a
+   partly hidden instance (few keypoints, whose median can agree with the wrong subject
+   by chance) joins only after the well-seen instances have formed their subjects.
+3. Repair of a chance pair: a two-instance cluster whose two instances each fit a
+   different larger cluster (no shared camera, mean cost <= threshold_px) is split into
+   them (two subjects that lie on one epipolar plane of two facing cameras agree in that
+   pair only, and that pair may form before either instance joins its own subject).
+4. A cluster with >= min_views instances is a subject; the others are left over
+   (counted, never silently dropped). Each subject is triangulated with the project's
+   robust triangulation (geometry.triangulate_robust: confidence-weighted DLT with
+   worst-view exclusion or RANSAC, cheirality), all subjects in one batched call.
+
+Epipolar distances are in pixels: the same for a rig in m or mm. Batched numpy: the
+costs of every instance pair and keypoint are one array; the only Python loop is over the
+accepted candidate pairs of step 2 (a few per subject and camera pair) and the rare
+two-instance clusters of step 3.
+"""
+from dataclasses import dataclass
+from itertools import combinations
+
+import numpy as np
+
+from monet_ros.config import setting, validate_config
+from monet_ros.geometry.camera import stack_cameras, undistort_views
+from monet_ros.geometry.epipolar import fundamental_from_params
+from monet_ros.geometry.triangulation import triangulate_robust
+
+METHODS = ('exclusion', 'ransac')
+
+
+@dataclass(frozen=True)
+class AssociationConfig:
+    """Settings of the association across cameras (validated; errors name the field)."""
+    threshold_px: float = setting(
+        15.0, 'association: largest median symmetric epipolar distance (px) between two '
+        'instances of one subject', minimum=0.0, exclusive_minimum=True)
+    min_common: int = setting(
+        3, 'association: fewest keypoints two instances must both see to be compared',
+        minimum=1)
+    strong_common: int = setting(
+        6, 'association: instance pairs with this many common keypoints (or all) are '
+        'merged before the others', minimum=1)
+    confidence_threshold: float = setting(
+        0.1, 'detection score below which a keypoint is left out', minimum=0.0)
+    min_views: int = setting(2, 'fewest cameras (instances) of a subject', minimum=2)
+    triangulation_px: float = setting(
+        15.0, 'reprojection error (px) of an inlier view in the triangulation',
+        minimum=0.0, exclusive_minimum=True)
+    method: str = setting('exclusion', 'robust triangulation method', choices=METHODS)
+
+    def __post_init__(self):
+        validate_config(self)
+
+
+_DEFAULT = AssociationConfig()
+
+
+@dataclass
+class Association:
+    """One frame's subjects.
+
+    X (S, C, 3) triangulated keypoints (the rig's unit), NaN where not triangulated;
+    instance (S, V) int: the instance index of each subject in each camera, -1 = not seen;
+    inliers (S, V, C) bool: the views used per keypoint; view_errors (S, V, C) px: their
+    reprojection errors (NaN elsewhere); score (S, C): mean score of the inlier views
+    (NaN where not triangulated); cost (S,) mean epipolar cost (px)
+    of the subject's instance pairs; unmatched: instances (with >= 1 keypoint) in no
+    subject; instances: instances with >= 1 keypoint."""
+    X: np.ndarray
+    instance: np.ndarray
+    inliers: np.ndarray
+    view_errors: np.ndarray
+    score: np.ndarray
+    cost: np.ndarray
+    unmatched: int
+    instances: int
+
+
+_F_CACHE = {}
+
+
+def pair_fundamentals(cameras):
+    """F (V, V, 3, 3) with x_b^T F[a, b] x_a = 0 for ideal pixels (zeros on the diagonal);
+    cached per rig (stack_cameras' cache key)."""
+    rig = stack_cameras(cameras)
+    key = id(rig['K'])
+    hit = _F_CACHE.get(key)
+    if hit is not None and hit[0] is rig['K']:
+        return hit[1]
+    V = len(rig['K'])
+    F = np.zeros((V, V, 3, 3))
+    a, b = np.array(list(combinations(range(V), 2))).T.reshape(2, -1)
+    F[a, b] = fundamental_from_params(rig['K'][a], rig['R'][a], rig['t'][a],
+                                      rig['K'][b], rig['R'][b], rig['t'][b])
+    F[b, a] = F[a, b].swapaxes(-1, -2)
+    F.setflags(write=False)
+    if len(_F_CACHE) >= 16:
+        _F_CACHE.pop(next(iter(_F_CACHE)))
+    _F_CACHE[key] = (rig['K'], F)
+    return F
+
+
+def pair_costs(ideal, present, view, F, min_common):
+    """(cost (M, M), common (M, M) int) between M instances: the median symmetric epipolar
+    distance (px) over the keypoints both see (inf for the same camera, itself, or
+    < min_common common keypoints) and how many they both see.
+
+    ideal (M, C, 2) undistorted pixels; present (M, C) bool; view (M,) camera indices;
+    F (V, V, 3, 3) of pair_fundamentals."""
+    M, C = present.shape
+    h = np.concatenate([ideal, np.ones((M, C, 1))], axis=-1)         # (M, C, 3)
+    h = np.where(present[..., None], h, 0.0)
+    # the epipolar lines of every instance in every camera: (M, V, 3, C), one matmul
+    lines = F[view] @ h.swapaxes(-1, -2)[:, None]
+    lines_b = lines[:, view]                                          # (M, M, 3, C) in b
+    num = np.abs((lines_b * h.swapaxes(-1, -2)[None]).sum(-2))        # |x_b^T F x_a|
+    norm_b = np.hypot(lines_b[:, :, 0], lines_b[:, :, 1])             # (M, M, C)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        d = 0.5 * num * (1 / norm_b + 1 / norm_b.swapaxes(0, 1))     # a's line of b
+    common = present[:, None] & present[None, :]                      # (M, M, C)
+    d = np.where(common & np.isfinite(d), d, np.inf)
+    k = common.sum(axis=-1)
+    s = np.sort(d, axis=-1)
+    lo = np.take_along_axis(s, (np.maximum(k - 1, 0) // 2)[..., None], axis=-1)[..., 0]
+    hi = np.take_along_axis(s, np.minimum(k // 2, C - 1)[..., None], axis=-1)[..., 0]
+    with np.errstate(invalid='ignore'):                               # k = 0: inf
+        cost = 0.5 * (lo + hi)
+    bad = (k < min_common) | (view[:, None] == view[None, :])
+    return np.where(bad | ~np.isfinite(cost), np.inf, cost), k
+
+
+def cluster_instances(cost, view, num_views, threshold_px, strong=None):
+    """Cluster labels (M,) of instances by the greedy rule of the module docstring (step
+    2): candidate pairs (the `strong` (M, M) bool ones first, then the others) cheapest
+    first, merged when their clusters share no camera and their average linkage (mean
+    finite cost between their members) is <= threshold_px. The linkage sums and counts
+    between clusters are kept up to date on each merge."""
+    M = len(view)
+    label = list(range(M))                       # cluster of each instance
+    members = [[m] for m in range(M)]            # instances of each cluster
+    seen = [1 << int(v) for v in view]           # cameras of each cluster (bit mask)
+    finite = np.isfinite(cost)
+    total = np.where(finite, cost, 0.0)          # cost sums between clusters (by label)
+    count = finite.astype(np.float64)            # and how many pairs have a cost
+    a, b = np.nonzero(np.triu(cost <= threshold_px, 1))
+    weak = np.zeros(len(a), bool) if strong is None else ~strong[a, b]
+    order = np.lexsort((cost[a, b], weak))
+    for i, j in zip(a[order].tolist(), b[order].tolist()):
+        la, lb = label[i], label[j]
+        if la == lb or seen[la] & seen[lb]:
+            continue
+        if total[la, lb] > threshold_px * count[la, lb]:
+            continue
+        for m in members[lb]:
+            label[m] = la
+        members[la] += members[lb]
+        seen[la] |= seen[lb]
+        total[la] += total[lb]
+        total[:, la] += total[:, lb]
+        count[la] += count[lb]
+        count[:, la] += count[:, lb]
+    label = np.array(label)
+    cams = np.zeros((M, num_views), bool)        # cameras of each cluster, by label
+    cams[label, view] = True
+    return _dissolve_pairs(label, cams, cost, finite, view, threshold_px)
+
+
+def _dissolve_pairs(label, cams, cost, finite, view, threshold_px):
+    """Step 3 of the module docstring: a two-instance cluster whose two instances each
+    fit a different larger cluster (no shared camera, mean cost <= threshold_px) is split
+    into them. Labels are changed in place and returned."""
+    ids, size = np.unique(label, return_counts=True)
+    big = ids[size > 2]
+    for pair in ids[size == 2]:
+        members = np.flatnonzero(label == pair)
+        target = []
+        for m in members:
+            fit = [(cost[m, label == b][finite[m, label == b]].mean(), b) for b in big
+                   if not cams[b, view[m]] and finite[m, label == b].any()]
+            fit = [f for f in fit if f[0] <= threshold_px]
+            target.append(min(fit)[1] if fit else None)
+        if None in target or target[0] == target[1]:
+            continue
+        for m, b in zip(members, target):
+            label[m] = b
+            cams[b, view[m]] = True
+    return label
+
+
+def _empty(V, C, M):
+    """An Association without subjects, M instances all unmatched."""
+    return Association(np.zeros((0, C, 3)), np.zeros((0, V), int), np.zeros((0, V, C), bool),
+                       np.zeros((0, V, C)), np.zeros((0, C)), np.zeros(0), M, M)
+
+
+def associate(points2d, cameras, scores=None, config=None):
+    """Association of one frame's per-camera instances into subjects, triangulated.
+
+    points2d (V, N, C, 2) observed (distorted) pixels: N instance slots per camera (pad
+    with NaN: a camera with fewer instances leaves slots all NaN), C keypoints, NaN =
+    missing keypoint; the instance order of a camera means nothing. scores (V, N, C) or
+    None (all 1): keypoints below config.confidence_threshold are left out and the rest
+    weigh the triangulation. cameras: V geometry.Camera (one unit). config:
+    AssociationConfig (None: defaults). Algorithm: the module docstring.
+    Returns Association, subjects ordered by how many cameras see them (most first), then
+    by their first instance. Raises ValueError for bad shapes."""
+    config = config or _DEFAULT
+    pts = np.asarray(points2d, np.float64)
+    V = len(cameras)
+    if pts.ndim != 4 or pts.shape[0] != V or pts.shape[-1] != 2:
+        raise ValueError(f'points2d must have shape (V={V}, N, C, 2), got {pts.shape}')
+    _, N, C, _ = pts.shape
+    w = np.ones((V, N, C)) if scores is None else np.asarray(scores, np.float64)
+    if w.shape != (V, N, C):
+        raise ValueError(f'scores must have shape {(V, N, C)}, got {w.shape}')
+    rig = stack_cameras(cameras)
+    # NaN scores compare False: missing
+    present = np.isfinite(pts).all(-1) & (w >= config.confidence_threshold) & (w > 0)
+    ideal = undistort_views(rig, np.where(present[..., None], pts, np.nan)
+                            .reshape(V, N * C, 2)).reshape(V, N, C, 2)
+    present &= np.isfinite(ideal).all(-1)
+    exists = present.any(-1)                                          # (V, N)
+    view, slot = np.nonzero(exists)
+    M = len(view)
+    if M < 2:
+        return _empty(V, C, M)
+    cost, common = pair_costs(ideal[view, slot], present[view, slot], view,
+                              pair_fundamentals(cameras), config.min_common)
+    label = cluster_instances(cost, view, V, config.threshold_px,
+                              common >= min(config.strong_common, C))
+    size = np.bincount(label, minlength=M)
+    ids = np.flatnonzero(size >= config.min_views)
+    if not len(ids):
+        return _empty(V, C, M)
+    first = np.full(M, M)
+    np.minimum.at(first, label, np.arange(M))                        # first instance
+    ids = ids[np.lexsort((first[ids], -size[ids]))]
+    S = len(ids)
+    member = label[None, :] == ids[:, None]                          # (S, M)
+    instance = np.full((S, V), -1)
+    s_idx, m_idx = np.nonzero(member)
+    instance[s_idx, view[m_idx]] = slot[m_idx]
+    seen = instance >= 0
+    take = np.maximum(instance, 0).T                                  # (V, S)
+    sub_pts = pts[np.arange(V)[:, None], take]                        # (V, S, C, 2)
+    sub_w = np.where(present[np.arange(V)[:, None], take] & seen.T[..., None],
+                     w[np.arange(V)[:, None], take], 0.0)
+    sub_pts = np.where(sub_w[..., None] > 0, sub_pts, np.nan)
+    sub_ideal = np.where(sub_w[..., None] > 0, ideal[np.arange(V)[:, None], take], np.nan)
+    X, inl, err = triangulate_robust(sub_pts.reshape(V, S * C, 2), cameras,
+                                     sub_w.reshape(V, S * C),
+                                     threshold_px=config.triangulation_px,
+                                     min_views=config.min_views, method=config.method,
+                                     errors=True, ideal=sub_ideal.reshape(V, S * C, 2))
+    inl = inl.reshape(V, S, C).transpose(1, 0, 2)
+    n_inl = inl.sum(1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        score = np.where(inl, sub_w.transpose(1, 0, 2), 0.0).sum(1) / n_inl
+    score[n_inl == 0] = np.nan
+    finite = np.isfinite(cost)
+    pair = member[:, :, None] & member[:, None, :] & finite[None]     # (S, M, M)
+    with np.errstate(invalid='ignore'):
+        mean_cost = np.where(pair, cost[None], 0.0).sum((1, 2)) / pair.sum((1, 2))
+    return Association(X=X.reshape(S, C, 3), instance=instance,
+                       inliers=inl, view_errors=err.reshape(V, S, C).transpose(1, 0, 2),
+                       score=score, cost=mean_cost,
+                       unmatched=int(M - member.sum()), instances=M)

@@ -1,0 +1,86 @@
+"""Identity metrics of tracked subjects against ground truth (no ROS).
+
+A ground-truth subject g and a track h "match" in a frame when both exist and the mean
+distance over their common finite keypoints is <= threshold (the rig's unit).
+- identity switches (as CLEAR MOT's IDSW, Bernardin & Stiefelhagen 2008): per frame, each
+  ground-truth subject takes the track matched to it by the Hungarian assignment of the
+  frame's distances (gated by threshold); a switch is a ground-truth subject whose matched
+  track differs from the one it last had;
+- IDF1 (Ristani et al., "Performance Measures and a Data Set for Multi-Target,
+  Multi-Camera Tracking", ECCV 2016 workshops): one global one-to-one assignment of tracks
+  to ground-truth subjects maximising IDTP, the frames where assigned pairs match;
+  IDF1 = 2 IDTP / (ground-truth detections + track detections).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import linear_sum_assignment
+
+
+@dataclass
+class IdentityScores:
+    """switches: identity switches (all ground-truth subjects); idf1 in [0, 1]; idtp, gt
+    (ground-truth subject-frames), pred (track-frames); matched (frames x subjects matched
+    per frame); error (G,) mean 3D keypoint error per ground-truth subject over its
+    matched frames (rig units), NaN when never matched."""
+    switches: int
+    idf1: float
+    idtp: int
+    gt: int
+    pred: int
+    matched: int
+    error: np.ndarray
+
+
+def _distance(A, B):
+    """Mean distances (T, G, H) over common finite keypoints; A (T, G, C, 3), B (T, H, C, 3)."""
+    d = np.linalg.norm(A[:, :, None] - B[:, None], axis=-1)            # (T, G, H, C)
+    ok = np.isfinite(d)
+    n = ok.sum(-1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        return np.where(n > 0, np.where(ok, d, 0.0).sum(-1) / n, np.inf)
+
+
+def identity_scores(gt_X, pred_X, pred_ids, threshold):
+    """IdentityScores of tracks against ground truth.
+
+    gt_X (T, G, C, 3) ground-truth keypoints (subject g in slot g; all NaN = absent);
+    pred_X (T, H, C, 3) tracked subjects per frame (padded with NaN), pred_ids (T, H) int
+    their identities (-1 = none / padding); threshold: match distance (the rig's unit)."""
+    gt_X, pred_X = np.asarray(gt_X, float), np.asarray(pred_X, float)
+    pred_ids = np.asarray(pred_ids)
+    T, G = gt_X.shape[:2]
+    dist = _distance(gt_X, pred_X)
+    dist = np.where((pred_ids >= 0)[:, None, :], dist, np.inf)
+    gt_here = np.isfinite(gt_X).all(-1).any(-1)                         # (T, G)
+    pred_here = (pred_ids >= 0) & np.isfinite(pred_X).all(-1).any(-1)   # (T, H)
+    uids = np.unique(pred_ids[pred_ids >= 0])
+    last = np.full(G, -1)
+    switches = matched = 0
+    err_sum, err_n = np.zeros(G), np.zeros(G)
+    co = np.zeros((G, len(uids)), np.int64)
+    col = np.searchsorted(uids, np.maximum(pred_ids, 0))
+    for t in range(T):     # the per-frame assignment (few subjects: a tiny matrix)
+        ok = dist[t] <= threshold
+        g_idx, h_idx = np.nonzero(ok)
+        np.add.at(co, (g_idx, col[t, h_idx]), 1)
+        rows, cols = linear_sum_assignment(np.where(ok, dist[t], 1e12))
+        keep = ok[rows, cols]
+        rows, cols = rows[keep], cols[keep]
+        ids = pred_ids[t, cols]
+        switches += int(((last[rows] >= 0) & (last[rows] != ids)).sum())
+        last[rows] = ids
+        matched += len(rows)
+        err_sum[rows] += dist[t, rows, cols]
+        err_n[rows] += 1
+    if co.size:
+        r, c = linear_sum_assignment(-co)
+        idtp = int(co[r, c].sum())
+    else:
+        idtp = 0
+    n_gt, n_pred = int(gt_here.sum()), int(pred_here.sum())
+    idf1 = 2 * idtp / (n_gt + n_pred) if n_gt + n_pred else 1.0
+    with np.errstate(invalid='ignore', divide='ignore'):
+        error = err_sum / err_n
+    return IdentityScores(switches=switches, idf1=idf1, idtp=idtp, gt=n_gt, pred=n_pred,
+                          matched=matched, error=error)

@@ -1,0 +1,140 @@
+"""`monet triangulate --subjects 2`: two synthetic subjects passing each other, their
+per-camera instances in an order shuffled in every camera and frame, written as SLEAP
+analysis files (2 tracks per camera, SLEAP's layout as the real files in
+../shared/data/sleap_anipose_minimal_session hold it), as multi-animal DeepLabCut CSVs
+(the `individuals` level) and as a points table with a `subject` column; the 3D of each
+identity is its ground-truth subject throughout, in CSV, TRC and NWB."""
+import numpy as np
+import pandas as pd
+import pytest
+
+from monet_ros.cli import main as monet
+from monet_ros.geometry import save_rig
+from monet_ros.io.export_tables import read_anipose_csv, read_trc
+from monet_ros.skeleton import load_skeleton
+from monet_ros.synth.rig import RigConfig, make_rig
+from monet_ros.synth.subjects import shuffled_instances, subjects_keypoints
+
+FPS = 30.0
+T = 60
+SK = load_skeleton('human14')
+
+
+@pytest.fixture(scope='module')
+def scene(tmp_path_factory):
+    root = tmp_path_factory.mktemp('subjects')
+    X = subjects_keypoints(SK, 2, np.arange(T) / FPS)           # frames 0..59 hold the pass
+    cams = make_rig(RigConfig(num_cameras=4))
+    save_rig(root / 'rig.yaml', cams)
+    points, owner = shuffled_instances(X, cams, noise_px=0.5, seed=7)
+    return root, X, cams, points, owner
+
+
+def _write_sleap(folder, points):
+    """One analysis file per camera: tracks (tracks, 2, nodes, frames) as h5py reads
+    SLEAP's files, track k of frame t = instance slot k (shuffled: not an identity)."""
+    import h5py
+    folder.mkdir()
+    V = points.shape[1]
+    for v in range(V):
+        with h5py.File(folder / f'cam{v}.analysis.h5', 'w') as f:
+            f['tracks'] = points[:, v].transpose(1, 3, 2, 0)    # (2, 2, 14, T)
+            f['track_occupancy'] = np.ones((T, 2), np.uint8)
+            f['point_scores'] = np.full((2, SK.num_keypoints, T), 0.9)
+            f['instance_scores'] = np.full((2, T), 0.9)
+            f['node_names'] = np.array([k.encode() for k in SK.keypoints])
+            f['track_names'] = np.array([b'track_0', b'track_1'])
+            f['video_path'] = f'D:/videos\\cam{v}.mp4'
+    return sorted(folder.glob('*.h5'))
+
+
+def _write_dlc(folder, points):
+    """Multi-animal DeepLabCut prediction CSVs (scorer, individuals, bodyparts, coords)."""
+    folder.mkdir()
+    cols = pd.MultiIndex.from_product(
+        [['DLC_dlcrnetms5_demo'], ['ind1', 'ind2'], list(SK.keypoints),
+         ['x', 'y', 'likelihood']], names=['scorer', 'individuals', 'bodyparts', 'coords'])
+    paths = []
+    for v in range(points.shape[1]):
+        xy = points[:, v]                                        # (T, 2, C, 2)
+        data = np.concatenate([xy, np.full(xy.shape[:3] + (1,), 0.9)], axis=-1)
+        frame = pd.DataFrame(data.reshape(T, -1), index=pd.RangeIndex(T), columns=cols)
+        paths.append(folder / f'cam{v}DLC_dlcrnetms5_demo.csv')
+        frame.to_csv(paths[-1])
+    return paths
+
+
+def _write_table(path, points):
+    lines = ['frame,camera,keypoint,u,v,score,subject']
+    for t in range(T):
+        for v in range(points.shape[1]):
+            for n, name in enumerate(('a', 'b')):
+                for c, k in enumerate(SK.keypoints):
+                    u, w = points[t, v, n, c]
+                    lines.append(f'{t},cam{v},{k},{float(u)!r},{float(w)!r},0.9,{name}')
+    path.write_text('\n'.join(lines) + '\n')
+    return [path]
+
+
+def _check(out, X, capsys):
+    table = read_anipose_csv(out / 'keypoints3d.csv')
+    assert table['keypoints'] == SK.keypoints
+    assert len(table['fnum']) == 2 * T
+    np.testing.assert_array_equal(np.bincount(table['fnum']), np.full(T, 2))
+    ids = np.unique(table['subject'])
+    assert len(ids) == 2                                         # no new identity
+    owners = []
+    for i in ids:
+        mine = table['subject'] == i
+        np.testing.assert_array_equal(table['fnum'][mine], np.arange(T))
+        err = np.linalg.norm(table['X'][mine][:, None] - X, axis=-1).mean(-1)   # (T, 2)
+        owner = np.argmin(err, axis=1)
+        assert (owner == owner[0]).all(), f'identity {i} changes subject'
+        assert err[:, owner[0]].max() < 0.02
+        owners.append(owner[0])
+        trc = read_trc(out / f'keypoints3d_subject{i}.trc')
+        np.testing.assert_allclose(trc['X'], table['X'][mine], rtol=1e-12)
+    assert sorted(owners) == [0, 1]
+    from ndx_pose import MultiCameraPoseEstimation  # noqa: F401 (registers the types)
+    from pynwb import NWBHDF5IO
+    with NWBHDF5IO(str(out / 'keypoints.nwb'), 'r') as io:
+        behavior = io.read().processing['behavior']
+        for i in ids:
+            pose = behavior[f'monet_pose_subject{i}']
+            head = pose.pose_estimation_series[SK.keypoints[0]]
+            np.testing.assert_allclose(head.data[:],
+                                       table['X'][table['subject'] == i][:, 0], rtol=1e-12)
+    text = capsys.readouterr().out
+    assert '2 identities' in text and '2 births, 0 deaths' in text
+    assert '0 of 480 instances matched in no other camera' in text
+    return table
+
+
+@pytest.mark.parametrize('kind', ['sleap', 'dlc', 'frames'])
+def test_two_subjects_round_trip(scene, kind, tmp_path, capsys):
+    root, X, _, points, _ = scene
+    if kind == 'sleap':
+        paths = _write_sleap(tmp_path / 'sleap', points)
+    elif kind == 'dlc':
+        paths = _write_dlc(tmp_path / 'dlc', points)
+    else:
+        paths = _write_table(tmp_path / 'points.csv', points)
+    out = tmp_path / 'out'
+    code = monet(['triangulate', *map(str, paths), '--rig', str(root / 'rig.yaml'),
+                  '--out', str(out), '--subjects', '2', '--fps', str(FPS),
+                  '--skeleton', 'human14'])
+    assert code == 0
+    _check(out, X, capsys)
+
+
+def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
+    root, _, _, points, _ = scene
+    paths = [str(p) for p in _write_table(tmp_path / 'points.csv', points)]
+    base = ['triangulate', *paths, '--rig', str(root / 'rig.yaml'), '--fps', '30']
+    for extra, words in ((['--subjects', '0'], "'subjects': must be >= 1"),
+                         (['--subjects', '2', '--filter', 'kalman'], '--filter kalman'),
+                         (['--subjects', '2', '--export', 'npz'], 'npz')):
+        code = monet(base + ['--out', str(tmp_path / 'x'), *extra])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and words in err and '\n' not in err, err
+        assert not (tmp_path / 'x').exists()
