@@ -3,7 +3,9 @@ runnable blocks run in order, per page, from a linked copy of the checkout with 
 data at ../shared/data; blocks marked flags-only have every option of their `monet`
 commands in that command's --help and every ROS parameter / launch argument declared; a
 block marked not-run says why. A command whose flags no longer exist fails here."""
+import contextlib
 from functools import lru_cache
+import io
 import os
 from pathlib import Path
 import random
@@ -11,13 +13,12 @@ import re
 import subprocess
 import sys
 
-from helpers.doc_blocks import commands, monet_invocation, option_words, ros_parameters
-from helpers.doc_blocks import shell_blocks
+from helpers import doc_blocks
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
 PAGES = ['README.md'] + sorted(f'docs/{p.name}' for p in (REPO / 'docs').glob('*.md'))
-BLOCKS = {page: shell_blocks(REPO / page, page) for page in PAGES}
+BLOCKS = {page: doc_blocks.shell_blocks(REPO / page, page) for page in PAGES}
 RUN_PAGES = [page for page, blocks in BLOCKS.items() if any(b.kind == 'run' for b in blocks)]
 FLAG_BLOCKS = [b for blocks in BLOCKS.values() for b in blocks if b.kind == 'flags-only']
 SKIP_ENTRIES = {'.git', '.venv', 'site', '.pytest_cache', '.ruff_cache'}
@@ -75,18 +76,13 @@ def test_runnable_blocks_run(page, tmp_path):
 
 @lru_cache(maxsize=None)
 def monet_help(subcommand):
-    result = subprocess.run([sys.executable, '-m', 'monet_ros.cli', *subcommand, '--help'],
-                            cwd=REPO, env=environment_for_help(), capture_output=True,
-                            text=True, timeout=120)
-    assert result.returncode == 0, f'monet {" ".join(subcommand)} --help: {result.stderr}'
-    return result.stdout
-
-
-def environment_for_help():
-    env = dict(os.environ)
-    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(REPO), env.get('PYTHONPATH')]))
-    return env
+    """`monet SUBCOMMAND --help` as the command prints it (its own parser, in process)."""
+    from monet_ros.cli import build_parser
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out), pytest.raises(SystemExit) as stopped:
+        build_parser().parse_args([*subcommand, '--help'])
+    assert stopped.value.code == 0, f'monet {" ".join(subcommand)} --help failed'
+    return out.getvalue()
 
 
 def declared(kind, name, parameters):
@@ -101,17 +97,17 @@ def declared(kind, name, parameters):
 @pytest.mark.parametrize('block', FLAG_BLOCKS, ids=lambda b: b.where())
 def test_flags_only_blocks_name_existing_options(block):
     checked = 0
-    for words in commands(block.text):
-        found = monet_invocation(words)
+    for words in doc_blocks.commands(block.text):
+        found = doc_blocks.monet_invocation(words)
         if found is not None:
             subcommand, rest = found
             text = monet_help(tuple(subcommand))
-            for option in option_words(rest):
+            for option in doc_blocks.option_words(rest):
                 assert re.search(rf'(?<![\w-]){re.escape(option)}(?![\w-])', text), (
                     f'{block.where()}: monet {" ".join(subcommand)} has no option {option}')
                 checked += 1
             checked += 1
-        ros = ros_parameters(words)
+        ros = doc_blocks.ros_parameters(words)
         if ros is not None:
             missing = declared(*ros)
             assert not missing, f'{block.where()}: {ros[1]} does not declare {missing}'
