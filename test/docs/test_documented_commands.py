@@ -21,7 +21,10 @@ PAGES = ['README.md'] + sorted(f'docs/{p.name}' for p in (REPO / 'docs').glob('*
 BLOCKS = {page: doc_blocks.shell_blocks(REPO / page, page) for page in PAGES}
 RUN_PAGES = [page for page, blocks in BLOCKS.items() if any(b.kind == 'run' for b in blocks)]
 FLAG_BLOCKS = [b for blocks in BLOCKS.values() for b in blocks if b.kind == 'flags-only']
-SKIP_ENTRIES = {'.git', '.venv', 'site', '.pytest_cache', '.ruff_cache'}
+# what the documented commands read from the checkout; never a folder they write into
+LINKED = ('bench', 'config', 'docs', 'launch', 'monet_ros', 'resource', 'test', 'tools',
+          'Makefile', 'README.md', 'mkdocs.yml', 'package.xml', 'requirements.txt',
+          'setup.cfg', 'setup.py')
 
 
 def shared_root():
@@ -46,13 +49,13 @@ def environment(tmp_path):
 
 
 def sandbox(tmp_path):
-    """tmp/checkout: the checkout's entries linked (outputs land beside them, not in the
+    """tmp/checkout: the checkout's sources linked (outputs land beside them, never in the
     checkout); tmp/shared/data: the real data, so `../shared/data` works as documented."""
     root = tmp_path / 'checkout'
     root.mkdir()
-    for entry in REPO.iterdir():
-        if entry.name not in SKIP_ENTRIES:
-            (root / entry.name).symlink_to(entry)
+    for name in LINKED:
+        if (REPO / name).exists():
+            (root / name).symlink_to(REPO / name)
     if shared_root().is_dir():
         (tmp_path / 'shared').mkdir()
         (tmp_path / 'shared' / 'data').symlink_to(shared_root())
