@@ -6,7 +6,7 @@ STAMP := $(VENV)/.monet-installed
 # The ROS wheels re-exec Python with their library path; never inherit another venv's state.
 unexport _ROS_WHEELS_BOOTSTRAP_COMPLETE
 
-.PHONY: venv tf2_msgs demo test lint bench clean browser-deps
+.PHONY: venv tf2_msgs demo test lint docs bench clean browser-deps
 
 venv: $(STAMP)
 
@@ -44,8 +44,12 @@ browser-deps:
 lint: $(STAMP)
 	$(PY) -m ruff check .
 
+# The user guide (docs/, mkdocs.yml) as a static site in site/; a broken link is an error.
+docs: $(STAMP)
+	$(PY) -m mkdocs build --strict
+
 bench: $(STAMP)
 	for script in bench/*.py; do $(PY) $$script || exit 1; done
 
 clean:
-	rm -rf $(VENV) build install log *.egg-info
+	rm -rf $(VENV) build install log site *.egg-info
