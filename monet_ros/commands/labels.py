@@ -93,7 +93,8 @@ def run(args):
                                 rig_units=args.rig_units)
         cameras = [c.name for c in index.cameras]
         skeleton = tuple(load_skeleton(args.skeleton).keypoints) if args.skeleton else None
-        reader_options = (dict(pose_model=args.pose_model, keypoints=skeleton)
+        reader_options = (dict(pose_model=args.pose_model, keypoints=skeleton,
+                               keypoint_map=dict(options.keypoint_map))
                           if args.format == 'openpose' else None)
         result = import_labels(args.format, args.path, cameras=cameras, camera=args.camera,
                                min_score=args.min_score, camera_map=dict(options.camera_map),
@@ -110,6 +111,10 @@ def run(args):
                                             options, valid=index.complete)
         except LabelResolutionError as error:
             raise LabelError(f'{error}{resize_hint(index.bag, args.label_scale)}') from None
+        if not len(labels):
+            raise LabelError(f'{args.path}: no label left to write ({report.summary()}'
+                             f'{"; " + result.note if result.note else ""}); nothing written '
+                             f'to {args.out}')
         count = write_labels(args.out, labels)
     except (LabelError, RecordingError, SkeletonError, ValueError,
             OSError) as error:

@@ -72,10 +72,12 @@ def _mean_confidence(c):
 
 
 def import_openpose(paths, cameras=(), camera=None, min_score=0.0, camera_map=None,
-                    pose_model=None, keypoints=None):
+                    pose_model=None, keypoints=None, keypoint_map=None):
     """ImportResult of OpenPose JSON folders (module docstring). pose_model: a name of
-    POSE_MODELS or None; keypoints: the skeleton's names or None; min_score: keypoints
-    below it are left out and counted. LabelRow.source is the camera's folder, where the
+    POSE_MODELS or None; keypoints: the skeleton's names or None (the model's keypoints
+    that are not in it, after keypoint_map {model name: skeleton name}, are left out and
+    counted; the rows keep the model's names, renamed later by --keypoint-map); min_score:
+    keypoints below it are left out and counted. LabelRow.source is the camera's folder, where the
     file name. Raises LabelError (one line naming the file and field)."""
     from monet_ros.geometry.pose2sim import read_openpose_json
     from monet_ros.labels_import.dlc import frame_of_image
@@ -130,7 +132,8 @@ def import_openpose(paths, cameras=(), camera=None, min_score=0.0, camera_map=No
     if dropped:
         notes.append(f'{dropped} points below --min-score {min_score} left out')
     if keypoints is not None and pose_model and names:
-        extra = [n for n in names if n not in keypoints]
+        renamed = dict(keypoint_map or {})
+        extra = [n for n in names if renamed.get(n, n) not in keypoints]
         if extra:
             lost = sum(r.keypoint in extra for r in rows)
             rows = [r for r in rows if r.keypoint not in extra]

@@ -49,3 +49,38 @@ def test_openpose_folders_import_to_the_recordings_labels(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1
     assert 'field pose_keypoints_2d: 3 keypoints per person, but COCO_17 has 17' in err
+
+
+def test_pose2sim_json_maps_onto_a_skeleton_with_the_shipped_keypoint_map(shared_data,
+                                                                          tmp_path, capsys):
+    """The real Pose2Sim demo's BODY_25B JSON, --skeleton human14 --keypoint-map body25b:
+    the map renames before the skeleton filters (it used to leave 0 labels, exit 0); each
+    label is the JSON's point of the mapped marker, scaled to the half-size recording."""
+    trial = shared_data / 'pose2sim_demo_balancing' / 'S00_P00_SingleParticipant' / \
+        'S00_P00_T01_BalancingTrial' / 'pose-associated'
+    rec = shared_data / 'derived_pose2sim_4cam_mcap' / 'pose2sim_balancing_4cam'
+    out = tmp_path / 'labels.csv'
+    args = ['labels', 'import', 'openpose', *map(str, sorted(trial.glob('cam*_json'))),
+            '--rec', str(rec), '--pose-model', 'BODY_25B', '--label-scale', '0.5',
+            '--skeleton', 'human14']
+    assert main([*args, '--keypoint-map', 'body25b', '--out', str(out)]) == 0
+    assert 'left out: Nose, LEye, REye, LEar, REar, LBigToe' in capsys.readouterr().out
+    labels = read_labels(out)
+    assert set(labels.keypoints) == {'head', 'neck', 'r_shoulder', 'r_elbow', 'r_wrist',
+                                     'l_shoulder', 'l_elbow', 'l_wrist', 'r_hip', 'r_knee',
+                                     'r_ankle', 'l_hip', 'l_knee', 'l_ankle'}
+    # an independent read of one file: BODY_25B's Head (index 18) and RWrist (index 10)
+    person = json.loads((trial / 'cam02_json' / 'cam02.0040.json').read_text())['people']
+    best = max((np.reshape(p['pose_keypoints_2d'], (-1, 3)) for p in person),
+               key=lambda p: p[p[:, 2] > 0, 2].mean())
+    stamp = labels.stamps[40]
+    points = labels.points(stamp, ['cam02'])[0]
+    names = list(labels.keypoints)
+    for marker, joint in ((18, 'head'), (10, 'r_wrist')):      # pixel centres scale
+        np.testing.assert_allclose(points[names.index(joint)],
+                                   (best[marker, :2] + 0.5) * 0.5 - 0.5, atol=1e-3)
+    # no map: nothing of BODY_25B is in human14 -> one line, exit 2, nothing written
+    empty = tmp_path / 'empty.csv'
+    assert main([*args, '--out', str(empty)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and 'no label left to write' in err[0] and not empty.exists()
