@@ -20,7 +20,7 @@ ROSDEP_RULES = {
     'python3-h5py', 'python3-pandas', 'python3-tables', 'python3-flask', 'python3-selenium',
     'python3-hypothesis',
 }
-# Keys the README's rosdep line skips (installed with a pinned pip line instead).
+# Keys the install guide's rosdep line (docs/install.md) skips (installed with a pinned pip line instead).
 SKIPPED = {'python3-torch', 'python3-rosbags-pip'}
 # Python import name -> the package.xml key that provides it.
 THIRD_PARTY = {'numpy': 'python3-numpy', 'cv2': 'python3-opencv', 'yaml': 'python3-yaml',
@@ -50,8 +50,8 @@ def test_every_key_resolves_with_rosdep(repo_root):
     keys = declared(repo_root)
     unknown = keys - JAZZY_PACKAGES - ROSDEP_RULES
     assert not unknown, f'keys without a rosdep rule or Jazzy package: {sorted(unknown)}'
-    readme = (repo_root / 'README.md').read_text()
-    assert f'--skip-keys "{" ".join(sorted(SKIPPED))}"' in readme
+    guide = (repo_root / 'docs' / 'install.md').read_text()
+    assert f'--skip-keys "{" ".join(sorted(SKIPPED))}"' in guide
 
 
 def test_every_imported_ros_package_is_declared(repo_root):
