@@ -77,9 +77,16 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--precision', choices=PRECISIONS, default='auto',
-                        help='network arithmetic: auto (default: bfloat16 where native, else '
-                        'float32; the choice is printed), float32, or bfloat16 (torch backend, '
-                        '2-3x faster on CPUs with AVX512-BF16 / AMX and on CUDA)')
+                        help='network arithmetic: auto (default: int8 with --backend '
+                        'onnxruntime where a cached quant exists and the CPU has VNNI / AMX, '
+                        'bfloat16 with torch where native, else float32; the choice is '
+                        'printed), float32, bfloat16 (torch backend, 2-3x faster on CPUs with '
+                        'AVX512-BF16 / AMX and on CUDA), or int8 (--backend onnxruntime, CPU '
+                        'with VNNI / AMX-INT8: quantised once, calibrated on the recording, '
+                        'cached beside the checkpoint)')
+    parser.add_argument('--calibration', default=None,
+                        help='int8: the recording (or cached *.int8.onnx quant) to calibrate '
+                        'on (default: the recording processed)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--export', default='csv,trc,nwb,npz',
                         help='analysis files written into OUT: any of csv (anipose), trc, '
@@ -174,14 +181,14 @@ def crop_view(image, camera, box, out_size, reader):
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
                       skeleton=None, progress=True, backend='torch', threads=0, exports=(),
                       trc_axes='xyz', camera_map=(), precision='auto', filter_config=None,
-                      rig_units=None, reduced_decode=True):
+                      rig_units=None, reduced_decode=True, calibration=None):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
     first reason), seconds, mean_error, mean_views, report (the reader's ReadReport).
     backend: 'torch' or 'onnxruntime'; threads: CPU threads (0 = the library's default);
-    precision: 'auto' (the command's default: bfloat16 where native, else float32),
-    'float32' or 'bfloat16' (models.detector.resolve_precision); `monet eval --reference`
+    precision: 'auto' (the command's default: models.detector.resolve_precision),
+    'float32', 'bfloat16' or 'int8' (backend onnxruntime); `monet eval --reference`
     and `monet train --holdout-labelled` score models through this function, so as `monet
     process` runs them.
     exports: formats of monet_ros.io.export_results written inside `out` (figures['exports']:
@@ -192,7 +199,9 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     rig_units: the length unit of a rig file that states none (geometry.read_rig);
     figures['units'] is the rig's unit, that of the 3D outputs.
     reduced_decode: JPEG views are decoded at the crop's scale (io.jpeg_scale; False: full
-    decodes, for comparison).
+    decodes, for comparison). calibration: precision int8's calibration data (a recording
+    or a cached quant; None = `bag` itself), read only when the checkpoint has no cached
+    quant (models.quantize).
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
@@ -222,7 +231,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
     detector = Detector.from_checkpoint(model, device=device, backend=backend, threads=threads,
-                                        precision=precision)
+                                        precision=precision,
+                                        calibration=bag if calibration is None else calibration)
     edges = None
     if skeleton is not None:
         edges = load_skeleton(skeleton).bone_indices
@@ -334,12 +344,17 @@ def run(args):
     filter_config = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)
-    print_precision('monet process', args.precision, args.backend, device)
+    print_precision('monet process', args.precision, args.backend, device, args.model)
     options = dict(model=args.model, rig=args.rig, cameras=args.cameras or (), config=config,
                    skeleton=args.skeleton, backend=args.backend,
                    exports=parse_formats(args.export), trc_axes=args.trc_axes,
                    camera_map=parse_name_map(args.camera_map), precision=args.precision,
-                   filter_config=filter_config, rig_units=args.rig_units)
+                   filter_config=filter_config, rig_units=args.rig_units,
+                   calibration=args.calibration)
+    if len(args.bag) > 1 and args.precision == 'int8':   # quantised once, before the workers
+        from monet_ros.models import Detector
+        Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
+                                 precision='int8', calibration=args.calibration or args.bag[0])
     if len(args.bag) > 1:         # several recordings: worker processes (process_many.py)
         from monet_ros.commands.process_many import run_many
         return run_many(args, options, process_recording)

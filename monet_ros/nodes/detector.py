@@ -137,11 +137,17 @@ class DetectorConfig:
     backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
                            'exported to ONNX once, cached beside the checkpoint)',
                            choices=('torch', 'onnxruntime'))
-    precision: str = setting('auto', 'network arithmetic: auto (bfloat16 where native, else '
-                             'float32; the start-up line says which and why), float32, or '
-                             'bfloat16 (torch backend, 2-3x faster on CPUs with AVX512-BF16 / '
-                             "AMX and on CUDA; peaks ~0.05 input px (median) from float32's)",
+    precision: str = setting('auto', 'network arithmetic: auto (int8 with backend onnxruntime '
+                             'where a cached quant exists and the CPU has VNNI / AMX-INT8, '
+                             'bfloat16 with torch where native, else float32; the start-up '
+                             'line says which and why), float32, bfloat16 (torch backend, 2-3x '
+                             'faster on CPUs with AVX512-BF16 / AMX and on CUDA; peaks ~0.05 '
+                             "input px (median) from float32's), or int8 (backend onnxruntime, "
+                             'CPU with VNNI / AMX-INT8; needs calibration or a cached quant)',
                              choices=PRECISIONS)
+    calibration: str = setting('', 'precision int8: a recording (rosbag2 folder or .mcap) to '
+                               'calibrate the quantisation on, or a cached <model>.<sha>'
+                               '.int8.onnx quant; unused when the checkpoint has a cached quant')
 
     def __post_init__(self):
         validate_config(self)
@@ -304,7 +310,8 @@ class DetectorNode(Node):
         return Detector.from_checkpoint(path, device=self.device,
                                         backend=self.config.backend,
                                         threads=self.config.threads,
-                                        precision=self.config.precision)
+                                        precision=self.config.precision,
+                                        calibration=self.config.calibration or None)
 
     # ------------------------------------------------------------------ input
     def bad_message(self, slot, topic, error):
