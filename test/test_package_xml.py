@@ -20,7 +20,8 @@ ROSDEP_RULES = {
     'python3-h5py', 'python3-pandas', 'python3-tables', 'python3-flask', 'python3-selenium',
     'python3-hypothesis',
 }
-# Keys the install guide's rosdep line (docs/install.md) skips (installed with a pinned pip line instead).
+# Keys the install guide's rosdep line (docs/install.md) skips (installed with a pinned pip
+# line instead).
 SKIPPED = {'python3-torch', 'python3-rosbags-pip'}
 # Python import name -> the package.xml key that provides it.
 THIRD_PARTY = {'numpy': 'python3-numpy', 'cv2': 'python3-opencv', 'yaml': 'python3-yaml',
