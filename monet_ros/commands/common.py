@@ -23,19 +23,21 @@ def check_threads(owner, threads):
         torch.set_num_threads(threads)
 
 
-def print_precision(owner, precision, backend='torch', device=None):
-    """Resolve --precision (auto: bfloat16 where native, else float32) for `device` (None =
-    CUDA when present, else CPU) and print the one line saying which runs and why (stdout,
-    `owner: precision auto: ...`: stderr keeps one line for a bad input); returns the
-    precision run. ConfigError names precision for a value that cannot run (bfloat16 on a
-    CPU that would emulate it)."""
+def print_precision(owner, precision, backend='torch', device=None, checkpoint=None):
+    """Resolve --precision (auto: int8 with backend onnxruntime where `checkpoint` has a
+    cached int8 quant and the CPU has VNNI / AMX-INT8, bfloat16 with torch where native,
+    else float32) for `device` (None = CUDA when present, else CPU) and print the one line
+    saying which runs and why (stdout, `owner: precision auto: ...`: stderr keeps one line
+    for a bad input); returns the precision run. ConfigError names precision for a value
+    that cannot run (bfloat16 on a CPU that would emulate it, int8 without onnxruntime or
+    without VNNI / AMX-INT8)."""
     import torch
 
     from monet_ros.models.detector import resolve_precision
     if device is None:
         device = 'cuda' if torch.cuda.is_available() else 'cpu'
     try:
-        chosen, note = resolve_precision(precision, backend, device)
+        chosen, note = resolve_precision(precision, backend, device, checkpoint)
     except ValueError as error:
         raise ConfigError(owner, 'precision', str(error)) from None
     print(f'{owner}: {note}', flush=True)

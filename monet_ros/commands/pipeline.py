@@ -82,9 +82,16 @@ def add_arguments(parser):
                         help='CPU threads of the network in each detector process (0 = the '
                         'backend default with one process, the cores shared out with several)')
     parser.add_argument('--precision', choices=PRECISIONS, default='auto',
-                        help='network arithmetic: auto (default: bfloat16 where native, else '
-                        'float32; the choice is printed), float32, or bfloat16 (torch backend, '
-                        '2-3x faster on CPUs with AVX512-BF16 / AMX and on CUDA)')
+                        help='network arithmetic: auto (default: int8 with --backend '
+                        'onnxruntime where a cached quant exists and the CPU has VNNI / AMX, '
+                        'bfloat16 with torch where native, else float32; the choice is '
+                        'printed), float32, bfloat16 (torch backend, 2-3x faster on CPUs with '
+                        'AVX512-BF16 / AMX and on CUDA), or int8 (--backend onnxruntime, CPU '
+                        'with VNNI / AMX-INT8: quantised once, calibrated on the recording, '
+                        'cached beside the checkpoint)')
+    parser.add_argument('--calibration', default=None,
+                        help='int8: the recording (or cached *.int8.onnx quant) to calibrate '
+                        'on (default: --bag)')
     parser.add_argument('--workdir', help='where the demo recording and model are cached '
                         '(default: ~/.cache/monet_ros/demo)')
     parser.add_argument('--start-delay', type=float, default=0.5,
@@ -350,7 +357,15 @@ def run(args):
     device = check_device('monet pipeline', args.device)
     from monet_ros.commands.common import print_precision
     # from the arguments alone, before any node logs a line; auto: the choice said once
-    print_precision('monet pipeline', args.precision, args.backend, device)
+    print_precision('monet pipeline', args.precision, args.backend, device, args.model)
+    calibration = ''
+    if args.precision == 'int8':     # quantised once here, before the detector processes
+        from monet_ros.models import Detector
+        from monet_ros.models.quantize import cached_int8
+        Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
+                                 threads=args.threads, precision='int8',
+                                 calibration=args.calibration or args.bag)
+        calibration = str(cached_int8(args.model) or args.calibration or args.bag)
     use_large_data_profile()
     import rclpy
     from rclpy.node import Node
@@ -391,7 +406,8 @@ def run(args):
                                        transport=image_transport(args.bag, fusion.cameras),
                                        device=args.device, backend=args.backend,
                                        threads=args.threads, debug_image=args.debug_image,
-                                       lockstep=args.lockstep, precision=args.precision)
+                                       lockstep=args.lockstep, precision=args.precision,
+                                       calibration=calibration)
                 slots = camera_slots(DetectorConfig(**detector_params))
                 groups = detector_groups(slots, options.detector_processes)
                 check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],

@@ -77,9 +77,16 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--precision', choices=PRECISIONS, default='auto',
-                        help='network arithmetic: auto (default: bfloat16 where native, else '
-                        'float32; the choice is printed), float32, or bfloat16 (torch backend, '
-                        '2-3x faster on CPUs with AVX512-BF16 / AMX and on CUDA)')
+                        help='network arithmetic: auto (default: int8 with --backend '
+                        'onnxruntime where a cached quant exists and the CPU has VNNI / AMX, '
+                        'bfloat16 with torch where native, else float32; the choice is '
+                        'printed), float32, bfloat16 (torch backend, 2-3x faster on CPUs with '
+                        'AVX512-BF16 / AMX and on CUDA), or int8 (--backend onnxruntime, CPU '
+                        'with VNNI / AMX-INT8: quantised once, calibrated on the recording, '
+                        'cached beside the checkpoint)')
+    parser.add_argument('--calibration', default=None,
+                        help='int8: the recording (or cached *.int8.onnx quant) to calibrate '
+                        'on (default: the recording processed)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--export', default='csv,trc,nwb,npz',
                         help='analysis files written into OUT: any of csv (anipose), trc, '
@@ -127,17 +134,61 @@ def view_problem(image, camera):
     return None
 
 
+def read_view(message, camera, reader, reduced_decode=True):
+    """(image, problem) of one view's BagMessage: a JPEG CompressedImage stays its BagMessage
+    when reduced_decode (only its header is read: crop_view decodes it at the crop's scale),
+    anything else is decoded (to rgb8, the detector node's rule). image None: the view is
+    left out; problem: why it is skipped (counted per camera), None for a view that does not
+    decode (counted in reader.report, as iter_multiview_frames does)."""
+    from monet_ros.io import any_image_to_numpy
+    from monet_ros.io.images import to_rgb8
+    from monet_ros.io.jpeg_scale import is_jpeg, jpeg_size
+
+    msg = message.msg
+    try:
+        if reduced_decode and hasattr(msg, 'format') and is_jpeg(msg.data):
+            width, height = jpeg_size(msg.data)
+            if (width, height) != (camera.width, camera.height):
+                return None, (f'image is {width}x{height}, the rig says '
+                              f'{camera.width}x{camera.height}')
+            return message, None
+        image = any_image_to_numpy(msg)
+    except Exception as exc:    # noqa: BLE001 - a bad image costs only its view
+        reader.report.skip(message.topic, f'image decode failed: {exc}')
+        return None, None
+    problem = view_problem(image, camera)
+    return (None, problem) if problem is not None else (to_rgb8(image), None)
+
+
+def crop_view(image, camera, box, out_size, reader):
+    """(image, encoding, camera, box) to give Detector.predict for a view read by read_view:
+    an rgb8 array as it is; a JPEG BagMessage decoded at the crop's scale
+    (io.jpeg_scale.decode_for_crop), or None (counted in reader.report) when it does not
+    decode."""
+    from monet_ros.io.jpeg_scale import decode_for_crop
+
+    if isinstance(image, np.ndarray):
+        return image, 'rgb8', camera, box
+    try:
+        decoded, layout, camera, box, _ = decode_for_crop(image.msg.data, camera, box,
+                                                          out_size)
+    except ValueError as exc:
+        reader.report.skip(image.topic, f'image decode failed: {exc}')
+        return None
+    return decoded, layout, camera, box
+
+
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
                       skeleton=None, progress=True, backend='torch', threads=0, exports=(),
                       trc_axes='xyz', camera_map=(), precision='auto', filter_config=None,
-                      rig_units=None):
+                      rig_units=None, reduced_decode=True, calibration=None):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
     first reason), seconds, mean_error, mean_views, report (the reader's ReadReport).
     backend: 'torch' or 'onnxruntime'; threads: CPU threads (0 = the library's default);
-    precision: 'auto' (the command's default: bfloat16 where native, else float32),
-    'float32' or 'bfloat16' (models.detector.resolve_precision); `monet eval --reference`
+    precision: 'auto' (the command's default: models.detector.resolve_precision),
+    'float32', 'bfloat16' or 'int8' (backend onnxruntime); `monet eval --reference`
     and `monet train --holdout-labelled` score models through this function, so as `monet
     process` runs them.
     exports: formats of monet_ros.io.export_results written inside `out` (figures['exports']:
@@ -147,6 +198,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     figures['filter_stamps'] (T,) ns the stamps of its rows.
     rig_units: the length unit of a rig file that states none (geometry.read_rig);
     figures['units'] is the rig's unit, that of the 3D outputs.
+    reduced_decode: JPEG views are decoded at the crop's scale (io.jpeg_scale; False: full
+    decodes, for comparison). calibration: precision int8's calibration data (a recording
+    or a cached quant; None = `bag` itself), read only when the checkpoint has no cached
+    quant (models.quantize).
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
@@ -157,7 +212,6 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from monet_ros.geometry.units import rig_units as units_of
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.io.export_results import ResultsCollector
-    from monet_ros.io.images import to_rgb8
     from monet_ros.io.multiview import image_topics
     from monet_ros.models import Detector
     from monet_ros.rig_select import load_node_rig, select_cameras
@@ -177,7 +231,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
     detector = Detector.from_checkpoint(model, device=device, backend=backend, threads=threads,
-                                        precision=precision)
+                                        precision=precision,
+                                        calibration=bag if calibration is None else calibration)
     edges = None
     if skeleton is not None:
         edges = load_skeleton(skeleton).bone_indices
@@ -196,27 +251,43 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     tracker = TrackedCrops(units=units)   # the detector node's defaults (track_* parameters)
     start = time.perf_counter()
     with atomic_output_dir(out) as staging, BagWriter(staging) as writer:
-        frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6))
+        frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6),
+                                       decode=False)
+        h_in, w_in = detector.input_size
         for frame in tqdm(frames, desc='monet process', unit='frame', disable=not progress,
                           file=sys.stderr):
             present, images = [], []
             for name in topics:
                 if name not in frame.images:
                     continue
-                problem = view_problem(frame.images[name], by_name[name])
+                image, problem = read_view(frame.images[name], by_name[name], reader,
+                                           reduced_decode)
                 if problem is not None:
                     figures['skipped_views'][name] += 1
                     figures['skip_reasons'].setdefault(name, f'{problem} at stamp '
                                                        f'{frame.stamp_ns}')
+                if image is None:
                     continue
                 present.append(by_name[name])
-                images.append(to_rgb8(frame.images[name]))    # the detector node's rule
-            figures['missing_views'] += len(topics) - len(present)
+                images.append(image)
             if len(present) < fusion_config.min_views:
+                figures['missing_views'] += len(topics) - len(present)
                 continue
             boxes = tracker.boxes(present, frame.stamp_ns if config.track else None)
             boxes = detector.boxes_for(present, boxes)
-            heat, heat_cameras = detector.predict(images, present, boxes, keep_aspect=False)
+            # JPEG views decoded at the crop's scale (the detector node's rule): their
+            # camera and box become the reduced image's; the heatmap cameras do not change
+            views = [crop_view(image, camera, box, (w_in, h_in), reader)
+                     for image, camera, box in zip(images, present, boxes)]
+            keep = [v is not None for v in views]
+            present = [c for c, k in zip(present, keep) if k]
+            views = [v for v in views if v is not None]
+            figures['missing_views'] += len(topics) - len(present)
+            if len(present) < fusion_config.min_views:
+                continue
+            heat, heat_cameras = detector.predict(
+                [v[0] for v in views], [v[2] for v in views], np.array([v[3] for v in views]),
+                keep_aspect=False, encodings=[v[1] for v in views])
             result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cameras]), present,
                                    fusion_config)
             writer.write_keypoints3d('/monet/keypoints3d', frame.stamp_ns, frame_id,
@@ -273,12 +344,17 @@ def run(args):
     filter_config = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)
-    print_precision('monet process', args.precision, args.backend, device)
+    print_precision('monet process', args.precision, args.backend, device, args.model)
     options = dict(model=args.model, rig=args.rig, cameras=args.cameras or (), config=config,
                    skeleton=args.skeleton, backend=args.backend,
                    exports=parse_formats(args.export), trc_axes=args.trc_axes,
                    camera_map=parse_name_map(args.camera_map), precision=args.precision,
-                   filter_config=filter_config, rig_units=args.rig_units)
+                   filter_config=filter_config, rig_units=args.rig_units,
+                   calibration=args.calibration)
+    if len(args.bag) > 1 and args.precision == 'int8':   # quantised once, before the workers
+        from monet_ros.models import Detector
+        Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
+                                 precision='int8', calibration=args.calibration or args.bag[0])
     if len(args.bag) > 1:         # several recordings: worker processes (process_many.py)
         from monet_ros.commands.process_many import run_many
         return run_many(args, options, process_recording)

@@ -102,7 +102,13 @@ def pick_device(name):
 def check_training_precision(precision, device):
     """ConfigError naming TrainConfig.precision unless it runs well on `device` (torch device
     or string): the inference rule, models.detector.check_precision (bfloat16 only where the
-    CPU has AVX512-BF16 / AMX or the GPU bfloat16; elsewhere it is emulated, slower)."""
+    CPU has AVX512-BF16 / AMX or the GPU bfloat16; elsewhere it is emulated, slower). int8
+    is refused by name: an inference precision (ONNX Runtime quantisation), not a training
+    one."""
+    if precision == 'int8':
+        raise ConfigError('TrainConfig', 'precision', 'int8 is an inference precision (ONNX '
+                          'Runtime static quantisation of a trained network), not a training '
+                          'one: train in auto, float32 or bfloat16')
     try:
         check_precision(precision, 'torch', device)
     except ValueError as error:

@@ -16,7 +16,9 @@ from monet_ros.models.layers import fuse_for_inference
 from monet_ros.models.onnx_backend import BACKENDS, OnnxRunner, export_onnx, onnx_runner_for
 from monet_ros.timing import StageTimer
 
-PRECISIONS = ('auto', 'float32', 'bfloat16')
+PRECISIONS = ('auto', 'float32', 'bfloat16', 'int8')
+# int8 is an inference precision only (ONNX Runtime static quantisation: models.quantize)
+TRAINING_PRECISIONS = ('auto', 'float32', 'bfloat16')
 
 
 def bfloat16_feature(device):
@@ -43,10 +45,19 @@ def bfloat16_native(device):
 
 def check_precision(precision, backend, device):
     """Raises ValueError (naming precision) unless `precision` is one of PRECISIONS that
-    `backend` runs well on `device` (bfloat16: torch backend, bfloat16_native device; auto
-    always runs: resolve_precision)."""
+    `backend` runs well on `device` (bfloat16: torch backend, bfloat16_native device; int8:
+    backend onnxruntime on a CPU with VNNI or AMX-INT8, models.quantize.check_int8_cpu;
+    auto always runs: resolve_precision)."""
     if precision not in PRECISIONS:
         raise ValueError(f'precision must be one of {PRECISIONS}, got {precision!r}')
+    if precision == 'int8':
+        from monet_ros.models.quantize import check_int8_cpu
+        if backend != 'onnxruntime':
+            raise ValueError(f'precision int8 needs backend onnxruntime (ONNX Runtime static '
+                             f'quantisation), got {backend!r}')
+        if torch.device(device).type != 'cpu':
+            raise ValueError(f'precision int8 runs on the CPU, not on {torch.device(device)}')
+        check_int8_cpu()
     if precision == 'bfloat16':
         if backend != 'torch':
             raise ValueError(f'precision bfloat16 needs backend torch, got {backend!r}')
@@ -57,15 +68,26 @@ def check_precision(precision, backend, device):
                              f'there)')
 
 
-def resolve_precision(precision, backend='torch', device='cpu'):
+def resolve_precision(precision, backend='torch', device='cpu', checkpoint=None):
     """(precision run, one line saying why) for a precision of PRECISIONS (check_precision
-    first: ValueError naming precision). auto -> bfloat16 where the torch backend runs it
-    natively on `device` (bfloat16_feature names the CPU feature or GPU found), else
-    float32; float32 / bfloat16 are kept as given."""
+    first: ValueError naming precision). auto -> with backend onnxruntime on a CPU: int8
+    when `checkpoint` has a cached int8 quant (models.quantize.cached_int8: auto never
+    calibrates) and the CPU has VNNI or AMX-INT8, else float32; with backend torch: bfloat16
+    where it runs natively on `device` (bfloat16_feature names the CPU feature or GPU
+    found), else float32. float32 / bfloat16 / int8 are kept as given."""
     check_precision(precision, backend, device)
     if precision != 'auto':
         return precision, f'precision {precision}'
     device = torch.device(device)
+    if backend == 'onnxruntime' and device.type == 'cpu':
+        from monet_ros.models.quantize import cached_int8, cpu_int8_feature
+        feature = cpu_int8_feature()
+        quant = cached_int8(checkpoint)
+        if feature is not None and quant is not None:
+            return 'int8', f'precision auto: int8 (cached quant {quant.name}; CPU has {feature})'
+        why = ('no cached int8 quant of the checkpoint' if quant is None else
+               'the CPU has no VNNI / AMX-INT8')
+        return 'float32', f'precision auto: float32 (backend {backend}; {why})'
     if backend != 'torch':
         return 'float32', f'precision auto: float32 (backend {backend} runs float32)'
     feature = bfloat16_feature(device)
@@ -103,8 +125,12 @@ class Detector:
     precision: 'float32', or 'bfloat16' (torch backend only: the network runs under
     torch.autocast in bfloat16, 2-3x faster on CPUs with AVX512-BF16 / AMX; heatmaps are
     returned as float32 and differ from float32 inference by ~1e-2 of their peak), or
-    'auto' (bfloat16 where native, else float32: resolve_precision; `precision` is then the
-    one chosen and `precision_note` the line saying why).
+    'int8' (backend onnxruntime, CPU with VNNI / AMX-INT8: the network quantised by ONNX
+    Runtime, models.quantize; `calibration` is a recording, a cached quant or crops (N, H,
+    W, 3) uint8, needed unless the checkpoint has a cached quant), or
+    'auto' (int8 with onnxruntime where a cached quant exists and the CPU has VNNI / AMX,
+    else bfloat16 with torch where native, else float32: resolve_precision; `precision` is
+    then the one chosen and `precision_note` the line saying why).
     The torch backend keeps the network and its input channels-last (NHWC), the layout
     oneDNN's bfloat16 convolutions take (for float32 within noise of NCHW on CPU, results
     equal to ~1e-6).
@@ -112,7 +138,7 @@ class Detector:
     """
 
     def __init__(self, model, metadata, device=None, fuse=True, backend='torch', threads=0,
-                 checkpoint=None, precision='float32'):
+                 checkpoint=None, precision='float32', calibration=None):
         keypoints = list(metadata.get('keypoints', []))
         if len(keypoints) != model.num_keypoints:
             raise ValueError(f'Detector: metadata.keypoints has {len(keypoints)} names but the '
@@ -127,7 +153,8 @@ class Detector:
             device = 'cuda' if torch.cuda.is_available() else 'cpu'
         self.device = torch.device(device)
         # auto -> the precision run here; precision_note: the one line saying which and why
-        self.precision, self.precision_note = resolve_precision(precision, backend, self.device)
+        self.precision, self.precision_note = resolve_precision(precision, backend, self.device,
+                                                                checkpoint)
         self.model = copy.deepcopy(model).eval().to(self.device)
         if fuse:
             fuse_for_inference(self.model)
@@ -139,7 +166,12 @@ class Detector:
         self.heatmap_size = tuple(model.heatmap_size)   # (h, w)
         self.backend = backend
         self.runner = None
-        if backend == 'onnxruntime':
+        if backend == 'onnxruntime' and self.precision == 'int8':
+            from monet_ros.models.quantize import int8_onnx_for
+            cpu_model = copy.deepcopy(self.model).cpu()
+            self.runner = OnnxRunner(int8_onnx_for(cpu_model, checkpoint, calibration),
+                                     self.device, threads)
+        elif backend == 'onnxruntime':
             cpu_model = copy.deepcopy(self.model).cpu()
             self.runner = (onnx_runner_for(cpu_model, checkpoint, self.device, threads)
                            if checkpoint is not None else
@@ -162,13 +194,14 @@ class Detector:
 
     @classmethod
     def from_checkpoint(cls, path, device=None, architecture=None, num_keypoints=None,
-                        backend='torch', threads=0, precision='float32'):
+                        backend='torch', threads=0, precision='float32', calibration=None):
         """Detector of a checkpoint file (CheckpointError names the file and field); with
-        backend 'onnxruntime' the export is cached beside it, keyed by its sha256."""
+        backend 'onnxruntime' the export (and with precision int8 the quant) is cached
+        beside it, keyed by its sha256."""
         model, metadata = load_checkpoint(path, architecture=architecture,
                                           num_keypoints=num_keypoints)
         return cls(model, metadata, device=device, backend=backend, threads=threads,
-                   checkpoint=path, precision=precision)
+                   checkpoint=path, precision=precision, calibration=calibration)
 
     def boxes_for(self, cameras, boxes=None, keep_aspect=True):
         """The crop boxes predict uses: (N, 4) edge coordinates.

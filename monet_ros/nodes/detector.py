@@ -47,6 +47,7 @@ from monet_ros.io import (
 )
 from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
 from monet_ros.io.images import image_for_crop, raw_to_rgb8, to_rgb8
+from monet_ros.io.jpeg_scale import decode_for_crop, is_jpeg, jpeg_size
 from monet_ros.models import CheckpointError, Detector
 from monet_ros.models.detector import PRECISIONS
 from monet_ros.models.device import check_device
@@ -136,11 +137,17 @@ class DetectorConfig:
     backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
                            'exported to ONNX once, cached beside the checkpoint)',
                            choices=('torch', 'onnxruntime'))
-    precision: str = setting('auto', 'network arithmetic: auto (bfloat16 where native, else '
-                             'float32; the start-up line says which and why), float32, or '
-                             'bfloat16 (torch backend, 2-3x faster on CPUs with AVX512-BF16 / '
-                             "AMX and on CUDA; peaks ~0.05 input px (median) from float32's)",
+    precision: str = setting('auto', 'network arithmetic: auto (int8 with backend onnxruntime '
+                             'where a cached quant exists and the CPU has VNNI / AMX-INT8, '
+                             'bfloat16 with torch where native, else float32; the start-up '
+                             'line says which and why), float32, bfloat16 (torch backend, 2-3x '
+                             'faster on CPUs with AVX512-BF16 / AMX and on CUDA; peaks ~0.05 '
+                             "input px (median) from float32's), or int8 (backend onnxruntime, "
+                             'CPU with VNNI / AMX-INT8; needs calibration or a cached quant)',
                              choices=PRECISIONS)
+    calibration: str = setting('', 'precision int8: a recording (rosbag2 folder or .mcap) to '
+                               'calibrate the quantisation on, or a cached <model>.<sha>'
+                               '.int8.onnx quant; unused when the checkpoint has a cached quant')
 
     def __post_init__(self):
         validate_config(self)
@@ -303,7 +310,8 @@ class DetectorNode(Node):
         return Detector.from_checkpoint(path, device=self.device,
                                         backend=self.config.backend,
                                         threads=self.config.threads,
-                                        precision=self.config.precision)
+                                        precision=self.config.precision,
+                                        calibration=self.config.calibration or None)
 
     # ------------------------------------------------------------------ input
     def bad_message(self, slot, topic, error):
@@ -396,9 +404,18 @@ class DetectorNode(Node):
     def decode(self, slot, msg):
         """(image (H, W, ch) uint8, its layout, Camera) of a message, or None (counted as
         bad). Raw rgb8/bgr8/rgba8/bgra8/mono8 images stay the message buffer (no copy): the
-        detector converts only the crop (raw_to_rgb8)."""
+        detector converts only the crop (raw_to_rgb8). A JPEG CompressedImage is only
+        checked here (its header's size) and given as (None, 'jpeg', Camera): decode_crops
+        decodes it at the crop's scale once the box is known (io.jpeg_scale)."""
         topic = slot.image_topic
         try:
+            camera = slot.camera or slot.rig_camera
+            if isinstance(msg, CompressedImage) and is_jpeg(msg.data) and camera is not None:
+                width, height = jpeg_size(msg.data)   # decoded at the crop's scale later
+                if (camera.width, camera.height) != (width, height):
+                    raise ValueError(f'image is {width}x{height} but the camera is '
+                                     f'{camera.width}x{camera.height}')
+                return None, 'jpeg', camera
             if isinstance(msg, CompressedImage):
                 image, layout = to_rgb8(compressed_image_to_numpy(msg)), 'rgb8'
             else:
@@ -421,6 +438,27 @@ class DetectorNode(Node):
             self.bad_message(slot, topic, error)
             return None
         return image, layout, camera
+
+    def decode_crops(self, work, boxes):
+        """Decode the JPEG views of `work` (decode gave them as 'jpeg') at the scale of their
+        crop (io.jpeg_scale.decode_for_crop: 1/2, 1/4 or 1/8 when the crop shrinks that much);
+        their camera and box become the reduced image's, so the heatmap camera is unchanged.
+        -> (work, cameras, boxes) without the views that fail to decode (counted as bad)."""
+        if all(w[3] != 'jpeg' for w in work):
+            return work, [w[4] for w in work], boxes
+        h_in, w_in = self.detector.input_size
+        kept, kept_boxes = [], []
+        for (slot, msg, image, layout, camera), box in zip(work, boxes):
+            if layout == 'jpeg':
+                try:
+                    image, layout, camera, box, _ = decode_for_crop(msg.data, camera, box,
+                                                                    (w_in, h_in))
+                except ValueError as error:
+                    self.bad_message(slot, slot.image_topic, error)
+                    continue
+            kept.append((slot, msg, image, layout, camera))
+            kept_boxes.append(box)
+        return kept, [w[4] for w in kept], np.asarray(kept_boxes, np.float64).reshape(-1, 4)
 
     def crop_boxes(self, cameras, stamp_ns):
         """(V, 4) boxes of images stamped stamp_ns: the tracked rule (fresh keypoints3d and
@@ -450,6 +488,10 @@ class DetectorNode(Node):
         if self.config.lockstep:
             self.awaiting_keypoints = stamp
         boxes = self.detector.boxes_for(cameras, self.crop_boxes(cameras, stamp))
+        with self.timer('decode'):
+            work, cameras, boxes = self.decode_crops(work, boxes)
+        if not work:
+            return
         start = time.perf_counter()
         heatmaps, heat_cameras = self.detector.predict([w[2] for w in work], cameras, boxes,
                                                        keep_aspect=False,
@@ -565,7 +607,8 @@ class DetectorNode(Node):
         msg.header.stamp = self.get_clock().now().to_msg()
         forward_ms = 1e3 * float(np.median(self.forward_seconds)) if self.forward_seconds \
             else 0.0
-        # per-batch stage times (ms) since start: convert, crop, forward, publish
+        # per-batch stage times (ms) since start: convert, decode (JPEG views, at the crop's
+        # scale), crop, forward, publish
         stages = {**self.timer.summary(), **self.detector.timer.summary()}
         for slot in self.slots:
             level = DiagnosticStatus.OK if slot.processed else DiagnosticStatus.WARN

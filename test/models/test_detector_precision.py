@@ -1,50 +1,19 @@
 """Detector precision: bfloat16 inference finds the keypoints float32 finds (on hardware with
 native bfloat16), and is refused, naming the cause, where it would not run well."""
+from helpers.blob_net import NAMES, SIZE, blob_images, train_blob_net
 from helpers.rigs import random_rig
 import numpy as np
 import pytest
-import torch
 
-from monet_ros.models import build_model
 from monet_ros.models.crop import crop_images
-from monet_ros.models.detector import Detector, bfloat16_native, images_to_tensor
-from monet_ros.models.heatmaps import decode_heatmaps, render_heatmaps
-
-NAMES = ['a', 'b', 'c']
-SIZE = 64      # network input side (px); heatmaps are SIZE / 4
-COLOURS = np.array([[255, 40, 40], [40, 255, 40], [60, 60, 255]], dtype=np.float64)
-
-
-def blob_images(rng, n):
-    """(n, SIZE, SIZE, 3) uint8 with one coloured Gaussian blob per keypoint, and the blob
-    centres (n, 3, 2) in input pixels (pixel-centre convention)."""
-    centres = rng.uniform(8, SIZE - 8, size=(n, len(NAMES), 2))
-    yy, xx = np.mgrid[0:SIZE, 0:SIZE]
-    images = np.full((n, SIZE, SIZE, 3), 70.0)
-    for c in range(len(NAMES)):
-        u, v = centres[:, c, 0, None, None], centres[:, c, 1, None, None]
-        g = np.exp(-((xx - u) ** 2 + (yy - v) ** 2) / (2 * 2.5 ** 2))[..., None]
-        images = images * (1 - g) + COLOURS[c] * g
-    return np.clip(images, 0, 255).astype(np.uint8), centres
+from monet_ros.models.detector import Detector, bfloat16_native
+from monet_ros.models.heatmaps import decode_heatmaps
 
 
 @pytest.fixture(scope='module')
 def trained():
     """A small net trained (supervised, a few hundred steps) to find three coloured blobs."""
-    rng = np.random.default_rng(0)
-    torch.manual_seed(0)
-    model = build_model('small', len(NAMES), width=16, input_size=(SIZE, SIZE))
-    optimiser = torch.optim.Adam(model.parameters(), lr=3e-3)
-    for _ in range(300):
-        images, centres = blob_images(rng, 16)
-        # heatmap pixel = (input pixel + 0.5) / 4 - 0.5 (pixel centres)
-        target = render_heatmaps(torch.as_tensor((centres + 0.5) / 4 - 0.5),
-                                 (SIZE // 4, SIZE // 4), 1.0)
-        loss = ((model(images_to_tensor(images))[-1] - target.float()) ** 2).mean()
-        optimiser.zero_grad()
-        loss.backward()
-        optimiser.step()
-    return model.eval()
+    return train_blob_net()
 
 
 def test_unknown_precision_is_named(trained):

@@ -9,7 +9,14 @@ from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
-from monet_ros.io import BagWriter, camera_info_from_camera, compressed_image_msg
+from monet_ros.io import (
+    BagWriter,
+    camera_info_from_camera,
+    compressed_image_msg,
+    image_msg_to_heatmaps,
+)
+from monet_ros.io.jpeg_scale import decode_for_crop
+from monet_ros.models import Detector
 
 T0 = 1_600_000_000_000_000_000
 
@@ -45,6 +52,7 @@ def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
         heat = ros.collect('/monet/cam0/heatmaps', Image)
+        heat_info = ros.collect('/monet/cam0/camera_info', CameraInfo)
         # cam1 has a raw publisher only: the report names the transport that would work
         raw_cam1 = ros.publisher('/cam1/image_raw', Image)
 
@@ -68,9 +76,23 @@ def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(
             if ros.spin_until(lambda: heat, timeout=1.0, process=node):
                 break
         assert heat, node.output()
+        assert ros.spin_until(lambda: heat_info, timeout=10, process=node), node.output()
         assert node.stop() == 0, node.output()
     output = node.output()
     assert output.count('no publisher on /cam0/image_raw/compressed') == 1, output
+    # the 320x240 JPEG's crop shrinks 2.5x to the 128x96 input: decoded at 1/2 (jpeg_scale),
+    # the heatmaps are the core's on that decode and their camera the full frame's crop
+    detector = Detector.from_checkpoint(model, device='cpu', precision='auto')  # the node's
+    box = detector.boxes_for(rig[:1])[0]
+    data = compressed_image_msg(images[0], T0, 'cam0_optical').data
+    image, layout, small, small_box, s = decode_for_crop(data, rig[0], box, (128, 96))
+    assert s == 2
+    expected, _ = detector.predict([image], [small], small_box[None], keep_aspect=False,
+                                   encodings=[layout])
+    np.testing.assert_allclose(image_msg_to_heatmaps(heat[-1]), expected[0], atol=1e-5)
+    h, w = detector.heatmap_size
+    np.testing.assert_allclose(np.reshape(heat_info[-1].k, (3, 3)),
+                               rig[0].crop(box, (w, h)).K, rtol=1e-12, atol=1e-9)
     assert 'Traceback' not in output
 
 

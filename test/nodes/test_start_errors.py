@@ -48,3 +48,23 @@ def test_learner_resuming_from_a_bad_checkpoint_prints_one_line(ros_env, tmp_pat
     params = dict(bags=[str(tmp_path / 'no_bag_needed')], out=str(out), resume=True)
     with NodeProcess('learner', ros_env, params) as node:
         assert_one_line_exit_2(node, 'learner', model)
+
+
+def test_detector_int8_without_calibration_names_the_parameter(ros_env, tmp_path):
+    from helpers.recordings import small_checkpoint
+
+    from monet_ros.models.quantize import cpu_int8_feature
+    save_rig(tmp_path / 'rig.yaml', ring_rig(2))
+    model = small_checkpoint(tmp_path / 'model.pt')
+    params = dict(rig=str(tmp_path / 'rig.yaml'), model=str(model), device='cpu',
+                  backend='onnxruntime', precision='int8')
+    with NodeProcess('detector', ros_env, params) as node:
+        assert node.wait(timeout=120) == 2, node.output()
+    lines = [line for line in node.stderr_path.read_text().splitlines() if line.strip()]
+    assert len(lines) == 1, node.output()
+    if cpu_int8_feature() is None:                    # refused for the CPU first
+        assert 'needs a CPU with AVX512-VNNI' in lines[0], lines
+    else:
+        assert 'precision int8 needs calibration data' in lines[0], lines
+        assert 'parameter calibration' in lines[0] and 'model.' in lines[0], lines
+    assert 'Traceback' not in node.output()

@@ -1,0 +1,228 @@
+"""INT8 inference: ONNX Runtime static quantisation of a detector network (`precision int8`).
+
+The float32 ONNX export (models.onnx_backend) is quantised with
+onnxruntime.quantization.quantize_static: QDQ format, weights int8 per output channel,
+activations uint8 per tensor (U8S8, the layout ONNX Runtime's x86 int8 kernels take), MinMax
+calibration on network-input crops. The crops come from a recording (its frames, every
+camera, full-frame crops as the detector makes them when it has no 3D yet:
+calibration_crops) or are given. The quantised network is cached beside the checkpoint as
+`<checkpoint stem>.<sha256[:16]>.int8.onnx` (int8_path_for), written atomically; the name
+is keyed by the checkpoint's sha256, so new weights need a new calibration and a quant never
+belongs to other weights.
+
+CPU rule (cpu_int8_feature): int8 is refused, not only warned about, on a CPU without
+AVX512-VNNI, AVX-VNNI or AMX-INT8. Without them ONNX Runtime's uint8 x int8 convolutions run
+on AVX2's vpmaddubsw, whose 16-bit pair sums saturate (u8 255 x s8 127 x 2 > 32767): the
+heatmaps come out wrong in a data-dependent way, not merely slower, and the speed-up over
+float32 is small there. `precision auto` then keeps float32 (resolve_precision).
+"""
+import logging
+from pathlib import Path
+import tempfile
+
+import numpy as np
+
+from monet_ros.atomic import atomic_write, sha256_file
+
+# CPU flags (/proc/cpuinfo) of the int8 dot-product instructions, and their names
+INT8_FLAGS = (('amx_int8', 'AMX-INT8'), ('avx512_vnni', 'AVX512-VNNI'), ('avx_vnni', 'AVX-VNNI'))
+CALIBRATION_IMAGES = 64     # crops a recording gives for calibration (at most)
+INT8_SUFFIX = '.int8.onnx'
+
+
+class Int8Error(ValueError):
+    """int8 cannot run here (CPU, backend, no calibration data or cached quant); the message
+    is one line naming the cause (a ValueError: commands exit 2, nodes refuse to start)."""
+
+
+def cpu_flags(path='/proc/cpuinfo'):
+    """The set of CPU feature flags of the first processor in `path` (empty when the file
+    cannot be read: not Linux)."""
+    try:
+        with open(path) as stream:
+            for line in stream:
+                if line.startswith('flags'):
+                    return set(line.partition(':')[2].split())
+    except OSError:
+        pass
+    return set()
+
+
+def cpu_int8_feature(flags=None):
+    """What makes int8 fast and exact on this CPU, as text ('AMX-INT8 and AVX512-VNNI', ...),
+    or None where ONNX Runtime would fall back to AVX2's saturating vpmaddubsw (see the module
+    docstring). flags: a set of /proc/cpuinfo flags (None = read them)."""
+    flags = cpu_flags() if flags is None else set(flags)
+    found = [text for flag, text in INT8_FLAGS if flag in flags]
+    return ' and '.join(found) or None
+
+
+def check_int8_cpu():
+    """Raises Int8Error unless cpu_int8_feature finds VNNI or AMX-INT8."""
+    if cpu_int8_feature() is None:
+        raise Int8Error('precision int8 needs a CPU with AVX512-VNNI, AVX-VNNI or AMX-INT8 '
+                        '(/proc/cpuinfo flags avx512_vnni, avx_vnni, amx_int8); without them '
+                        "ONNX Runtime's int8 convolutions saturate (wrong heatmaps); use "
+                        'float32 (precision auto picks it there)')
+
+
+def int8_path_for(checkpoint, sha256):
+    """Where the int8 quant of a checkpoint with this sha256 is cached (beside it)."""
+    checkpoint = Path(checkpoint)
+    return checkpoint.with_name(f'{checkpoint.stem}.{sha256[:16]}{INT8_SUFFIX}')
+
+
+def cached_int8(checkpoint, sha256=None):
+    """The cached int8 quant of `checkpoint` (Path) when it exists, else None."""
+    if checkpoint is None or not Path(checkpoint).is_file():
+        return None
+    path = int8_path_for(checkpoint, sha256 or sha256_file(checkpoint))
+    return path if path.is_file() else None
+
+
+def crops_to_input(crops):
+    """(N, H, W, 3) uint8 RGB crops -> (N, 3, H, W) float32 in [0, 1]: the network input, as
+    Detector.forward makes it."""
+    crops = np.asarray(crops)
+    if crops.ndim != 4 or crops.shape[-1] != 3 or crops.dtype != np.uint8:
+        raise ValueError(f'calibration crops must be (N, H, W, 3) uint8 RGB, got '
+                         f'{crops.shape} {crops.dtype}')
+    return np.ascontiguousarray(crops.transpose(0, 3, 1, 2), dtype=np.float32) / 255.0
+
+
+def calibration_crops(recording, input_size, count=CALIBRATION_IMAGES):
+    """Up to `count` network-input crops (N, H, W, 3) uint8 RGB of a recording's frames.
+
+    recording: a rosbag2 folder or .mcap; input_size: (H, W) of the network. Every
+    Image / CompressedImage topic is read; frames are taken evenly over the recording (each
+    topic's first frame, then every k-th message) and cropped full frame, grown to the
+    input's aspect (models.crop), as the detector crops before it has 3D. Raises Int8Error
+    when the recording cannot be read or has no image that decodes."""
+    from monet_ros.io import any_image_to_numpy, open_bag
+    from monet_ros.io.images import to_rgb8
+    from monet_ros.models.crop import crop_images, full_frame_boxes
+
+    h, w = (int(v) for v in input_size)
+    try:
+        reader = open_bag(recording)
+        topics = reader.topics_of_type('sensor_msgs/msg/Image', 'sensor_msgs/msg/CompressedImage')
+        total = sum(int(getattr(reader.topics[t], 'count', 0) or 0) for t in topics)
+    except (OSError, ValueError) as error:
+        raise Int8Error(f'calibration {recording}: cannot read it ({error})') from None
+    if not topics:
+        raise Int8Error(f'calibration {recording}: no Image or CompressedImage topic')
+    every = max(1, total // count) if total else 1
+    crops = []
+    try:
+        for n, message in enumerate(reader.messages(topics=topics)):
+            if n % every:
+                continue
+            try:
+                image = to_rgb8(any_image_to_numpy(message.msg))
+            except ValueError:
+                continue              # a view that does not decode: not calibration data
+            box = full_frame_boxes([(image.shape[1], image.shape[0])], w / h)
+            crops.append(crop_images([image], box, (w, h))[0])
+            if len(crops) >= count:
+                break
+    except (OSError, ValueError) as error:
+        raise Int8Error(f'calibration {recording}: cannot read it ({error})') from None
+    if not crops:
+        raise Int8Error(f'calibration {recording}: no image decodes')
+    return np.stack(crops)
+
+
+def _reader(inputs, batch=8):
+    from onnxruntime.quantization import CalibrationDataReader
+
+    class Batches(CalibrationDataReader):
+        def __init__(self):
+            self.batches = iter([{'images': inputs[i:i + batch]}
+                                 for i in range(0, len(inputs), batch)])
+
+        def get_next(self):
+            return next(self.batches, None)
+
+    return Batches()
+
+
+def quantize_onnx(float_onnx, crops):
+    """The int8 (QDQ, per-channel weights) ONNX bytes of a float32 export (bytes or path),
+    calibrated (MinMax) on `crops` (N, H, W, 3) uint8 RGB. Raises Int8Error when ONNX Runtime's
+    quantiser is missing or fails."""
+    try:
+        from onnxruntime.quantization import (
+            CalibrationMethod,
+            QuantFormat,
+            QuantType,
+            quantize_static,
+        )
+    except ImportError:
+        raise Int8Error('precision int8 needs the onnxruntime package (pip install -r '
+                        'requirements.txt)') from None
+    inputs = crops_to_input(crops)
+    if not len(inputs):
+        raise Int8Error('precision int8: no calibration crops')
+    with tempfile.TemporaryDirectory(prefix='monet-int8-') as folder:
+        source = Path(folder) / 'float.onnx'
+        target = Path(folder) / 'int8.onnx'
+        source.write_bytes(float_onnx if isinstance(float_onnx, bytes)
+                           else Path(float_onnx).read_bytes())
+        # the quantiser logs advice (pre-processing) to the root logger: not the user's
+        logging.disable(logging.WARNING)
+        try:
+            quantize_static(str(source), str(target), _reader(inputs),
+                            quant_format=QuantFormat.QDQ, per_channel=True,
+                            activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
+                            calibrate_method=CalibrationMethod.MinMax)
+        except Exception as error:  # noqa: BLE001 - the quantiser raises many kinds
+            raise Int8Error(f'int8 quantisation failed ({type(error).__name__}: '
+                            f'{error})') from None
+        finally:
+            logging.disable(logging.NOTSET)
+        return target.read_bytes()
+
+
+def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None):
+    """The int8 network of `model` (eval mode, CPU) as a path (cached) or ONNX bytes.
+
+    checkpoint: the file `model` was loaded from (the quant is cached beside it, keyed by its
+    sha256), or None (quantised in memory, never cached). calibration: None (the cached
+    quant must exist), a recording (rosbag2 folder or .mcap: calibration_crops), a cached
+    quant (`*.int8.onnx`, which must be this checkpoint's) or crops (N, H, W, 3) uint8.
+    A cached quant is used as it is (calibration is then not read). Where the folder is
+    not writable the quant is used from memory. Raises Int8Error (one line) when there is
+    no calibration data and no cached quant, or the quant given is another checkpoint's."""
+    from monet_ros.models.onnx_backend import export_onnx
+
+    path = None
+    if checkpoint is not None:
+        sha256 = sha256 or sha256_file(checkpoint)
+        path = int8_path_for(checkpoint, sha256)
+        if path.is_file():
+            return path
+    if isinstance(calibration, (str, Path)) and str(calibration).endswith(INT8_SUFFIX):
+        given = Path(calibration)
+        if path is not None and not given.name.endswith(f'.{sha256[:16]}{INT8_SUFFIX}'):
+            raise Int8Error(f'calibration {given}: a quant of other weights (this checkpoint '
+                            f'is {Path(checkpoint).name}, sha256 {sha256[:16]}: {path.name})')
+        if not given.is_file():
+            raise Int8Error(f'calibration {given}: no such quant')
+        return given
+    if calibration is None or (isinstance(calibration, str) and not calibration):
+        where = f' and no cached quant {path}' if path is not None else ''
+        raise Int8Error(f'precision int8 needs calibration data (a recording or a cached '
+                        f'quant: parameter calibration){where}')
+    if isinstance(calibration, (str, Path)):
+        crops = calibration_crops(calibration, model.input_size)
+    else:
+        crops = np.asarray(calibration)
+    data = quantize_onnx(export_onnx(model), crops)
+    if path is None:
+        return data
+    try:
+        with atomic_write(path) as stream:
+            stream.write(data)
+    except OSError:
+        return data
+    return path

@@ -1,0 +1,122 @@
+"""precision int8 (models.quantize): ONNX Runtime static quantisation of a trained network
+finds the keypoints float32 finds; it is refused, in one line naming the cause, without
+calibration data, without onnxruntime, for training, and on CPUs without VNNI / AMX-INT8;
+its cache beside the checkpoint follows the checkpoint's sha256."""
+from helpers.blob_net import NAMES, SIZE, blob_images, train_blob_net
+import numpy as np
+import pytest
+
+from monet_ros.atomic import sha256_file
+from monet_ros.config import ConfigError
+from monet_ros.learning.trainer import check_training_precision
+from monet_ros.models import save_checkpoint
+from monet_ros.models.detector import Detector, resolve_precision
+from monet_ros.models.heatmaps import decode_heatmaps
+from monet_ros.models.quantize import (
+    Int8Error,
+    cpu_int8_feature,
+    int8_path_for,
+)
+
+HAS_INT8 = cpu_int8_feature() is not None
+needs_int8 = pytest.mark.skipif(not HAS_INT8, reason='no VNNI / AMX-INT8 on this CPU')
+
+
+@pytest.fixture(scope='module')
+def trained():
+    return train_blob_net()
+
+
+@pytest.fixture(scope='module')
+def calibration():
+    return blob_images(np.random.default_rng(5), 48)[0]
+
+
+def full_boxes(n):
+    return np.array([[0.0, 0.0, SIZE, SIZE]] * n)
+
+
+def cameras(n):
+    from monet_ros.geometry import Camera
+    return [Camera(name=f'cam{i}', K=np.diag([100.0, 100.0, 1.0]), dist=np.zeros(5),
+                   R=np.eye(3), t=np.zeros(3), width=SIZE, height=SIZE) for i in range(n)]
+
+
+@needs_int8
+def test_int8_finds_the_keypoints_float32_finds(trained, calibration):
+    images, centres = blob_images(np.random.default_rng(7), 24)
+    heat = {}
+    for precision in ('float32', 'int8'):
+        detector = Detector(trained, {'keypoints': NAMES}, device='cpu', backend='onnxruntime',
+                            precision=precision, calibration=calibration)
+        assert detector.precision == precision
+        heat[precision] = detector.predict(images, cameras(len(images)),
+                                           full_boxes(len(images)))[0]
+    points = {p: decode_heatmaps(h)[0] * 4 + 1.5 for p, h in heat.items()}     # input px
+    assert np.median(np.linalg.norm(points['float32'] - centres, axis=-1)) < 1.5
+    shift = np.linalg.norm(points['int8'] - points['float32'], axis=-1)
+    # measured: median 0.022, largest 0.08 input px (float32's own error vs truth ~0.1);
+    # heatmap values within 0.04 of peaks ~0.9
+    assert shift.max() < 0.3, shift
+    assert np.abs(heat['int8'] - heat['float32']).max() < 0.1
+
+
+@needs_int8
+def test_no_calibration_and_no_cached_quant_is_refused_in_one_line(trained, tmp_path):
+    path = tmp_path / 'model.pt'
+    save_checkpoint(path, trained, {'keypoints': NAMES})
+    with pytest.raises(Int8Error) as caught:
+        Detector.from_checkpoint(path, device='cpu', backend='onnxruntime', precision='int8')
+    text = str(caught.value)
+    assert '\n' not in text and 'needs calibration data' in text and 'calibration' in text
+    assert str(int8_path_for(path, sha256_file(path))) in text
+    assert not list(tmp_path.glob('*.int8.onnx'))
+
+
+def test_int8_is_refused_without_onnxruntime_and_for_training(trained):
+    with pytest.raises(ValueError, match='precision int8 needs backend onnxruntime'):
+        Detector(trained, {'keypoints': NAMES}, device='cpu', precision='int8')
+    with pytest.raises(ConfigError, match='int8 is an inference precision'):
+        check_training_precision('int8', 'cpu')
+
+
+def test_cpu_rule_reads_the_vnni_and_amx_flags():
+    assert cpu_int8_feature({'avx2', 'fma', 'avx512f'}) is None
+    assert cpu_int8_feature({'avx2', 'avx_vnni'}) == 'AVX-VNNI'
+    assert cpu_int8_feature({'amx_int8', 'avx512_vnni'}) == 'AMX-INT8 and AVX512-VNNI'
+    if not HAS_INT8:
+        with pytest.raises(ValueError, match='needs a CPU with AVX512-VNNI, AVX-VNNI or AMX'):
+            resolve_precision('int8', 'onnxruntime', 'cpu')
+
+
+@needs_int8
+def test_cache_follows_the_checkpoint_sha256(trained, calibration, tmp_path):
+    path = tmp_path / 'model.pt'
+    save_checkpoint(path, trained, {'keypoints': NAMES})
+    # auto with onnxruntime: float32 until a quant is cached
+    assert resolve_precision('auto', 'onnxruntime', 'cpu', path)[0] == 'float32'
+    first = Detector.from_checkpoint(path, device='cpu', backend='onnxruntime',
+                                     precision='int8', calibration=calibration)
+    cached = int8_path_for(path, sha256_file(path))
+    assert cached.is_file() and cached.name.endswith('.int8.onnx')
+    assert list(tmp_path.glob('*.int8.onnx')) == [cached]
+    assert first.runner.path == cached
+    # cached: no calibration needed now, and auto takes it
+    again = Detector.from_checkpoint(path, device='cpu', backend='onnxruntime',
+                                     precision='int8')
+    assert again.runner.path == cached
+    choice, line = resolve_precision('auto', 'onnxruntime', 'cpu', path)
+    assert choice == 'int8' and cached.name in line
+    # new weights under the same name: a new sha256, the old quant is not used
+    save_checkpoint(path, train_blob_net(steps=1, seed=3), {'keypoints': NAMES})
+    assert resolve_precision('auto', 'onnxruntime', 'cpu', path)[0] == 'float32'
+    with pytest.raises(Int8Error, match='needs calibration data'):
+        Detector.from_checkpoint(path, device='cpu', backend='onnxruntime', precision='int8')
+    with pytest.raises(Int8Error, match='a quant of other weights'):
+        Detector.from_checkpoint(path, device='cpu', backend='onnxruntime', precision='int8',
+                                 calibration=str(cached))
+    renewed = Detector.from_checkpoint(path, device='cpu', backend='onnxruntime',
+                                       precision='int8', calibration=calibration)
+    new = int8_path_for(path, sha256_file(path))
+    assert new != cached and renewed.runner.path == new
+    assert sorted(tmp_path.glob('*.int8.onnx')) == sorted([cached, new])
