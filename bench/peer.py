@@ -259,26 +259,30 @@ def triangulate_peer(work, recording):
     from monet_ros.geometry.rig import save_rig
     from monet_ros.io.export_tables import read_anipose_csv
 
+    T, C = recording.num_instants, recording.num_keypoints
+    X = np.full((T, C, 3), np.nan)
+    points = np.full((T, recording.num_views, C, 2), np.nan)
+    lines = (work / 'points.csv').read_text().splitlines()[1:]
     save_rig(work / 'rig.yaml', recording.cameras)
     command = [sys.executable, '-m', 'monet_ros.cli', 'triangulate', str(work / 'points.csv'),
                '--rig', str(work / 'rig.yaml'), '--out', str(work / 'tri'),
                '--skeleton', 'human14', '--export', 'csv', '--quiet']
     env = dict(os.environ, PYTHONPATH=str(REPO))
+    shown = ' '.join(['monet', *command[3:]]).replace(str(work), 'WORK')
+    if not lines:                                 # the peer detected nothing: no 3D
+        return X, points, shown + ' (not run: no 2D)'
     subprocess.run(command, check=True, env=env)
-    T, C = recording.num_instants, recording.num_keypoints
     table = read_anipose_csv(work / 'tri' / 'keypoints3d.csv')
-    X = np.full((T, C, 3), np.nan)
     order = [table['keypoints'].index(k) for k in recording.keypoints]
     for row, fnum in enumerate(table['fnum']):
         if 0 <= int(fnum) < T:
             X[int(fnum)] = table['X'][row][order]
-    points = np.full((T, recording.num_views, C, 2), np.nan)
     cams = {c.name: v for v, c in enumerate(recording.cameras)}
     keys = {k: c for c, k in enumerate(recording.keypoints)}
-    for line in (work / 'points.csv').read_text().splitlines()[1:]:
+    for line in lines:
         frame, cam, key, u, v, _ = line.split(',')
         points[int(frame), cams[cam], keys[key]] = float(u), float(v)
-    return X, points, ' '.join(command[1:]).replace(str(work), 'WORK')
+    return X, points, shown
 
 
 def peer_row(args, real, recording, instants, say):
