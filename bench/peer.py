@@ -41,7 +41,7 @@ torchvision fails to import (operator torchvision::nms does not exist) and the C
 not reachable from here.
 
 Writes OUT.md (table, command, CPU model, load averages, settings) and OUT.json.
-    python bench/peer.py --budget-s 180            # one label set, 3 instants, seed 0
+    python bench/peer.py --budget-s 240     # one label set, 3 instants, seed 0: ~13 min
     python bench/real.py ... --peer bench/results/peer.json   # the peer's row in real.py
 """
 import argparse
