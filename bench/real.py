@@ -32,6 +32,9 @@ Rows without training: OpenPose (pretrained BODY_25B, Pose2Sim's pose-associated
 2D PCK is the floor of the reference; image-blind baselines: the pose of the nearest labelled
 instant, and the mean labelled pose (projected for 2D).
 
+--peer PEER_JSON: the sleap-nn rows of bench/peer.py runs (same data, labels and scoring; run
+it with the same --budget-s) join the table and the curves where labels and seed match.
+
 Writes OUT.md (tables + the command), OUT.json and OUT.png (curves: 3D median error and
 PCK@10 px against the number of labelled instants). --quick: 3 labelled instants, all modes,
 45 s per run (a smoke run of the whole path, a few minutes; not the figures).
@@ -339,6 +342,22 @@ def openpose_row(root):
     return r
 
 
+def peer_rows(paths, count, seed, instants):
+    """The peer rows (bench/peer.py's OUT.json) of this label set; an error if one of them
+    was trained on other instants."""
+    rows = []
+    for path in paths:
+        for r in json.loads(Path(path).read_text()):
+            if r['mode'] != 'peer sleap-nn' or (r['labels'], r['seed']) != (count, seed):
+                continue
+            if r['instants'] != instants.tolist():
+                raise SystemExit(f'{path}: its peer row for {count} labels, seed {seed} was '
+                                 f'trained on instants {r["instants"]}, not {instants.tolist()}')
+            rows.append(dict(r, mode=f'peer sleap-nn ({Path(path).name}, '
+                                     f'{r["train_s"]:.0f} s)'))
+    return rows
+
+
 def fmt(value, spec):
     return '–' if value is None else format(value, spec)
 
@@ -371,6 +390,7 @@ def plot(rows, path, counts):
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for mode in (*dict.fromkeys(r['mode'] for r in rows if r['mode'] in TRAIN_MODES),
+                 *dict.fromkeys(r['mode'] for r in rows if r['mode'].startswith('peer')),
                  'nearest labelled pose'):
         pts = sorted((r['labels'], r['median_mm'], r.get('pck10')) for r in rows
                      if r['mode'] == mode and r['median_mm'] is not None)
@@ -411,6 +431,9 @@ def main(argv=None):
     parser.add_argument('--jobs', type=int, default=1, help='runs in parallel (processes)')
     parser.add_argument('--set', nargs='*', default=[], metavar='KEY=VALUE',
                         help='TrainConfig overrides for every run (e.g. lr=3e-4)')
+    parser.add_argument('--peer', nargs='*', type=Path, default=[], metavar='PEER_JSON',
+                        help='OUT.json of bench/peer.py runs: their sleap-nn rows join the '
+                             'table where labels and seed match those of this run')
     parser.add_argument('--quick', action='store_true',
                         help='smoke run: 3 labelled instants, 45 s per run')
     args = parser.parse_args(argv)
@@ -462,6 +485,8 @@ def main(argv=None):
         for seed in args.seeds:
             rows += [r for r in trained if r['labels'] == n and r['seed'] == seed]
             rows += [dict(r, seed=seed) for r in baselines(n, seed)]
+            rows += peer_rows(args.peer, n, seed,
+                              choose_instants(recording.num_instants, n, seed))
     command = 'python bench/real.py ' + ' '.join(argv if argv is not None else sys.argv[1:])
     title = '# Label efficiency on real video (Pose2Sim 4-camera recording)'
     if args.quick:
