@@ -28,7 +28,19 @@ def blob_images(rng, n, size=SIZE, sigma=2.5, margin=8):
 
 
 def train_blob_net(steps=300, seed=0):
-    """The small net (width 16, SIZE x SIZE input) trained on blob_images; eval mode."""
+    """The small net (width 16, SIZE x SIZE input) trained on blob_images; eval mode. Trained
+    on one torch thread: torch's thread count is process-wide and commands run earlier in
+    the suite set it (`--threads`), and another count sums in another order, which over
+    300 Adam steps gives another net (a test's tolerances would depend on test order)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return _train(steps, seed)
+    finally:
+        torch.set_num_threads(threads)
+
+
+def _train(steps, seed):
     rng = np.random.default_rng(seed)
     torch.manual_seed(seed)
     model = build_model('small', len(NAMES), width=16, input_size=(SIZE, SIZE))
