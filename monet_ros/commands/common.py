@@ -24,13 +24,12 @@ def check_threads(owner, threads):
 
 
 def print_precision(owner, precision, backend='torch', device=None, checkpoint=None):
-    """Resolve --precision (auto: int8 with backend onnxruntime where `checkpoint` has a
-    cached int8 quant and the CPU has VNNI / AMX-INT8, bfloat16 with torch where native,
-    else float32) for `device` (None = CUDA when present, else CPU) and print the one line
-    saying which runs and why (stdout, `owner: precision auto: ...`: stderr keeps one line
-    for a bad input); returns the precision run. ConfigError names precision for a value
-    that cannot run (bfloat16 on a CPU that would emulate it, int8 without onnxruntime or
-    without VNNI / AMX-INT8)."""
+    """Resolve --precision (auto: bfloat16 with torch where native, else float32; int8 only
+    when asked for: models.detector.resolve_precision) for `device` (None = CUDA when
+    present, else CPU) and print the one line saying which runs and why (stdout, `owner:
+    precision auto: ...`: stderr keeps one line for a bad input); returns the precision
+    run. ConfigError names precision for a value that cannot run (bfloat16 on a CPU that
+    would emulate it, int8 without onnxruntime or without VNNI / AMX-INT8)."""
     import torch
 
     from monet_ros.models.detector import resolve_precision

@@ -77,9 +77,8 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default)')
     parser.add_argument('--precision', choices=PRECISIONS, default='auto',
-                        help='network arithmetic: auto (default: int8 with --backend '
-                        'onnxruntime where a cached quant exists and the CPU has VNNI / AMX, '
-                        'bfloat16 with torch where native, else float32; the choice is '
+                        help='network arithmetic: auto (default: bfloat16 with torch where '
+                        'native, else float32; never int8, measured slower; the choice is '
                         'printed), float32, bfloat16 (torch backend, 2-3x faster on CPUs with '
                         'AVX512-BF16 / AMX and on CUDA), or int8 (--backend onnxruntime, CPU '
                         'with VNNI / AMX-INT8: quantised once, calibrated on the recording, '

@@ -70,24 +70,20 @@ def check_precision(precision, backend, device):
 
 def resolve_precision(precision, backend='torch', device='cpu', checkpoint=None):
     """(precision run, one line saying why) for a precision of PRECISIONS (check_precision
-    first: ValueError naming precision). auto -> with backend onnxruntime on a CPU: int8
-    when `checkpoint` has a cached int8 quant (models.quantize.cached_int8: auto never
-    calibrates) and the CPU has VNNI or AMX-INT8, else float32; with backend torch: bfloat16
-    where it runs natively on `device` (bfloat16_feature names the CPU feature or GPU
-    found), else float32. float32 / bfloat16 / int8 are kept as given."""
+    first: ValueError naming precision). auto -> with backend torch: bfloat16 where it runs
+    natively on `device` (bfloat16_feature names the CPU feature or GPU found), else
+    float32; with another backend: float32. auto never picks int8: measured slower than
+    ONNX Runtime float32 and than torch bfloat16 on an AMX CPU (bench/detector_budget.py,
+    bench/results/pipeline.md: bare forward 1.9 against 1.2 and 0.46 ms per image); int8
+    runs when asked for. float32 / bfloat16 / int8 are kept as given. `checkpoint` is
+    accepted for callers that pass it and unused."""
     check_precision(precision, backend, device)
     if precision != 'auto':
         return precision, f'precision {precision}'
     device = torch.device(device)
     if backend == 'onnxruntime' and device.type == 'cpu':
-        from monet_ros.models.quantize import cached_int8, cpu_int8_feature
-        feature = cpu_int8_feature()
-        quant = cached_int8(checkpoint)
-        if feature is not None and quant is not None:
-            return 'int8', f'precision auto: int8 (cached quant {quant.name}; CPU has {feature})'
-        why = ('no cached int8 quant of the checkpoint' if quant is None else
-               'the CPU has no VNNI / AMX-INT8')
-        return 'float32', f'precision auto: float32 (backend {backend}; {why})'
+        return 'float32', ('precision auto: float32 (backend onnxruntime; int8 only when '
+                           'asked for: measured slower here, bench/results/pipeline.md)')
     if backend != 'torch':
         return 'float32', f'precision auto: float32 (backend {backend} runs float32)'
     feature = bfloat16_feature(device)
@@ -128,9 +124,8 @@ class Detector:
     'int8' (backend onnxruntime, CPU with VNNI / AMX-INT8: the network quantised by ONNX
     Runtime, models.quantize; `calibration` is a recording, a cached quant or crops (N, H,
     W, 3) uint8, needed unless the checkpoint has a cached quant), or
-    'auto' (int8 with onnxruntime where a cached quant exists and the CPU has VNNI / AMX,
-    else bfloat16 with torch where native, else float32: resolve_precision; `precision` is
-    then the one chosen and `precision_note` the line saying why).
+    'auto' (bfloat16 with torch where native, else float32; never int8: resolve_precision;
+    `precision` is then the one chosen and `precision_note` the line saying why).
     The torch backend keeps the network and its input channels-last (NHWC), the layout
     oneDNN's bfloat16 convolutions take (for float32 within noise of NCHW on CPU, results
     equal to ~1e-6).

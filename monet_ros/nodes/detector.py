@@ -137,9 +137,8 @@ class DetectorConfig:
     backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
                            'exported to ONNX once, cached beside the checkpoint)',
                            choices=('torch', 'onnxruntime'))
-    precision: str = setting('auto', 'network arithmetic: auto (int8 with backend onnxruntime '
-                             'where a cached quant exists and the CPU has VNNI / AMX-INT8, '
-                             'bfloat16 with torch where native, else float32; the start-up '
+    precision: str = setting('auto', 'network arithmetic: auto (bfloat16 with torch where '
+                             'native, else float32; never int8, measured slower; the start-up '
                              'line says which and why), float32, bfloat16 (torch backend, 2-3x '
                              'faster on CPUs with AVX512-BF16 / AMX and on CUDA; peaks ~0.05 '
                              "input px (median) from float32's), or int8 (backend onnxruntime, "

@@ -52,9 +52,10 @@ def test_int8_3d_is_float32s_and_reduced_decode_is_full_decodes(tmp_path, capsys
     out = capsys.readouterr().out
     assert 'monet process: precision int8' in out and '8 frames (32 views' in out
     assert len(list(tmp_path.glob('blobs.*.int8.onnx'))) == 1   # calibrated on the recording
-    # auto now finds the cached quant (onnxruntime, VNNI / AMX) and says so
+    # auto does not pick int8 even with the quant cached (measured slower than float32)
     assert monet(common + ['--out', str(tmp_path / 'auto')]) == 0
-    assert 'precision auto: int8 (cached quant blobs.' in capsys.readouterr().out
+    assert 'precision auto: float32 (backend onnxruntime; int8 only when asked' in \
+        capsys.readouterr().out
     full = tmp_path / 'full'
     process_recording(tmp_path / 'rec', model, full, config=ProcessConfig(track=False),
                       device='cpu', progress=False, backend='onnxruntime', threads=1,
