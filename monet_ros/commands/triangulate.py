@@ -53,7 +53,7 @@ def add_arguments(parser):
     parser.add_argument('--rig', required=True, help='calibration (rig YAML, Pose2Sim / '
                         'anipose TOML, ...)')
     add_rig_units_argument(parser)
-    parser.add_argument('--out', required=True, help='output folder (must not exist)')
+    parser.add_argument('--out', required=True, help='output folder (new, or an empty folder)')
     parser.add_argument('--format', choices=FORMATS, default='auto',
                         help='2D table format (default: detected from the files)')
     parser.add_argument('--pose-model', choices=tuple(POSE_MODELS), default=None,

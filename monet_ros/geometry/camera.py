@@ -371,9 +371,16 @@ def _apply_views(M, X):
 def project_views(cameras, X):
     """Project points into every camera of a rig at once (same model as Camera.project).
 
-    X: (..., N, 3) world points (leading dims are batch); returns (..., V, N, 2) pixels.
+    X: (..., N, 3) world points (leading dims are batch); returns (..., V, N, 2) pixels,
+    non-finite (no warning) for a point in a camera's focal plane (z = 0), which has no
+    image; callers count such points as not projected.
     `cameras` is a list of Camera or the dict of stack_cameras.
     """
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        return _project_views(cameras, X)
+
+
+def _project_views(cameras, X):
     p = cameras if isinstance(cameras, dict) else stack_cameras(cameras)
     X = np.asarray(X, dtype=np.float64)
     if not p['d12'].any():  # pinhole rig: x ~ P X
