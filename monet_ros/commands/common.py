@@ -23,6 +23,23 @@ def check_threads(owner, threads):
         torch.set_num_threads(threads)
 
 
+
+def add_precision_options(parser, calibration_default):
+    """--precision and --calibration of the commands that run the detector (monet process,
+    monet pipeline): one help text; `calibration_default` names what int8 calibrates on
+    when --calibration is not given."""
+    from monet_ros.models.detector import PRECISIONS
+    parser.add_argument('--precision', choices=PRECISIONS, default='auto',
+                        help='network arithmetic: auto (default: bfloat16 with torch where '
+                        'native, else float32; never int8, measured slower; the choice is '
+                        'printed), float32, bfloat16 (torch backend, 2-3x faster on CPUs with '
+                        'AVX512-BF16 / AMX and on CUDA), or int8 (--backend onnxruntime, CPU '
+                        'with VNNI / AMX-INT8: quantised once, calibrated on the recording, '
+                        'cached beside the checkpoint)')
+    parser.add_argument('--calibration', default=None,
+                        help='int8: the recording (or cached *.int8.onnx quant) to calibrate '
+                        f'on (default: {calibration_default})')
+
 def print_precision(owner, precision, backend='torch', device=None, checkpoint=None):
     """Resolve --precision (auto: bfloat16 with torch where native, else float32; int8 only
     when asked for: models.detector.resolve_precision) for `device` (None = CUDA when

@@ -46,12 +46,11 @@ HELP = ('live all-in-one: player + detector + fusion as ROS nodes (player and de
 
 
 def add_arguments(parser):
-    from monet_ros.models.detector import PRECISIONS
     parser.add_argument('--bag', help='recording (rosbag2 folder or .mcap); default: a small '
                         'synthetic recording generated (once) in --workdir')
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
                         '/tf_static, or the rig.yaml beside a synthetic recording)')
-    from monet_ros.commands.common import add_rig_units_argument
+    from monet_ros.commands.common import add_precision_options, add_rig_units_argument
     add_rig_units_argument(parser)
     parser.add_argument('--model', help='detector checkpoint (default with no --bag: a small '
                         'net trained once for the synthetic recording)')
@@ -81,16 +80,7 @@ def add_arguments(parser):
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network in each detector process (0 = the '
                         'backend default with one process, the cores shared out with several)')
-    parser.add_argument('--precision', choices=PRECISIONS, default='auto',
-                        help='network arithmetic: auto (default: bfloat16 with torch where '
-                        'native, else float32; never int8, measured slower; the choice is '
-                        'printed), float32, bfloat16 (torch backend, 2-3x faster on CPUs with '
-                        'AVX512-BF16 / AMX and on CUDA), or int8 (--backend onnxruntime, CPU '
-                        'with VNNI / AMX-INT8: quantised once, calibrated on the recording, '
-                        'cached beside the checkpoint)')
-    parser.add_argument('--calibration', default=None,
-                        help='int8: the recording (or cached *.int8.onnx quant) to calibrate '
-                        'on (default: --bag)')
+    add_precision_options(parser, '--bag')
     parser.add_argument('--workdir', help='where the demo recording and model are cached '
                         '(default: ~/.cache/monet_ros/demo)')
     parser.add_argument('--start-delay', type=float, default=0.5,

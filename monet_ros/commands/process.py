@@ -32,13 +32,12 @@ import numpy as np
 
 from monet_ros.config import ConfigError, config_subset, setting
 from monet_ros.fusion import PEAKS_PER_VIEW, FusionConfig
-from monet_ros.models.detector import PRECISIONS
 
 HELP = 'run detector + fusion over a recording offline, write keypoints3d to an MCAP'
 
 
 def add_arguments(parser):
-    from monet_ros.commands.common import add_rig_units_argument
+    from monet_ros.commands.common import add_precision_options, add_rig_units_argument
     parser.add_argument('bag', nargs='+', help='recording(s): rosbag2 folder or .mcap (with '
                         'several, --out is their parent: OUT/<recording name>/ each)')
     parser.add_argument('--jobs', type=int, default=1,
@@ -76,16 +75,7 @@ def add_arguments(parser):
                         'beside the checkpoint)')
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default)')
-    parser.add_argument('--precision', choices=PRECISIONS, default='auto',
-                        help='network arithmetic: auto (default: bfloat16 with torch where '
-                        'native, else float32; never int8, measured slower; the choice is '
-                        'printed), float32, bfloat16 (torch backend, 2-3x faster on CPUs with '
-                        'AVX512-BF16 / AMX and on CUDA), or int8 (--backend onnxruntime, CPU '
-                        'with VNNI / AMX-INT8: quantised once, calibrated on the recording, '
-                        'cached beside the checkpoint)')
-    parser.add_argument('--calibration', default=None,
-                        help='int8: the recording (or cached *.int8.onnx quant) to calibrate '
-                        'on (default: the recording processed)')
+    add_precision_options(parser, 'the recording processed')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--export', default='csv,trc,nwb,npz',
                         help='analysis files written into OUT: any of csv (anipose), trc, '
