@@ -32,6 +32,16 @@ Rows without training: OpenPose (pretrained BODY_25B, Pose2Sim's pose-associated
 2D PCK is the floor of the reference; image-blind baselines: the pose of the nearest labelled
 instant, and the mean labelled pose (projected for 2D).
 
+--modes takes `monet train` modes, each optionally with its own TrainConfig overrides after a
+colon: `reprojection:lambda_r=0` is the default mode's exact control (the same run and batch
+plan with the term's weight 0), labelled `reprojection (lambda_r=0)` in the tables.
+
+Every finished run is appended to OUT.runs.jsonl at once; a rerun with the same OUT skips the
+runs already there (same labels, seed, model, steps or budget, overrides), so a long curve
+can be stopped and resumed without losing a run. With several --seeds and --labels, OUT.md
+also gets the learning curve: per count and model the mean over label sets, and the paired
+differences against supervised and against each exact control (how many sets improved).
+
 --peer PEER_JSON: the sleap-nn rows of bench/peer.py runs (same data, labels and scoring; run
 it with the same --budget-s) join the table and the curves where labels and seed match.
 
@@ -42,7 +52,7 @@ PCK@10 px against the number of labelled instants). --quick: 3 labelled instants
     .venv/bin/python bench/real.py --budget-s 300 --jobs 2      # the figures, about 40 min
 """
 import argparse
-from concurrent.futures import ProcessPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, as_completed
 import json
 import multiprocessing
 import os
@@ -238,7 +248,9 @@ def run_job(job):
     from monet_ros.models import build_model, save_checkpoint
 
     torch.set_num_threads(1)
-    count, mode, budget_s, fixed_steps, overrides, seed = job
+    count, arm, budget_s, fixed_steps, overrides, seed = job
+    mode, arm_overrides = parse_arm(arm)
+    overrides = {**overrides, **arm_overrides}
     recording, reference, reference2d = _STATE['recording'], _STATE['reference'], \
         _STATE['reference2d']
     instants = choose_instants(recording.num_instants, count, seed)
@@ -290,17 +302,111 @@ def run_job(job):
     X_gt, points_gt = ground_truth_crop_path(trainer.model, trainer.metadata(), rec,
                                              reference2d)
     result['gt_crop'] = score(X_gt, points_gt, reference, reference2d, unlabelled)
-    result.update({'labels': count, 'seed': seed, 'mode': mode, 'steps': steps,
+    result.update({'labels': count, 'seed': seed, 'mode': arm_label(arm), 'steps': steps,
                    'train_s': round(train_s, 1),
                    'instants': instants.tolist(), 'fit_px': summary['fit']['median_px'],
                    'fit_heat': summary['fit']['median_heat'],
                    'pseudo_labels': summary['pseudo_labels'], 'warnings': said,
                    'bootstrap': summary['bootstrap'], 'distill': summary.get('distill')})
-    print(f'[{count} labels {mode}] {steps} steps in {train_s:.0f} s: monet process 3D '
-          f'median {fmt(result["median_mm"], ".0f")} mm, PCK@10 {result["pck10"]:.3f}; GT '
-          f'crops {fmt(result["gt_crop"]["median_mm"], ".0f")} mm, fit '
+    print(f'[{count} labels {arm_label(arm)}, seed {seed}] {steps} steps in {train_s:.0f} s: '
+          f'monet process 3D median {fmt(result["median_mm"], ".0f")} mm, PCK@10 '
+          f'{result["pck10"]:.3f}; GT crops {fmt(result["gt_crop"]["median_mm"], ".0f")} mm, fit '
           f'{result["fit_px"]:.1f} px, {len(said)} warnings', file=sys.stderr, flush=True)
     return result
+
+
+def parse_value(value):
+    """A --set / --modes override value: YAML, with 1e-3 read as a float."""
+    import yaml
+    value = yaml.safe_load(value)
+    if isinstance(value, str):                     # YAML 1.1 reads 1e-3 as a string
+        try:
+            value = float(value)
+        except ValueError:
+            pass
+    return value
+
+
+def parse_arm(arm):
+    """(mode, overrides) of a --modes entry 'MODE' or 'MODE:KEY=VALUE[,KEY=VALUE]'.
+    Raises ValueError naming the entry."""
+    mode, _, rest = arm.partition(':')
+    if mode not in TRAIN_MODES:
+        raise ValueError(f'--modes {arm!r}: {mode!r} is not a monet train mode '
+                         f'({", ".join(TRAIN_MODES)})')
+    overrides = {}
+    for pair in filter(None, rest.split(',')):
+        key, sep, value = pair.partition('=')
+        if not sep or key not in TrainConfig.__dataclass_fields__:
+            raise ValueError(f'--modes {arm!r}: {pair!r} is not KEY=VALUE with KEY a '
+                             'TrainConfig field')
+        overrides[key] = parse_value(value)
+    return mode, overrides
+
+
+def arm_label(arm):
+    """The table's name of a --modes entry: 'reprojection (lambda_r=0)'."""
+    mode, _, rest = arm.partition(':')
+    return f'{mode} ({rest.replace(",", ", ")})' if rest else mode
+
+
+def job_key(job):
+    """What identifies a finished run in the journal (OUT.runs.jsonl)."""
+    count, arm, budget_s, fixed_steps, overrides, seed = job
+    return json.dumps([count, arm_label(arm), seed, fixed_steps or f'{budget_s:g} s',
+                       sorted(overrides.items())])
+
+
+def read_journal(path):
+    """{job_key: row} of the runs already in OUT.runs.jsonl (none when it is missing)."""
+    done = {}
+    if path.exists():
+        for line in path.read_text().splitlines():
+            if line.strip():
+                entry = json.loads(line)
+                done[entry['key']] = entry['row']
+    return done
+
+
+def curve(rows, counts, seeds, arms):
+    """Markdown: the learning curve (mean over label sets per count and model) and paired
+    differences against supervised and against each exact control."""
+    labels = [arm_label(a) for a in arms]
+    by = {(r['labels'], r['seed'], r['mode']): r for r in rows}
+    stats = (('median_mm', '3D median', '.0f', 1), ('mean_mm', '3D mean', '.0f', 1),
+             ('p90_mm', '3D p90', '.0f', 1), ('pck10', 'PCK@10 px', '.1f', 100))
+    lines = ['| labelled instants | model | label sets | ' + ' | '.join(
+        f'{name} (mean over sets{", mm" if key != "pck10" else ", %"})'
+        for key, name, _, _ in stats) + ' |', '|---|---|---|' + '---|' * len(stats)]
+    for n in counts:
+        for label in labels:
+            got = [by[(n, s, label)] for s in seeds if (n, s, label) in by]
+            if not got:
+                continue
+            cells = []
+            for key, _, spec, scale in stats:
+                vals = [r[key] * scale for r in got if r.get(key) is not None]
+                cells.append(format(np.mean(vals), spec) if vals else '–')
+            lines.append(f'| {n} | {label} | {len(got)} | ' + ' | '.join(cells) + ' |')
+    pairs = [(a, 'supervised') for a in labels if a != 'supervised' and ' (' not in a]
+    pairs += [(a.split(' (')[0], a) for a in labels if ' (' in a]
+    if pairs:
+        lines += ['', '| labelled instants | paired difference | label sets | 3D mean (mm), '
+                  'per set | better on | 3D p90 (mm), per set | better on |',
+                  '|---|---|---|---|---|---|---|']
+    for n in counts:
+        for a, b in pairs:
+            both = [(by[(n, s, a)], by[(n, s, b)]) for s in seeds
+                    if (n, s, a) in by and (n, s, b) in by]
+            if not both:
+                continue
+            cells = []
+            for key in ('mean_mm', 'p90_mm'):
+                d = [x[key] - y[key] for x, y in both
+                     if x.get(key) is not None and y.get(key) is not None]
+                cells += [' / '.join(f'{v:+.0f}' for v in d), f'{sum(v < 0 for v in d)}/{len(d)}']
+            lines.append(f'| {n} | {a} - {b} | {len(both)} | ' + ' | '.join(cells) + ' |')
+    return '\n'.join(lines)
 
 
 def baselines(count, seed):
@@ -421,7 +527,9 @@ def main(argv=None):
                         'bench/results/real, or bench/results/real_quick with --quick)')
     parser.add_argument('--labels', nargs='+', type=int, default=[2, 3, 5, 10],
                         help='numbers of labelled instants')
-    parser.add_argument('--modes', nargs='+', default=list(MODES), choices=TRAIN_MODES)
+    parser.add_argument('--modes', nargs='+', default=list(MODES), metavar='MODE[:K=V,...]',
+                        help='monet train modes, each with optional TrainConfig overrides '
+                             "(reprojection:lambda_r=0 is the default's exact control)")
     parser.add_argument('--budget-s', type=float, default=300.0,
                         help='training wall time per run (s), the same for every mode')
     parser.add_argument('--steps', type=int, default=0,
@@ -437,8 +545,6 @@ def main(argv=None):
     parser.add_argument('--quick', action='store_true',
                         help='smoke run: 3 labelled instants, 45 s per run')
     args = parser.parse_args(argv)
-    import yaml
-
     from monet_ros.learning.recording import load_recording
 
     if args.quick:
@@ -450,13 +556,12 @@ def main(argv=None):
         key, sep, value = pair.partition('=')
         if not sep or key not in TrainConfig.__dataclass_fields__:
             parser.error(f'--set {pair!r}: expected KEY=VALUE with KEY a TrainConfig field')
-        value = yaml.safe_load(value)
-        if isinstance(value, str):                     # YAML 1.1 reads 1e-3 as a string
-            try:
-                value = float(value)
-            except ValueError:
-                pass
-        overrides[key] = value
+        overrides[key] = parse_value(value)
+    for arm in args.modes:
+        try:
+            parse_arm(arm)
+        except ValueError as e:
+            parser.error(str(e))
     root = args.data or default_data_root()
     if not (root / BAG).exists():
         print(f'real.py: {root / BAG} not found (use --data){"" if args.data else ": skipped"}',
@@ -474,12 +579,29 @@ def main(argv=None):
           f'{time.monotonic() - start:.0f} s', file=sys.stderr)
     jobs = [(n, m, args.budget_s, args.steps, overrides, seed)
             for seed in args.seeds for n in args.labels for m in args.modes]
-    if args.jobs > 1:
+    journal = stem.with_suffix('.runs.jsonl')
+    done = read_journal(journal)
+    todo = [j for j in jobs if job_key(j) not in done]
+    if len(todo) < len(jobs):
+        print(f'{len(jobs) - len(todo)} of {len(jobs)} runs already in {journal}: skipped',
+              file=sys.stderr)
+    stem.parent.mkdir(parents=True, exist_ok=True)
+
+    def record(job, row):           # at once, so a stopped curve keeps its runs
+        done[job_key(job)] = row
+        with journal.open('a') as f:
+            f.write(json.dumps({'key': job_key(job), 'row': row}) + '\n')
+
+    if args.jobs > 1 and todo:
         with ProcessPoolExecutor(args.jobs,
                                  mp_context=multiprocessing.get_context('fork')) as pool:
-            trained = list(pool.map(run_job, jobs))
+            futures = {pool.submit(run_job, j): j for j in todo}
+            for future in as_completed(futures):
+                record(futures[future], future.result())
     else:
-        trained = [run_job(j) for j in jobs]
+        for j in todo:
+            record(j, run_job(j))
+    trained = [done[job_key(j)] for j in jobs]
     rows = [openpose_row(root)]
     for n in args.labels:
         for seed in args.seeds:
@@ -499,6 +621,8 @@ def main(argv=None):
         f'run; seeds {args.seeds}; overrides {overrides or "none"}; scores on the unlabelled '
         'instants (OpenPose row: all instants). How the figures are made: bench/real.py.', '',
         table(rows), '',
+        *(['## Learning curve', '', curve(trained, args.labels, args.seeds, args.modes), '']
+          if len(args.labels) > 1 or len(args.seeds) > 1 else []),
         'Labelled instants per count: ' + '; '.join(
             f'{n} (seed {seed}): {choose_instants(recording.num_instants, n, seed).tolist()}'
             for n in args.labels for seed in args.seeds), ''])
@@ -506,7 +630,6 @@ def main(argv=None):
     if warnings:
         text += '\nWarnings of the runs:\n\n' + '\n'.join(
             f'- {n} labels, {m}: {w}' for n, m, w in warnings) + '\n'
-    stem.parent.mkdir(parents=True, exist_ok=True)
     stem.with_suffix('.md').write_text(text)
     stem.with_suffix('.json').write_text(json.dumps(rows, indent=1))
     plot(rows, stem.with_suffix('.png'), args.labels)

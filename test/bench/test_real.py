@@ -54,3 +54,40 @@ def test_the_benchs_real_data_path_equals_monet_process(tmp_path, repo_root):
     assert finite.any()                                   # something was triangulated
     np.testing.assert_array_equal(np.isfinite(X), finite)
     np.testing.assert_allclose(X[finite], expected[finite], atol=1e-6, rtol=0)
+
+
+def test_modes_take_exact_controls_and_the_curve_pairs_them(repo_root, tmp_path):
+    real = bench_real(repo_root)
+    assert real.parse_arm('reprojection:lambda_r=0,lr=1e-3') == (
+        'reprojection', {'lambda_r': 0, 'lr': 1e-3})
+    assert real.arm_label('reprojection:lambda_r=0') == 'reprojection (lambda_r=0)'
+    for bad in ('nonsense', 'reprojection:lambda_r', 'reprojection:no_field=1'):
+        with pytest.raises(ValueError, match='--modes'):
+            real.parse_arm(bad)
+    arms = ['supervised', 'reprojection', 'reprojection:lambda_r=0']
+    rows = []
+    rng = np.random.default_rng(0)
+    for seed in (0, 1, 2):
+        for arm in arms:
+            mean = float(rng.uniform(40, 90))
+            rows.append({'labels': 3, 'seed': seed, 'mode': real.arm_label(arm),
+                         'median_mm': mean - 5, 'mean_mm': mean, 'p90_mm': 2 * mean,
+                         'pck10': 0.5})
+    text = real.curve(rows, [3], [0, 1, 2], arms)
+    by = {(r['seed'], r['mode']): r['mean_mm'] for r in rows}
+    diffs = [by[(s, 'reprojection')] - by[(s, 'supervised')] for s in (0, 1, 2)]
+    expect = ' / '.join(f'{d:+.0f}' for d in diffs) + f' | {sum(d < 0 for d in diffs)}/3'
+    line = next(x for x in text.splitlines() if 'reprojection - supervised' in x)
+    assert expect in line
+    line = next(x for x in text.splitlines()
+                if 'reprojection - reprojection (lambda_r=0)' in x)
+    assert line.startswith('| 3 | ')
+    mean_sup = np.mean([by[(s, 'supervised')] for s in (0, 1, 2)])
+    assert '| 3 | supervised | 3 | ' in text and f'{mean_sup:.0f}' in text
+    # the journal: a run written is a run skipped on the rerun
+    job = (3, 'reprojection:lambda_r=0', 300.0, 2000, {'input_size': 128}, 1)
+    journal = tmp_path / 'curve.runs.jsonl'
+    journal.write_text(real.json.dumps({'key': real.job_key(job), 'row': rows[0]}) + '\n')
+    assert real.read_journal(journal) == {real.job_key(job): rows[0]}
+    assert real.job_key(job) != real.job_key((3, 'reprojection', 300.0, 2000,
+                                              {'input_size': 128}, 1))
