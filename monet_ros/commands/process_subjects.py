@@ -44,7 +44,8 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     subjects: SubjectsConfig; association: AssociationConfig; tracker: TrackerConfig.
     Fills `figures` (process_recording's dict) and adds figures['subjects']: the
     subjects.offline.SubjectRows, figures['subject_counts']: per-frame counts (frames
-    with k subjects, discoveries, crops, duplicates, instances, unmatched)."""
+    with k subjects, discoveries, crops, duplicates, instances, unmatched, and discovery's
+    3D points: found, explained by a track, loose)."""
     from collections import Counter
 
     from tqdm import tqdm
@@ -61,7 +62,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     rows = RowCollector()
     stamps = []
     counts = dict(per_frame=Counter(), discoveries=0, discovered=0, crops=0, duplicates=0,
-                  instances=0, unmatched=0, extra=0)
+                  instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0)
     with BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6),
                                        decode=False)
@@ -91,7 +92,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
             counts['per_frame'][int((r.ids >= 0).sum())] += 1
             counts['discoveries'] += r.discovered >= 0
             counts['discovered'] += max(r.discovered, 0)
-            for key in ('crops', 'duplicates', 'extra'):
+            for key in ('crops', 'duplicates', 'extra', 'points', 'explained', 'loose'):
                 counts[key] += getattr(r, key)
             counts['instances'] += a.instances
             counts['unmatched'] += a.unmatched
@@ -140,7 +141,9 @@ def print_subjects(figures, out):
           f'{len(s.subject)} subject-frames, {s.births} births, {s.deaths} deaths; frames '
           f'by subjects tracked: {per_frame or "none"}')
     print(f'{name}: detection: {n["crops"]} subject crops, {n["discoveries"]} full-frame '
-          f'discoveries finding {n["discovered"]} subjects')
+          f'discovery runs finding {n["discovered"]} subjects from {n["points"]} 3D keypoint '
+          f'candidates ({n["explained"]} near a live track, {n["loose"]} in no subject: '
+          'too few keypoints or beyond --subjects)')
     print(f'{name}: skipped: {s.unmatched} of {s.instances} crop instances matched in no '
           f'other camera, {n["duplicates"]} duplicate subjects (one body from two crops), '
           f'{s.extra} subjects beyond --subjects, {s.untracked} with too few keypoints for '

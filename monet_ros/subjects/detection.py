@@ -16,7 +16,10 @@ Algorithm, per synchronized frame (stamps increasing):
    d. the rest are grouped into subjects by constrained single linkage (Kruskal order):
       every pair of points of two different keypoints closer than link_mm, shortest
       first, merges their two groups unless the groups share a keypoint (a subject has
-      one point per keypoint; two whole subjects never merge through one close pair);
+      one point per keypoint: two subjects, each linked by its own shorter pairs,
+      never merge through a pair between them). Geometry alone cannot tell keypoints of
+      two subjects apart where they are closer than a subject's own adjacent keypoints
+      (bodies in contact): such a frame can start a mixed hypothesis;
    e. groups with >= the tracker's min_keypoints points are new hypotheses, the most
       keypoints (then the most views) first, until N hypotheses exist.
 2. Crops: per view, one crop per hypothesis, the single-subject crop rule's box
@@ -83,7 +86,9 @@ class FrameSubjects:
     subjects given to the tracker (at most N, duplicates left out); ids (K,) their
     identities (-1: too few keypoints for a track); and the counts: hypotheses (crops per
     view), discovered (new hypotheses from the full frame; -1: no discovery this frame),
-    crops (detector crops), duplicates, extra (subjects beyond N)."""
+    points (discovery's 3D keypoint points), explained (of those, near a live track's
+    joint), loose (in groups with too few keypoints, or beyond N: left out), crops
+    (detector crops), duplicates, extra (subjects beyond N)."""
     association: object
     keep: np.ndarray
     ids: np.ndarray
@@ -92,6 +97,9 @@ class FrameSubjects:
     crops: int
     duplicates: int
     extra: int
+    points: int = 0
+    explained: int = 0
+    loose: int = 0
 
 
 def group_points(points, keypoint, views, link):
@@ -168,8 +176,9 @@ class SubjectsStep:
                 'method')}, 'min_common': 1, 'strong_common': 1})
 
     def discover(self, images, cameras, predicted):
-        """New hypotheses (H, C, 3) from a full-frame detection (module docstring step 1),
-        none near the predicted joints (tracks, C, 3) of the live tracks."""
+        """(hypotheses (H, C, 3), counts dict: points, explained, loose) of a full-frame
+        detection (module docstring step 1), none near the predicted joints (tracks, C, 3)
+        of the live tracks."""
         from monet_ros.models import decode_heatmap_peaks
 
         rig = stack_cameras(cameras)
@@ -179,14 +188,18 @@ class SubjectsStep:
         peaks, conf, _ = decode_heatmap_peaks(list(heat), self.config.candidates, floor=thr)
         pts = heat_to_source_points(peaks, S)                       # (V, C, k, 2)
         points, keypoint, views = [], [], []
+        counts = dict(points=0, explained=0, loose=0)
         for c in range(self.C):
             a = associate(pts[:, c, :, None], cameras, conf[:, c, :, None],
                           self._point_association)
             X = a.X[:, 0]
             ok = np.isfinite(X).all(-1)
+            counts['points'] += int(ok.sum())
             if len(predicted):
                 near = np.linalg.norm(X[:, None] - predicted[None, :, c], axis=-1)
-                ok &= ~(near <= self._gate).any(-1)
+                explained = ok & (near <= self._gate).any(-1)
+                counts['explained'] += int(explained.sum())
+                ok &= ~explained
             points.append(X[ok])
             keypoint.append(np.full(int(ok.sum()), c))
             views.append((a.instance[ok] >= 0).sum(-1))
@@ -195,11 +208,12 @@ class SubjectsStep:
         found = []
         for group in group_points(points, keypoint, views, self._link):
             if len(group) < self.tracker.config.min_keypoints or len(found) == need:
-                break
+                counts['loose'] += len(group)
+                continue
             X = np.full((self.C, 3), np.nan)
             X[keypoint[group]] = points[group]
             found.append(X)
-        return np.array(found).reshape(-1, self.C, 3)
+        return np.array(found).reshape(-1, self.C, 3), counts
 
     def step(self, images, cameras, stamp_ns):
         """images: (H, W, 3) uint8 RGB of the present views; cameras: their Cameras (at
@@ -208,8 +222,9 @@ class SubjectsStep:
         predicted = tracker.predicted(stamp_ns)                       # (tracks, C, 3)
         discovered = -1
         hyp = predicted
+        counts = {}
         if len(predicted) < self.config.subjects:
-            new = self.discover(images, cameras, predicted)
+            new, counts = self.discover(images, cameras, predicted)
             discovered = len(new)
             hyp = np.concatenate([predicted, new])
         V, H = len(cameras), len(hyp)
@@ -248,4 +263,4 @@ class SubjectsStep:
         ids = tracker.step(a.X[keep], stamp_ns)
         return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
-                             extra=extra)
+                             extra=extra, **counts)

@@ -42,7 +42,7 @@ def test_two_subjects_are_found_and_keep_their_identity(scene, tmp_path, capsys)
     text = capsys.readouterr().out
     assert '2 identities (0, 1), 24 subject-frames, 2 births, 0 deaths' in text
     assert 'frames by subjects tracked: 2: 12' in text
-    assert '1 full-frame discoveries finding 2 subjects' in text
+    assert '1 full-frame discovery runs finding 2 subjects from 6 3D keypoint' in text
     table = read_anipose_csv(out / 'keypoints3d.csv')
     ids = np.unique(table['subject'])
     pred = np.full((T, 2, 3, 3), np.nan)
@@ -74,6 +74,26 @@ def test_two_subjects_are_found_and_keep_their_identity(scene, tmp_path, capsys)
         for slot, i in enumerate(ids):
             series = behavior[f'monet_pose_subject{i}'].pose_estimation_series['a']
             np.testing.assert_allclose(series.data[:], pred[:, slot, 0], rtol=1e-12)
+
+
+def test_synth_recording_without_subjects_found_still_writes_and_counts(tmp_path, capsys):
+    """A `monet synth --subjects 2` recording (its own rig from /tf_static + camera_info,
+    human14) through an untrained net: nothing is found, every frame is counted, the
+    analysis files are written (no rows)."""
+    from helpers.recordings import small_checkpoint
+    rec = tmp_path / 'rec'
+    assert monet(['synth', '--out', str(rec), '--cameras', '3', '--frames', '3', '--width',
+                  '160', '--height', '120', '--subjects', '2', '--quiet']) == 0
+    out = tmp_path / 'out'
+    assert monet(['process', str(rec / 'recording'), '--model',
+                  str(small_checkpoint(tmp_path / 'h14.pt')), '--out', str(out), '--subjects',
+                  '2', '--skeleton', 'human14', *COMMON]) == 0
+    text = capsys.readouterr().out
+    assert 'monet process: 3 frames (9 views, 0 missing)' in text
+    assert '0 identities (), 0 subject-frames' in text and 'frames by subjects tracked: 0: 3' \
+        in text and '3 full-frame discovery runs finding 0 subjects' in text
+    assert read_anipose_csv(out / 'keypoints3d.csv')['X'].shape[0] == 0
+    assert (out / 'keypoints.nwb').is_file()
 
 
 def test_one_subject_is_the_one_subject_path(scene, tmp_path, capsys):
