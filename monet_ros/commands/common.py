@@ -107,3 +107,35 @@ def add_rig_units_argument(parser):
     parser.add_argument('--rig-units', choices=UNITS, default=None,
                         help="length unit of a calibration that states none (default: the "
                         "file's `units`, else camera centres >= 50 apart -> mm, else m)")
+
+
+def add_subject_tracking_arguments(parser):
+    """--association-px, --gate-mm, --max-missed-s: the association and tracker settings of
+    `monet triangulate --subjects` and `monet process --subjects` (subjects.association,
+    subjects.tracking)."""
+    parser.add_argument('--association-px', type=float, default=15.0,
+                        help='--subjects: largest median epipolar distance (px) between two '
+                        'instances of one subject')
+    parser.add_argument('--gate-mm', type=float, default=400.0,
+                        help="--subjects: largest mean keypoint distance (mm) of a subject to "
+                        "a track's prediction")
+    parser.add_argument('--max-missed-s', type=float, default=0.5,
+                        help='--subjects: a track unseen for longer (s) ends')
+
+
+def add_subjects_detection_arguments(parser):
+    """--subjects N and the subjects.detection.SubjectsConfig options of `monet process`
+    (help: the config's field descriptions), with add_subject_tracking_arguments."""
+    from dataclasses import fields
+
+    from monet_ros.subjects.detection import SubjectsConfig
+    d = {f.name: f for f in fields(SubjectsConfig)}
+    parser.add_argument('--subjects', type=int, default=1, metavar='N',
+                        help='several subjects (N >= 2): per-subject crops tracked over time, '
+                        'found by full-frame candidates; per-subject outputs as `monet '
+                        'triangulate --subjects` (1 = one subject, the tracked crop)')
+    for name, kind in (('candidates', int), ('link_mm', float), ('crop_peaks', int),
+                       ('duplicate_mm', float)):
+        parser.add_argument('--' + name.replace('_', '-'), type=kind, default=d[name].default,
+                            help='--subjects: ' + d[name].metadata['description'])
+    add_subject_tracking_arguments(parser)

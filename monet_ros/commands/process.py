@@ -4,6 +4,8 @@ possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 
     monet process REC... --model CKPT --out OUT [--jobs N] [--rig RIG] [--rig-units m|cm|mm]
         [--heatmaps] [--threads N] [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx]
         [--filter none|kalman|optim]
+        [--subjects N [--candidates 3] [--link-mm 600] [--crop-peaks 3] [--duplicate-mm 100]
+         [--association-px 15] [--gate-mm 400] [--max-missed-s 0.5]]
 
 Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
 (monet_ros.io.export_results): keypoints3d.csv (anipose's 3D CSV layout),
@@ -16,6 +18,12 @@ in metres (REP 103) whatever the rig's unit.
 --filter kalman|optim smooths the 3D over the whole recording (monet_ros.temporal): the
 analysis files then hold the filtered points and the MCAP also /monet/keypoints3d_filtered
 (/monet/keypoints3d stays the frame-by-frame result).
+
+--subjects N (N >= 2): several subjects (commands/process_subjects.py; the algorithm in
+monet_ros.subjects.detection): per-subject crops from each track's prediction, full-frame
+top-k candidates to find subjects, identities over time; the outputs of `monet
+triangulate --subjects N` (keypoints3d.csv with a `subject` column, one TRC and one NWB
+series per subject). --subjects 1 (the default) is the one-subject path below.
 
 The same functions as the live nodes: Detector.predict (one batched forward per instant),
 crop_rule.TrackedCrops (the detector node's crop rule: around the previous instant's 3D
@@ -77,13 +85,16 @@ def add_arguments(parser):
                         help='CPU threads of the network (0 = the backend default)')
     add_precision_options(parser, 'the recording processed')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
-    parser.add_argument('--export', default='csv,trc,nwb,npz',
+    parser.add_argument('--export', default=None,
                         help='analysis files written into OUT: any of csv (anipose), trc, '
-                        'nwb (ndx-pose), npz (2D detections + crop cameras); "none" for none')
+                        'nwb (ndx-pose), npz (2D detections + crop cameras); "none" for none '
+                        '(default csv,trc,nwb,npz; with --subjects N >= 2 csv,trc,nwb)')
     parser.add_argument('--trc-axes', choices=('xyz', 'yzx'), default='xyz',
                         help='TRC axes: world as is, or yzx = Y-up as Pose2Sim/OpenSim')
     from monet_ros.commands.filter_options import add_filter_arguments
     add_filter_arguments(parser)
+    from monet_ros.commands.common import add_subjects_detection_arguments
+    add_subjects_detection_arguments(parser)
 
 
 @dataclass(frozen=True)
@@ -170,7 +181,8 @@ def crop_view(image, camera, box, out_size, reader):
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
                       skeleton=None, progress=True, backend='torch', threads=0, exports=(),
                       trc_axes='xyz', camera_map=(), precision='auto', filter_config=None,
-                      rig_units=None, reduced_decode=True, calibration=None):
+                      rig_units=None, reduced_decode=True, calibration=None, subjects=None,
+                      association=None, tracker=None):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
@@ -191,6 +203,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     decodes, for comparison). calibration: precision int8's calibration data (a recording
     or a cached quant; None = `bag` itself), read only when the checkpoint has no cached
     quant (models.quantize).
+    subjects: a subjects.detection.SubjectsConfig; with subjects >= 2 several subjects
+    (commands.process_subjects: figures then has 'subjects' (subjects.offline.SubjectRows)
+    and 'subject_counts'; association: subjects.AssociationConfig (None: from config's
+    fusion settings), tracker: subjects.tracking.TrackerConfig).
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
@@ -208,6 +224,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
 
     config = config or ProcessConfig()
     fusion_config = config_subset(config, FusionConfig)
+    several = subjects is not None and subjects.subjects > 1
+    if several:
+        from monet_ros.commands.process_subjects import check_subject_options
+        check_subject_options(config, subjects, filter_config, exports)
     check_new_output(out, 'monet process')
     rig_cameras, frame_id = load_node_rig(rig or bag, rig_units)
     if rig is not None and Path(rig).is_file():    # a calibration file: fit it to the images
@@ -235,6 +255,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     by_name = {cam.name: cam for cam in cameras}
     figures = dict(frames=0, views=0, missing_views=0, skipped_views=Counter(),
                    skip_reasons={}, seconds=0.0)
+    if several:
+        return _several(reader, topics, cameras, detector, units, frame_id, out, config,
+                        subjects, association, tracker, exports, edges, trc_axes, progress,
+                        figures)
     errors, num_views = RunningMean(), RunningMean()
     collector = ResultsCollector(cameras, detector.keypoints)
     tracker = TrackedCrops(units=units)   # the detector node's defaults (track_* parameters)
@@ -318,6 +342,49 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     return figures
 
 
+def _several(reader, topics, cameras, detector, units, frame_id, out, config, subjects,
+             association, tracker, exports, edges, trc_axes, progress, figures):
+    """process_recording with --subjects N >= 2 (commands.process_subjects)."""
+    from monet_ros.commands.common import atomic_output_dir
+    from monet_ros.commands.process_subjects import process_subjects
+    from monet_ros.subjects import AssociationConfig
+
+    if association is None:
+        association = AssociationConfig(confidence_threshold=config.confidence_threshold,
+                                         min_views=config.min_views,
+                                         triangulation_px=config.threshold_px,
+                                         method=config.method)
+    figures['start'] = time.perf_counter()
+    with atomic_output_dir(out) as staging:
+        written = process_subjects(reader, topics, cameras, detector, units, frame_id,
+                                   staging, config, subjects, association, tracker, exports,
+                                   edges, trc_axes, progress, figures)
+    figures['exports'] = {fmt: Path(out) / Path(path).relative_to(staging)
+                          for fmt, path in written.items()}
+    figures['units'] = cameras[0].units
+    figures['filter'] = None
+    figures['report'] = reader.report
+    return figures
+
+
+def subject_configs(args):
+    """(SubjectsConfig, AssociationConfig or None, TrackerConfig) of the --subjects
+    options (ConfigError naming the option)."""
+    from monet_ros.subjects import AssociationConfig
+    from monet_ros.subjects.detection import SubjectsConfig
+    from monet_ros.subjects.tracking import TrackerConfig
+
+    subjects = SubjectsConfig(subjects=args.subjects, candidates=args.candidates,
+                              link_mm=args.link_mm, crop_peaks=args.crop_peaks,
+                              duplicate_mm=args.duplicate_mm)
+    association = AssociationConfig(threshold_px=args.association_px,
+                                    confidence_threshold=args.confidence_threshold,
+                                    min_views=args.min_views,
+                                    triangulation_px=args.threshold_px, method=args.method)
+    tracker = TrackerConfig(gate_mm=args.gate_mm, max_missed_s=args.max_missed_s)
+    return subjects, association, tracker
+
+
 def run(args):
     from monet_ros.commands.common import check_threads, print_precision
     from monet_ros.commands.filter_options import filter_config_from_args
@@ -336,10 +403,15 @@ def run(args):
     print_precision('monet process', args.precision, args.backend, device, args.model)
     options = dict(model=args.model, rig=args.rig, cameras=args.cameras or (), config=config,
                    skeleton=args.skeleton, backend=args.backend,
-                   exports=parse_formats(args.export), trc_axes=args.trc_axes,
+                   exports=parse_formats(args.export if args.export is not None else
+                                         'csv,trc,nwb' if args.subjects > 1 else
+                                         'csv,trc,nwb,npz'), trc_axes=args.trc_axes,
                    camera_map=parse_name_map(args.camera_map), precision=args.precision,
                    filter_config=filter_config, rig_units=args.rig_units,
                    calibration=args.calibration)
+    if args.subjects != 1:
+        subjects, association, tracker = subject_configs(args)
+        options.update(subjects=subjects, association=association, tracker=tracker)
     if len(args.bag) > 1 and args.precision == 'int8':   # quantised once, before the workers
         from monet_ros.models import Detector
         Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
@@ -350,6 +422,12 @@ def run(args):
     args.bag = args.bag[0]
     figures = process_recording(args.bag, out=args.out, device=device,
                                 progress=not args.quiet, threads=args.threads, **options)
+    if 'subjects' in figures:
+        from monet_ros.commands.process_subjects import print_subjects
+        print_subjects(figures, args.out)
+        for fmt, path in figures['exports'].items():
+            print(f'monet process: wrote {fmt}: {path}')
+        return 0
     fps = figures['frames'] / figures['seconds'] if figures['seconds'] else 0.0
     skipped = figures['skipped_views']
     print(f'monet process: {figures["frames"]} frames ({figures["views"]} views, '

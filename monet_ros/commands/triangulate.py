@@ -43,7 +43,7 @@ HELP = '3D keypoints from 2D detections of other tools (DeepLabCut, SLEAP, anipo
 
 
 def add_arguments(parser):
-    from monet_ros.commands.common import add_rig_units_argument
+    from monet_ros.commands.common import add_rig_units_argument, add_subject_tracking_arguments
     from monet_ros.commands.filter_options import add_filter_arguments
     from monet_ros.geometry.pose2sim import POSE_MODELS
     from monet_ros.labels_import.points2d import FORMATS
@@ -81,15 +81,7 @@ def add_arguments(parser):
     parser.add_argument('--subjects', type=int, default=None, metavar='N',
                         help='several subjects: per-camera instances associated across '
                         'cameras and tracked over time; at most N per frame')
-    parser.add_argument('--association-px', type=float, default=15.0,
-                        help='--subjects: largest median epipolar distance (px) between two '
-                        'instances of one subject')
-    parser.add_argument('--gate-mm', type=float, default=400.0,
-                        help="--subjects: largest mean keypoint distance (mm) of a subject to "
-                        "a track's prediction")
-    parser.add_argument('--max-missed-s', type=float, default=0.5,
-                        help='--subjects: a track unseen for longer (s) ends')
-
+    add_subject_tracking_arguments(parser)
 
 
 def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, camera_map=None,

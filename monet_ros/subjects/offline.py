@@ -67,6 +67,40 @@ class SubjectRows:
     seconds: float
 
 
+class RowCollector:
+    """SubjectRows accumulated frame by frame (one implementation of the rows of
+    `monet triangulate --subjects` and `monet process --subjects`).
+
+    add(t, association, ids, keep): the subjects `keep` (index array or slice into
+    association's subjects) of frame t with their tracker identities ids (-1: no track,
+    counted in `untracked`, left out)."""
+
+    def __init__(self):
+        self.rows = dict(frame=[], subject=[], X=[], error=[], ncams=[], score=[])
+        self.untracked = 0
+
+    def add(self, t, a, ids, keep=slice(None)):
+        ok = np.asarray(ids) >= 0
+        self.untracked += int((~ok).sum())
+        n = int(ok.sum())
+        ncams = a.inliers.sum(1)
+        with np.errstate(invalid='ignore', divide='ignore'):
+            error = np.where(a.inliers, a.view_errors, 0.0).sum(1) / ncams
+        self.rows['frame'].append(np.full(n, t))
+        self.rows['subject'].append(np.asarray(ids)[ok])
+        self.rows['X'].append(a.X[keep][ok])
+        self.rows['error'].append(error[keep][ok])
+        self.rows['ncams'].append(ncams[keep][ok])
+        self.rows['score'].append(a.score[keep][ok])
+
+    def result(self, tracker, **counts):
+        """SubjectRows of the frames added; births / deaths from the SubjectTracker, the
+        other counts (instances, unmatched, extra, seconds) given."""
+        cat = {k: np.concatenate(v) if v else np.zeros(0) for k, v in self.rows.items()}
+        return SubjectRows(**cat, births=tracker.births, deaths=tracker.deaths,
+                           untracked=self.untracked, **counts)
+
+
 def track_subjects(points, score, cameras, stamps_ns, num_subjects, association=None,
                    tracker=None):
     """SubjectRows of per-camera instances over time.
@@ -81,8 +115,8 @@ def track_subjects(points, score, cameras, stamps_ns, num_subjects, association=
     from monet_ros.geometry.units import rig_units
     T, V, N, C, _ = points.shape
     trk = SubjectTracker(C, tracker, units=rig_units(cameras))
-    rows = dict(frame=[], subject=[], X=[], error=[], ncams=[], score=[])
-    instances = unmatched = extra = untracked = 0
+    rows = RowCollector()
+    instances = unmatched = extra = 0
     start = time.perf_counter()
     for t in range(T):
         a = associate(points[t], cameras, score[t], association)
@@ -91,19 +125,6 @@ def track_subjects(points, score, cameras, stamps_ns, num_subjects, association=
         keep = slice(0, num_subjects)
         extra += max(0, len(a.X) - num_subjects)
         ids = trk.step(a.X[keep], stamps_ns[t])
-        ok = ids >= 0
-        untracked += int((~ok).sum())
-        n = int(ok.sum())
-        rows['frame'].append(np.full(n, t))
-        rows['subject'].append(ids[ok])
-        rows['X'].append(a.X[keep][ok])
-        ncams = a.inliers.sum(1)
-        with np.errstate(invalid='ignore', divide='ignore'):
-            error = np.where(a.inliers, a.view_errors, 0.0).sum(1) / ncams
-        rows['error'].append(error[keep][ok])
-        rows['ncams'].append(ncams[keep][ok])
-        rows['score'].append(a.score[keep][ok])
-    seconds = time.perf_counter() - start
-    cat = {k: np.concatenate(v) if v else np.zeros(0) for k, v in rows.items()}
-    return SubjectRows(**cat, births=trk.births, deaths=trk.deaths, instances=instances,
-                       unmatched=unmatched, extra=extra, untracked=untracked, seconds=seconds)
+        rows.add(t, a, ids, keep)
+    return rows.result(trk, instances=instances, unmatched=unmatched, extra=extra,
+                       seconds=time.perf_counter() - start)

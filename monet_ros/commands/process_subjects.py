@@ -1,0 +1,150 @@
+"""`monet process --subjects N` (N >= 2): several subjects through the detector.
+
+Each frame goes through monet_ros.subjects.detection.SubjectsStep (its module docstring
+states the algorithm: per-subject crops from the tracks' predictions, full-frame top-k
+candidates associated across views to find subjects, subjects.association across views,
+subjects.tracking over time). The outputs are those of `monet triangulate --subjects N`
+(io.export_results.write_subject_results): keypoints3d.csv with a `subject` column, one
+TRC per subject (keypoints3d_subject<id>.trc), NWB with one 3D series per subject; the
+MCAP holds /monet/subject<id>/keypoints3d (PointCloud2 in the /monet/keypoints3d layout,
+metres) per frame and subject. Views are decoded in full (no reduced JPEG decode).
+Not with --no-track, --heatmaps, --filter or --export npz (ConfigError).
+"""
+import sys
+import time
+
+import numpy as np
+
+from monet_ros.config import ConfigError
+
+
+def check_subject_options(config, subjects, filter_config, exports):
+    """ConfigError (naming the option) for an option `monet process --subjects N` (N >= 2)
+    does not take."""
+    where = 'monet process'
+    if not config.track:
+        raise ConfigError(where, 'subjects', '--no-track: several subjects are found by '
+                          'their tracks (leave --no-track out)')
+    if config.heatmaps:
+        raise ConfigError(where, 'heatmaps', '--heatmaps is not written with --subjects')
+    if filter_config is not None and filter_config.method != 'none':
+        raise ConfigError(where, 'filter', f'--filter {filter_config.method} is not '
+                          'available with --subjects (per-subject filters are not written '
+                          'yet)')
+    if 'npz' in exports:
+        raise ConfigError(where, 'export', 'npz is not written with --subjects; use csv, '
+                          'trc, nwb')
+
+
+def process_subjects(reader, topics, cameras, detector, units, frame_id, staging, config,
+                     subjects, association, tracker, exports, edges, trc_axes, progress,
+                     figures):
+    """The frame loop of process.process_recording for several subjects: writes the MCAP
+    (inside `staging`, already an open rosbag2 folder's staging path) and the exports.
+    subjects: SubjectsConfig; association: AssociationConfig; tracker: TrackerConfig.
+    Fills `figures` (process_recording's dict) and adds figures['subjects']: the
+    subjects.offline.SubjectRows, figures['subject_counts']: per-frame counts (frames
+    with k subjects, discoveries, crops, duplicates, instances, unmatched, and discovery's
+    3D points: found, explained by a track, loose)."""
+    from collections import Counter
+
+    from tqdm import tqdm
+
+    from monet_ros.commands.process import read_view
+    from monet_ros.io import BagWriter, iter_multiview_frames
+    from monet_ros.io.export_results import write_subject_results
+    from monet_ros.io.export_tables import frame_numbers
+    from monet_ros.subjects.detection import SubjectsStep
+    from monet_ros.subjects.offline import RowCollector
+
+    by_name = {cam.name: cam for cam in cameras}
+    step = SubjectsStep(detector, units, subjects, association, tracker)
+    rows = RowCollector()
+    stamps = []
+    counts = dict(per_frame=Counter(), discoveries=0, discovered=0, crops=0, duplicates=0,
+                  instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0)
+    with BagWriter(staging) as writer:
+        frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6),
+                                       decode=False)
+        for frame in tqdm(frames, desc='monet process', unit='frame', disable=not progress,
+                          file=sys.stderr):
+            present, images = [], []
+            for name in topics:
+                if name not in frame.images:
+                    continue
+                image, problem = read_view(frame.images[name], by_name[name], reader,
+                                           reduced_decode=False)
+                if problem is not None:
+                    figures['skipped_views'][name] += 1
+                    figures['skip_reasons'].setdefault(name, f'{problem} at stamp '
+                                                       f'{frame.stamp_ns}')
+                if image is None:
+                    continue
+                present.append(by_name[name])
+                images.append(image)
+            figures['missing_views'] += len(topics) - len(present)
+            if len(present) < config.min_views:
+                continue
+            r = step.step(images, present, frame.stamp_ns)
+            a = r.association
+            rows.add(len(stamps), a, r.ids, r.keep)
+            stamps.append(frame.stamp_ns)
+            counts['per_frame'][int((r.ids >= 0).sum())] += 1
+            counts['discoveries'] += r.discovered >= 0
+            counts['discovered'] += max(r.discovered, 0)
+            for key in ('crops', 'duplicates', 'extra', 'points', 'explained', 'loose'):
+                counts[key] += getattr(r, key)
+            counts['instances'] += a.instances
+            counts['unmatched'] += a.unmatched
+            for s, ident in zip(r.keep, r.ids):
+                if ident < 0:
+                    continue
+                ncams = a.inliers[s].sum(0)
+                with np.errstate(invalid='ignore', divide='ignore'):
+                    error = np.where(a.inliers[s], a.view_errors[s], 0.0).sum(0) / ncams
+                writer.write_keypoints3d(f'/monet/subject{int(ident)}/keypoints3d',
+                                         frame.stamp_ns, frame_id, a.X[s],
+                                         np.nan_to_num(a.score[s]), error, ncams,
+                                         units=units)
+            figures['frames'] += 1
+            figures['views'] += len(present)
+    figures['seconds'] = time.perf_counter() - figures['start']
+    result = rows.result(step.tracker, instances=counts['instances'],
+                         unmatched=counts['unmatched'], extra=counts['extra'],
+                         seconds=figures['seconds'])
+    stamps = np.array(stamps, np.int64)
+    triangulated = np.isfinite(result.X).all(-1)
+    error = result.error[triangulated & np.isfinite(result.error)]
+    figures['mean_error'] = float(error.mean()) if error.size else float('nan')
+    figures['mean_views'] = (float(result.ncams[triangulated].mean()) if triangulated.any()
+                             else float('nan'))
+    written = {}
+    if len(stamps):
+        written = write_subject_results(staging, exports, cameras, detector.keypoints,
+                                        result, stamps, frame_numbers(stamps), edges=edges,
+                                        trc_axes=trc_axes)
+    figures['subjects'] = result
+    figures['subject_counts'] = counts
+    return written
+
+
+def print_subjects(figures, out):
+    """The summary lines of `monet process --subjects N` (stdout)."""
+    s, n = figures['subjects'], figures['subject_counts']
+    ids = np.unique(s.subject)
+    per_frame = ', '.join(f'{k}: {v}' for k, v in sorted(n['per_frame'].items()))
+    name = 'monet process'
+    print(f'{name}: {figures["frames"]} frames ({figures["views"]} views, '
+          f'{figures["missing_views"]} missing) in {figures["seconds"]:.1f} s -> {out} (3D in '
+          f'{figures["units"]}, the rig\'s unit)')
+    print(f'{name}: subjects: {len(ids)} identities ({", ".join(map(str, ids))}), '
+          f'{len(s.subject)} subject-frames, {s.births} births, {s.deaths} deaths; frames '
+          f'by subjects tracked: {per_frame or "none"}')
+    print(f'{name}: detection: {n["crops"]} subject crops, {n["discoveries"]} full-frame '
+          f'discovery runs finding {n["discovered"]} subjects from {n["points"]} 3D keypoint '
+          f'candidates ({n["explained"]} near a live track, {n["loose"]} in no subject: '
+          'too few keypoints or beyond --subjects)')
+    print(f'{name}: skipped: {s.unmatched} of {s.instances} crop instances matched in no '
+          f'other camera, {n["duplicates"]} duplicate subjects (one body from two crops), '
+          f'{s.extra} subjects beyond --subjects, {s.untracked} with too few keypoints for '
+          'a track')

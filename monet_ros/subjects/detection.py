@@ -1,0 +1,266 @@
+"""Several subjects through the detector, one frame at a time (no ROS): the core of
+`monet process --subjects N`.
+
+Algorithm, per synchronized frame (stamps increasing):
+
+1. Hypotheses: the SubjectTracker's predicted joints of every live track (its Kalman
+   prediction to the frame's stamp). Discovery, when fewer than N tracks live (at the
+   start, and after a track has died):
+   a. one full-frame detection per view; the `candidates` highest local maxima of every
+      keypoint's map (models.decode_heatmap_peaks, at least the confidence threshold);
+   b. per keypoint, each (view, peak) is a one-keypoint instance; subjects.association.
+      associate clusters them across views (epipolar distance, at most one per camera,
+      >= min_views) and triangulates each cluster robustly: 3D points of that keypoint;
+   c. a point within the tracker's gate (gate_mm) of a live track's predicted joint of
+      the same keypoint belongs to that track and is dropped;
+   d. the rest are grouped into subjects by constrained single linkage (Kruskal order):
+      every pair of points of two different keypoints closer than link_mm, shortest
+      first, merges their two groups unless the groups share a keypoint (a subject has
+      one point per keypoint: two subjects, each linked by its own shorter pairs,
+      never merge through a pair between them). Geometry alone cannot tell keypoints of
+      two subjects apart where they are closer than a subject's own adjacent keypoints
+      (bodies in contact): such a frame can start a mixed hypothesis;
+   e. groups with >= the tracker's min_keypoints points are new hypotheses, the most
+      keypoints (then the most views) first, until N hypotheses exist.
+2. Crops: per view, one crop per hypothesis, the single-subject crop rule's box
+   (crop_rule.subject_boxes with the TrackedRule's margin, min_points and trim) around its
+   joints projected into that view; a view where too few joints project has no crop for
+   it. All crops of the frame go through the detector in one batch.
+3. One instance per crop: per keypoint, among the `crop_peaks` highest local maxima of the
+   crop's map (>= the confidence threshold), the one nearest the hypothesis' joint
+   projected into the view (the highest where the joint is unknown); source pixels and
+   the peak value as its score. So a crop showing two subjects decodes the one it was cut
+   for.
+4. The instances of all views (slot h = hypothesis h's crop) go through associate (the
+   instance order is not trusted) and are triangulated per subject; a subject whose mean
+   joint distance to a subject seen by more cameras (association's order) is below
+   duplicate_mm is the same body decoded by two hypotheses' crops: dropped, counted.
+5. The first N subjects (most cameras first; the others counted as `extra`) go to the
+   SubjectTracker: Hungarian assignment to the tracks' predictions (gated), births,
+   deaths (subjects.tracking). Its identities are the output's.
+
+Units: the rig's (the cameras'); link_mm, duplicate_mm and the tracker's settings are
+physical (mm) and converted. Full-frame decodes cost one extra forward of V images, only
+in frames that discover.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from monet_ros.config import setting, validate_config
+from monet_ros.crop_rule import TrackedRule, subject_boxes
+from monet_ros.fusion import MAX_PEAKS_PER_VIEW, crop_scales, heat_to_source_points
+from monet_ros.geometry import project_views, stack_cameras
+from monet_ros.geometry.units import from_mm
+from monet_ros.subjects.association import AssociationConfig, associate
+from monet_ros.subjects.tracking import SubjectTracker
+
+
+@dataclass(frozen=True)
+class SubjectsConfig:
+    """Settings of the detector's several-subject step (validated; errors name the
+    field). The association and the tracker have their own configs."""
+    subjects: int = setting(1, 'most subjects tracked and written per frame', minimum=1)
+    candidates: int = setting(
+        3, 'discovery: heatmap peaks per view and keypoint of the full-frame detection',
+        minimum=1, maximum=2 * MAX_PEAKS_PER_VIEW)
+    link_mm: float = setting(
+        600.0, 'discovery: largest distance (mm) between two keypoints of one subject '
+        'linked into a group (adjacent joints are closer)', minimum=0.0,
+        exclusive_minimum=True)
+    crop_peaks: int = setting(
+        3, "per-subject crops: peaks per keypoint among which the one nearest the subject's "
+        'predicted joint is taken', minimum=1, maximum=2 * MAX_PEAKS_PER_VIEW)
+    duplicate_mm: float = setting(
+        100.0, 'mean joint distance (mm) below which two associated subjects are one body',
+        minimum=0.0)
+
+    def __post_init__(self):
+        validate_config(self)
+
+
+@dataclass
+class FrameSubjects:
+    """One frame's result. association: the subjects.association.Association of the crop
+    instances (all its subjects, duplicates included); keep (K,) int: the indices of the
+    subjects given to the tracker (at most N, duplicates left out); ids (K,) their
+    identities (-1: too few keypoints for a track); and the counts: hypotheses (crops per
+    view), discovered (new hypotheses from the full frame; -1: no discovery this frame),
+    points (discovery's 3D keypoint points), explained (of those, near a live track's
+    joint), loose (in groups with too few keypoints, or beyond N: left out), crops
+    (detector crops), duplicates, extra (subjects beyond N)."""
+    association: object
+    keep: np.ndarray
+    ids: np.ndarray
+    hypotheses: int
+    discovered: int
+    crops: int
+    duplicates: int
+    extra: int
+    points: int = 0
+    explained: int = 0
+    loose: int = 0
+
+
+def group_points(points, keypoint, views, link):
+    """Constrained single linkage of 3D points (module docstring, step 1d).
+
+    points (P, 3), keypoint (P,) int, views (P,) int (cameras of each point), link: the
+    largest linking distance (rig units). -> list of index arrays, one per group, the
+    groups with the most keypoints (then the most views) first."""
+    P = len(points)
+    if not P:
+        return []
+    d = np.linalg.norm(points[:, None] - points[None], axis=-1)
+    a, b = np.nonzero(np.triu((d <= link) & (keypoint[:, None] != keypoint[None]), 1))
+    label = np.arange(P)
+    masks = [{int(k)} for k in keypoint]
+    order = np.argsort(d[a, b], kind='stable')                       # shortest first
+    for i, j in zip(a[order].tolist(), b[order].tolist()):
+        la, lb = label[i], label[j]
+        if la == lb or masks[la] & masks[lb]:
+            continue
+        label[label == lb] = la
+        masks[la] |= masks[lb]
+    groups = [np.flatnonzero(label == g) for g in np.unique(label)]
+    return sorted(groups, key=lambda g: (-len(g), -int(views[g].sum()), int(g[0])))
+
+
+def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_threshold):
+    """One instance per crop (module docstring, step 3).
+
+    heat: N heatmaps (C, h, w); heat_cameras / cameras: their heatmap and source Cameras;
+    targets (N, C, 2) source px of the hypothesis' joints in each crop's view (NaN:
+    unknown). -> points (N, C, 2) source px (NaN: no peak), score (N, C)."""
+    from monet_ros.models import decode_heatmap_peaks
+
+    rig = stack_cameras(cameras)
+    S, _ = crop_scales(np.stack([c.K for c in heat_cameras]), rig['K'], rig['K_inv'])
+    k = config.crop_peaks
+    peaks, conf, _ = decode_heatmap_peaks(list(heat), k, floor=confidence_threshold)
+    pts = heat_to_source_points(peaks, S)                          # (N, C, k, 2)
+    usable = (conf >= confidence_threshold) & np.isfinite(pts).all(-1)
+    dist = np.linalg.norm(pts - targets[:, :, None], axis=-1)
+    # the nearest usable peak; the highest (index 0) where the target is unknown
+    dist = np.where(np.isfinite(targets).all(-1)[..., None], dist, np.arange(k))
+    pick = np.argmin(np.where(usable, dist, np.inf), axis=-1)      # (N, C)
+    chosen = np.take_along_axis(pts, pick[..., None, None], axis=2)[:, :, 0]
+    score = np.take_along_axis(conf, pick[..., None], axis=2)[..., 0]
+    found = np.take_along_axis(usable, pick[..., None], axis=2)[..., 0]
+    return np.where(found[..., None], chosen, np.nan), np.where(found, score, 0.0)
+
+
+class SubjectsStep:
+    """The several-subject step of the module docstring over a stream of frames.
+
+    detector: a models.Detector; num_keypoints: its C; units: the rig's length unit;
+    config: SubjectsConfig; association: AssociationConfig (its confidence_threshold is
+    the peaks' too); tracker: subjects.TrackerConfig; rule: crop_rule.TrackedRule.
+    step(images, cameras, stamp_ns) -> FrameSubjects. Counters: tracker.births / deaths."""
+
+    def __init__(self, detector, units, config=None, association=None, tracker=None,
+                 rule=None):
+        self.detector = detector
+        self.config = config or SubjectsConfig()
+        self.association = association or AssociationConfig()
+        self.rule = rule or TrackedRule()
+        self.C = len(detector.keypoints)
+        self.units = units
+        self.tracker = SubjectTracker(self.C, tracker, units=units)
+        self._gate = from_mm(self.tracker.config.gate_mm, units)
+        self._link = from_mm(self.config.link_mm, units)
+        self._duplicate = from_mm(self.config.duplicate_mm, units)
+        self._point_association = AssociationConfig(**{
+            **{f: getattr(self.association, f) for f in (
+                'threshold_px', 'confidence_threshold', 'min_views', 'triangulation_px',
+                'method')}, 'min_common': 1, 'strong_common': 1})
+
+    def discover(self, images, cameras, predicted):
+        """(hypotheses (H, C, 3), counts dict: points, explained, loose) of a full-frame
+        detection (module docstring step 1), none near the predicted joints (tracks, C, 3)
+        of the live tracks."""
+        from monet_ros.models import decode_heatmap_peaks
+
+        rig = stack_cameras(cameras)
+        heat, heat_cameras = self.detector.predict(images, cameras)
+        S, _ = crop_scales(np.stack([c.K for c in heat_cameras]), rig['K'], rig['K_inv'])
+        thr = self.association.confidence_threshold
+        peaks, conf, _ = decode_heatmap_peaks(list(heat), self.config.candidates, floor=thr)
+        pts = heat_to_source_points(peaks, S)                       # (V, C, k, 2)
+        points, keypoint, views = [], [], []
+        counts = dict(points=0, explained=0, loose=0)
+        for c in range(self.C):
+            a = associate(pts[:, c, :, None], cameras, conf[:, c, :, None],
+                          self._point_association)
+            X = a.X[:, 0]
+            ok = np.isfinite(X).all(-1)
+            counts['points'] += int(ok.sum())
+            if len(predicted):
+                near = np.linalg.norm(X[:, None] - predicted[None, :, c], axis=-1)
+                explained = ok & (near <= self._gate).any(-1)
+                counts['explained'] += int(explained.sum())
+                ok &= ~explained
+            points.append(X[ok])
+            keypoint.append(np.full(int(ok.sum()), c))
+            views.append((a.instance[ok] >= 0).sum(-1))
+        points, keypoint, views = (np.concatenate(x) for x in (points, keypoint, views))
+        need = self.config.subjects - len(predicted)
+        found = []
+        for group in group_points(points, keypoint, views, self._link):
+            if len(group) < self.tracker.config.min_keypoints or len(found) == need:
+                counts['loose'] += len(group)
+                continue
+            X = np.full((self.C, 3), np.nan)
+            X[keypoint[group]] = points[group]
+            found.append(X)
+        return np.array(found).reshape(-1, self.C, 3), counts
+
+    def step(self, images, cameras, stamp_ns):
+        """images: (H, W, 3) uint8 RGB of the present views; cameras: their Cameras (at
+        least 2); stamp_ns: the frame's stamp. -> FrameSubjects."""
+        tracker = self.tracker
+        predicted = tracker.predicted(stamp_ns)                       # (tracks, C, 3)
+        discovered = -1
+        hyp = predicted
+        counts = {}
+        if len(predicted) < self.config.subjects:
+            new, counts = self.discover(images, cameras, predicted)
+            discovered = len(new)
+            hyp = np.concatenate([predicted, new])
+        V, H = len(cameras), len(hyp)
+        boxes = np.full((V, H, 4), np.nan)
+        for h in range(H):
+            boxes[:, h] = subject_boxes(cameras, hyp[h], self.rule.margin,
+                                        self.rule.min_points, trim=self.rule.trim)
+        has = np.isfinite(boxes).all(-1)                              # (V, H)
+        v_idx, h_idx = np.nonzero(has)
+        points = np.full((V, H, self.C, 2), np.nan)
+        score = np.zeros((V, H, self.C))
+        if len(v_idx):
+            crop_cams = [cameras[v] for v in v_idx]
+            heat, heat_cameras = self.detector.predict(
+                [images[v] for v in v_idx], crop_cams, boxes[v_idx, h_idx])
+            known = np.isfinite(hyp).all(-1)                          # (H, C)
+            targets = project_views(stack_cameras(cameras),
+                                    np.where(known[..., None], hyp, 0.0).reshape(-1, 3))
+            targets = targets.reshape(V, H, self.C, 2)[v_idx, h_idx]
+            targets[~known[h_idx]] = np.nan
+            p, s = crop_instances(heat, heat_cameras, crop_cams, targets, self.config,
+                                  self.association.confidence_threshold)
+            points[v_idx, h_idx], score[v_idx, h_idx] = p, s
+        a = associate(points, cameras, score, self.association)
+        keep = []
+        for s in range(len(a.X)):
+            d = np.linalg.norm(a.X[s] - a.X[keep], axis=-1)               # (kept, C)
+            both = np.isfinite(d)
+            with np.errstate(invalid='ignore', divide='ignore'):
+                mean = np.where(both, d, 0.0).sum(-1) / both.sum(-1)
+            if not (mean < self._duplicate).any():
+                keep.append(s)
+        duplicates = len(a.X) - len(keep)
+        extra = max(0, len(keep) - self.config.subjects)
+        keep = np.array(keep[:self.config.subjects], np.int64)
+        ids = tracker.step(a.X[keep], stamp_ns)
+        return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
+                             discovered=discovered, crops=len(v_idx), duplicates=duplicates,
+                             extra=extra, **counts)
