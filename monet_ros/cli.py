@@ -11,6 +11,7 @@ traceback).
 """
 import argparse
 from contextlib import contextmanager
+import difflib
 import importlib
 import os
 import signal
@@ -45,6 +46,40 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message):
         self.exit(EXIT_BAD_INPUT, f'{self.prog}: error: {message}\n')
+
+    def parse_known_args(self, args=None, namespace=None):
+        """Unknown options of a command are reported first, by the command, with the
+        closest known one: `monet triangulate: error: unrecognized arguments: --rgi (did
+        you mean --rig?)`; argparse alone would report only the required option a typo
+        hides, under the top parser's name."""
+        if args is not None and not any(isinstance(a, argparse._SubParsersAction)
+                                        for a in self._actions):
+            unknown = [a for a in self._unknown_options(args)]
+            if unknown:
+                known = [o for o in self._option_string_actions if o.startswith('--')]
+                hints = []
+                for option in unknown:
+                    close = difflib.get_close_matches(option.split('=', 1)[0], known, n=1,
+                                                    cutoff=0.75)
+                    hints.append(f'{option} (did you mean {close[0]}?)' if close else option)
+                self.error('unrecognized arguments: ' + ' '.join(hints))
+        return super().parse_known_args(args, namespace)
+
+    def _unknown_options(self, args):
+        """The `--name` tokens of args (before a bare `--`) that name no option of this
+        parser, neither exactly nor as a prefix (argparse's abbreviations)."""
+        options = [o for o in self._option_string_actions if o.startswith('--')]
+        for token in args:
+            if token == '--':
+                return
+            if not token.startswith('--'):
+                continue
+            name = token.split('=', 1)[0]
+            if name in self._option_string_actions:
+                continue
+            if self.allow_abbrev and any(o.startswith(name) for o in options):
+                continue            # a prefix: argparse resolves it or says it is ambiguous
+            yield token
 
 
 def build_parser():

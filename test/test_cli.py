@@ -1,0 +1,33 @@
+"""monet's argument errors: one line, exit 2, named by the command, the typo before what
+it hides."""
+import pytest
+
+from monet_ros.cli import main as monet
+
+
+@pytest.mark.parametrize('argv, line', [
+    (['triangulate', 'x.csv', '--rgi', 'r.yaml', '--out', 'o'],
+     'monet triangulate: error: unrecognized arguments: --rgi (did you mean --rig?)'),
+    (['triangulate', 'x.csv', '--rig=r.yaml', '--out', 'o', '--bogus'],
+     'monet triangulate: error: unrecognized arguments: --bogus'),
+    (['process', 'rec', '--precison', 'int8'],
+     'monet process: error: unrecognized arguments: --precison (did you mean --precision?)'),
+    (['triangulate', 'x.csv', '--ri', 'r.yaml', '--out', 'o'],   # argparse's own answer
+     'monet triangulate: error: ambiguous option: --ri could match --rig, --rig-units'),
+])
+def test_unknown_options_are_named_by_their_command(argv, line, capsys, tmp_path,
+                                                    monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert monet(argv) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == line
+    assert not (tmp_path / 'o').exists()
+
+
+def test_abbreviations_still_parse(capsys, tmp_path):
+    # a unique prefix is an option (argparse's abbreviation): the command runs and fails
+    # on the missing file, not on the option
+    assert monet(['triangulate', str(tmp_path / 'x.csv'), '--rig', str(tmp_path / 'r.yaml'),
+                  '--rig-u', 'mm', '--out', str(tmp_path / 'o')]) == 2
+    err = capsys.readouterr().err
+    assert 'unrecognized' not in err and ('x.csv' in err or 'r.yaml' in err)
