@@ -17,7 +17,7 @@ from math import comb
 
 import numpy as np
 
-from monet_ros.geometry.camera import project_views, stack_cameras, undistort_views
+from monet_ros.geometry.camera import project_uv, project_views, stack_cameras, undistort_views
 from monet_ros.timing import NO_TIMER
 
 
@@ -35,7 +35,7 @@ def _prepare(points2d, cameras, weights, rig=None, ideal=None):
         w = np.array(weights, dtype=np.float64)
         if w.shape != obs.shape[:2]:
             raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
-        if np.any(w < 0):
+        if (w < 0).any():
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
     if ideal is None:
         ideal = undistort_views(rig or stack_cameras(cameras), obs)
@@ -45,8 +45,8 @@ def _prepare(points2d, cameras, weights, rig=None, ideal=None):
             raise ValueError(f'ideal must have the shape of points2d {obs.shape}, got '
                              f'{ideal.shape}')
     # missing: NaN input, zero/NaN weight, or a point the distortion model cannot invert
-    missing = ~np.all(np.isfinite(ideal), axis=2) | ~np.isfinite(w) | (w <= 0)
-    w = np.where(missing, 0.0, w)
+    missing = ~(np.isfinite(ideal).all(axis=2) & np.isfinite(w) & (w > 0))
+    w[missing] = 0.0
     ideal[missing] = 0.0
     return obs, ideal, w
 
@@ -71,8 +71,8 @@ def solve_dlt(B, w, per_metre=1.0):
     if per_metre != 1.0:
         B = np.concatenate([B[..., :3], B[..., 3:] / per_metre], axis=-1)
     A = w[..., None, None] * B  # (..., V, N, 2, 4)
-    A = np.moveaxis(A, -4, -3).reshape(*A.shape[:-4], N, 2 * V, 4)
-    n_views = np.sum(w > 0, axis=-2)  # (..., N)
+    A = A.swapaxes(-4, -3).reshape(*A.shape[:-4], N, 2 * V, 4)
+    n_views = (w > 0).sum(axis=-2)  # (..., N)
     if 2 * V < 4:
         return np.full((*n_views.shape, 3), np.nan)
     _, _, vh = np.linalg.svd(A, full_matrices=False)
@@ -122,8 +122,13 @@ def triangulate(points2d, cameras, weights=None):
 
 
 def _view_errors(rig, X, obs):
-    """Pixel distances (..., V, N) between the projections of X (..., N, 3) and obs (V, N, 2)."""
-    return np.linalg.norm(project_views(rig, X) - obs, axis=-1)
+    """Pixel distances (..., V, N) between the projections of X (..., N, 3) and obs (V, N, 2)
+    (the numbers of np.linalg.norm(project_views(rig, X) - obs, axis=-1))."""
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        u, v = project_uv(rig, X)
+        du = u - obs[..., 0]
+        dv = v - obs[..., 1]
+        return np.sqrt(du * du + dv * dv)
 
 
 def reprojection_error(X, points2d, cameras):
