@@ -152,7 +152,7 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
             x = x - step_x
             y = y - step_y
             change = np.maximum(np.abs(step_x), np.abs(step_y))
-            if np.max(change, initial=0.0, where=np.isfinite(change)) <= tol:
+            if not ((change > tol) & (change < np.inf)).any():  # every finite step <= tol
                 break
         # the residual and Jacobian of the last evaluated iterate (the final step only
         # refines it further): no extra evaluation of the model
@@ -364,8 +364,7 @@ def _apply_views(M, X):
     lead, N = X.shape[:-2], X.shape[-2]
     flat = X.reshape(-1, 3)
     out = flat @ M[:, :, :3].reshape(V * 3, 3).T + M[:, :, 3].reshape(V * 3)  # (M, 3V)
-    out = out.reshape(*lead, N, V, 3)
-    return np.moveaxis(out, -2, -3)
+    return out.reshape(*lead, N, V, 3).swapaxes(-2, -3)
 
 
 def project_views(cameras, X):

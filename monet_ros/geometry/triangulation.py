@@ -152,13 +152,22 @@ def _mean_used_error(err, used):
     return mean
 
 
+@lru_cache(maxsize=64)
+def _left_out(V, k):
+    """(C(V, k), V) bool, read-only: every subset of k of V views, as the views left out."""
+    drop = np.zeros((comb(V, k), V), dtype=bool)
+    for s, idx in enumerate(combinations(range(V), k)):
+        drop[s, list(idx)] = True
+    drop.setflags(write=False)
+    return drop
+
+
 def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
     V, N = w.shape
     avail = w > 0
     n_avail = avail.sum(axis=0)
     X = np.full((N, 3), np.nan)
-    inliers = np.zeros((V, N), dtype=bool)
-    errors = np.full((V, N), np.nan)  # of the accepted subsets' views
+    accepted = np.zeros(N, dtype=bool)  # keypoints whose subset met the threshold
     current = avail.copy()  # best view subset found so far, per keypoint (V, N)
     current_err = np.zeros((V, N))  # its per-view reprojection errors
     todo = np.arange(N)
@@ -166,32 +175,35 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         todo = todo[n_avail[todo] - k >= min_views]
         if todo.size == 0:
             break
+        cols = slice(None) if todo.size == N else todo  # (a slice: no copies)
         if comb(V, k) <= max_subsets:  # every subset with k views left out (as Pose2Sim)
-            drop = np.zeros((comb(V, k), V), dtype=bool)
-            for s, idx in enumerate(combinations(range(V), k)):
-                drop[s, list(idx)] = True
-            used = avail[None, :, todo] & ~drop[:, :, None]  # (S, V, n)
+            used = avail[None, :, cols] & ~_left_out(V, k)[:, :, None]  # (S, V, n)
         else:  # leave out the worst view (largest error) of the previous level's best subset
-            err = np.where(current[:, todo], current_err[:, todo], -np.inf)
+            err = np.where(current[:, cols], current_err[:, cols], -np.inf)
             worst = np.argmax(err, axis=0)
-            used = current[:, todo].copy()
+            used = current[:, cols].copy()
             used[worst, np.arange(todo.size)] = False
             used = used[None]
-        Xs = solve_dlt(B[:, todo], w[None, :, todo] * used, rig['per_metre'])  # (S, n, 3)
-        err = _view_errors(rig, Xs, obs[:, todo])  # (S, V, n)
+        Xs = solve_dlt(B[:, cols], w[None, :, cols] * used, rig['per_metre'])  # (S, n, 3)
+        err = _view_errors(rig, Xs, obs[:, cols])  # (S, V, n)
         err[_behind(rig, Xs, used)] = np.inf  # cheirality: a view behind is an outlier
         mean = _mean_used_error(err, used)
-        best = np.argmin(mean, axis=0)
-        cols = np.arange(todo.size)
-        ok = mean[best, cols] <= threshold_px
-        X[todo[ok]] = Xs[best[ok], cols[ok]]
-        best_used = used[best, :, cols].T  # (V, n)
-        inliers[:, todo[ok]] = best_used[:, ok]
-        current[:, todo] = best_used
-        current_err[:, todo] = err[best, :, cols].T
-        errors[:, todo[ok]] = current_err[:, todo[ok]]
+        if len(used) == 1:  # one candidate subset: it is the best
+            best_mean, best_X, best_used, best_err = mean[0], Xs[0], used[0], err[0]
+        else:
+            best = np.argmin(mean, axis=0)
+            n = np.arange(todo.size)
+            best_mean, best_X = mean[best, n], Xs[best, n]
+            best_used, best_err = used[best, :, n].T, err[best, :, n].T  # (V, n)
+        ok = best_mean <= threshold_px
+        X[todo[ok]] = best_X[ok]
+        accepted[todo[ok]] = True
+        current[:, cols] = best_used
+        current_err[:, cols] = best_err
         todo = todo[~ok]
-    return X, np.where(inliers, errors, np.nan), inliers
+    # an accepted keypoint left `todo`: its current subset and errors are those accepted
+    inliers = current & accepted
+    return X, np.where(inliers, current_err, np.nan), inliers
 
 
 def _two_view_points(B1, B2, valid):

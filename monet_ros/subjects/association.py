@@ -157,38 +157,40 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     members = [[m] for m in range(M)]            # instances of each cluster
     seen = [1 << int(v) for v in view]           # cameras of each cluster (bit mask)
     finite = np.isfinite(cost)
-    total = np.where(finite, cost, 0.0)          # cost sums between clusters (by label)
-    count = finite.astype(np.float64)            # and how many pairs have a cost
-    a, b = np.nonzero(np.triu(cost <= threshold_px, 1))
+    # [..., 0]: cost sums between clusters (by label), [..., 1]: how many pairs have a cost
+    linkage = np.stack([np.where(finite, cost, 0.0), finite], axis=-1)
+    a, b = np.nonzero(cost <= threshold_px)
+    upper = a < b
+    a, b = a[upper], b[upper]
     weak = np.zeros(len(a), bool) if strong is None else ~strong[a, b]
     order = np.lexsort((cost[a, b], weak))
     for i, j in zip(a[order].tolist(), b[order].tolist()):
         la, lb = label[i], label[j]
         if la == lb or seen[la] & seen[lb]:
             continue
-        if total[la, lb] > threshold_px * count[la, lb]:
+        total, count = linkage[la, lb].tolist()
+        if total > threshold_px * count:
             continue
         for m in members[lb]:
             label[m] = la
         members[la] += members[lb]
         seen[la] |= seen[lb]
-        total[la] += total[lb]
-        total[:, la] += total[:, lb]
-        count[la] += count[lb]
-        count[:, la] += count[:, lb]
-    label = np.array(label)
-    cams = np.zeros((M, num_views), bool)        # cameras of each cluster, by label
-    cams[label, view] = True
-    return _dissolve_pairs(label, cams, cost, finite, view, threshold_px)
+        linkage[la] += linkage[lb]
+        linkage[:, la] += linkage[:, lb]
+    return _dissolve_pairs(np.array(label), cost, finite, view, num_views, threshold_px)
 
 
-def _dissolve_pairs(label, cams, cost, finite, view, threshold_px):
+def _dissolve_pairs(label, cost, finite, view, num_views, threshold_px):
     """Step 3 of the module docstring: a two-instance cluster whose two instances each
     fit a different larger cluster (no shared camera, mean cost <= threshold_px) is split
     into them. Labels are changed in place and returned."""
-    ids, size = np.unique(label, return_counts=True)
-    big = ids[size > 2]
-    for pair in ids[size == 2]:
+    size = np.bincount(label, minlength=len(label))    # labels are instance indices
+    if not (size == 2).any():
+        return label
+    cams = np.zeros((len(label), num_views), bool)     # cameras of each cluster, by label
+    cams[label, view] = True
+    big = np.flatnonzero(size > 2)
+    for pair in np.flatnonzero(size == 2):
         members = np.flatnonzero(label == pair)
         target = []
         for m in members:
@@ -257,13 +259,11 @@ def associate(points2d, cameras, scores=None, config=None):
     instance = np.full((S, V), -1)
     s_idx, m_idx = np.nonzero(member)
     instance[s_idx, view[m_idx]] = slot[m_idx]
-    seen = instance >= 0
-    take = np.maximum(instance, 0).T                                  # (V, S)
-    sub_pts = pts[np.arange(V)[:, None], take]                        # (V, S, C, 2)
-    sub_w = np.where(present[np.arange(V)[:, None], take] & seen.T[..., None],
-                     w[np.arange(V)[:, None], take], 0.0)
-    sub_pts = np.where(sub_w[..., None] > 0, sub_pts, np.nan)
-    sub_ideal = np.where(sub_w[..., None] > 0, ideal[np.arange(V)[:, None], take], np.nan)
+    rows, take = np.arange(V)[:, None], np.maximum(instance, 0).T     # (V, S)
+    keep = (present[rows, take] & (instance >= 0).T[..., None])[..., None]  # (V, S, C, 1)
+    sub_w = np.where(keep[..., 0], w[rows, take], 0.0)                # (V, S, C)
+    sub_pts = np.where(keep, pts[rows, take], np.nan)                 # (V, S, C, 2)
+    sub_ideal = np.where(keep, ideal[rows, take], np.nan)
     X, inl, err = triangulate_robust(sub_pts.reshape(V, S * C, 2), cameras,
                                      sub_w.reshape(V, S * C),
                                      threshold_px=config.triangulation_px,
