@@ -131,19 +131,20 @@ def pair_costs(ideal, present, view, F, min_common):
     lines = F[view] @ h.swapaxes(-1, -2)[:, None]
     lines_b = lines[:, view]                                          # (M, M, 3, C) in b
     num = np.abs((lines_b * h.swapaxes(-1, -2)[None]).sum(-2))        # |x_b^T F x_a|
-    norm_b = np.hypot(lines_b[:, :, 0], lines_b[:, :, 1])             # (M, M, C)
     with np.errstate(invalid='ignore', divide='ignore'):
-        d = 0.5 * num * (1 / norm_b + 1 / norm_b.swapaxes(0, 1))     # a's line of b
+        # 1 / the norm of each line, per camera (M, V, C), then per instance b (M, M, C)
+        inv_b = (1 / np.hypot(lines[:, :, 0], lines[:, :, 1]))[:, view]
+        d = 0.5 * num * (inv_b + inv_b.swapaxes(0, 1))               # a's line of b
     common = present[:, None] & present[None, :]                      # (M, M, C)
     d = np.where(common & np.isfinite(d), d, np.inf)
     k = common.sum(axis=-1)
-    s = np.sort(d, axis=-1)
-    lo = np.take_along_axis(s, (np.maximum(k - 1, 0) // 2)[..., None], axis=-1)[..., 0]
-    hi = np.take_along_axis(s, np.minimum(k // 2, C - 1)[..., None], axis=-1)[..., 0]
-    with np.errstate(invalid='ignore'):                               # k = 0: inf
-        cost = 0.5 * (lo + hi)
-    bad = (k < min_common) | (view[:, None] == view[None, :])
-    return np.where(bad | ~np.isfinite(cost), np.inf, cost), k
+    d.sort(axis=-1)                                                   # inf (missing) last
+    s, r = d.reshape(M * M, C), np.arange(M * M)
+    lo = s[r, (np.maximum(k - 1, 0) // 2).ravel()]
+    hi = s[r, np.minimum(k // 2, C - 1).ravel()]
+    cost = (0.5 * (lo + hi)).reshape(M, M)                            # k = 0: inf
+    cost[(k < min_common) | (view[:, None] == view[None, :])] = np.inf
+    return cost, k
 
 
 def cluster_instances(cost, view, num_views, threshold_px, strong=None):

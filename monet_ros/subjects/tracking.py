@@ -133,16 +133,16 @@ class SubjectTracker:
         return out
 
     def _update(self, p, P, rows, X, finite):
-        """Kalman update of the tracks `rows` with their subjects X (k, C, 3)."""
+        """Kalman update of the tracks `rows` with their subjects X (k, C, 3) (finite (k, C):
+        their triangulated keypoints); p, P: the prediction (new arrays, updated in place)."""
         v = self.v
         pr, vr, Pr = p[rows].reshape(-1, 3), v[rows].reshape(-1, 3), P[:, rows].reshape(3, -1)
         Xr, fr = X.reshape(-1, 3), finite.reshape(-1)
         started = self.started[rows].reshape(-1)
-        y, S, _, measured = cv_kalman.innovation(pr, Pr, np.where(fr[:, None], Xr, np.nan),
-                                                 self._r2)
+        # innovation's `measured` is `fr`: a keypoint is finite in all 3 coordinates or missing
+        y, S, _, measured = cv_kalman.innovation(pr, Pr, Xr, self._r2)
         pr, vr, Pr = cv_kalman.update(pr, vr, Pr, y, S, measured & started)
         cv_kalman.start(pr, vr, Pr, Xr, fr & ~started, self._r2, self._v0)
-        p, P = p.copy(), P.copy()
         p[rows], P[:, rows] = pr.reshape(-1, self.C, 3), Pr.reshape(3, -1, self.C)
         v = v.copy()
         v[rows] = vr.reshape(-1, self.C, 3)
