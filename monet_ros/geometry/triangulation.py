@@ -201,6 +201,8 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         current[:, cols] = best_used
         current_err[:, cols] = best_err
         todo = todo[~ok]
+        if todo.size == 0:
+            break
     # an accepted keypoint left `todo`: its current subset and errors are those accepted
     inliers = current & accepted
     return X, np.where(inliers, current_err, np.nan), inliers

@@ -234,8 +234,11 @@ def associate(points2d, cameras, scores=None, config=None):
     if w.shape != (V, N, C):
         raise ValueError(f'scores must have shape {(V, N, C)}, got {w.shape}')
     rig = stack_cameras(cameras)
-    # NaN scores compare False: missing
-    present = np.isfinite(pts).all(-1) & (w >= config.confidence_threshold) & (w > 0)
+    present = np.isfinite(pts).all(-1)
+    if scores is not None:  # NaN scores compare False: missing
+        present &= (w >= config.confidence_threshold) & (w > 0)
+    elif not 1.0 >= config.confidence_threshold:
+        present[...] = False
     ideal = undistort_views(rig, np.where(present[..., None], pts, np.nan)
                             .reshape(V, N * C, 2)).reshape(V, N, C, 2)
     present &= np.isfinite(ideal).all(-1)
