@@ -384,9 +384,10 @@ def _project_views(cameras, X):
 
 
 def project_uv(cameras, X):
-    """project_views' pixels as two arrays (u, v), each (..., V, N), without stacking them
-    (the same numbers; for hot paths that use the coordinates apart). Numpy's warnings for
-    points in a focal plane are not silenced here."""
+    """project_views' pixels as two arrays (u, v), each (..., V, N) (pixels), of X (..., N, 3)
+    world points (the rig's unit), without stacking them: the same numbers, for hot paths
+    that use the coordinates apart. Numpy's warnings for points in a focal plane are not
+    silenced here (project_views silences them)."""
     p = cameras if isinstance(cameras, dict) else stack_cameras(cameras)
     X = np.asarray(X, dtype=np.float64)
     if not p['d12'].any():  # pinhole rig: x ~ P X

@@ -156,7 +156,7 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     M = len(view)
     label = list(range(M))                       # cluster of each instance
     members = [[m] for m in range(M)]            # instances of each cluster
-    seen = [1 << int(v) for v in view]           # cameras of each cluster (bit mask)
+    seen = [1 << v for v in view.tolist()]       # cameras of each cluster (bit mask)
     finite = np.isfinite(cost)
     # [..., 0]: cost sums between clusters (by label), [..., 1]: how many pairs have a cost
     linkage = np.stack([np.where(finite, cost, 0.0), finite], axis=-1)
