@@ -176,7 +176,9 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         if todo.size == 0:
             break
         cols = slice(None) if todo.size == N else todo  # (a slice: no copies)
-        if comb(V, k) <= max_subsets:  # every subset with k views left out (as Pose2Sim)
+        if k == 0:  # every available view
+            used = avail[None, :, cols]
+        elif comb(V, k) <= max_subsets:  # every subset with k views left out (as Pose2Sim)
             used = avail[None, :, cols] & ~_left_out(V, k)[:, :, None]  # (S, V, n)
         else:  # leave out the worst view (largest error) of the previous level's best subset
             err = np.where(current[:, cols], current_err[:, cols], -np.inf)
@@ -184,7 +186,9 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
             used = current[:, cols].copy()
             used[worst, np.arange(todo.size)] = False
             used = used[None]
-        Xs = solve_dlt(B[:, cols], w[None, :, cols] * used, rig['per_metre'])  # (S, n, 3)
+        # (w is 0 at the views not available: w * used is w when every available one is used)
+        w_used = w[None, :, cols] if k == 0 else w[None, :, cols] * used
+        Xs = solve_dlt(B[:, cols], w_used, rig['per_metre'])  # (S, n, 3)
         err = _view_errors(rig, Xs, obs[:, cols])  # (S, V, n)
         err[_behind(rig, Xs, used)] = np.inf  # cheirality: a view behind is an outlier
         mean = _mean_used_error(err, used)
