@@ -152,7 +152,7 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
             x = x - step_x
             y = y - step_y
             change = np.maximum(np.abs(step_x), np.abs(step_y))
-            if np.max(change, initial=0.0, where=np.isfinite(change)) <= tol:
+            if not ((change > tol) & (change < np.inf)).any():  # every finite step <= tol
                 break
         # the residual and Jacobian of the last evaluated iterate (the final step only
         # refines it further): no extra evaluation of the model
@@ -364,8 +364,7 @@ def _apply_views(M, X):
     lead, N = X.shape[:-2], X.shape[-2]
     flat = X.reshape(-1, 3)
     out = flat @ M[:, :, :3].reshape(V * 3, 3).T + M[:, :, 3].reshape(V * 3)  # (M, 3V)
-    out = out.reshape(*lead, N, V, 3)
-    return np.moveaxis(out, -2, -3)
+    return out.reshape(*lead, N, V, 3).swapaxes(-2, -3)
 
 
 def project_views(cameras, X):
@@ -381,12 +380,20 @@ def project_views(cameras, X):
 
 
 def _project_views(cameras, X):
+    return np.stack(project_uv(cameras, X), axis=-1)
+
+
+def project_uv(cameras, X):
+    """project_views' pixels as two arrays (u, v), each (..., V, N) (pixels), of X (..., N, 3)
+    world points (the rig's unit), without stacking them: the same numbers, for hot paths
+    that use the coordinates apart. Numpy's warnings for points in a focal plane are not
+    silenced here (project_views silences them)."""
     p = cameras if isinstance(cameras, dict) else stack_cameras(cameras)
     X = np.asarray(X, dtype=np.float64)
     if not p['d12'].any():  # pinhole rig: x ~ P X
         P = p['P'] if 'P' in p else p['K'] @ np.concatenate([p['R'], p['t'][..., None]], -1)
         h = _apply_views(P, X)  # (..., V, N, 3)
-        return h[..., :2] / h[..., 2:]
+        return h[..., 0] / h[..., 2], h[..., 1] / h[..., 2]
     Rt = p['Rt'] if 'Rt' in p else np.concatenate([p['R'], p['t'][..., None]], -1)
     Xc = _apply_views(Rt, X)
     x = Xc[..., 0] / Xc[..., 2]
@@ -394,9 +401,7 @@ def _project_views(cameras, X):
     # 12 coefficient arrays (V, 1), over (..., V, N)
     xd, yd = _distort(p['model'] if 'model' in p else _model_terms(p['d12']), x, y)
     K = p['K'][:, None]  # (V, 1, 3, 3)
-    u = K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2]
-    v = K[..., 1, 1] * yd + K[..., 1, 2]
-    return np.stack([u, v], axis=-1)
+    return K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2], K[..., 1, 1] * yd + K[..., 1, 2]
 
 
 def undistort_views(cameras, uv):

@@ -17,7 +17,7 @@ from math import comb
 
 import numpy as np
 
-from monet_ros.geometry.camera import project_views, stack_cameras, undistort_views
+from monet_ros.geometry.camera import project_uv, project_views, stack_cameras, undistort_views
 from monet_ros.timing import NO_TIMER
 
 
@@ -35,7 +35,7 @@ def _prepare(points2d, cameras, weights, rig=None, ideal=None):
         w = np.array(weights, dtype=np.float64)
         if w.shape != obs.shape[:2]:
             raise ValueError(f'weights must have shape {obs.shape[:2]}, got {w.shape}')
-        if np.any(w < 0):
+        if (w < 0).any():
             raise ValueError('weights must be >= 0 (0 or NaN = missing)')
     if ideal is None:
         ideal = undistort_views(rig or stack_cameras(cameras), obs)
@@ -45,8 +45,8 @@ def _prepare(points2d, cameras, weights, rig=None, ideal=None):
             raise ValueError(f'ideal must have the shape of points2d {obs.shape}, got '
                              f'{ideal.shape}')
     # missing: NaN input, zero/NaN weight, or a point the distortion model cannot invert
-    missing = ~np.all(np.isfinite(ideal), axis=2) | ~np.isfinite(w) | (w <= 0)
-    w = np.where(missing, 0.0, w)
+    missing = ~(np.isfinite(ideal).all(axis=2) & np.isfinite(w) & (w > 0))
+    w[missing] = 0.0
     ideal[missing] = 0.0
     return obs, ideal, w
 
@@ -71,8 +71,8 @@ def solve_dlt(B, w, per_metre=1.0):
     if per_metre != 1.0:
         B = np.concatenate([B[..., :3], B[..., 3:] / per_metre], axis=-1)
     A = w[..., None, None] * B  # (..., V, N, 2, 4)
-    A = np.moveaxis(A, -4, -3).reshape(*A.shape[:-4], N, 2 * V, 4)
-    n_views = np.sum(w > 0, axis=-2)  # (..., N)
+    A = A.swapaxes(-4, -3).reshape(*A.shape[:-4], N, 2 * V, 4)
+    n_views = (w > 0).sum(axis=-2)  # (..., N)
     if 2 * V < 4:
         return np.full((*n_views.shape, 3), np.nan)
     _, _, vh = np.linalg.svd(A, full_matrices=False)
@@ -122,8 +122,13 @@ def triangulate(points2d, cameras, weights=None):
 
 
 def _view_errors(rig, X, obs):
-    """Pixel distances (..., V, N) between the projections of X (..., N, 3) and obs (V, N, 2)."""
-    return np.linalg.norm(project_views(rig, X) - obs, axis=-1)
+    """Pixel distances (..., V, N) between the projections of X (..., N, 3) and obs (V, N, 2)
+    (the numbers of np.linalg.norm(project_views(rig, X) - obs, axis=-1))."""
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        u, v = project_uv(rig, X)
+        du = u - obs[..., 0]
+        dv = v - obs[..., 1]
+        return np.sqrt(du * du + dv * dv)
 
 
 def reprojection_error(X, points2d, cameras):
@@ -147,13 +152,22 @@ def _mean_used_error(err, used):
     return mean
 
 
+@lru_cache(maxsize=64)
+def _left_out(V, k):
+    """(C(V, k), V) bool, read-only: every subset of k of V views, as the views left out."""
+    drop = np.zeros((comb(V, k), V), dtype=bool)
+    for s, idx in enumerate(combinations(range(V), k)):
+        drop[s, list(idx)] = True
+    drop.setflags(write=False)
+    return drop
+
+
 def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
     V, N = w.shape
     avail = w > 0
     n_avail = avail.sum(axis=0)
     X = np.full((N, 3), np.nan)
-    inliers = np.zeros((V, N), dtype=bool)
-    errors = np.full((V, N), np.nan)  # of the accepted subsets' views
+    accepted = np.zeros(N, dtype=bool)  # keypoints whose subset met the threshold
     current = avail.copy()  # best view subset found so far, per keypoint (V, N)
     current_err = np.zeros((V, N))  # its per-view reprojection errors
     todo = np.arange(N)
@@ -161,32 +175,41 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         todo = todo[n_avail[todo] - k >= min_views]
         if todo.size == 0:
             break
-        if comb(V, k) <= max_subsets:  # every subset with k views left out (as Pose2Sim)
-            drop = np.zeros((comb(V, k), V), dtype=bool)
-            for s, idx in enumerate(combinations(range(V), k)):
-                drop[s, list(idx)] = True
-            used = avail[None, :, todo] & ~drop[:, :, None]  # (S, V, n)
+        cols = slice(None) if todo.size == N else todo  # (a slice: no copies)
+        if k == 0:  # every available view
+            used = avail[None, :, cols]
+        elif comb(V, k) <= max_subsets:  # every subset with k views left out (as Pose2Sim)
+            used = avail[None, :, cols] & ~_left_out(V, k)[:, :, None]  # (S, V, n)
         else:  # leave out the worst view (largest error) of the previous level's best subset
-            err = np.where(current[:, todo], current_err[:, todo], -np.inf)
+            err = np.where(current[:, cols], current_err[:, cols], -np.inf)
             worst = np.argmax(err, axis=0)
-            used = current[:, todo].copy()
+            used = current[:, cols].copy()
             used[worst, np.arange(todo.size)] = False
             used = used[None]
-        Xs = solve_dlt(B[:, todo], w[None, :, todo] * used, rig['per_metre'])  # (S, n, 3)
-        err = _view_errors(rig, Xs, obs[:, todo])  # (S, V, n)
+        # (w is 0 at the views not available: w * used is w when every available one is used)
+        w_used = w[None, :, cols] if k == 0 else w[None, :, cols] * used
+        Xs = solve_dlt(B[:, cols], w_used, rig['per_metre'])  # (S, n, 3)
+        err = _view_errors(rig, Xs, obs[:, cols])  # (S, V, n)
         err[_behind(rig, Xs, used)] = np.inf  # cheirality: a view behind is an outlier
         mean = _mean_used_error(err, used)
-        best = np.argmin(mean, axis=0)
-        cols = np.arange(todo.size)
-        ok = mean[best, cols] <= threshold_px
-        X[todo[ok]] = Xs[best[ok], cols[ok]]
-        best_used = used[best, :, cols].T  # (V, n)
-        inliers[:, todo[ok]] = best_used[:, ok]
-        current[:, todo] = best_used
-        current_err[:, todo] = err[best, :, cols].T
-        errors[:, todo[ok]] = current_err[:, todo[ok]]
+        if len(used) == 1:  # one candidate subset: it is the best
+            best_mean, best_X, best_used, best_err = mean[0], Xs[0], used[0], err[0]
+        else:
+            best = np.argmin(mean, axis=0)
+            n = np.arange(todo.size)
+            best_mean, best_X = mean[best, n], Xs[best, n]
+            best_used, best_err = used[best, :, n].T, err[best, :, n].T  # (V, n)
+        ok = best_mean <= threshold_px
+        X[todo[ok]] = best_X[ok]
+        accepted[todo[ok]] = True
+        current[:, cols] = best_used
+        current_err[:, cols] = best_err
         todo = todo[~ok]
-    return X, np.where(inliers, errors, np.nan), inliers
+        if todo.size == 0:
+            break
+    # an accepted keypoint left `todo`: its current subset and errors are those accepted
+    inliers = current & accepted
+    return X, np.where(inliers, current_err, np.nan), inliers
 
 
 def _two_view_points(B1, B2, valid):

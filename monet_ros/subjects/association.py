@@ -128,22 +128,26 @@ def pair_costs(ideal, present, view, F, min_common):
     h = np.concatenate([ideal, np.ones((M, C, 1))], axis=-1)         # (M, C, 3)
     h = np.where(present[..., None], h, 0.0)
     # the epipolar lines of every instance in every camera: (M, V, 3, C), one matmul
-    lines = F[view] @ h.swapaxes(-1, -2)[:, None]
+    ht = h.swapaxes(-1, -2)                                           # (M, 3, C)
+    lines = F[view] @ ht[:, None]
     lines_b = lines[:, view]                                          # (M, M, 3, C) in b
-    num = np.abs((lines_b * h.swapaxes(-1, -2)[None]).sum(-2))        # |x_b^T F x_a|
-    norm_b = np.hypot(lines_b[:, :, 0], lines_b[:, :, 1])             # (M, M, C)
+    # |x_b^T F x_a|, the three terms added in order (cheaper than a sum over axis -2)
+    num = np.abs(lines_b[:, :, 0] * ht[:, 0] + lines_b[:, :, 1] * ht[:, 1]
+                 + lines_b[:, :, 2] * ht[:, 2])
     with np.errstate(invalid='ignore', divide='ignore'):
-        d = 0.5 * num * (1 / norm_b + 1 / norm_b.swapaxes(0, 1))     # a's line of b
+        # 1 / the norm of each line, per camera (M, V, C), then per instance b (M, M, C)
+        inv_b = (1 / np.hypot(lines[:, :, 0], lines[:, :, 1]))[:, view]
+        d = 0.5 * num * (inv_b + inv_b.swapaxes(0, 1))               # a's line of b
     common = present[:, None] & present[None, :]                      # (M, M, C)
     d = np.where(common & np.isfinite(d), d, np.inf)
     k = common.sum(axis=-1)
-    s = np.sort(d, axis=-1)
-    lo = np.take_along_axis(s, (np.maximum(k - 1, 0) // 2)[..., None], axis=-1)[..., 0]
-    hi = np.take_along_axis(s, np.minimum(k // 2, C - 1)[..., None], axis=-1)[..., 0]
-    with np.errstate(invalid='ignore'):                               # k = 0: inf
-        cost = 0.5 * (lo + hi)
-    bad = (k < min_common) | (view[:, None] == view[None, :])
-    return np.where(bad | ~np.isfinite(cost), np.inf, cost), k
+    d.sort(axis=-1)                                                   # inf (missing) last
+    s, r = d.reshape(M * M, C), np.arange(M * M)
+    lo = s[r, (np.maximum(k - 1, 0) // 2).ravel()]
+    hi = s[r, np.minimum(k // 2, C - 1).ravel()]
+    cost = (0.5 * (lo + hi)).reshape(M, M)                            # k = 0: inf
+    cost[(k < min_common) | (view[:, None] == view[None, :])] = np.inf
+    return cost, k
 
 
 def cluster_instances(cost, view, num_views, threshold_px, strong=None):
@@ -155,40 +159,42 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     M = len(view)
     label = list(range(M))                       # cluster of each instance
     members = [[m] for m in range(M)]            # instances of each cluster
-    seen = [1 << int(v) for v in view]           # cameras of each cluster (bit mask)
+    seen = [1 << v for v in view.tolist()]       # cameras of each cluster (bit mask)
     finite = np.isfinite(cost)
-    total = np.where(finite, cost, 0.0)          # cost sums between clusters (by label)
-    count = finite.astype(np.float64)            # and how many pairs have a cost
-    a, b = np.nonzero(np.triu(cost <= threshold_px, 1))
+    # [..., 0]: cost sums between clusters (by label), [..., 1]: how many pairs have a cost
+    linkage = np.stack([np.where(finite, cost, 0.0), finite], axis=-1)
+    a, b = np.nonzero(cost <= threshold_px)
+    upper = a < b
+    a, b = a[upper], b[upper]
     weak = np.zeros(len(a), bool) if strong is None else ~strong[a, b]
     order = np.lexsort((cost[a, b], weak))
     for i, j in zip(a[order].tolist(), b[order].tolist()):
         la, lb = label[i], label[j]
         if la == lb or seen[la] & seen[lb]:
             continue
-        if total[la, lb] > threshold_px * count[la, lb]:
+        total, count = linkage[la, lb].tolist()
+        if total > threshold_px * count:
             continue
         for m in members[lb]:
             label[m] = la
         members[la] += members[lb]
         seen[la] |= seen[lb]
-        total[la] += total[lb]
-        total[:, la] += total[:, lb]
-        count[la] += count[lb]
-        count[:, la] += count[:, lb]
-    label = np.array(label)
-    cams = np.zeros((M, num_views), bool)        # cameras of each cluster, by label
-    cams[label, view] = True
-    return _dissolve_pairs(label, cams, cost, finite, view, threshold_px)
+        linkage[la] += linkage[lb]
+        linkage[:, la] += linkage[:, lb]
+    return _dissolve_pairs(np.array(label), cost, finite, view, num_views, threshold_px)
 
 
-def _dissolve_pairs(label, cams, cost, finite, view, threshold_px):
+def _dissolve_pairs(label, cost, finite, view, num_views, threshold_px):
     """Step 3 of the module docstring: a two-instance cluster whose two instances each
     fit a different larger cluster (no shared camera, mean cost <= threshold_px) is split
     into them. Labels are changed in place and returned."""
-    ids, size = np.unique(label, return_counts=True)
-    big = ids[size > 2]
-    for pair in ids[size == 2]:
+    size = np.bincount(label, minlength=len(label))    # labels are instance indices
+    if not (size == 2).any():
+        return label
+    cams = np.zeros((len(label), num_views), bool)     # cameras of each cluster, by label
+    cams[label, view] = True
+    big = np.flatnonzero(size > 2)
+    for pair in np.flatnonzero(size == 2):
         members = np.flatnonzero(label == pair)
         target = []
         for m in members:
@@ -231,8 +237,11 @@ def associate(points2d, cameras, scores=None, config=None):
     if w.shape != (V, N, C):
         raise ValueError(f'scores must have shape {(V, N, C)}, got {w.shape}')
     rig = stack_cameras(cameras)
-    # NaN scores compare False: missing
-    present = np.isfinite(pts).all(-1) & (w >= config.confidence_threshold) & (w > 0)
+    present = np.isfinite(pts).all(-1)
+    if scores is not None:  # NaN scores compare False: missing
+        present &= (w >= config.confidence_threshold) & (w > 0)
+    elif not 1.0 >= config.confidence_threshold:
+        present[...] = False
     ideal = undistort_views(rig, np.where(present[..., None], pts, np.nan)
                             .reshape(V, N * C, 2)).reshape(V, N, C, 2)
     present &= np.isfinite(ideal).all(-1)
@@ -257,13 +266,11 @@ def associate(points2d, cameras, scores=None, config=None):
     instance = np.full((S, V), -1)
     s_idx, m_idx = np.nonzero(member)
     instance[s_idx, view[m_idx]] = slot[m_idx]
-    seen = instance >= 0
-    take = np.maximum(instance, 0).T                                  # (V, S)
-    sub_pts = pts[np.arange(V)[:, None], take]                        # (V, S, C, 2)
-    sub_w = np.where(present[np.arange(V)[:, None], take] & seen.T[..., None],
-                     w[np.arange(V)[:, None], take], 0.0)
-    sub_pts = np.where(sub_w[..., None] > 0, sub_pts, np.nan)
-    sub_ideal = np.where(sub_w[..., None] > 0, ideal[np.arange(V)[:, None], take], np.nan)
+    rows, take = np.arange(V)[:, None], np.maximum(instance, 0).T     # (V, S)
+    keep = (present[rows, take] & (instance >= 0).T[..., None])[..., None]  # (V, S, C, 1)
+    sub_w = np.where(keep[..., 0], w[rows, take], 0.0)                # (V, S, C)
+    sub_pts = np.where(keep, pts[rows, take], np.nan)                 # (V, S, C, 2)
+    sub_ideal = np.where(keep, ideal[rows, take], np.nan)
     X, inl, err = triangulate_robust(sub_pts.reshape(V, S * C, 2), cameras,
                                      sub_w.reshape(V, S * C),
                                      threshold_px=config.triangulation_px,

@@ -104,7 +104,8 @@ class SubjectTracker:
         matched_t = np.zeros(T, bool)
         if S and T:
             both = self.started[:, None] & finite[None]                 # (T, S, C)
-            d = np.linalg.norm(p[:, None] - np.where(finite[..., None], X, 0.0)[None], axis=-1)
+            diff = p[:, None] - np.where(finite[..., None], X, 0.0)[None]
+            d = np.sqrt(np.add.reduce(diff * diff, axis=-1))  # np.linalg.norm's numbers
             n = both.sum(-1)
             with np.errstate(invalid='ignore', divide='ignore'):
                 dist = np.where(both, d, 0.0).sum(-1) / n
@@ -133,16 +134,18 @@ class SubjectTracker:
         return out
 
     def _update(self, p, P, rows, X, finite):
-        """Kalman update of the tracks `rows` with their subjects X (k, C, 3)."""
+        """Kalman update of the tracks `rows` with their subjects X (k, C, 3) (finite (k, C):
+        their triangulated keypoints); p, P: the prediction (new arrays, updated in place)."""
         v = self.v
         pr, vr, Pr = p[rows].reshape(-1, 3), v[rows].reshape(-1, 3), P[:, rows].reshape(3, -1)
         Xr, fr = X.reshape(-1, 3), finite.reshape(-1)
         started = self.started[rows].reshape(-1)
-        y, S, _, measured = cv_kalman.innovation(pr, Pr, np.where(fr[:, None], Xr, np.nan),
-                                                 self._r2)
+        # innovation's `measured` is `fr`: a keypoint is finite in all 3 coordinates or missing
+        y, S, _, measured = cv_kalman.innovation(pr, Pr, Xr, self._r2)
         pr, vr, Pr = cv_kalman.update(pr, vr, Pr, y, S, measured & started)
-        cv_kalman.start(pr, vr, Pr, Xr, fr & ~started, self._r2, self._v0)
-        p, P = p.copy(), P.copy()
+        new = fr & ~started
+        if new.any():  # (after a track's first frames, rarely)
+            cv_kalman.start(pr, vr, Pr, Xr, new, self._r2, self._v0)
         p[rows], P[:, rows] = pr.reshape(-1, self.C, 3), Pr.reshape(3, -1, self.C)
         v = v.copy()
         v[rows] = vr.reshape(-1, self.C, 3)
