@@ -30,6 +30,9 @@ class IdentityScores:
     pred: int
     matched: int
     error: np.ndarray
+    found: np.ndarray
+    track: np.ndarray
+    distance: np.ndarray
 
 
 def _distance(A, B):
@@ -59,6 +62,8 @@ def identity_scores(gt_X, pred_X, pred_ids, threshold):
     switches = matched = 0
     err_sum, err_n = np.zeros(G), np.zeros(G)
     co = np.zeros((G, len(uids)), np.int64)
+    track = np.full((T, G), -1)
+    distance = np.full((T, G), np.nan)
     col = np.searchsorted(uids, np.maximum(pred_ids, 0))
     for t in range(T):     # the per-frame assignment (few subjects: a tiny matrix)
         ok = dist[t] <= threshold
@@ -70,6 +75,8 @@ def identity_scores(gt_X, pred_X, pred_ids, threshold):
         ids = pred_ids[t, cols]
         switches += int(((last[rows] >= 0) & (last[rows] != ids)).sum())
         last[rows] = ids
+        track[t, rows] = ids
+        distance[t, rows] = dist[t, rows, cols]
         matched += len(rows)
         err_sum[rows] += dist[t, rows, cols]
         err_n[rows] += 1
@@ -83,4 +90,5 @@ def identity_scores(gt_X, pred_X, pred_ids, threshold):
     with np.errstate(invalid='ignore', divide='ignore'):
         error = err_sum / err_n
     return IdentityScores(switches=switches, idf1=idf1, idtp=idtp, gt=n_gt, pred=n_pred,
-                          matched=matched, error=error)
+                          matched=matched, error=error, found=err_n.astype(np.int64),
+                          track=track, distance=distance)

@@ -22,6 +22,9 @@ def test_a_swap_halfway_is_two_switches_and_idf1_one_half():
     assert s.switches == 2 and s.idtp == 10 and s.gt == 20 and s.pred == 20
     assert s.idf1 == 0.5 and s.matched == 20
     np.testing.assert_allclose(s.error, 0.0)
+    np.testing.assert_array_equal(s.found, [10, 10])
+    np.testing.assert_array_equal(s.track[:, 0], [7] * 5 + [8] * 5)
+    np.testing.assert_allclose(s.distance, 0.0)
 
 
 def test_perfect_tracks_with_a_gap_and_a_stray_track():
@@ -37,3 +40,6 @@ def test_perfect_tracks_with_a_gap_and_a_stray_track():
     assert s.switches == 0 and s.idtp == 19 and s.gt == 20 and s.pred == 20
     assert s.idf1 == 2 * 19 / 40
     np.testing.assert_allclose(s.error, [0.05, 0.0], atol=1e-12)
+    np.testing.assert_array_equal(s.found, [10, 9])
+    assert s.track[3, 1] == -1 and np.isnan(s.distance[3, 1])
+    np.testing.assert_array_equal(s.track[:, 0], 0)
