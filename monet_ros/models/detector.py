@@ -9,7 +9,6 @@ import copy
 import numpy as np
 import torch
 
-from monet_ros.io.images import raw_to_rgb8
 from monet_ros.models.checkpoint import load_checkpoint
 from monet_ros.models.crop import crop_images, fit_boxes_to_aspect, full_frame_boxes
 from monet_ros.models.layers import fuse_for_inference
@@ -244,12 +243,9 @@ class Detector:
         boxes = self.boxes_for(cameras, boxes, keep_aspect)
         h_in, w_in = self.input_size
         with self.timer('crop'):
-            if all(e == 'rgb8' for e in encodings):
-                crops = crop_images(images, boxes, (w_in, h_in))
-            else:  # crop in the message's own layout, then convert the (small) crop
-                crops = np.stack([raw_to_rgb8(crop_images([image], box[None], (w_in, h_in))[0],
-                                              encoding)
-                                  for image, box, encoding in zip(images, boxes, encodings)])
+            # one batch of crops; each in the message's own layout, then only the (small)
+            # crop converted to RGB
+            crops = crop_images(images, boxes, (w_in, h_in), layouts=encodings)
         with self.timer('forward'):
             heatmaps = self.forward(crops)
         h, w = self.heatmap_size
