@@ -17,3 +17,14 @@ def threads_each(workers, cores=None):
     (bench/results/pipeline.md)."""
     cores = usable_cores() if cores is None else cores
     return max(1, cores // max(1, workers))
+
+
+def decode_threads(threads=0, cores=None):
+    """Threads decoding the views of one instant (io.jpeg_scale.CropDecoder): `threads`
+    when given (> 0), else the cores this process may use (usable_cores()). The decode runs
+    before the network's forward pass, never beside it, so it may use the cores the network
+    uses: a detector's `threads` (shared out between detector processes by threads_each)
+    bounds both."""
+    if threads > 0:
+        return int(threads)
+    return max(1, usable_cores() if cores is None else int(cores))

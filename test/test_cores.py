@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from monet_ros.cores import threads_each
+from monet_ros.cores import decode_threads, threads_each, usable_cores
 
 
 @pytest.mark.parametrize('workers, cores, expected', [
@@ -22,3 +22,10 @@ def test_usable_cores_is_the_affinity_mask():
     out = subprocess.run(['taskset', '-c', '0', sys.executable, '-c', code],
                          capture_output=True, text=True, check=True).stdout.split()
     assert out == ['1', '1']
+
+
+def test_decode_threads_is_the_given_count_else_the_usable_cores():
+    assert decode_threads(3, cores=16) == 3
+    assert decode_threads(0, cores=16) == 16
+    assert decode_threads(0, cores=0) == 1
+    assert decode_threads(0) == usable_cores()
