@@ -255,14 +255,22 @@ class Detector:
     def forward(self, crops):
         """(N, H, W, 3) uint8 RGB network-input crops -> (N, C, h, w) float32 numpy heatmaps,
         through the chosen backend (the same conversion as images_to_tensor, into the
-        pre-allocated input tensor)."""
+        pre-allocated input tensor).
+
+        The array's memory is channel-interleaved ((N, h, w, C) contiguous, seen as (N, C,
+        h, w)): the torch network's own channels-last output, and the layout of a heatmap
+        message (32FC<C>), so io.heatmaps_to_image_msg copies it only into the message
+        (a contiguous (N, C, h, w) result cost a copy here and a transposing one there)."""
         buffer = self.input_buffer(len(crops))
         with torch.inference_mode():
             source = torch.from_numpy(np.ascontiguousarray(crops)).to(buffer.device)
             buffer.copy_(source.permute(0, 3, 1, 2)).div_(255.0)
             if self.runner is not None:
-                return self.runner(buffer.numpy())
+                heatmaps = self.runner(buffer.numpy())
+                return np.ascontiguousarray(heatmaps.transpose(0, 2, 3, 1)).transpose(0, 3, 1, 2)
             with torch.autocast(self.device.type, dtype=torch.bfloat16,
                                 enabled=self.precision == 'bfloat16'):
                 heatmaps = self.model(buffer)[-1]
-        return heatmaps.float().contiguous().cpu().numpy()
+            # a no-op for the channels-last output of a CPU network
+            heatmaps = heatmaps.float().permute(0, 2, 3, 1).contiguous()
+        return heatmaps.cpu().numpy().transpose(0, 3, 1, 2)
