@@ -6,10 +6,10 @@ Stages (median over --repeats batches after a warm-up; ms per image):
   decode reduced   io.jpeg_scale.decode_for_crop: decoded at the crop's scale (1/s), one view
                    after the other
   decode parallel  the same decodes of the instant's views in parallel threads
-                   (io.jpeg_scale.CropDecoder with --decode-threads, as the detector node and
+                   (io.jpeg_scale.decode_views on --view-threads, as the detector node and
                    `monet process` decode)
   crop full        the Detector's crop of the full decodes (antialiased warp + BGR -> RGB,
-                   models.crop_images with layouts, as Detector.predict)
+                   models.crop_images with layouts on --view-threads, as Detector.predict)
   crop reduced     the same crop of the reduced decodes (same heatmap cameras)
   crop raw         the same crop of raw 640x480 rgb8 frames (a sensor_msgs/Image camera: no
                    decode, the message buffer cropped as it is)
@@ -27,7 +27,7 @@ int8 (onnxruntime, only with VNNI / AMX-INT8; calibrated on the bench's own crop
 Threads: --threads for torch and onnxruntime alike. The load average and CPU model are
 printed: on a shared machine every figure is inflated.
 Run: .venv/bin/python bench/detector_budget.py [--cameras 8 16] [--repeats 5] [--no-dds]
-     [--decode-threads N]
+     [--view-threads N]
 """
 import argparse
 import os
@@ -41,9 +41,10 @@ import cv2
 import numpy as np
 import torch
 
+from monet_ros.cores import ViewThreads
 from monet_ros.geometry import Camera
 from monet_ros.io.images import raw_to_rgb8
-from monet_ros.io.jpeg_scale import CropDecoder, decode_for_crop
+from monet_ros.io.jpeg_scale import decode_for_crop, decode_views
 from monet_ros.models import build_model
 from monet_ros.models.crop import crop_images
 from monet_ros.models.detector import Detector, bfloat16_native
@@ -113,16 +114,16 @@ def main(argv=None):
     parser.add_argument('--keypoints', type=int, default=14)
     parser.add_argument('--threads', type=int, default=2)
     parser.add_argument('--repeats', type=int, default=5)
-    parser.add_argument('--decode-threads', type=int, default=None,
-                        help='threads decoding the views in parallel (default --threads, as '
-                        'the detector node: cores.decode_threads)')
+    parser.add_argument('--view-threads', type=int, default=None,
+                        help='threads decoding and cropping the views in parallel (default '
+                        '--threads, as the detector node: cores.view_threads)')
     parser.add_argument('--no-dds', action='store_true', help='skip publish / DDS delivery')
     args = parser.parse_args(argv)
     torch.set_num_threads(args.threads)
-    decoder = CropDecoder(args.threads if args.decode_threads is None else args.decode_threads)
+    views_on = ViewThreads(args.threads if args.view_threads is None else args.view_threads)
     print(f'# {cpu_model()}; {os.cpu_count()} CPUs; load average at start '
-          f'{" ".join(f"{x:.2f}" for x in os.getloadavg())}; threads {args.threads}, decode '
-          f'threads {decoder.threads}; small '
+          f'{" ".join(f"{x:.2f}" for x in os.getloadavg())}; threads {args.threads}, view '
+          f'threads {views_on.threads}; small '
           f'net {args.input_size}x{args.input_size}, {args.keypoints} keypoints; '
           f'{WIDTH}x{HEIGHT} JPEG q90, full-frame crops; median of {args.repeats}')
     size = args.input_size
@@ -167,23 +168,23 @@ def main(argv=None):
             lambda views=views: [
                 decode_for_crop(d, c, b, (size, size)) for d, c, b in views], args.repeats) / V
         common['decode parallel'] = median_ms(
-            lambda views=views: decoder.decode(views, (size, size)), args.repeats) / V
-        parallel = decoder.decode(views, (size, size))
+            lambda views=views: decode_views(views, (size, size), views_on), args.repeats) / V
+        parallel = decode_views(views, (size, size), views_on)
         assert all(np.array_equal(p[0], r[0]) for p, r in zip(parallel, reduced))
         bgr, rgb = ['bgr8'] * V, ['rgb8'] * V
         common['crop full'] = median_ms(
-            lambda full=full, boxes=boxes, bgr=bgr: crop_images(full, boxes, (size, size),
-                                                                layouts=bgr),
+            lambda full=full, boxes=boxes, bgr=bgr: crop_images(
+                full, boxes, (size, size), layouts=bgr, threads=views_on),
             args.repeats) / V
         small_boxes = np.stack([r[3] for r in reduced])
         common['crop reduced'] = median_ms(
             lambda images=[r[0] for r in reduced], boxes=small_boxes, bgr=bgr: crop_images(
-                images, boxes, (size, size), layouts=bgr), args.repeats) / V
+                images, boxes, (size, size), layouts=bgr, threads=views_on), args.repeats) / V
         # raw rgb8 frames as an Image message's buffer (io.images.view_for_crop: no copy)
         raw = [raw_to_rgb8(f, 'bgr8').copy() for f in full]
         common['crop raw'] = median_ms(
-            lambda raw=raw, boxes=boxes, rgb=rgb: crop_images(raw, boxes, (size, size),
-                                                              layouts=rgb),
+            lambda raw=raw, boxes=boxes, rgb=rgb: crop_images(
+                raw, boxes, (size, size), layouts=rgb, threads=views_on),
             args.repeats) / V
         heat, heat_cams = probe.predict([r[0] for r in reduced], [r[2] for r in reduced],
                                         small_boxes, keep_aspect=False,
@@ -258,7 +259,7 @@ def main(argv=None):
               f'{bare / total_raw:.2f} |')
     print(f'\n# ms per image (DDS latency: per message, publish -> subscriber callback); '
           f'load average at the end {" ".join(f"{x:.2f}" for x in os.getloadavg())}')
-    decoder.close()
+    views_on.close()
     if publisher is not None:
         import rclpy
         rclpy.try_shutdown()

@@ -75,7 +75,7 @@ def add_arguments(parser):
                         'beside the checkpoint)')
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default) and of '
-                        'JPEG decoding (0 = the cores the process may use)')
+                        'decoding and cropping the views (0 = the cores the process may use)')
     add_precision_options(parser, 'the recording processed')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--export', default='csv,trc,nwb,npz',
@@ -147,16 +147,17 @@ def read_view(message, camera, reader, reduced_decode=True):
     return (None, problem) if problem is not None else ((image, layout), None)
 
 
-def crop_views(views, cameras, boxes, out_size, reader, decoder):
+def crop_views(views, cameras, boxes, out_size, reader, threads):
     """[(image, layout, camera, box) or None] to give Detector.predict for views read by
     read_view: an (array, layout) view as it is; the JPEG BagMessages decoded at their
-    crop's scale by `decoder` (io.jpeg_scale.CropDecoder, in parallel threads), or None
-    (counted in reader.report) when one does not decode."""
+    crop's scale (io.jpeg_scale.decode_views on `threads`, the Detector's view_threads), or
+    None (counted in reader.report) when one does not decode."""
+    from monet_ros.io.jpeg_scale import decode_views
     from monet_ros.io.reader import BagMessage
 
     jpegs = [i for i, view in enumerate(views) if isinstance(view, BagMessage)]
-    decoded = dict(zip(jpegs, decoder.decode(
-        [(views[i].msg.data, cameras[i], boxes[i]) for i in jpegs], out_size)))
+    decoded = dict(zip(jpegs, decode_views(
+        [(views[i].msg.data, cameras[i], boxes[i]) for i in jpegs], out_size, threads)))
     out = []
     for i, (view, camera, box) in enumerate(zip(views, cameras, boxes)):
         if i not in decoded:
@@ -203,7 +204,6 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     from monet_ros.geometry.units import rig_units as units_of
     from monet_ros.io import BagWriter, iter_multiview_frames, open_bag
     from monet_ros.io.export_results import ResultsCollector
-    from monet_ros.io.jpeg_scale import CropDecoder
     from monet_ros.io.multiview import image_topics
     from monet_ros.models import Detector
     from monet_ros.rig_select import load_node_rig, select_cameras
@@ -243,9 +243,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     collector = ResultsCollector(cameras, detector.keypoints)
     tracker = TrackedCrops(units=units)   # the detector node's defaults (track_* parameters)
     start = time.perf_counter()
-    # the JPEG views of an instant are decoded in parallel (`threads`: cores.decode_threads)
-    with atomic_output_dir(out) as staging, BagWriter(staging) as writer, \
-            CropDecoder(threads) as decoder:
+    with atomic_output_dir(out) as staging, BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6),
                                        decode=False)
         h_in, w_in = detector.input_size
@@ -272,7 +270,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
             boxes = detector.boxes_for(present, boxes)
             # JPEG views decoded at the crop's scale (the detector node's rule): their
             # camera and box become the reduced image's; the heatmap cameras do not change
-            views = crop_views(images, present, boxes, (w_in, h_in), reader, decoder)
+            # the views of an instant decoded (and cropped) in parallel, on `threads` threads
+            # (0 = the usable cores: cores.view_threads)
+            views = crop_views(images, present, boxes, (w_in, h_in), reader,
+                               detector.view_threads)
             keep = [v is not None for v in views]
             present = [c for c, k in zip(present, keep) if k]
             views = [v for v in views if v is not None]

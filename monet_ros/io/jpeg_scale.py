@@ -26,14 +26,12 @@ box at least the network input size on both axes, so the warp to the input never
 Images are returned in OpenCV's BGR order ('bgr8'): the detector converts only the crop
 (io.images.raw_to_rgb8), never the full frame.
 """
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import replace
 import math
 
 import cv2
 import numpy as np
 
-from monet_ros.cores import decode_threads
 from monet_ros.io.images import ImageDecodeError
 
 REDUCTIONS = (1, 2, 4, 8)
@@ -158,55 +156,29 @@ def decode_for_crop(data, camera, box, out_size, reduce=True):
     return image, 'bgr8', reduced_camera(camera, s), box, s
 
 
-class CropDecoder:
-    """Decode the JPEG views of one instant at their crops' scale (decode_for_crop) in
-    parallel threads: the one decoding step of the detector node and `monet process`.
 
-    cv2.imdecode releases the GIL, so V views on T threads take about V / T decodes' time;
-    each view is decoded by the same call as sequentially (bit-identical). threads: as
-    cores.decode_threads (0 = the cores this process may use; 1 = in the caller's thread,
-    no pool). The views are dealt out round-robin, one task per thread (the caller's
-    thread takes the first share), so a batch costs T - 1 hand-overs, not V."""
+def decode_views(views, out_size, threads=None, reduce=True):
+    """Decode the JPEG views of one instant at their crops' scale (decode_for_crop), in
+    parallel: the one decoding step of the detector node and `monet process`.
 
-    def __init__(self, threads=0):
-        self.threads = decode_threads(threads)
-        self._pool = None
+    views: sequence of (JPEG bytes, Camera, box); threads: a cores.ViewThreads (the
+    Detector's view_threads; None = one after the other). -> a list in the same order, each
+    decode_for_crop's (image, 'bgr8', camera, box, s) or the ImageDecodeError / ValueError
+    it raised for that view (one bad view never costs the others). Bit-identical to
+    sequential decodes (cv2.imdecode releases the GIL; each view is the same call)."""
+    views = list(views)
+    out = [None] * len(views)
 
-    def decode(self, views, out_size, reduce=True):
-        """views: sequence of (JPEG bytes, Camera, box) -> a list in the same order, each
-        decode_for_crop's (image, 'bgr8', camera, box, s) or the ImageDecodeError /
-        ValueError it raised for that view (one bad view never costs the others)."""
-        views = list(views)
-        out = [None] * len(views)
+    def one(i):
+        data, camera, box = views[i]
+        try:
+            out[i] = decode_for_crop(data, camera, box, out_size, reduce)
+        except ValueError as error:               # ImageDecodeError is a ValueError
+            out[i] = error
 
-        def share(first, step):
-            for i in range(first, len(views), step):
-                data, camera, box = views[i]
-                try:
-                    out[i] = decode_for_crop(data, camera, box, out_size, reduce)
-                except ValueError as error:        # ImageDecodeError is a ValueError
-                    out[i] = error
-
-        workers = min(self.threads, len(views))
-        if workers <= 1:
-            share(0, 1)
-            return out
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix='monet-decode')
-        futures = [self._pool.submit(share, k, workers) for k in range(1, workers)]
-        share(0, workers)
-        for future in futures:
-            future.result()            # re-raises anything but a view's decode error
-        return out
-
-    def close(self):
-        """Stop the threads (a later decode starts them again)."""
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+    if threads is None:
+        for i in range(len(views)):
+            one(i)
+    else:
+        threads.run(one, len(views))
+    return out

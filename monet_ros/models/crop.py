@@ -32,7 +32,7 @@ def full_frame_boxes(sizes, aspect):
     return fit_boxes_to_aspect(boxes, aspect)
 
 
-def crop_images(images, boxes, out_size, antialias=True, layouts=None):
+def crop_images(images, boxes, out_size, antialias=True, layouts=None, threads=None):
     """Crop and resize every image to out_size = (W_out, H_out) -> (N, H_out, W_out, 3) uint8.
 
     images: (N, H, W, 3) array or a sequence of (H_i, W_i, 3) arrays (cameras may differ);
@@ -45,6 +45,7 @@ def crop_images(images, boxes, out_size, antialias=True, layouts=None):
     (H, W, 3 | 4 | 1) arrays): each is cropped in its own layout and only the crop is
     converted to RGB (as io.images.raw_to_rgb8, by cv2.cvtColor into the output batch: a
     numpy channel flip of a 128 px crop took 81 us, cvtColor 2 us).
+    threads: a cores.ViewThreads to crop the images in parallel (the same result), or None.
     cv2.warpAffine with bilinear interpolation, constant 0 border.
     """
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
@@ -55,18 +56,25 @@ def crop_images(images, boxes, out_size, antialias=True, layouts=None):
     w_out, h_out = int(out_size[0]), int(out_size[1])
     channels = (3,) if layouts is not None else np.shape(images[0])[2:]
     out = np.empty((len(boxes), h_out, w_out) + channels, dtype=np.uint8)
-    for n, (image, box) in enumerate(zip(images, boxes)):
-        S = crop_transform(box, (w_out, h_out))
-        source = image
+
+    def crop(n):
+        S = crop_transform(boxes[n], (w_out, h_out))
+        source = images[n]
         if antialias:
-            source, S = _area_shrunk_region(image, box, S)
+            source, S = _area_shrunk_region(source, boxes[n], S)
         layout = 'rgb8' if layouts is None else layouts[n]
         # the crop in the image's own layout: straight into the batch when it is rgb8
         dst = out[n] if layout == 'rgb8' else None
-        crop = cv2.warpAffine(source, S[:2], (w_out, h_out), dst=dst, flags=cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        warped = cv2.warpAffine(source, S[:2], (w_out, h_out), dst=dst, flags=cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
         if dst is None:
-            _crop_to_rgb8(crop, layout, out[n])
+            _crop_to_rgb8(warped, layout, out[n])
+
+    if threads is None:
+        for n in range(len(boxes)):
+            crop(n)
+    else:
+        threads.run(crop, len(boxes))
     return out
 
 

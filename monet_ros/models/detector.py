@@ -9,6 +9,7 @@ import copy
 import numpy as np
 import torch
 
+from monet_ros.cores import ViewThreads
 from monet_ros.models.checkpoint import load_checkpoint
 from monet_ros.models.crop import crop_images, fit_boxes_to_aspect, full_frame_boxes
 from monet_ros.models.layers import fuse_for_inference
@@ -116,7 +117,9 @@ class Detector:
     available, else CPU. backend: 'torch' or 'onnxruntime' (the same network exported to
     ONNX, see monet_ros.models.onnx_backend; exported in memory here, or cached beside the
     checkpoint by from_checkpoint). threads: CPU threads of the onnxruntime session
-    (0 = its default; torch's are process-wide: torch.set_num_threads).
+    (0 = its default; torch's are process-wide: torch.set_num_threads) and of the per-view
+    work of an instant (view_threads, a cores.ViewThreads: the crops here, the JPEG
+    decodes of io.jpeg_scale.decode_views; 0 = the cores the process may use).
     precision: 'float32', or 'bfloat16' (torch backend only: the network runs under
     torch.autocast in bfloat16, 2-3x faster on CPUs with AVX512-BF16 / AMX; heatmaps are
     returned as float32 and differ from float32 inference by ~1e-2 of their peak), or
@@ -171,6 +174,7 @@ class Detector:
                            if checkpoint is not None else
                            OnnxRunner(export_onnx(cpu_model), self.device, threads))
         self._input = None  # pre-allocated network input, grown with the batch size
+        self.view_threads = ViewThreads(threads)   # crops (and decodes) of the views
         self.timer = StageTimer()  # 'crop' and 'forward' wall time of predict
 
     def input_buffer(self, n):
@@ -245,7 +249,8 @@ class Detector:
         with self.timer('crop'):
             # one batch of crops; each in the message's own layout, then only the (small)
             # crop converted to RGB
-            crops = crop_images(images, boxes, (w_in, h_in), layouts=encodings)
+            crops = crop_images(images, boxes, (w_in, h_in), layouts=encodings,
+                                threads=self.view_threads)
         with self.timer('forward'):
             heatmaps = self.forward(crops)
         h, w = self.heatmap_size

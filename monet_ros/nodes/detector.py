@@ -46,7 +46,7 @@ from monet_ros.io import (
 )
 from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
 from monet_ros.io.images import raw_to_rgb8, view_for_crop
-from monet_ros.io.jpeg_scale import CropDecoder, is_jpeg, jpeg_size
+from monet_ros.io.jpeg_scale import decode_views, is_jpeg, jpeg_size
 from monet_ros.models import CheckpointError, Detector
 from monet_ros.models.detector import PRECISIONS
 from monet_ros.models.device import check_device
@@ -132,8 +132,8 @@ class DetectorConfig:
                                         minimum=0.0)
     device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
     threads: int = setting(0, 'CPU threads of the network (torch and onnxruntime; 0 = their '
-                           'default) and of JPEG decoding (0 = the cores the process may '
-                           'use)', minimum=0, maximum=MAX_THREADS)
+                           'default) and of decoding and cropping the views of an instant (0 = '
+                           'the cores the process may use)', minimum=0, maximum=MAX_THREADS)
     backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
                            'exported to ONNX once, cached beside the checkpoint)',
                            choices=('torch', 'onnxruntime'))
@@ -240,9 +240,6 @@ class DetectorNode(Node):
         self.slots = camera_slots(config, self.get_name())
         self.detector = self.load_detector(config.model)
         self.model_sha256 = sha256_file(config.model)
-        # JPEG views of an instant decoded in parallel: `threads` threads (0: the cores
-        # this process may use; cores.decode_threads)
-        self.decoder = CropDecoder(config.threads)
         self.pubs = {}
         for slot in self.slots:
             if slot.image_topic.endswith('/compressed'):
@@ -284,12 +281,8 @@ class DetectorNode(Node):
             f'{[(s.name, self.resolve_topic_name(s.image_topic)) for s in self.slots]} with '
             f'{self.detector.metadata.get("architecture")} ({len(self.detector.keypoints)} '
             f'keypoints, heatmaps {self.detector.heatmap_size}) on {self.detector.device}, '
-            f'{self.detector.backend}, {self.detector.precision_note}; JPEG decode on '
-            f'{self.decoder.threads} thread(s)')
-
-    def destroy_node(self):
-        self.decoder.close()
-        return super().destroy_node()
+            f'{self.detector.backend}, {self.detector.precision_note}; decode and crop on '
+            f'{self.detector.view_threads.threads} thread(s)')
 
     @staticmethod
     def tracked_rule(config):
@@ -441,16 +434,17 @@ class DetectorNode(Node):
 
     def decode_crops(self, work, boxes):
         """Decode the JPEG views of `work` (decode gave them as 'jpeg') at the scale of their
-        crop (io.jpeg_scale.CropDecoder: 1/2, 1/4 or 1/8 when the crop shrinks that much, the
-        views in parallel threads); their camera and box become the reduced image's, so the
-        heatmap camera is unchanged.
+        crop (io.jpeg_scale.decode_views: 1/2, 1/4 or 1/8 when the crop shrinks that much, the
+        views in parallel on the detector's view_threads); their camera and box become the
+        reduced image's, so the heatmap camera is unchanged.
         -> (work, cameras, boxes) without the views that fail to decode (counted as bad)."""
         jpegs = [i for i, w in enumerate(work) if w[3] == 'jpeg']
         if not jpegs:
             return work, [w[4] for w in work], boxes
         h_in, w_in = self.detector.input_size
-        decoded = dict(zip(jpegs, self.decoder.decode(
-            [(work[i][1].data, work[i][4], boxes[i]) for i in jpegs], (w_in, h_in))))
+        decoded = dict(zip(jpegs, decode_views(
+            [(work[i][1].data, work[i][4], boxes[i]) for i in jpegs], (w_in, h_in),
+            self.detector.view_threads)))
         kept, kept_boxes = [], []
         for i, ((slot, msg, image, layout, camera), box) in enumerate(zip(work, boxes)):
             if i in decoded:

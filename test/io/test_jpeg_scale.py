@@ -7,13 +7,13 @@ from helpers.rigs import random_camera
 import numpy as np
 import pytest
 
-from monet_ros.cores import usable_cores
+from monet_ros.cores import ViewThreads
 from monet_ros.geometry import Camera
 from monet_ros.io.images import ImageDecodeError
 from monet_ros.io.jpeg_scale import (
-    CropDecoder,
     decode_for_crop,
     decode_jpeg,
+    decode_views,
     jpeg_size,
     reduced_camera,
     reduced_size,
@@ -171,10 +171,10 @@ def test_parallel_decode_is_bit_identical_to_sequential_cv2_decode(shared_data, 
     views = [(d, camera, b) for d, b in zip(data, boxes)]
     views.insert(3, (data[0][:2000], camera, boxes[0]))     # a truncated JPEG: its own error
     views.insert(5, (b'not a jpeg', camera, boxes[0]))
-    with CropDecoder(threads) as decoder:
-        results = decoder.decode(views, (128, 128))
-        again = decoder.decode(views, (128, 128))              # the pool is reused
-    assert decoder.threads == threads and len(results) == len(views)
+    with ViewThreads(threads) as pool:
+        results = decode_views(views, (128, 128), pool)
+        again = decode_views(views, (128, 128), pool)          # the pool is reused
+    assert pool.threads == threads and len(results) == len(views)
     flags = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2,
              4: cv2.IMREAD_REDUCED_COLOR_4, 8: cv2.IMREAD_REDUCED_COLOR_8}
     seen, failed = set(), 0
@@ -194,8 +194,4 @@ def test_parallel_decode_is_bit_identical_to_sequential_cv2_decode(shared_data, 
         np.testing.assert_array_equal(small_box, expected[3])
     assert failed == 2
     assert seen == {1, 2, 4, 8}
-
-
-def test_decoder_threads_default_to_the_usable_cores():
-    assert CropDecoder().threads == usable_cores()
-    assert CropDecoder(0).decode([], (128, 128)) == []
+    assert decode_views([], (128, 128), ViewThreads(2)) == []

@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from monet_ros.cores import ViewThreads
 from monet_ros.geometry import crop_transform
 from monet_ros.io.images import ImageDecodeError, raw_to_rgb8
 from monet_ros.models.crop import (
@@ -137,5 +138,11 @@ def test_crops_of_raw_layouts_are_the_crops_of_the_rgb_images():
                            (32, 32))
     assert got.shape == (5, 32, 32, 3) and got.dtype == np.uint8
     np.testing.assert_array_equal(got, expected)
+    with ViewThreads(3) as threads:                  # the views cropped in parallel: the same
+        np.testing.assert_array_equal(
+            crop_images(raw, boxes, (32, 32), layouts=layouts, threads=threads), expected)
+        np.testing.assert_array_equal(
+            crop_images(np.stack(rgb), boxes, (32, 32), threads=threads),
+            crop_images(np.stack(rgb), boxes, (32, 32)))
     with pytest.raises(ImageDecodeError, match='unsupported layout'):
         crop_images(raw[:1], boxes[:1], (32, 32), layouts=['yuv422'])
