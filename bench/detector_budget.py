@@ -24,8 +24,10 @@ parallel reduced decode and with raw input (no decode), each also as a fraction 
 forward pass of the same precision (chain / bare).
 Precisions: float32 (torch), bfloat16 (torch, only where native), float32 (onnxruntime) and
 int8 (onnxruntime, only with VNNI / AMX-INT8; calibrated on the bench's own crops).
-Threads: --threads for torch and onnxruntime alike. The load average and CPU model are
-printed: on a shared machine every figure is inflated.
+Threads: --threads for torch and onnxruntime alike, --view-threads for the decodes and crops
+(default --threads); OpenMP waits passively, as in the detector node (OMP_WAIT_POLICY=PASSIVE
+unless set). The load average and CPU model are printed: on a shared machine every figure is
+inflated.
 Run: .venv/bin/python bench/detector_budget.py [--cameras 8 16] [--repeats 5] [--no-dds]
      [--view-threads N]
 """
@@ -39,16 +41,12 @@ import time
 
 import cv2
 import numpy as np
-import torch
 
 from monet_ros.cores import ViewThreads
 from monet_ros.geometry import Camera
 from monet_ros.io.images import raw_to_rgb8
 from monet_ros.io.jpeg_scale import decode_for_crop, decode_views
-from monet_ros.models import build_model
-from monet_ros.models.crop import crop_images
-from monet_ros.models.detector import Detector, bfloat16_native
-from monet_ros.models.quantize import cpu_int8_feature
+from monet_ros.nodes import passive_openmp
 
 WIDTH, HEIGHT = 640, 480
 
@@ -119,11 +117,21 @@ def main(argv=None):
                         '--threads, as the detector node: cores.view_threads)')
     parser.add_argument('--no-dds', action='store_true', help='skip publish / DDS delivery')
     args = parser.parse_args(argv)
+    # OpenMP threads wait passively, as in the detector node (monet_ros.nodes): before torch
+    # loads. Spinning ones (OpenMP's default) took the cores from ONNX Runtime's and the
+    # decode threads, and from the whole chain on a shared machine.
+    passive_openmp()
+    import torch
+
+    from monet_ros.models import build_model
+    from monet_ros.models.crop import crop_images
+    from monet_ros.models.detector import Detector, bfloat16_native
+    from monet_ros.models.quantize import cpu_int8_feature
     torch.set_num_threads(args.threads)
     views_on = ViewThreads(args.threads if args.view_threads is None else args.view_threads)
     print(f'# {cpu_model()}; {os.cpu_count()} CPUs; load average at start '
           f'{" ".join(f"{x:.2f}" for x in os.getloadavg())}; threads {args.threads}, view '
-          f'threads {views_on.threads}; small '
+          f'threads {views_on.threads}, OMP_WAIT_POLICY {os.environ["OMP_WAIT_POLICY"]}; small '
           f'net {args.input_size}x{args.input_size}, {args.keypoints} keypoints; '
           f'{WIDTH}x{HEIGHT} JPEG q90, full-frame crops; median of {args.repeats}')
     size = args.input_size
