@@ -19,7 +19,6 @@ def threads_each(workers, cores=None):
     return max(1, cores // max(1, workers))
 
 
-
 def view_threads(threads=0, cores=None):
     """Threads for the per-view work of one instant (ViewThreads: JPEG decodes, crops):
     `threads` when given (> 0), else the cores this process may use (usable_cores()). That

@@ -156,7 +156,6 @@ def decode_for_crop(data, camera, box, out_size, reduce=True):
     return image, 'bgr8', reduced_camera(camera, s), box, s
 
 
-
 def decode_views(views, out_size, threads=None, reduce=True):
     """Decode the JPEG views of one instant at their crops' scale (decode_for_crop), in
     parallel: the one decoding step of the detector node and `monet process`.
