@@ -3,20 +3,33 @@ into its stages, per image, for each precision, against the bare forward-pass ra
 
 Stages (median over --repeats batches after a warm-up; ms per image):
   decode full      cv2.imdecode of every 640x480 JPEG at full size (BGR)
-  decode reduced   io.jpeg_scale.decode_for_crop: decoded at the crop's scale (1/s)
-  crop full        the Detector's crop of the full decodes (antialiased warp + BGR -> RGB)
+  decode reduced   io.jpeg_scale.decode_for_crop: decoded at the crop's scale (1/s), one view
+                   after the other
+  decode parallel  the same decodes of the instant's views in parallel threads
+                   (io.jpeg_scale.decode_views on --view-threads, as the detector node and
+                   `monet process` decode)
+  crop full        the Detector's crop of the full decodes (antialiased warp + BGR -> RGB,
+                   models.crop_images with layouts on --view-threads, as Detector.predict)
   crop reduced     the same crop of the reduced decodes (same heatmap cameras)
+  crop raw         the same crop of raw 640x480 rgb8 frames (a sensor_msgs/Image camera: no
+                   decode, the message buffer cropped as it is)
   forward          Detector.forward: uint8 crops -> float input -> network -> numpy heatmaps
   bare forward     the network alone on a ready float input (torch model / ONNX session):
                    the denominator; every throughput is also given as a fraction of it
   encode           heatmaps -> sensor_msgs/Image (io.heatmaps_to_image_msg) + camera_info
   publish          rclpy publish of those messages to one subscriber in another process
   DDS delivery     publish -> callback in that subscriber (header stamp = wall clock), median
+Chains (images/s): decode + crop + forward + encode + publish, with the full, reduced,
+parallel reduced decode and with raw input (no decode), each also as a fraction of the bare
+forward pass of the same precision (chain / bare).
 Precisions: float32 (torch), bfloat16 (torch, only where native), float32 (onnxruntime) and
 int8 (onnxruntime, only with VNNI / AMX-INT8; calibrated on the bench's own crops).
-Threads: --threads for torch and onnxruntime alike. The load average and CPU model are
-printed: on a shared machine every figure is inflated.
+Threads: --threads for torch and onnxruntime alike, --view-threads for the decodes and crops
+(default --threads); OpenMP waits passively, as in the detector node (OMP_WAIT_POLICY=PASSIVE
+unless set). The load average and CPU model are printed: on a shared machine every figure is
+inflated.
 Run: .venv/bin/python bench/detector_budget.py [--cameras 8 16] [--repeats 5] [--no-dds]
+     [--view-threads N]
 """
 import argparse
 import os
@@ -28,15 +41,12 @@ import time
 
 import cv2
 import numpy as np
-import torch
 
+from monet_ros.cores import ViewThreads
 from monet_ros.geometry import Camera
 from monet_ros.io.images import raw_to_rgb8
-from monet_ros.io.jpeg_scale import decode_for_crop
-from monet_ros.models import build_model
-from monet_ros.models.crop import crop_images
-from monet_ros.models.detector import Detector, bfloat16_native
-from monet_ros.models.quantize import cpu_int8_feature
+from monet_ros.io.jpeg_scale import decode_for_crop, decode_views
+from monet_ros.nodes import passive_openmp
 
 WIDTH, HEIGHT = 640, 480
 
@@ -102,11 +112,26 @@ def main(argv=None):
     parser.add_argument('--keypoints', type=int, default=14)
     parser.add_argument('--threads', type=int, default=2)
     parser.add_argument('--repeats', type=int, default=5)
+    parser.add_argument('--view-threads', type=int, default=None,
+                        help='threads decoding and cropping the views in parallel (default '
+                        '--threads, as the detector node: cores.view_threads)')
     parser.add_argument('--no-dds', action='store_true', help='skip publish / DDS delivery')
     args = parser.parse_args(argv)
+    # OpenMP threads wait passively, as in the detector node (monet_ros.nodes): before torch
+    # loads. Spinning ones (OpenMP's default) took the cores from ONNX Runtime's and the
+    # decode threads, and from the whole chain on a shared machine.
+    passive_openmp()
+    import torch
+
+    from monet_ros.models import build_model
+    from monet_ros.models.crop import crop_images
+    from monet_ros.models.detector import Detector, bfloat16_native
+    from monet_ros.models.quantize import cpu_int8_feature
     torch.set_num_threads(args.threads)
+    views_on = ViewThreads(args.threads if args.view_threads is None else args.view_threads)
     print(f'# {cpu_model()}; {os.cpu_count()} CPUs; load average at start '
-          f'{" ".join(f"{x:.2f}" for x in os.getloadavg())}; threads {args.threads}; small '
+          f'{" ".join(f"{x:.2f}" for x in os.getloadavg())}; threads {args.threads}, view '
+          f'threads {views_on.threads}, OMP_WAIT_POLICY {os.environ["OMP_WAIT_POLICY"]}; small '
           f'net {args.input_size}x{args.input_size}, {args.keypoints} keypoints; '
           f'{WIDTH}x{HEIGHT} JPEG q90, full-frame crops; median of {args.repeats}')
     size = args.input_size
@@ -150,14 +175,24 @@ def main(argv=None):
         common['decode reduced'] = median_ms(
             lambda views=views: [
                 decode_for_crop(d, c, b, (size, size)) for d, c, b in views], args.repeats) / V
+        common['decode parallel'] = median_ms(
+            lambda views=views: decode_views(views, (size, size), views_on), args.repeats) / V
+        parallel = decode_views(views, (size, size), views_on)
+        assert all(np.array_equal(p[0], r[0]) for p, r in zip(parallel, reduced))
+        bgr, rgb = ['bgr8'] * V, ['rgb8'] * V
         common['crop full'] = median_ms(
-            lambda full=full, boxes=boxes: [
-                raw_to_rgb8(c, 'bgr8') for c in crop_images(full, boxes, (size, size))],
+            lambda full=full, boxes=boxes, bgr=bgr: crop_images(
+                full, boxes, (size, size), layouts=bgr, threads=views_on),
             args.repeats) / V
         small_boxes = np.stack([r[3] for r in reduced])
         common['crop reduced'] = median_ms(
-            lambda images=[r[0] for r in reduced], boxes=small_boxes: [
-                raw_to_rgb8(c, 'bgr8') for c in crop_images(images, boxes, (size, size))],
+            lambda images=[r[0] for r in reduced], boxes=small_boxes, bgr=bgr: crop_images(
+                images, boxes, (size, size), layouts=bgr, threads=views_on), args.repeats) / V
+        # raw rgb8 frames as an Image message's buffer (io.images.view_for_crop: no copy)
+        raw = [raw_to_rgb8(f, 'bgr8').copy() for f in full]
+        common['crop raw'] = median_ms(
+            lambda raw=raw, boxes=boxes, rgb=rgb: crop_images(
+                raw, boxes, (size, size), layouts=rgb, threads=views_on),
             args.repeats) / V
         heat, heat_cams = probe.predict([r[0] for r in reduced], [r[2] for r in reduced],
                                         small_boxes, keep_aspect=False,
@@ -210,22 +245,29 @@ def main(argv=None):
                 bare = median_ms(bare_torch, args.repeats) / V
             rows.append((V, name, common, forward, bare))
     print()
-    print('| cameras | precision | decode full | decode reduced | crop full | crop reduced | '
-          'forward | bare forward | encode | publish | DDS latency | images/s full decode | '
-          'images/s reduced | bare forward images/s | reduced rate / bare rate |')
-    print('|' + '---|' * 15)
+    print('| cameras | precision | decode full | decode reduced | decode parallel | crop full | '
+          'crop reduced | crop raw | forward | bare forward | encode | publish | DDS latency | '
+          'images/s full decode | images/s reduced | images/s parallel decode | images/s raw | '
+          'bare forward images/s | reduced / bare | parallel decode / bare | raw / bare |')
+    print('|' + '---|' * 21)
     for V, name, c, forward, bare in rows:
-        tail = c.get('publish', 0.0)
-        total_full = c['decode full'] + c['crop full'] + forward + c['encode'] + tail
-        total_reduced = c['decode reduced'] + c['crop reduced'] + forward + c['encode'] + tail
+        tail = forward + c['encode'] + c.get('publish', 0.0)
+        total_full = c['decode full'] + c['crop full'] + tail
+        total_reduced = c['decode reduced'] + c['crop reduced'] + tail
+        total_parallel = c['decode parallel'] + c['crop reduced'] + tail
+        total_raw = c['crop raw'] + tail
         dds = c.get('DDS delivery (latency)', float('nan'))
         print(f'| {V} | {name} | {c["decode full"]:.3f} | {c["decode reduced"]:.3f} | '
-              f'{c["crop full"]:.3f} | {c["crop reduced"]:.3f} | {forward:.3f} | {bare:.3f} | '
+              f'{c["decode parallel"]:.3f} | {c["crop full"]:.3f} | {c["crop reduced"]:.3f} | '
+              f'{c["crop raw"]:.3f} | {forward:.3f} | {bare:.3f} | '
               f'{c["encode"]:.3f} | {c.get("publish", float("nan")):.3f} | {dds:.2f} ms | '
-              f'{1e3 / total_full:.0f} | {1e3 / total_reduced:.0f} | {1e3 / bare:.0f} | '
-              f'{bare / total_reduced:.2f} |')
+              f'{1e3 / total_full:.0f} | {1e3 / total_reduced:.0f} | '
+              f'{1e3 / total_parallel:.0f} | {1e3 / total_raw:.0f} | {1e3 / bare:.0f} | '
+              f'{bare / total_reduced:.2f} | {bare / total_parallel:.2f} | '
+              f'{bare / total_raw:.2f} |')
     print(f'\n# ms per image (DDS latency: per message, publish -> subscriber callback); '
           f'load average at the end {" ".join(f"{x:.2f}" for x in os.getloadavg())}')
+    views_on.close()
     if publisher is not None:
         import rclpy
         rclpy.try_shutdown()

@@ -17,3 +17,65 @@ def threads_each(workers, cores=None):
     (bench/results/pipeline.md)."""
     cores = usable_cores() if cores is None else cores
     return max(1, cores // max(1, workers))
+
+
+def view_threads(threads=0, cores=None):
+    """Threads for the per-view work of one instant (ViewThreads: JPEG decodes, crops):
+    `threads` when given (> 0), else the cores this process may use (usable_cores()). That
+    work runs before the network's forward pass, never beside it, so it may use the cores
+    the network uses: a detector's `threads` (shared out between detector processes by
+    threads_each) bounds both."""
+    if threads > 0:
+        return int(threads)
+    return max(1, usable_cores() if cores is None else int(cores))
+
+
+class ViewThreads:
+    """Run the per-view work of one instant on view_threads(threads) threads: OpenCV's
+    decode, resize and warp release the GIL, so V views on T threads take about V / T
+    views' time, each computed by the same calls as sequentially (bit-identical).
+
+    The views are dealt out round-robin, one task per thread, the caller's thread taking
+    the first share: a batch costs T - 1 hand-overs, not V. 1 thread: no pool at all. The
+    pool's threads start on first use and end with close() or when it is garbage."""
+
+    def __init__(self, threads=0):
+        self.threads = view_threads(threads)
+        self._pool = None
+
+    def run(self, work, n):
+        """work(i) for i in range(n); returns when every thread's share is done. An exception
+        ends its thread's share and is re-raised here once the others are done (a caller
+        that must not lose the other views catches its own, as io.jpeg_scale.decode_views)."""
+        workers = min(self.threads, n)
+        if workers <= 1:
+            for i in range(n):
+                work(i)
+            return
+        if self._pool is None:
+            from concurrent.futures import ThreadPoolExecutor
+            self._pool = ThreadPoolExecutor(self.threads - 1, thread_name_prefix='monet-views')
+
+        def share(first):
+            for i in range(first, n, workers):
+                work(i)
+        futures = [self._pool.submit(share, k) for k in range(1, workers)]
+        try:
+            share(0)
+        finally:
+            for future in futures:
+                future.exception()              # wait for every share, even after an error
+        for future in futures:
+            future.result()
+
+    def close(self):
+        """Stop the threads (a later run starts them again)."""
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from monet_ros.cores import threads_each
+from monet_ros.cores import ViewThreads, threads_each, usable_cores, view_threads
 
 
 @pytest.mark.parametrize('workers, cores, expected', [
@@ -22,3 +22,28 @@ def test_usable_cores_is_the_affinity_mask():
     out = subprocess.run(['taskset', '-c', '0', sys.executable, '-c', code],
                          capture_output=True, text=True, check=True).stdout.split()
     assert out == ['1', '1']
+
+
+def test_view_threads_are_the_given_count_else_the_usable_cores():
+    assert view_threads(3, cores=16) == 3
+    assert view_threads(0, cores=16) == 16
+    assert view_threads(0, cores=0) == 1
+    assert view_threads(0) == usable_cores() == ViewThreads().threads
+
+
+@pytest.mark.parametrize('threads', [1, 2, 3, 8])
+def test_view_threads_run_every_view_once_and_reraise_an_error(threads):
+    with ViewThreads(threads) as pool:
+        for n in (0, 1, 5, 17):
+            done = []
+            pool.run(done.append, n)        # list.append is atomic
+            assert sorted(done) == list(range(n))
+
+        def work(i):
+            if i == 4:
+                raise ValueError('view 4')
+        with pytest.raises(ValueError, match='view 4'):
+            pool.run(work, 9)
+        done = []
+        pool.run(done.append, 6)            # still usable after an error
+        assert sorted(done) == list(range(6))

@@ -78,8 +78,9 @@ def add_arguments(parser):
                         help='detector inference backend (onnxruntime: exported once, cached '
                         'beside the checkpoint)')
     parser.add_argument('--threads', type=int, default=0,
-                        help='CPU threads of the network in each detector process (0 = the '
-                        'backend default with one process, the cores shared out with several)')
+                        help='CPU threads of the network and of decoding and cropping the views '
+                        'in each detector process (0 = the backend default and the cores '
+                        'with one process, the cores shared out with several)')
     add_precision_options(parser, '--bag')
     parser.add_argument('--workdir', help='where the demo recording and model are cached '
                         '(default: ~/.cache/monet_ros/demo)')

@@ -82,7 +82,8 @@ def add_arguments(parser):
                         help='detector inference backend (onnxruntime: exported once, cached '
                         'beside the checkpoint)')
     parser.add_argument('--threads', type=int, default=0,
-                        help='CPU threads of the network (0 = the backend default)')
+                        help='CPU threads of the network (0 = the backend default) and of '
+                        'decoding and cropping the views (0 = the cores the process may use)')
     add_precision_options(parser, 'the recording processed')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
     parser.add_argument('--export', default=None,
@@ -123,11 +124,8 @@ class RunningMean:
 
 
 def view_problem(image, camera):
-    """Why a decoded view cannot go to the detector (None when it can): the rig's size and
-    a grey or 3-channel image (any bit depth: io.images.to_rgb8 converts it, as live)."""
-    image = np.asarray(image)
-    if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3)):
-        return f'image shape {image.shape} (expected {camera.height}x{camera.width} grey or rgb)'
+    """Why a view read by io.images.view_for_crop cannot go to the detector (None when it
+    can): the rig's size."""
     if image.shape[:2] != (camera.height, camera.width):
         return (f'image is {image.shape[1]}x{image.shape[0]}, the rig says '
                 f'{camera.width}x{camera.height}')
@@ -135,13 +133,13 @@ def view_problem(image, camera):
 
 
 def read_view(message, camera, reader, reduced_decode=True):
-    """(image, problem) of one view's BagMessage: a JPEG CompressedImage stays its BagMessage
-    when reduced_decode (only its header is read: crop_view decodes it at the crop's scale),
-    anything else is decoded (to rgb8, the detector node's rule). image None: the view is
-    left out; problem: why it is skipped (counted per camera), None for a view that does not
-    decode (counted in reader.report, as iter_multiview_frames does)."""
-    from monet_ros.io import any_image_to_numpy
-    from monet_ros.io.images import to_rgb8
+    """(view, problem) of one view's BagMessage: a JPEG CompressedImage stays its BagMessage
+    when reduced_decode (only its header is read: crop_views decodes it at the crop's scale),
+    anything else is (array, layout) of io.images.view_for_crop (the detector node's rule:
+    the raw buffer, converted to RGB only after cropping). view None: the view is left out;
+    problem: why it is skipped (counted per camera), None for a view that does not decode
+    (counted in reader.report, as iter_multiview_frames does)."""
+    from monet_ros.io.images import view_for_crop
     from monet_ros.io.jpeg_scale import is_jpeg, jpeg_size
 
     msg = message.msg
@@ -152,30 +150,35 @@ def read_view(message, camera, reader, reduced_decode=True):
                 return None, (f'image is {width}x{height}, the rig says '
                               f'{camera.width}x{camera.height}')
             return message, None
-        image = any_image_to_numpy(msg)
+        image, layout = view_for_crop(msg)
     except Exception as exc:    # noqa: BLE001 - a bad image costs only its view
         reader.report.skip(message.topic, f'image decode failed: {exc}')
         return None, None
     problem = view_problem(image, camera)
-    return (None, problem) if problem is not None else (to_rgb8(image), None)
+    return (None, problem) if problem is not None else ((image, layout), None)
 
 
-def crop_view(image, camera, box, out_size, reader):
-    """(image, encoding, camera, box) to give Detector.predict for a view read by read_view:
-    an rgb8 array as it is; a JPEG BagMessage decoded at the crop's scale
-    (io.jpeg_scale.decode_for_crop), or None (counted in reader.report) when it does not
-    decode."""
-    from monet_ros.io.jpeg_scale import decode_for_crop
+def crop_views(views, cameras, boxes, out_size, reader, threads):
+    """[(image, layout, camera, box) or None] to give Detector.predict for views read by
+    read_view: an (array, layout) view as it is; the JPEG BagMessages decoded at their
+    crop's scale (io.jpeg_scale.decode_views on `threads`, the Detector's view_threads), or
+    None (counted in reader.report) when one does not decode."""
+    from monet_ros.io.jpeg_scale import decode_views
+    from monet_ros.io.reader import BagMessage
 
-    if isinstance(image, np.ndarray):
-        return image, 'rgb8', camera, box
-    try:
-        decoded, layout, camera, box, _ = decode_for_crop(image.msg.data, camera, box,
-                                                          out_size)
-    except ValueError as exc:
-        reader.report.skip(image.topic, f'image decode failed: {exc}')
-        return None
-    return decoded, layout, camera, box
+    jpegs = [i for i, view in enumerate(views) if isinstance(view, BagMessage)]
+    decoded = dict(zip(jpegs, decode_views(
+        [(views[i].msg.data, cameras[i], boxes[i]) for i in jpegs], out_size, threads)))
+    out = []
+    for i, (view, camera, box) in enumerate(zip(views, cameras, boxes)):
+        if i not in decoded:
+            out.append((*view, camera, box))
+        elif isinstance(decoded[i], ValueError):
+            reader.report.skip(view.topic, f'image decode failed: {decoded[i]}')
+            out.append(None)
+        else:
+            out.append(decoded[i][:4])
+    return out
 
 
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
@@ -252,6 +255,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                               f'the model {model}: {list(detector.keypoints)}')
     reader = open_bag(bag)
     topics = image_topics(reader, cameras, bag)
+
     by_name = {cam.name: cam for cam in cameras}
     figures = dict(frames=0, views=0, missing_views=0, skipped_views=Counter(),
                    skip_reasons={}, seconds=0.0)
@@ -290,8 +294,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
             boxes = detector.boxes_for(present, boxes)
             # JPEG views decoded at the crop's scale (the detector node's rule): their
             # camera and box become the reduced image's; the heatmap cameras do not change
-            views = [crop_view(image, camera, box, (w_in, h_in), reader)
-                     for image, camera, box in zip(images, present, boxes)]
+            # the views of an instant decoded (and cropped) in parallel, on `threads` threads
+            # (0 = the usable cores: cores.view_threads)
+            views = crop_views(images, present, boxes, (w_in, h_in), reader,
+                               detector.view_threads)
             keep = [v is not None for v in views]
             present = [c for c, k in zip(present, keep) if k]
             views = [v for v in views if v is not None]

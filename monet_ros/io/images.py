@@ -219,6 +219,39 @@ def image_for_crop(msg):
     return image_to_numpy(msg), 'rgb8'
 
 
+def view_for_crop(msg):
+    """(array (H, W, ch) uint8, layout) of an Image or CompressedImage message for the
+    detector's crop, converted to RGB only after cropping (raw_to_rgb8(crop, layout)): the
+    one rule of the detector node and `monet process` for views not decoded at the crop's
+    scale (io.jpeg_scale).
+
+    An Image in a CROPPABLE encoding is its message buffer (image_for_crop, no copy); a
+    CompressedImage is OpenCV's decode as it comes (8-bit: 'bgr8', 'bgra8' or 'mono8', no
+    full-frame colour conversion); anything else (16-bit, float, bayer, yuv) is converted to
+    rgb8 (to_rgb8). Grey images are (H, W, 1) 'mono8'. Raises ImageDecodeError when the
+    message does not decode."""
+    if hasattr(msg, 'format') and not hasattr(msg, 'encoding'):
+        if 'compresseddepth' in str(msg.format).lower():
+            raise ImageDecodeError(f'unsupported compressed image format {msg.format!r}')
+        buf = np.frombuffer(msg.data, np.uint8)
+        image = cv2.imdecode(buf, cv2.IMREAD_UNCHANGED) if buf.size else None
+        if image is None:
+            raise ImageDecodeError(f'compressed image ({msg.format!r}, {buf.size} bytes) '
+                                   'does not decode')
+        if image.ndim == 2:
+            image = image[..., None]
+        layout = {1: 'mono8', 3: 'bgr8', 4: 'bgra8'}.get(image.shape[2])
+        if image.dtype != np.uint8 or layout is None:
+            image, layout = to_rgb8(compressed_image_to_numpy(msg)), 'rgb8'
+    else:
+        image, layout = image_for_crop(msg)
+        if layout == 'rgb8' and (image.dtype != np.uint8 or image.ndim != 3):
+            image = to_rgb8(image)        # grey / 16-bit / float -> the network's rgb8
+    if image.ndim == 2:
+        image, layout = image[..., None], 'mono8'
+    return image, layout
+
+
 def raw_to_rgb8(array, layout):
     """(H, W, ch) uint8 pixels in `layout` (a CROPPABLE encoding) -> (H, W, 3) uint8 rgb."""
     arr = np.asarray(array)

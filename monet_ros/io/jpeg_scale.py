@@ -154,3 +154,30 @@ def decode_for_crop(data, camera, box, out_size, reduce=True):
                                f'expected {expected[0]}x{expected[1]}')
     box = np.asarray(box, np.float64).reshape(4) / s
     return image, 'bgr8', reduced_camera(camera, s), box, s
+
+
+def decode_views(views, out_size, threads=None, reduce=True):
+    """Decode the JPEG views of one instant at their crops' scale (decode_for_crop), in
+    parallel: the one decoding step of the detector node and `monet process`.
+
+    views: sequence of (JPEG bytes, Camera, box); threads: a cores.ViewThreads (the
+    Detector's view_threads; None = one after the other). -> a list in the same order, each
+    decode_for_crop's (image, 'bgr8', camera, box, s) or the ImageDecodeError / ValueError
+    it raised for that view (one bad view never costs the others). Bit-identical to
+    sequential decodes (cv2.imdecode releases the GIL; each view is the same call)."""
+    views = list(views)
+    out = [None] * len(views)
+
+    def one(i):
+        data, camera, box = views[i]
+        try:
+            out[i] = decode_for_crop(data, camera, box, out_size, reduce)
+        except ValueError as error:               # ImageDecodeError is a ValueError
+            out[i] = error
+
+    if threads is None:
+        for i in range(len(views)):
+            one(i)
+    else:
+        threads.run(one, len(views))
+    return out

@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from monet_ros.geometry import crop_transform
+from monet_ros.io.images import raw_to_rgb8
 
 
 def fit_boxes_to_aspect(boxes, aspect):
@@ -31,7 +32,7 @@ def full_frame_boxes(sizes, aspect):
     return fit_boxes_to_aspect(boxes, aspect)
 
 
-def crop_images(images, boxes, out_size, antialias=True):
+def crop_images(images, boxes, out_size, antialias=True, layouts=None, threads=None):
     """Crop and resize every image to out_size = (W_out, H_out) -> (N, H_out, W_out, 3) uint8.
 
     images: (N, H, W, 3) array or a sequence of (H_i, W_i, 3) arrays (cameras may differ);
@@ -39,21 +40,55 @@ def crop_images(images, boxes, out_size, antialias=True):
     region is first block-averaged by power-of-two factors (2x2 means, cv2.resize INTER_AREA)
     so that the warp shrinks by less than 2x, and the warp is re-expressed in that region's
     pixels, so the geometry S is unchanged.
+    layouts: None (the images are as they come, e.g. all rgb8) or, per image, the channel
+    layout of an io.images.CROPPABLE buffer ('rgb8', 'bgr8', 'rgba8', 'bgra8', 'mono8' with
+    (H, W, 3 | 4 | 1) arrays): each is cropped in its own layout and only the crop is
+    converted to RGB (as io.images.raw_to_rgb8, by cv2.cvtColor into the output batch: a
+    numpy channel flip of a 128 px crop took 81 us, cvtColor 2 us).
+    threads: a cores.ViewThreads to crop the images in parallel (the same result), or None.
     cv2.warpAffine with bilinear interpolation, constant 0 border.
     """
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 4)
     if len(images) != len(boxes):
         raise ValueError(f'crop_images: {len(images)} images but {len(boxes)} boxes')
+    if layouts is not None and len(layouts) != len(boxes):
+        raise ValueError(f'crop_images: {len(layouts)} layouts for {len(boxes)} images')
     w_out, h_out = int(out_size[0]), int(out_size[1])
-    out = np.empty((len(boxes), h_out, w_out) + np.shape(images[0])[2:], dtype=np.uint8)
-    for n, (image, box) in enumerate(zip(images, boxes)):
-        S = crop_transform(box, (w_out, h_out))
-        source = image
+    channels = (3,) if layouts is not None else np.shape(images[0])[2:]
+    out = np.empty((len(boxes), h_out, w_out) + channels, dtype=np.uint8)
+
+    def crop(n):
+        S = crop_transform(boxes[n], (w_out, h_out))
+        source = images[n]
         if antialias:
-            source, S = _area_shrunk_region(image, box, S)
-        cv2.warpAffine(source, S[:2], (w_out, h_out), dst=out[n], flags=cv2.INTER_LINEAR,
-                       borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+            source, S = _area_shrunk_region(source, boxes[n], S)
+        layout = 'rgb8' if layouts is None else layouts[n]
+        # the crop in the image's own layout: straight into the batch when it is rgb8
+        dst = out[n] if layout == 'rgb8' else None
+        warped = cv2.warpAffine(source, S[:2], (w_out, h_out), dst=dst, flags=cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        if dst is None:
+            _crop_to_rgb8(warped, layout, out[n])
+
+    if threads is None:
+        for n in range(len(boxes)):
+            crop(n)
+    else:
+        threads.run(crop, len(boxes))
     return out
+
+
+# io.images.raw_to_rgb8's channel shuffles as OpenCV conversions (the same bytes)
+_TO_RGB = {'bgr8': cv2.COLOR_BGR2RGB, 'rgba8': cv2.COLOR_RGBA2RGB, 'bgra8': cv2.COLOR_BGRA2RGB,
+           'mono8': cv2.COLOR_GRAY2RGB}
+
+
+def _crop_to_rgb8(crop, layout, out):
+    """Write raw_to_rgb8(crop, layout) into out (H, W, 3) uint8."""
+    if layout not in _TO_RGB:
+        out[...] = raw_to_rgb8(crop, layout)    # raises ImageDecodeError naming the layout
+        return
+    cv2.cvtColor(crop, _TO_RGB[layout], dst=out)
 
 
 def _integer_span(lo, hi, factor, limit):

@@ -9,7 +9,7 @@ import copy
 import numpy as np
 import torch
 
-from monet_ros.io.images import raw_to_rgb8
+from monet_ros.cores import ViewThreads
 from monet_ros.models.checkpoint import load_checkpoint
 from monet_ros.models.crop import crop_images, fit_boxes_to_aspect, full_frame_boxes
 from monet_ros.models.layers import fuse_for_inference
@@ -117,7 +117,9 @@ class Detector:
     available, else CPU. backend: 'torch' or 'onnxruntime' (the same network exported to
     ONNX, see monet_ros.models.onnx_backend; exported in memory here, or cached beside the
     checkpoint by from_checkpoint). threads: CPU threads of the onnxruntime session
-    (0 = its default; torch's are process-wide: torch.set_num_threads).
+    (0 = its default; torch's are process-wide: torch.set_num_threads) and of the per-view
+    work of an instant (view_threads, a cores.ViewThreads: the crops here, the JPEG
+    decodes of io.jpeg_scale.decode_views; 0 = the cores the process may use).
     precision: 'float32', or 'bfloat16' (torch backend only: the network runs under
     torch.autocast in bfloat16, 2-3x faster on CPUs with AVX512-BF16 / AMX; heatmaps are
     returned as float32 and differ from float32 inference by ~1e-2 of their peak), or
@@ -172,6 +174,7 @@ class Detector:
                            if checkpoint is not None else
                            OnnxRunner(export_onnx(cpu_model), self.device, threads))
         self._input = None  # pre-allocated network input, grown with the batch size
+        self.view_threads = ViewThreads(threads)   # crops (and decodes) of the views
         self.timer = StageTimer()  # 'crop' and 'forward' wall time of predict
 
     def input_buffer(self, n):
@@ -244,12 +247,10 @@ class Detector:
         boxes = self.boxes_for(cameras, boxes, keep_aspect)
         h_in, w_in = self.input_size
         with self.timer('crop'):
-            if all(e == 'rgb8' for e in encodings):
-                crops = crop_images(images, boxes, (w_in, h_in))
-            else:  # crop in the message's own layout, then convert the (small) crop
-                crops = np.stack([raw_to_rgb8(crop_images([image], box[None], (w_in, h_in))[0],
-                                              encoding)
-                                  for image, box, encoding in zip(images, boxes, encodings)])
+            # one batch of crops; each in the message's own layout, then only the (small)
+            # crop converted to RGB
+            crops = crop_images(images, boxes, (w_in, h_in), layouts=encodings,
+                                threads=self.view_threads)
         with self.timer('forward'):
             heatmaps = self.forward(crops)
         h, w = self.heatmap_size
@@ -259,14 +260,22 @@ class Detector:
     def forward(self, crops):
         """(N, H, W, 3) uint8 RGB network-input crops -> (N, C, h, w) float32 numpy heatmaps,
         through the chosen backend (the same conversion as images_to_tensor, into the
-        pre-allocated input tensor)."""
+        pre-allocated input tensor).
+
+        The array's memory is channel-interleaved ((N, h, w, C) contiguous, seen as (N, C,
+        h, w)): the torch network's own channels-last output, and the layout of a heatmap
+        message (32FC<C>), so io.heatmaps_to_image_msg copies it only into the message
+        (a contiguous (N, C, h, w) result cost a copy here and a transposing one there)."""
         buffer = self.input_buffer(len(crops))
         with torch.inference_mode():
             source = torch.from_numpy(np.ascontiguousarray(crops)).to(buffer.device)
             buffer.copy_(source.permute(0, 3, 1, 2)).div_(255.0)
             if self.runner is not None:
-                return self.runner(buffer.numpy())
+                heatmaps = self.runner(buffer.numpy())
+                return np.ascontiguousarray(heatmaps.transpose(0, 2, 3, 1)).transpose(0, 3, 1, 2)
             with torch.autocast(self.device.type, dtype=torch.bfloat16,
                                 enabled=self.precision == 'bfloat16'):
                 heatmaps = self.model(buffer)[-1]
-        return heatmaps.float().contiguous().cpu().numpy()
+            # a no-op for the channels-last output of a CPU network
+            heatmaps = heatmaps.float().permute(0, 2, 3, 1).contiguous()
+        return heatmaps.cpu().numpy().transpose(0, 3, 1, 2)

@@ -40,14 +40,13 @@ from monet_ros.io import (
     camera_from_camera_info,
     camera_info_from_camera,
     cloud_to_keypoints3d,
-    compressed_image_to_numpy,
     header_stamp_ns,
     heatmaps_to_image_msg,
     numpy_to_image_msg,
 )
 from monet_ros.io.debug_image import debug_image, heatmap_peaks_in_image
-from monet_ros.io.images import image_for_crop, raw_to_rgb8, to_rgb8
-from monet_ros.io.jpeg_scale import decode_for_crop, is_jpeg, jpeg_size
+from monet_ros.io.images import raw_to_rgb8, view_for_crop
+from monet_ros.io.jpeg_scale import decode_views, is_jpeg, jpeg_size
 from monet_ros.models import CheckpointError, Detector
 from monet_ros.models.detector import PRECISIONS
 from monet_ros.models.device import check_device
@@ -133,7 +132,8 @@ class DetectorConfig:
                                         minimum=0.0)
     device: str = setting('', "torch device ('' = CUDA when available, else CPU)")
     threads: int = setting(0, 'CPU threads of the network (torch and onnxruntime; 0 = their '
-                           'default)', minimum=0, maximum=MAX_THREADS)
+                           'default) and of decoding and cropping the views of an instant (0 = '
+                           'the cores the process may use)', minimum=0, maximum=MAX_THREADS)
     backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
                            'exported to ONNX once, cached beside the checkpoint)',
                            choices=('torch', 'onnxruntime'))
@@ -281,7 +281,8 @@ class DetectorNode(Node):
             f'{[(s.name, self.resolve_topic_name(s.image_topic)) for s in self.slots]} with '
             f'{self.detector.metadata.get("architecture")} ({len(self.detector.keypoints)} '
             f'keypoints, heatmaps {self.detector.heatmap_size}) on {self.detector.device}, '
-            f'{self.detector.backend}, {self.detector.precision_note}')
+            f'{self.detector.backend}, {self.detector.precision_note}; decode and crop on '
+            f'{self.detector.view_threads.threads} thread(s)')
 
     @staticmethod
     def tracked_rule(config):
@@ -415,14 +416,7 @@ class DetectorNode(Node):
                     raise ValueError(f'image is {width}x{height} but the camera is '
                                      f'{camera.width}x{camera.height}')
                 return None, 'jpeg', camera
-            if isinstance(msg, CompressedImage):
-                image, layout = to_rgb8(compressed_image_to_numpy(msg)), 'rgb8'
-            else:
-                image, layout = image_for_crop(msg)
-                if layout == 'rgb8' and (image.dtype != np.uint8 or image.ndim != 3):
-                    image = to_rgb8(image)        # grey / 16-bit / float -> the network's rgb8
-            if image.ndim == 2:
-                image, layout = image[..., None], 'mono8'
+            image, layout = view_for_crop(msg)    # cropped before any colour conversion
             channels = {'rgba8': 4, 'bgra8': 4, 'mono8': 1}.get(layout, 3)
             if image.dtype != np.uint8 or image.shape[2] != channels:
                 raise ValueError(f'need an 8-bit colour or mono image, got {image.dtype} '
@@ -440,21 +434,24 @@ class DetectorNode(Node):
 
     def decode_crops(self, work, boxes):
         """Decode the JPEG views of `work` (decode gave them as 'jpeg') at the scale of their
-        crop (io.jpeg_scale.decode_for_crop: 1/2, 1/4 or 1/8 when the crop shrinks that much);
-        their camera and box become the reduced image's, so the heatmap camera is unchanged.
+        crop (io.jpeg_scale.decode_views: 1/2, 1/4 or 1/8 when the crop shrinks that much, the
+        views in parallel on the detector's view_threads); their camera and box become the
+        reduced image's, so the heatmap camera is unchanged.
         -> (work, cameras, boxes) without the views that fail to decode (counted as bad)."""
-        if all(w[3] != 'jpeg' for w in work):
+        jpegs = [i for i, w in enumerate(work) if w[3] == 'jpeg']
+        if not jpegs:
             return work, [w[4] for w in work], boxes
         h_in, w_in = self.detector.input_size
+        decoded = dict(zip(jpegs, decode_views(
+            [(work[i][1].data, work[i][4], boxes[i]) for i in jpegs], (w_in, h_in),
+            self.detector.view_threads)))
         kept, kept_boxes = [], []
-        for (slot, msg, image, layout, camera), box in zip(work, boxes):
-            if layout == 'jpeg':
-                try:
-                    image, layout, camera, box, _ = decode_for_crop(msg.data, camera, box,
-                                                                    (w_in, h_in))
-                except ValueError as error:
-                    self.bad_message(slot, slot.image_topic, error)
+        for i, ((slot, msg, image, layout, camera), box) in enumerate(zip(work, boxes)):
+            if i in decoded:
+                if isinstance(decoded[i], ValueError):
+                    self.bad_message(slot, slot.image_topic, decoded[i])
                     continue
+                image, layout, camera, box, _ = decoded[i]
             kept.append((slot, msg, image, layout, camera))
             kept_boxes.append(box)
         return kept, [w[4] for w in kept], np.asarray(kept_boxes, np.float64).reshape(-1, 4)

@@ -11,8 +11,10 @@ T0 = 1_000_000_000_000_000_000
 PERIOD = 33_000_000
 
 
-def noise_recording(path, cameras=4, frames=6, width=320, height=240, seed=0):
-    """A rosbag2 folder: `cameras` Image + CameraInfo topics, /tf_static, noise images.
+def noise_recording(path, cameras=4, frames=6, width=320, height=240, seed=0,
+                    compressed=False):
+    """A rosbag2 folder: `cameras` Image + CameraInfo topics, /tf_static, noise images
+    (compressed: JPEG CompressedImage on /<cam>/image_raw/compressed instead).
     Returns (rig, stamps)."""
     K = np.array([[300.0, 0, width / 2 - 0.5], [0, 300.0, height / 2 - 0.5], [0, 0, 1]])
     rig = [c.replace(width=width, height=height, K=K) for c in ring_rig(cameras)]
@@ -23,7 +25,12 @@ def noise_recording(path, cameras=4, frames=6, width=320, height=240, seed=0):
         for stamp in stamps:
             for cam in rig:
                 image = rng.integers(0, 255, (height, width, 3), dtype=np.uint8)
-                writer.write_image(f'/{cam.name}/image_raw', stamp, image, f'{cam.name}_optical')
+                if compressed:
+                    writer.write_compressed_image(f'/{cam.name}/image_raw/compressed', stamp,
+                                                  image, f'{cam.name}_optical')
+                else:
+                    writer.write_image(f'/{cam.name}/image_raw', stamp, image,
+                                       f'{cam.name}_optical')
                 writer.write_camera_info(f'/{cam.name}/camera_info', stamp, cam,
                                          f'{cam.name}_optical')
     return rig, stamps

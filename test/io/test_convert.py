@@ -79,6 +79,13 @@ def test_heatmaps_32fc_round_trip_and_layout():
     off = ((5 * 40 + 7) * 14 + 3) * 4
     assert struct.unpack_from('<f', bytes(back.data), off)[0] == heat[3, 5, 7]
     np.testing.assert_array_equal(convert.image_msg_to_heatmaps(back), heat)
+    # the detector's heatmaps are channel-interleaved in memory (Detector.forward): the same
+    # message
+    interleaved = np.ascontiguousarray(np.moveaxis(heat, 0, -1))
+    view = np.moveaxis(interleaved, -1, 0)
+    assert not view.flags['C_CONTIGUOUS']
+    again = convert.heatmaps_to_image_msg(view, 7, 'cam0_heat')
+    assert bytes(again.data) == bytes(msg.data)
 
 
 def test_keypoint_cloud_layout_and_round_trip():

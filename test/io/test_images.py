@@ -13,6 +13,8 @@ from monet_ros.io.images import (
     image_for_crop,
     image_to_numpy,
     raw_to_rgb8,
+    to_rgb8,
+    view_for_crop,
 )
 
 
@@ -151,3 +153,34 @@ def test_image_for_crop_keeps_the_buffer_and_converts_like_image_to_numpy(encodi
         assert layout == 'rgb8'
     with pytest.raises(ImageDecodeError, match='unsupported layout'):
         raw_to_rgb8(raw, 'yuv422')
+
+
+@pytest.mark.parametrize('kind', ['bgr8 image', 'mono16 image', 'png', 'grey png', 'bgra png',
+                                  'jpeg', 'png16'])
+def test_view_for_crop_converts_only_what_is_not_8_bit(kind):
+    """view_for_crop (the detector node's and `monet process`'s input rule): 8-bit pixels
+    stay as they come (an Image: its buffer; a CompressedImage: OpenCV's BGR decode), so
+    only the crop is converted (raw_to_rgb8); its RGB is what the full decode gives."""
+    rgb = smooth_rgb()
+    if kind == 'bgr8 image':
+        msg = msg_from(rgb[..., ::-1], 'bgr8')
+        expected, layout = rgb, 'bgr8'
+    elif kind == 'mono16 image':
+        msg = msg_from((rgb[..., 0].astype(np.uint16) * 200), 'mono16')
+        expected, layout = to_rgb8(image_to_numpy(msg)), 'rgb8'
+    else:
+        source = {'grey png': rgb[..., 0], 'png16': rgb.astype(np.uint16) * 100,
+                  'bgra png': np.concatenate([rgb[..., ::-1], rgb[..., :1]], axis=2)}.get(
+                      kind, rgb[..., ::-1])
+        ext = '.jpg' if kind == 'jpeg' else '.png'
+        msg = SimpleNamespace(format=ext[1:], data=cv2.imencode(ext, source)[1].tobytes())
+        expected = to_rgb8(compressed_image_to_numpy(msg))
+        layout = {'png': 'bgr8', 'jpeg': 'bgr8', 'grey png': 'mono8', 'bgra png': 'bgra8',
+                  'png16': 'rgb8'}[kind]
+    image, got_layout = view_for_crop(msg)
+    assert got_layout == layout and image.dtype == np.uint8 and image.ndim == 3
+    np.testing.assert_array_equal(raw_to_rgb8(image, got_layout), expected)
+    if kind == 'bgr8 image':
+        assert np.shares_memory(image, np.frombuffer(msg.data, np.uint8))
+    with pytest.raises(ImageDecodeError, match='does not decode'):
+        view_for_crop(SimpleNamespace(format='png', data=b'not a png'))

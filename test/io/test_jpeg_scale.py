@@ -7,11 +7,13 @@ from helpers.rigs import random_camera
 import numpy as np
 import pytest
 
+from monet_ros.cores import ViewThreads
 from monet_ros.geometry import Camera
 from monet_ros.io.images import ImageDecodeError
 from monet_ros.io.jpeg_scale import (
     decode_for_crop,
     decode_jpeg,
+    decode_views,
     jpeg_size,
     reduced_camera,
     reduced_size,
@@ -147,3 +149,49 @@ def test_reduced_decode_finds_the_full_decodes_peaks(trained, s):
     shift = np.linalg.norm(peaks_small - peaks_full, axis=-1)
     # measured: median 0.003-0.006, largest 0.012 heatmap px (0.05-0.4 frame px)
     assert shift.max() < 0.05, shift
+
+
+def calibration_jpegs(shared_data, n):
+    """n real camera JPEGs (1280x1024 checkerboard frames of the sleap-anipose session)."""
+    paths = sorted((shared_data / 'sleap_anipose_minimal_session').glob('*/calibration_images/'
+                                                                         '*.jpg'))
+    if len(paths) < n:
+        pytest.skip(f'{len(paths)} calibration JPEGs in ../shared/data, need {n}')
+    return [path.read_bytes() for path in paths[:n]]
+
+
+@pytest.mark.parametrize('threads', [1, 2, 5])
+def test_parallel_decode_is_bit_identical_to_sequential_cv2_decode(shared_data, threads):
+    data = calibration_jpegs(shared_data, 7)
+    camera = Camera(name='c', K=np.array([[1000.0, 0, 639.5], [0, 1000.0, 511.5], [0, 0, 1]]),
+                    dist=np.zeros(5), R=np.eye(3), t=np.zeros(3), width=1280, height=1024)
+    # crops shrunk 1x, 2x, 4x and 8x to a 128 px input: every reduction, full decode too
+    boxes = [(0, 0, 1280, 1024), (100, 50, 356, 306), (0, 0, 160, 128), (10, 20, 650, 532),
+             (400, 300, 912, 812), (0, 0, 1280, 1024), (600, 500, 700, 600)]
+    views = [(d, camera, b) for d, b in zip(data, boxes)]
+    views.insert(3, (data[0][:2000], camera, boxes[0]))     # a truncated JPEG: its own error
+    views.insert(5, (b'not a jpeg', camera, boxes[0]))
+    with ViewThreads(threads) as pool:
+        results = decode_views(views, (128, 128), pool)
+        again = decode_views(views, (128, 128), pool)          # the pool is reused
+    assert pool.threads == threads and len(results) == len(views)
+    flags = {1: cv2.IMREAD_COLOR, 2: cv2.IMREAD_REDUCED_COLOR_2,
+             4: cv2.IMREAD_REDUCED_COLOR_4, 8: cv2.IMREAD_REDUCED_COLOR_8}
+    seen, failed = set(), 0
+    for (data_i, camera_i, box), result, second in zip(views, results, again):
+        try:                                     # the same view decoded sequentially
+            expected = decode_for_crop(data_i, camera_i, box, (128, 128))
+        except ImageDecodeError as error:        # a bad view: its own error, in its place
+            assert type(result) is ImageDecodeError and str(result) == str(error)
+            failed += 1
+            continue
+        image, layout, small, small_box, s = result
+        seen.add(s)
+        reference = cv2.imdecode(np.frombuffer(data_i, np.uint8), flags[s])
+        assert layout == 'bgr8' and image.dtype == reference.dtype
+        assert np.array_equal(image, reference) and np.array_equal(second[0], reference)
+        assert s == expected[4] and np.array_equal(small.K, expected[2].K)
+        np.testing.assert_array_equal(small_box, expected[3])
+    assert failed == 2
+    assert seen == {1, 2, 4, 8}
+    assert decode_views([], (128, 128), ViewThreads(2)) == []

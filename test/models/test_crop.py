@@ -2,7 +2,9 @@
 import numpy as np
 import pytest
 
+from monet_ros.cores import ViewThreads
 from monet_ros.geometry import crop_transform
+from monet_ros.io.images import ImageDecodeError, raw_to_rgb8
 from monet_ros.models.crop import (
     crop_images,
     crop_to_original,
@@ -118,3 +120,29 @@ def test_a_box_far_larger_than_the_image_stays_within_memory():
     textured = smooth_image(rng, 120, 160)
     got = crop_images([textured], np.array([wide]), (46, 46), antialias=False)[0]
     np.testing.assert_allclose(got, brute_force_crop(textured, wide, (46, 46)), atol=1.01)
+
+
+def test_crops_of_raw_layouts_are_the_crops_of_the_rgb_images():
+    """crop_images(layouts=...): each image cropped in its own channel layout and converted
+    into the one batch equals the crop of the image converted to RGB first (raw_to_rgb8)."""
+    rng = np.random.default_rng(3)
+    rgb = [smooth_image(rng, 120, 160) for _ in range(5)]
+    alpha = np.full((120, 160, 1), 200, np.uint8)
+    raw = [rgb[0], rgb[1][..., ::-1].copy(), np.concatenate([rgb[2], alpha], axis=2),
+           np.concatenate([rgb[3][..., ::-1], alpha], axis=2), rgb[4][..., :1].copy()]
+    layouts = ['rgb8', 'bgr8', 'rgba8', 'bgra8', 'mono8']
+    boxes = np.array([(0, -20, 160, 140), (10, 10, 90, 90), (-30, 5, 50, 85),
+                      (40, 30, 72, 62), (0, 0, 160, 160)], float)
+    got = crop_images(raw, boxes, (32, 32), layouts=layouts)
+    expected = crop_images([raw_to_rgb8(r, layout) for r, layout in zip(raw, layouts)], boxes,
+                           (32, 32))
+    assert got.shape == (5, 32, 32, 3) and got.dtype == np.uint8
+    np.testing.assert_array_equal(got, expected)
+    with ViewThreads(3) as threads:                  # the views cropped in parallel: the same
+        np.testing.assert_array_equal(
+            crop_images(raw, boxes, (32, 32), layouts=layouts, threads=threads), expected)
+        np.testing.assert_array_equal(
+            crop_images(np.stack(rgb), boxes, (32, 32), threads=threads),
+            crop_images(np.stack(rgb), boxes, (32, 32)))
+    with pytest.raises(ImageDecodeError, match='unsupported layout'):
+        crop_images(raw[:1], boxes[:1], (32, 32), layouts=['yuv422'])

@@ -45,7 +45,9 @@ def test_bfloat16_finds_the_keypoints_float32_finds(trained):
     for precision in ('float32', 'bfloat16'):
         detector = Detector(trained, {'keypoints': NAMES}, device='cpu', precision=precision)
         heat, _ = detector.predict(images, cameras)
-        assert heat.dtype == np.float32 and heat.flags['C_CONTIGUOUS']
+        # channel-interleaved memory, the heatmap message's layout (copied only into it)
+        assert heat.dtype == np.float32 and heat.shape == (len(images), len(NAMES), 16, 16)
+        assert np.moveaxis(heat, 1, -1).flags['C_CONTIGUOUS']
         points[precision] = decode_heatmaps(heat)[0] * 4 + 1.5   # input px
     # the float32 net has learned the blobs (else the comparison below says nothing)
     assert np.median(np.linalg.norm(points['float32'] - centres, axis=-1)) < 1.5
