@@ -299,6 +299,7 @@ def main(argv=None):
     # 3. the report
     out = Path(args.out)
     png = out.with_suffix('.png')
+    out.parent.mkdir(parents=True, exist_ok=True)
     plot(png, plots, args.match_m)
     command = ' '.join(['nice .venv/bin/python bench/subjects_process.py',
                         *(sys.argv[1:] if argv is None else argv)])
@@ -345,7 +346,6 @@ def main(argv=None):
             f'{run["frames"] / run["wall"]:.1f} ({run["frames"] / run["loop_s"]:.1f}) | '
             f'{1000 * run["cpu"] / max(run["frames"], 1):.0f} |')
     lines += ['', f'![3D error and identity per frame]({png.name})', '']
-    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text('\n'.join(lines))
     print('\n'.join(lines))
     say(f'wrote {out} and {png}')
