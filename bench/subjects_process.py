@@ -327,6 +327,7 @@ def main(argv=None):
         "/ frames; ratio: 3D error / the baseline's; frames/s: frames / wall of the whole "
         'command (start-up included), loop: the frame loop only (its summary line); CPU: the '
         "command's process CPU time per frame.", '',
+        '<!-- --8<-- [start:table] -->',
         '| subjects | closest pass (m) | identities (births) | IDSW | IDF1 | 3D error per '
         'subject (mm) | ratio to one subject | found | frames/s (loop) | CPU ms/frame |',
         '|---|---|---|---|---|---|---|---|---|---|',
@@ -345,7 +346,8 @@ def main(argv=None):
             f'{", ".join(f"{f / args.frames:.0%}" for f in s.found)} | '
             f'{run["frames"] / run["wall"]:.1f} ({run["frames"] / run["loop_s"]:.1f}) | '
             f'{1000 * run["cpu"] / max(run["frames"], 1):.0f} |')
-    lines += ['', f'![3D error and identity per frame]({png.name})', '']
+    lines += ['<!-- --8<-- [end:table] -->', '',
+              f'![3D error and identity per frame]({png.name})', '']
     out.write_text('\n'.join(lines))
     print('\n'.join(lines))
     say(f'wrote {out} and {png}')
