@@ -4,9 +4,11 @@ and frames/s for 1, 2 and 3 subjects, against the same model's one-subject figur
 
 1. A detector the way a user trains one: `monet synth` a one-subject human14 recording
    with labels (--train-frames instants, --label-fraction of them labelled in every view,
-   left limbs in their own colour, seed --train-seed: not the seed of the recordings
-   scored), then `monet train` on it (the default mode, the small net at input 128: the
-   CPU recipe of docs/train.md with --train-steps steps, one torch thread). The checkpoint
+   left limbs in their own colour; --train-seed, default --seed: the rig, the subjects'
+   look and the room of the recordings scored; --train-motion-seed: another motion, so no
+   scored frame is a training frame, and not one of the scored subjects' motion seeds
+   seed * 1000 + k), then `monet train` on it (the default mode, the small net at input
+   128: the CPU recipe of docs/train.md with --train-steps steps, one torch thread). The checkpoint
    is cached in WORK/model-<settings>/model.pt: a rerun with the same settings skips it.
 2. For each N of --subjects-list: `monet synth --subjects N` (--cameras, --width x
    --height, --frames at 30/s, --seed; the subjects walk rings of 0.7 / 1.4 / 2.1 m and
@@ -216,13 +218,18 @@ def main(argv=None):
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--train-frames', type=int, default=300)
     p.add_argument('--label-fraction', type=float, default=0.05)
-    p.add_argument('--train-seed', type=int, default=1)
+    p.add_argument('--train-seed', type=int, default=None,
+                   help='seed (rig, look, room) of the training recording (default --seed)')
+    p.add_argument('--train-motion-seed', type=int, default=7,
+                   help='motion seed of the training recording (default %(default)s)')
     p.add_argument('--train-steps', type=int, default=1500)
     p.add_argument('--threads', type=int, default=1, help='torch threads of train/process')
     p.add_argument('--match-m', type=float, default=0.3,
                    help='largest mean keypoint distance (m) of a match')
     p.add_argument('--out', default=str(REPO / 'bench' / 'results' / 'subjects_process.md'))
     args = p.parse_args(argv)
+    if args.train_seed is None:
+        args.train_seed = args.seed
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     start_load = load()
@@ -233,12 +240,13 @@ def main(argv=None):
 
     # 1. the detector
     train_synth = ['synth', '--frames', args.train_frames, '--label-fraction',
-                   args.label_fraction, '--seed', args.train_seed, *rig]
+                   args.label_fraction, '--seed', args.train_seed, '--motion-seed',
+                   args.train_motion_seed, *rig]
     train_args = ['--input-size', 128, '--steps', args.train_steps, '--threads', args.threads,
                   '--checkpoint-every', args.train_steps, '--no-progress']
     settings = dict(synth=list(map(str, train_synth)), train=list(map(str, train_args)))
     key = f'model-f{args.train_frames}-c{args.cameras}-{args.width}x{args.height}-' \
-          f's{args.train_seed}-steps{args.train_steps}'
+          f's{args.train_seed}-m{args.train_motion_seed}-steps{args.train_steps}'
 
     def make_model(folder):
         folder.mkdir(parents=True)
@@ -291,6 +299,7 @@ def main(argv=None):
     # 3. the report
     out = Path(args.out)
     png = out.with_suffix('.png')
+    out.parent.mkdir(parents=True, exist_ok=True)
     plot(png, plots, args.match_m)
     command = ' '.join(['nice .venv/bin/python bench/subjects_process.py',
                         *(sys.argv[1:] if argv is None else argv)])
@@ -301,7 +310,8 @@ def main(argv=None):
         f'({os.cpu_count()} cores, shared), load average {start_load} at start, {end_load} '
         f'at end; {time.perf_counter() - started:.0f} s in all.', '',
         f'- Detector: `monet synth --frames {args.train_frames} --label-fraction '
-        f'{args.label_fraction} --seed {args.train_seed} --cameras {args.cameras} --width '
+        f'{args.label_fraction} --seed {args.train_seed} --motion-seed '
+        f'{args.train_motion_seed} --cameras {args.cameras} --width '
         f'{args.width} --height {args.height} --distinct-sides` (one subject), then `monet '
         f'train DATA --input-size 128 --steps {args.train_steps} --threads {args.threads}` '
         f'(default mode, small net, precision auto): {train_wall["wall"]:.0f} s wall, '
@@ -317,6 +327,7 @@ def main(argv=None):
         "/ frames; ratio: 3D error / the baseline's; frames/s: frames / wall of the whole "
         'command (start-up included), loop: the frame loop only (its summary line); CPU: the '
         "command's process CPU time per frame.", '',
+        '<!-- --8<-- [start:table] -->',
         '| subjects | closest pass (m) | identities (births) | IDSW | IDF1 | 3D error per '
         'subject (mm) | ratio to one subject | found | frames/s (loop) | CPU ms/frame |',
         '|---|---|---|---|---|---|---|---|---|---|',
@@ -335,8 +346,8 @@ def main(argv=None):
             f'{", ".join(f"{f / args.frames:.0%}" for f in s.found)} | '
             f'{run["frames"] / run["wall"]:.1f} ({run["frames"] / run["loop_s"]:.1f}) | '
             f'{1000 * run["cpu"] / max(run["frames"], 1):.0f} |')
-    lines += ['', f'![3D error and identity per frame]({png.name})', '']
-    out.parent.mkdir(parents=True, exist_ok=True)
+    lines += ['<!-- --8<-- [end:table] -->', '',
+              f'![3D error and identity per frame]({png.name})', '']
     out.write_text('\n'.join(lines))
     print('\n'.join(lines))
     say(f'wrote {out} and {png}')

@@ -135,7 +135,7 @@ def add_subjects_detection_arguments(parser):
                         'found by full-frame candidates; per-subject outputs as `monet '
                         'triangulate --subjects` (1 = one subject, the tracked crop)')
     for name, kind in (('candidates', int), ('link_mm', float), ('crop_peaks', int),
-                       ('duplicate_mm', float)):
+                       ('duplicate_mm', float), ('crop_missed', int)):
         parser.add_argument('--' + name.replace('_', '-'), type=kind, default=d[name].default,
                             help='--subjects: ' + d[name].metadata['description'])
     add_subject_tracking_arguments(parser)

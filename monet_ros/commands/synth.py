@@ -37,6 +37,9 @@ def add_arguments(parser):
                              '(default %(default)s)')
     parser.add_argument('--seed', type=int, default=d['seed'].default,
                         help='random seed: same seed, same bytes (default %(default)s)')
+    parser.add_argument('--motion-seed', type=int, default=None,
+                        help="seed of the subjects' motion only (paths, speeds, gestures): "
+                        'the rig, look and room stay those of --seed (default: --seed)')
     parser.add_argument('--distortion', default=','.join(
         str(v) for v in d['distortion'].default),
         help='OpenCV distortion k1[,k2,p1,p2,k3] of every camera, e.g. '
@@ -84,7 +87,7 @@ def config_from_args(args):
         radius=args.radius, hfov_deg=args.hfov, noise=args.noise,
         label_occluded=not args.visible_labels_only, height_spread=args.height_spread,
         occluders=args.occluders, distinct_sides=args.distinct_sides,
-        subjects=args.subjects)
+        subjects=args.subjects, motion_seed=args.motion_seed)
 
 
 def run(args):

@@ -3,16 +3,21 @@
 
 Algorithm, per synchronized frame (stamps increasing):
 
-1. Hypotheses: the SubjectTracker's predicted joints of every live track (its Kalman
-   prediction to the frame's stamp). Discovery, when fewer than N tracks live (at the
-   start, and after a track has died):
+1. Hypotheses: the SubjectTracker's predicted joints (its Kalman prediction to the
+   frame's stamp) of the tracks matched in at least one of the last `crop_missed` frames,
+   at most N of them, the most recently matched first (then the oldest identity). A track
+   missed longer (its crops decoded nothing it matched, or a body another crop decoded
+   too) lives on in the tracker until max_missed_s, so a subject found again within the
+   gate keeps its identity, but it gets no crops: its prediction drifts by its velocity
+   and its crops would only decode a neighbour (a duplicate) or nothing. Discovery, when
+   fewer than N tracks get crops (at the start, and after a track was missed):
    a. one full-frame detection per view; the `candidates` highest local maxima of every
       keypoint's map (models.decode_heatmap_peaks, at least the confidence threshold);
    b. per keypoint, each (view, peak) is a one-keypoint instance; subjects.association.
       associate clusters them across views (epipolar distance, at most one per camera,
       >= min_views) and triangulates each cluster robustly: 3D points of that keypoint;
-   c. a point within the tracker's gate (gate_mm) of a live track's predicted joint of
-      the same keypoint belongs to that track and is dropped;
+   c. a point within the tracker's gate (gate_mm) of a cropped track's predicted joint
+      of the same keypoint belongs to that track and is dropped;
    d. the rest are grouped into subjects by constrained single linkage (Kruskal order):
       every pair of points of two different keypoints closer than link_mm, shortest
       first, merges their two groups unless the groups share a keypoint (a subject has
@@ -74,6 +79,9 @@ class SubjectsConfig:
     duplicate_mm: float = setting(
         100.0, 'mean joint distance (mm) below which two associated subjects are one body',
         minimum=0.0)
+    crop_missed: int = setting(
+        1, 'per-subject crops: a track missed in this many consecutive frames gets no crops '
+        '(discovery looks for its subject again)', minimum=1)
 
     def __post_init__(self):
         validate_config(self)
@@ -85,10 +93,10 @@ class FrameSubjects:
     instances (all its subjects, duplicates included); keep (K,) int: the indices of the
     subjects given to the tracker (at most N, duplicates left out); ids (K,) their
     identities (-1: too few keypoints for a track); and the counts: hypotheses (crops per
-    view), discovered (new hypotheses from the full frame; -1: no discovery this frame),
-    points (discovery's 3D keypoint points), explained (of those, near a live track's
-    joint), loose (in groups with too few keypoints, or beyond N: left out), crops
-    (detector crops), duplicates, extra (subjects beyond N)."""
+    view; tracked: those of tracks), discovered (new hypotheses from the full frame;
+    -1: no discovery this frame), points (discovery's 3D keypoint points), explained (of
+    those, near a cropped track's joint), loose (in groups with too few keypoints, or
+    beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N)."""
     association: object
     keep: np.ndarray
     ids: np.ndarray
@@ -100,6 +108,7 @@ class FrameSubjects:
     points: int = 0
     explained: int = 0
     loose: int = 0
+    tracked: int = 0
 
 
 def group_points(points, keypoint, views, link):
@@ -170,6 +179,7 @@ class SubjectsStep:
         self._gate = from_mm(self.tracker.config.gate_mm, units)
         self._link = from_mm(self.config.link_mm, units)
         self._duplicate = from_mm(self.config.duplicate_mm, units)
+        self._missed = np.zeros(0, np.int64)      # per tracker track: frames since matched
         self._point_association = AssociationConfig(**{
             **{f: getattr(self.association, f) for f in (
                 'threshold_px', 'confidence_threshold', 'min_views', 'triangulation_px',
@@ -219,7 +229,8 @@ class SubjectsStep:
         """images: (H, W, 3) uint8 RGB of the present views; cameras: their Cameras (at
         least 2); stamp_ns: the frame's stamp. -> FrameSubjects."""
         tracker = self.tracker
-        predicted = tracker.predicted(stamp_ns)                       # (tracks, C, 3)
+        crop = self.cropped_tracks()
+        predicted = tracker.predicted(stamp_ns)[crop]                 # (cropped, C, 3)
         discovered = -1
         hyp = predicted
         counts = {}
@@ -260,7 +271,25 @@ class SubjectsStep:
         duplicates = len(a.X) - len(keep)
         extra = max(0, len(keep) - self.config.subjects)
         keep = np.array(keep[:self.config.subjects], np.int64)
+        before = dict(zip(tracker.ids.tolist(), self._missed.tolist()))
         ids = tracker.step(a.X[keep], stamp_ns)
+        self.count_misses(before, ids)
         return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
-                             extra=extra, **counts)
+                             extra=extra, tracked=len(predicted), **counts)
+
+    def count_misses(self, before, ids):
+        """Frames since each tracker track was last matched, after a tracker step that gave
+        the identities `ids` (matched or born: 0); before: {identity: count} of the tracks
+        before that step."""
+        matched = set(np.asarray(ids).tolist())
+        self._missed = np.array([0 if i in matched else before.get(i, -1) + 1
+                                 for i in self.tracker.ids.tolist()], np.int64)
+
+    def cropped_tracks(self):
+        """Indices (into the tracker's tracks) of the tracks that get crops this frame
+        (module docstring step 1): matched within the last crop_missed frames, at most N,
+        the most recently matched first, then the oldest identity."""
+        ok = np.flatnonzero(self._missed < self.config.crop_missed)
+        order = np.lexsort((self.tracker.ids[ok], self._missed[ok]))
+        return ok[order][:self.config.subjects]

@@ -66,6 +66,9 @@ class SynthConfig:
     instant is labelled); seed: everything random derives from it; distortion: OpenCV
     (k1[, k2, p1, p2, k3]); radius: camera distance (m; None = 4.0 for a human, 2.5 for a
     quadruped); hfov_deg: horizontal field of view; jitter: rig perturbation scale;
+    motion_seed: the subjects' motion (paths, speeds, gestures) only, so two recordings can
+    share the rig, the look and the room (seed) and differ in motion (None = seed; a
+    recording with motion_seed == seed has the message data of one without it);
     label_occluded: label keypoints hidden by other limbs too (True) or only visible ones;
     noise: sensor noise std (DN); start_ns: stamp of the first instant.
     height_spread: ring cameras alternately up to this many metres above / below the nominal
@@ -99,6 +102,7 @@ class SynthConfig:
     occluders: int = 0
     distinct_sides: bool = False
     subjects: int = 1
+    motion_seed: int | None = None
     rig: RigConfig = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -117,6 +121,10 @@ class SynthConfig:
             bad('label_fraction', f'must be in [0, 1], got {self.label_fraction!r}')
         if self.seed < 0:
             bad('seed', f'must be >= 0, got {self.seed}')
+        if self.motion_seed is not None and (
+                isinstance(self.motion_seed, bool)
+                or not isinstance(self.motion_seed, (int, np.integer)) or self.motion_seed < 0):
+            bad('motion_seed', f'must be an integer >= 0 or None, got {self.motion_seed!r}')
         if self.start_ns < 0:
             bad('start_ns', f'must be >= 0, got {self.start_ns}')
         if self.layout not in LAYOUTS:
@@ -167,9 +175,16 @@ class SynthConfig:
         k = np.arange(self.frames, dtype=np.float64)
         return self.start_ns + np.round(k * 1e9 / self.fps).astype(np.int64)
 
+    @property
+    def subject_seed(self):
+        """The seed of the subjects' motion: motion_seed, or seed when it is None."""
+        return self.seed if self.motion_seed is None else int(self.motion_seed)
+
     def to_dict(self):
         data = asdict(self)
         data.pop('rig', None)
+        if self.motion_seed is None:          # a seed's README stays as it was
+            data.pop('motion_seed')
         data['distortion'] = list(self.distortion)
         return data
 
@@ -226,8 +241,8 @@ def plan(config):
     subjects_occluded (T, V, S, C) of every subject (A, B: every subject's capsules).
     """
     skeleton = load_skeleton(config.skeleton)
-    subjects = [Subject(skeleton, seed=config.seed)] if config.subjects == 1 else \
-        make_subjects(skeleton, config.subjects, seed=config.seed)
+    subjects = [Subject(skeleton, seed=config.subject_seed)] if config.subjects == 1 else \
+        make_subjects(skeleton, config.subjects, seed=config.subject_seed)
     subject = subjects[0]
     cameras = make_rig(config.rig, seed=config.seed)
     stamps = config.stamps()
@@ -394,6 +409,7 @@ def readme_text(config, p, result):
                      'only keypoints that project inside the image and are not hidden by '
                      'another limb')
     settings = '\n'.join(f'- {k}: {v}' for k, v in config.to_dict().items())
+    motion = '' if config.motion_seed is None else f' (motion seed {config.motion_seed})'
     several = '' if config.subjects == 1 else f"""
 ## Several subjects
 
@@ -414,7 +430,7 @@ monet triangulate {result.out}/points2d.csv --rig {result.out}/rig.yaml \\
 
 Rendered by `monet synth` (monet_ros): a calibrated {config.layout} rig of {len(cams)} cameras
 around a {p['subject'].body} ({p['skeleton'].name}, {p['skeleton'].num_keypoints} keypoints)
-walking on a curved path. Seed {config.seed}; the same settings give byte-identical
+walking on a curved path. Seed {config.seed}{motion}; the same settings give byte-identical
 message data.
 
 - Frames: {config.frames} instants at {config.fps:g} fps, stamps {stamps[0]} ..

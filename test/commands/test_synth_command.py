@@ -46,3 +46,18 @@ def test_cli_errors(tmp_path):
     proc = monet('--out', str(tmp_path / 'full'), '--frames', '1')
     assert proc.returncode == 2 and 'not overwriting' in proc.stderr
     assert (tmp_path / 'full' / 'x').read_text() == 'keep'
+
+
+def test_cli_motion_seed_keeps_the_rig_and_the_room(tmp_path):
+    a, b = tmp_path / 'a', tmp_path / 'b'
+    common = ('--cameras', '2', '--frames', '1', '--width', '64', '--height', '48', '--seed',
+              '5', '--quiet')
+    assert monet('--out', str(a), *common).returncode == 0
+    proc = monet('--out', str(b), *common, '--motion-seed', '6')
+    assert proc.returncode == 0, proc.stderr
+    assert (a / 'rig.yaml').read_text() == (b / 'rig.yaml').read_text()
+    ga, gb = np.load(a / 'ground_truth.npz'), np.load(b / 'ground_truth.npz')
+    assert np.abs(ga['keypoints3d'] - gb['keypoints3d']).max() > 0.1
+    assert 'Seed 5 (motion seed 6)' in (b / 'README.md').read_text()
+    proc = monet('--out', str(tmp_path / 'c'), '--motion-seed', '-2')
+    assert proc.returncode == 2 and "field 'motion_seed'" in proc.stderr

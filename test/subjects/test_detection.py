@@ -33,3 +33,31 @@ def test_no_points_no_groups():
 def test_config_names_the_bad_field(field, value):
     with pytest.raises(ConfigError, match=field):
         SubjectsConfig(**{field: value})
+
+
+def test_only_recently_matched_tracks_get_crops_at_most_n():
+    # the rule of the module docstring, step 1: tracks matched within crop_missed frames,
+    # at most N, the most recently matched first; a track missed longer still lives in the
+    # tracker (its identity kept for a later match) but gets no crop
+    from types import SimpleNamespace
+
+    from monet_ros.subjects.detection import SubjectsStep
+
+    step = SubjectsStep(SimpleNamespace(keypoints=['a', 'b', 'c']), 'm',
+                        SubjectsConfig(subjects=2, crop_missed=2))
+    body = np.array([[0.0, 0.0, 1.6], [0.0, 0.0, 1.3], [0.0, 0.0, 1.0]])
+    bodies = np.stack([body, body + [2.0, 0, 0], body + [0, 2.0, 0]])
+
+    def frame(k, subjects):
+        before = dict(zip(step.tracker.ids.tolist(), step._missed.tolist()))
+        ids = step.tracker.step(bodies[subjects], k * 33_333_333)
+        step.count_misses(before, ids)
+        return step.tracker.ids[step.cropped_tracks()].tolist()
+
+    assert frame(0, [0, 1, 2]) == [0, 1]            # three born, N = 2: the oldest two
+    assert frame(1, [2, 0]) == [0, 2]               # 1 missed once: still allowed, but 0, 2
+    assert frame(2, [0]) == [0, 2]                  # 2 missed once, 1 twice: 0, 2
+    assert frame(3, [1]) == [1, 0]                  # 1 back (same identity), 0 missed once
+    assert frame(4, []) == [1]                      # 0 missed twice now
+    assert frame(5, []) == []                       # all missed twice or more: none
+    assert step.tracker.ids.tolist() == [0, 1, 2]   # alive (max_missed_s 0.5 s)

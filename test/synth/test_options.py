@@ -60,3 +60,26 @@ def test_distinct_sides_colour_left_arm_and_leg_differently():
     colours = part_colors(parts, np.random.default_rng(0))
     assert np.abs(colours['left_arm'] - colours['arm']).max() > 30
     assert np.abs(colours['left_leg'] - colours['leg']).max() > 30
+
+
+def test_motion_seed_changes_the_motion_only_and_defaults_to_the_seed():
+    base = plan(SynthConfig(**BASE, subjects=2))
+    same = plan(SynthConfig(**BASE, subjects=2, motion_seed=BASE['seed']))
+    for key, value in base.items():
+        if isinstance(value, np.ndarray):
+            np.testing.assert_array_equal(same[key], value, err_msg=key)
+    other = plan(SynthConfig(**BASE, subjects=2, motion_seed=4))
+    for a, b in zip(base['cameras'], other['cameras']):          # the rig: the seed's
+        np.testing.assert_array_equal(a.K, b.K)
+        np.testing.assert_array_equal(a.R, b.R)
+        np.testing.assert_array_equal(a.t, b.t)
+    assert other['parts'] == base['parts']                       # the look's materials
+    np.testing.assert_array_equal(other['labelled'], base['labelled'])
+    np.testing.assert_array_equal(other['stamps'], base['stamps'])
+    moved = np.linalg.norm(other['subjects_keypoints3d'] - base['subjects_keypoints3d'], axis=-1)
+    assert np.median(moved) > 0.1                                # metres: another motion
+    assert SynthConfig(**BASE).to_dict() == {
+        k: v for k, v in SynthConfig(**BASE, motion_seed=9).to_dict().items()
+        if k != 'motion_seed'}
+    with pytest.raises(SynthError, match='motion_seed'):
+        SynthConfig(**BASE, motion_seed=-1)
