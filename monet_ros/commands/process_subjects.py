@@ -68,7 +68,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                                        decode=False)
         for frame in tqdm(frames, desc='monet process', unit='frame', disable=not progress,
                           file=sys.stderr):
-            present, images = [], []
+            present, images, layouts = [], [], []
             for name in topics:
                 if name not in frame.images:
                     continue
@@ -81,11 +81,12 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                 if image is None:
                     continue
                 present.append(by_name[name])
-                images.append(image)
+                images.append(image[0])                 # (array, layout): read_view's view
+                layouts.append(image[1])
             figures['missing_views'] += len(topics) - len(present)
             if len(present) < config.min_views:
                 continue
-            r = step.step(images, present, frame.stamp_ns)
+            r = step.step(images, present, frame.stamp_ns, layouts)
             a = r.association
             rows.add(len(stamps), a, r.ids, r.keep)
             stamps.append(frame.stamp_ns)

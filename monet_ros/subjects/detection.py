@@ -185,14 +185,14 @@ class SubjectsStep:
                 'threshold_px', 'confidence_threshold', 'min_views', 'triangulation_px',
                 'method')}, 'min_common': 1, 'strong_common': 1})
 
-    def discover(self, images, cameras, predicted):
+    def discover(self, images, cameras, predicted, encodings=None):
         """(hypotheses (H, C, 3), counts dict: points, explained, loose) of a full-frame
         detection (module docstring step 1), none near the predicted joints (tracks, C, 3)
-        of the live tracks."""
+        of the live tracks; encodings: as in step."""
         from monet_ros.models import decode_heatmap_peaks
 
         rig = stack_cameras(cameras)
-        heat, heat_cameras = self.detector.predict(images, cameras)
+        heat, heat_cameras = self.detector.predict(images, cameras, encodings=encodings)
         S, _ = crop_scales(np.stack([c.K for c in heat_cameras]), rig['K'], rig['K_inv'])
         thr = self.association.confidence_threshold
         peaks, conf, _ = decode_heatmap_peaks(list(heat), self.config.candidates, floor=thr)
@@ -225,9 +225,11 @@ class SubjectsStep:
             found.append(X)
         return np.array(found).reshape(-1, self.C, 3), counts
 
-    def step(self, images, cameras, stamp_ns):
-        """images: (H, W, 3) uint8 RGB of the present views; cameras: their Cameras (at
-        least 2); stamp_ns: the frame's stamp. -> FrameSubjects."""
+    def step(self, images, cameras, stamp_ns, encodings=None):
+        """images: (H, W, 3) uint8 RGB of the present views, or each in its own layout
+        (encodings: one per image, as models.Detector.predict takes them: converted to RGB
+        only after cropping); cameras: their Cameras (at least 2); stamp_ns: the frame's
+        stamp. -> FrameSubjects."""
         tracker = self.tracker
         crop = self.cropped_tracks()
         predicted = tracker.predicted(stamp_ns)[crop]                 # (cropped, C, 3)
@@ -235,7 +237,7 @@ class SubjectsStep:
         hyp = predicted
         counts = {}
         if len(predicted) < self.config.subjects:
-            new, counts = self.discover(images, cameras, predicted)
+            new, counts = self.discover(images, cameras, predicted, encodings)
             discovered = len(new)
             hyp = np.concatenate([predicted, new])
         V, H = len(cameras), len(hyp)
@@ -250,7 +252,8 @@ class SubjectsStep:
         if len(v_idx):
             crop_cams = [cameras[v] for v in v_idx]
             heat, heat_cameras = self.detector.predict(
-                [images[v] for v in v_idx], crop_cams, boxes[v_idx, h_idx])
+                [images[v] for v in v_idx], crop_cams, boxes[v_idx, h_idx],
+                encodings=None if encodings is None else [encodings[v] for v in v_idx])
             known = np.isfinite(hyp).all(-1)                          # (H, C)
             targets = project_views(stack_cameras(cameras),
                                     np.where(known[..., None], hyp, 0.0).reshape(-1, 3))
