@@ -62,7 +62,8 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     rows = RowCollector()
     stamps = []
     counts = dict(per_frame=Counter(), discoveries=0, discovered=0, crops=0, duplicates=0,
-                  instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0)
+                  instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0,
+                  shared=0)
     with BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6),
                                        decode=False)
@@ -93,7 +94,8 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
             counts['per_frame'][int((r.ids >= 0).sum())] += 1
             counts['discoveries'] += r.discovered >= 0
             counts['discovered'] += max(r.discovered, 0)
-            for key in ('crops', 'duplicates', 'extra', 'points', 'explained', 'loose'):
+            for key in ('crops', 'duplicates', 'extra', 'points', 'explained', 'loose',
+                        'shared'):
                 counts[key] += getattr(r, key)
             counts['instances'] += a.instances
             counts['unmatched'] += a.unmatched
@@ -147,5 +149,6 @@ def print_subjects(figures, out):
           'too few keypoints or beyond --subjects)')
     print(f'{name}: skipped: {s.unmatched} of {s.instances} crop instances matched in no '
           f'other camera, {n["duplicates"]} duplicate subjects (one body from two crops), '
+          f'{n["shared"]} joints decoded by two subjects (kept by one), '
           f'{s.extra} subjects beyond --subjects, {s.untracked} with too few keypoints for '
           'a track')

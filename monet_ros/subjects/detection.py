@@ -40,9 +40,17 @@ Algorithm, per synchronized frame (stamps increasing):
    instance order is not trusted) and are triangulated per subject; a subject whose mean
    joint distance to a subject seen by more cameras (association's order) is below
    duplicate_mm is the same body decoded by two hypotheses' crops: dropped, counted.
-5. The first N subjects (most cameras first; the others counted as `extra`) go to the
-   SubjectTracker: Hungarian assignment to the tracks' predictions (gated), births,
-   deaths (subjects.tracking). Its identities are the output's.
+5. The first N subjects (most cameras first; the others counted as `extra`). A keypoint
+   of two of them closer than duplicate_mm is one body part decoded by two subjects'
+   crops (a joint captured from the neighbour: the capturing track's prediction follows
+   it, so its next crop would decode the neighbour's joint again): the subject whose
+   joint lies farther from its own other joints (their median distance) loses it (NaN,
+   counted as `shared`), the other keeps it.
+6. They go to the SubjectTracker: Hungarian assignment to the tracks' predictions
+   (gated), births, deaths (subjects.tracking). Its identities are the output's. A
+   joint lost in step 5 is restarted in its track (unstarted: no prediction), so the
+   next frame's crops take their highest peak for it (step 3): the crop is centred on
+   the track's own body.
 
 Units: the rig's (the cameras'); link_mm, duplicate_mm and the tracker's settings are
 physical (mm) and converted. Full-frame decodes cost one extra forward of V images, only
@@ -96,7 +104,8 @@ class FrameSubjects:
     view; tracked: those of tracks), discovered (new hypotheses from the full frame;
     -1: no discovery this frame), points (discovery's 3D keypoint points), explained (of
     those, near a cropped track's joint), loose (in groups with too few keypoints, or
-    beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N)."""
+    beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N),
+    shared (joints dropped as decoded by two subjects, step 5)."""
     association: object
     keep: np.ndarray
     ids: np.ndarray
@@ -109,6 +118,7 @@ class FrameSubjects:
     explained: int = 0
     loose: int = 0
     tracked: int = 0
+    shared: int = 0
 
 
 def group_points(points, keypoint, views, link):
@@ -133,6 +143,29 @@ def group_points(points, keypoint, views, link):
         masks[la] |= masks[lb]
     groups = [np.flatnonzero(label == g) for g in np.unique(label)]
     return sorted(groups, key=lambda g: (-len(g), -int(views[g].sum()), int(g[0])))
+
+
+def shared_joints(X, near):
+    """Joints decoded twice (module docstring, step 5): X (K, C, 3) the subjects' joints,
+    near: the largest distance (rig units) of two subjects' same keypoint that is one body
+    part. -> (K, C) bool, True where the joint goes: of two subjects whose keypoint c lies
+    within `near`, the one whose joint is farther (median) from its own other joints loses
+    it (tie: the later subject)."""
+    K, C = X.shape[:2]
+    drop = np.zeros((K, C), bool)
+    if K < 2:
+        return drop
+    with np.errstate(invalid='ignore'):
+        own = np.linalg.norm(X[:, :, None] - X[:, None], axis=-1)         # (K, C, C)
+        own[:, np.arange(C), np.arange(C)] = np.nan
+        fit = np.full((K, C), np.inf)
+        some = np.isfinite(own).any(-1)
+        fit[some] = np.nanmedian(own[some], axis=-1)
+        pair = np.linalg.norm(X[:, None] - X[None], axis=-1) <= near       # (K, K, C)
+    s, t, c = np.nonzero(np.triu(np.ones((K, K), bool), 1)[..., None] & pair)
+    loser = np.where(fit[t, c] >= fit[s, c], t, s)
+    drop[loser, c] = True
+    return drop
 
 
 def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_threshold):
@@ -274,12 +307,31 @@ class SubjectsStep:
         duplicates = len(a.X) - len(keep)
         extra = max(0, len(keep) - self.config.subjects)
         keep = np.array(keep[:self.config.subjects], np.int64)
+        drop = shared_joints(a.X[keep], self._duplicate)
+        if drop.any():
+            s, c = np.nonzero(drop)
+            a.X[keep[s], c] = np.nan
+            a.inliers[keep[s], :, c] = False
+            a.view_errors[keep[s], :, c] = np.nan
+            a.score[keep[s], c] = np.nan
         before = dict(zip(tracker.ids.tolist(), self._missed.tolist()))
         ids = tracker.step(a.X[keep], stamp_ns)
         self.count_misses(before, ids)
+        self.restart(ids, drop)
         return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
-                             extra=extra, tracked=len(predicted), **counts)
+                             extra=extra, tracked=len(predicted), shared=int(drop.sum()),
+                             **counts)
+
+    def restart(self, ids, drop):
+        """Unstart the tracker joints `drop` (K, C) bool of the subjects given the
+        identities ids (K,) (module docstring step 5): predicted() is NaN there, so the
+        next frame's crops take their highest peak for it (step 3)."""
+        s, c = np.nonzero(drop)
+        rows = np.searchsorted(self.tracker.ids, ids[s])      # ids increase in the tracker
+        ok = (ids[s] >= 0) & (rows < len(self.tracker.ids))
+        ok[ok] &= self.tracker.ids[rows[ok]] == ids[s][ok]
+        self.tracker.started[rows[ok], c[ok]] = False
 
     def count_misses(self, before, ids):
         """Frames since each tracker track was last matched, after a tracker step that gave

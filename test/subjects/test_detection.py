@@ -61,3 +61,64 @@ def test_only_recently_matched_tracks_get_crops_at_most_n():
     assert frame(4, []) == [1]                      # 0 missed twice now
     assert frame(5, []) == []                       # all missed twice or more: none
     assert step.tracker.ids.tolist() == [0, 1, 2]   # alive (max_missed_s 0.5 s)
+
+
+def test_a_joint_decoded_by_two_subjects_stays_with_the_body_it_fits():
+    from monet_ros.subjects.detection import shared_joints
+
+    # two bodies 1 m apart, keypoints 0-3 in a column; subject 1's keypoint 2 was decoded
+    # from subject 0 (1 cm from subject 0's): it is 1 m from subject 1's other joints
+    A = np.array([[0.0, 0, 1.6], [0.0, 0, 1.3], [0.0, 0, 1.0], [0.0, 0, 0.7]])
+    B = A + [1.0, 0, 0]
+    B[2] = A[2] + [0.01, 0, 0]
+    X = np.stack([B, A])                     # the captured subject first: order is no help
+    drop = shared_joints(X, near=0.1)
+    assert drop.tolist() == [[False, False, True, False], [False] * 4]
+    # independently: median distance of the shared joint to each subject's other joints
+    fit = [np.median(np.linalg.norm(np.delete(S, 2, 0) - S[2], axis=-1)) for S in X]
+    assert fit[0] > fit[1]
+    # apart (more than `near`), missing, or one subject: nothing goes
+    assert not shared_joints(X, near=0.005).any()
+    X[1, 2] = np.nan
+    assert not shared_joints(X, near=0.1).any()
+    assert not shared_joints(X[:1], near=0.1).any()
+
+
+def test_a_captured_joint_is_restarted_and_its_crop_takes_its_own_peak():
+    # the capture: a track whose joint was decoded from the neighbour predicts it there, and
+    # the per-crop rule (the peak nearest the prediction) decodes the neighbour again; once
+    # the joint is restarted the crop (centred on its own body) takes its highest peak
+    from types import SimpleNamespace
+
+    from monet_ros.geometry import Camera
+    from monet_ros.subjects.detection import SubjectsStep, crop_instances
+    from monet_ros.subjects.tracking import TrackerConfig
+
+    cam = Camera(name='c', K=np.array([[50.0, 0, 32], [0, 50.0, 24], [0, 0, 1]]),
+                 dist=np.zeros(5), R=np.eye(3), t=np.zeros(3), width=64, height=48)
+    heat_cam = cam.crop(np.array([0.0, 0.0, 64.0, 48.0]), (16, 12))
+    yy, xx = np.mgrid[0:12, 0:16]
+    own, neighbour = (4, 6), (12, 6)         # heatmap px (x, y): own peak higher
+    heat = (0.9 * np.exp(-((xx - own[0]) ** 2 + (yy - own[1]) ** 2) / 2)
+            + 0.6 * np.exp(-((xx - neighbour[0]) ** 2 + (yy - neighbour[1]) ** 2) / 2))
+    heat = heat[None, None].astype(np.float32)                        # (1 crop, 1 kp)
+    source = lambda p: (np.array(p) + 0.5) * 4 - 0.5                  # noqa: E731
+    config = SubjectsConfig()
+
+    step = SubjectsStep(SimpleNamespace(keypoints=['a', 'b']), 'm', SubjectsConfig(subjects=2),
+                        tracker=TrackerConfig(min_keypoints=1))
+    # joint a projects near the neighbour's peak (captured); joint b is its own
+    captured = np.array([[[0.6, 0.0, 2.0], [0.0, 0.5, 2.0]]])
+    ids = step.tracker.step(captured, 0)
+    target = cam.project(step.tracker.predicted(33_333_333)[0, :1])[None]  # (1, 1, 2)
+    p, _ = crop_instances(heat, [heat_cam], [cam], target, config, 0.1)
+    assert np.linalg.norm(p[0, 0] - source(neighbour)) < 2.0           # today's rule: captured
+    step.restart(ids, np.array([[True, False]]))
+    assert np.isnan(step.tracker.predicted(33_333_333)[0, 0]).all()
+    assert np.isfinite(step.tracker.predicted(33_333_333)[0, 1]).all()
+    p, _ = crop_instances(heat, [heat_cam], [cam], np.full((1, 1, 2), np.nan), config, 0.1)
+    assert np.linalg.norm(p[0, 0] - source(own)) < 2.0                 # restarted: its own
+    own_joint = captured.copy()
+    own_joint[0, 0, 0] = 0.0
+    assert step.tracker.step(own_joint, 66_666_666).tolist() == [0]   # its other joint matches
+    assert step.tracker.ids.tolist() == [0] and step.tracker.started.all()
