@@ -85,8 +85,9 @@ class SubjectsConfig:
         3, "per-subject crops: peaks per keypoint among which the one nearest the subject's "
         'predicted joint is taken', minimum=1, maximum=2 * MAX_PEAKS_PER_VIEW)
     duplicate_mm: float = setting(
-        100.0, 'mean joint distance (mm) below which two associated subjects are one body',
-        minimum=0.0)
+        100.0, 'mean joint distance (mm) below which two associated subjects are one body; '
+        "also the distance below which two subjects' same keypoint is one body part (kept "
+        'by one)', minimum=0.0)
     crop_missed: int = setting(
         1, 'per-subject crops: a track missed in this many consecutive frames gets no crops '
         '(discovery looks for its subject again)', minimum=1)
