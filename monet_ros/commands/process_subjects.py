@@ -50,7 +50,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
 
     from tqdm import tqdm
 
-    from monet_ros.commands.process import read_view
+    from monet_ros.commands.views import read_view
     from monet_ros.io import BagWriter, iter_multiview_frames
     from monet_ros.io.export_results import write_subject_results
     from monet_ros.io.export_tables import frame_numbers
