@@ -148,18 +148,19 @@ def score(X, points, reference, reference2d, instants):
     return out
 
 
-def process_path(bag, checkpoint, out, stamps, cameras):
+def process_path(bag, checkpoint, out, stamps, cameras, **options):
     """`monet process` on `bag` with `checkpoint` (commands.process.process_recording, its
     defaults: tracked crops, fuse_heatmaps), results read back from its csv / npz exports.
 
     stamps (T,) ns: the recording's instants; cameras: the recording's cameras (their order).
     Returns X (T, C, 3) world m and points (T, V, C, 2) its detections in source pixels, NaN
     for instants or views it gave nothing for, and the number of its frames whose stamp is
-    not an instant of the recording (0 expected)."""
+    not an instant of the recording (0 expected). options: more process_recording
+    arguments (precision, calibration)."""
     from monet_ros.commands.process import process_recording
     from monet_ros.io.export_tables import read_anipose_csv
 
-    process_recording(bag, checkpoint, out, progress=False, exports=('csv', 'npz'))
+    process_recording(bag, checkpoint, out, progress=False, exports=('csv', 'npz'), **options)
     table = read_anipose_csv(Path(out) / 'keypoints3d.csv')
     det = np.load(Path(out) / 'detections2d.npz')
     stamps = np.asarray(stamps, dtype=np.int64)
@@ -495,16 +496,28 @@ def plot(rows, path, counts):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
-    for mode in (*dict.fromkeys(r['mode'] for r in rows if r['mode'] in TRAIN_MODES),
+    for mode in (*dict.fromkeys(r['mode'] for r in rows
+                                if r['mode'].split(' (')[0] in TRAIN_MODES),
                  *dict.fromkeys(r['mode'] for r in rows if r['mode'].startswith('peer')),
                  'nearest labelled pose'):
         pts = sorted((r['labels'], r['median_mm'], r.get('pck10')) for r in rows
                      if r['mode'] == mode and r['median_mm'] is not None)
         if not pts:
             continue
-        style = '--s' if mode not in TRAIN_MODES else '-o'
-        axes[0].plot([p[0] for p in pts], [p[1] for p in pts], style, label=mode)
-        axes[1].plot([p[0] for p in pts], [100 * p[2] for p in pts], style, label=mode)
+        # one point per label set (small), the line through their means per count
+        counts_here = sorted({p[0] for p in pts})
+        mean_3d = [np.mean([p[1] for p in pts if p[0] == n]) for n in counts_here]
+        mean_pck = [100 * np.mean([p[2] for p in pts if p[0] == n and p[2] is not None])
+                    for n in counts_here]
+        style = '--s' if mode not in TRAIN_MODES and ' (' not in mode else '-o'
+        line = axes[0].plot(counts_here, mean_3d, style, label=mode)[0]
+        axes[1].plot(counts_here, mean_pck, style, label=mode, color=line.get_color())
+        if len(pts) > len(counts_here):
+            axes[0].plot([p[0] for p in pts], [p[1] for p in pts], '.', alpha=0.4,
+                         color=line.get_color())
+            have = [p for p in pts if p[2] is not None]
+            axes[1].plot([p[0] for p in have], [100 * p[2] for p in have], '.', alpha=0.4,
+                         color=line.get_color())
     for r in rows:
         if r['mode'].startswith('OpenPose'):
             axes[1].axhline(100 * r['pck10'], color='grey', ls=':', label='OpenPose')
