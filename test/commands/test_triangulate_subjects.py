@@ -2,8 +2,8 @@
 per-camera instances in an order shuffled in every camera and frame, written as SLEAP
 analysis files (2 tracks per camera, SLEAP's layout as the real files in
 ../shared/data/sleap_anipose_minimal_session hold it), as multi-animal DeepLabCut CSVs
-(the `individuals` level) and as a points table with a `subject` column; the 3D of each
-identity is its ground-truth subject throughout, in CSV, TRC and NWB."""
+and .h5 files (the `individuals` level), and as a points table with a `subject` column;
+the 3D of each identity is its ground-truth subject throughout, in CSV, TRC and NWB."""
 import numpy as np
 import pandas as pd
 import pytest
@@ -48,8 +48,9 @@ def _write_sleap(folder, points):
     return sorted(folder.glob('*.h5'))
 
 
-def _write_dlc(folder, points):
-    """Multi-animal DeepLabCut prediction CSVs (scorer, individuals, bodyparts, coords)."""
+def _write_dlc(folder, points, h5=False):
+    """Multi-animal DeepLabCut predictions (scorer, individuals, bodyparts, coords): CSVs,
+    or .h5 files as DeepLabCut writes them (pandas HDFStore, key 'df_with_missing')."""
     folder.mkdir()
     cols = pd.MultiIndex.from_product(
         [['DLC_dlcrnetms5_demo'], ['ind1', 'ind2'], list(SK.keypoints),
@@ -59,8 +60,11 @@ def _write_dlc(folder, points):
         xy = points[:, v]                                        # (T, 2, C, 2)
         data = np.concatenate([xy, np.full(xy.shape[:3] + (1,), 0.9)], axis=-1)
         frame = pd.DataFrame(data.reshape(T, -1), index=pd.RangeIndex(T), columns=cols)
-        paths.append(folder / f'cam{v}DLC_dlcrnetms5_demo.csv')
-        frame.to_csv(paths[-1])
+        paths.append(folder / f'cam{v}DLC_dlcrnetms5_demo.{"h5" if h5 else "csv"}')
+        if h5:
+            frame.to_hdf(paths[-1], key='df_with_missing', format='table', mode='w')
+        else:
+            frame.to_csv(paths[-1])
     return paths
 
 
@@ -110,13 +114,13 @@ def _check(out, X, capsys):
     return table
 
 
-@pytest.mark.parametrize('kind', ['sleap', 'dlc', 'frames'])
+@pytest.mark.parametrize('kind', ['sleap', 'dlc', 'dlc_h5', 'frames'])
 def test_two_subjects_round_trip(scene, kind, tmp_path, capsys):
     root, X, _, points, _ = scene
     if kind == 'sleap':
         paths = _write_sleap(tmp_path / 'sleap', points)
-    elif kind == 'dlc':
-        paths = _write_dlc(tmp_path / 'dlc', points)
+    elif kind in ('dlc', 'dlc_h5'):
+        paths = _write_dlc(tmp_path / 'dlc', points, h5=kind == 'dlc_h5')
     else:
         paths = _write_table(tmp_path / 'points.csv', points)
     out = tmp_path / 'out'
