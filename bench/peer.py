@@ -42,6 +42,9 @@ not reachable from here.
 
 Writes OUT.md (table, command, CPU model, load averages, settings) and OUT.json.
     python bench/peer.py --budget-s 240     # one label set, 3 instants, seed 0: ~13 min
+    python bench/peer.py --seed 1 --peer-steps 1250 --steps 4316 --no-supervised
+        # fixed step counts (what 600 s of one core gave each side on seed 0): a budget
+        # that does not move with the machine's load
     python bench/real.py ... --peer bench/results/peer.json   # the peer's row in real.py
 """
 import argparse
@@ -71,9 +74,9 @@ OURS = {'reprojection': 'ours default (reprojection)', 'supervised': 'ours super
 # The peer's side: runs in the peer venv (numpy, sleap-io, sleap-nn; no monet_ros)
 # ---------------------------------------------------------------------------------------
 
-def peer_train(work, budget_s, seed):
-    """Build labels.slp from work/labels.json, train sleap-nn within budget_s, write
-    work/train.json."""
+def peer_train(work, budget_s, seed, steps=0):
+    """Build labels.slp from work/labels.json, train sleap-nn within budget_s (or exactly
+    `steps` steps, rounded up to whole epochs, when steps > 0), write work/train.json."""
     import numpy as np
     import sleap_io as sio
     import torch
@@ -114,7 +117,7 @@ def peer_train(work, budget_s, seed):
             now = time.monotonic()
             epoch_s, self.last = now - self.last, now
             self.epochs += 1
-            if now - self.start + epoch_s > budget_s:
+            if not steps and now - self.start + epoch_s > budget_s:
                 trainer.should_stop = True
 
     budget = Budget()
@@ -138,7 +141,8 @@ def peer_train(work, budget_s, seed):
               'output_stride': PEER['output_stride']}}},
           batch_size=PEER['batch_size'], learning_rate=PEER['learning_rate'],
           train_steps_per_epoch=PEER['steps_per_epoch'],
-          min_train_steps_per_epoch=PEER['steps_per_epoch'], max_epochs=10 ** 6,
+          min_train_steps_per_epoch=PEER['steps_per_epoch'],
+          max_epochs=-(-steps // PEER['steps_per_epoch']) if steps else 10 ** 6,
           data_pipeline_fw='torch_dataset_cache_img_memory',
           trainer_accelerator='cpu', trainer_num_devices=1, enable_progress_bar=False,
           save_ckpt=True, ckpt_dir=str(work), run_name='model', seed=seed, num_workers=0)
@@ -290,9 +294,11 @@ def peer_row(args, real, recording, instants, say):
     work = Path(tempfile.mkdtemp(prefix='monet-peer-', dir=args.work))
     try:
         n = export_labels(work, recording, real._STATE['reference2d'], instants)
-        say(f'peer: {n} labelled images exported; training sleap-nn ({args.budget_s:.0f} s)')
+        say(f'peer: {n} labelled images exported; training sleap-nn ('
+            + (f'{args.peer_steps} steps)' if args.peer_steps else f'{args.budget_s:.0f} s)'))
         train_wall, train_cpu = run_peer_stage(python, 'train', work, '--budget-s',
-                                               str(args.budget_s), '--seed', str(args.seed))
+                                               str(args.budget_s), '--seed', str(args.seed),
+                                               '--peer-steps', str(args.peer_steps))
         trained = json.loads((work / 'train.json').read_text())
         predict_wall, _ = run_peer_stage(python, 'predict', work)
         X, points, command = triangulate_peer(work, recording)
@@ -355,6 +361,11 @@ def main(argv=None):
                         help='label set (real.choose_instants) and training seed')
     parser.add_argument('--budget-s', type=float, default=300.0,
                         help='training wall time of every trained row (s), one thread each')
+    parser.add_argument('--peer-steps', type=int, default=0,
+                        help="the peer's training steps (whole epochs of 50) instead of "
+                             '--budget-s: a budget that does not depend on the load')
+    parser.add_argument('--steps', type=int, default=0,
+                        help="our rows' training steps instead of --budget-s")
     parser.add_argument('--peer-venv', type=Path, default=DEFAULT_VENV,
                         help="the peer's virtual environment, created on first use")
     parser.add_argument('--set', nargs='*', default=['input_size=128', 'precision=auto'],
@@ -369,7 +380,7 @@ def main(argv=None):
     if args.stage:                                # inside the peer venv
         work = Path(args.work)
         if args.stage == 'train':
-            peer_train(work, args.budget_s, args.seed)
+            peer_train(work, args.budget_s, args.seed, args.peer_steps)
         else:
             peer_predict(work)
         return 0
@@ -405,7 +416,8 @@ def main(argv=None):
     if not args.peer_only:
         modes = ['reprojection'] + ([] if args.no_supervised else ['supervised'])
         for mode in modes:
-            row = real.run_job((args.labels, mode, args.budget_s, 0, overrides, args.seed))
+            row = real.run_job((args.labels, mode, args.budget_s, args.steps, overrides,
+                                args.seed))
             row['mode'] = OURS[mode]
             rows.append(row)
             loads.append(os.getloadavg())
@@ -420,7 +432,10 @@ def main(argv=None):
         f'Machine: {cpu_model()}, {os.cpu_count()} cores; load averages (1 / 5 / 15 min) at '
         'the start and after each trained row: ' + '; '.join(
             ' / '.join(f'{x:.1f}' for x in load) for load in loads) + '.',
-        f'Budget: {args.budget_s:.0f} s of training wall time per trained row, one torch '
+        (f'Budget: {args.budget_s:.0f} s of training wall time per trained row'
+         if not (args.peer_steps or args.steps) else
+         f'Budget: fixed step counts (peer {args.peer_steps or "by time"}, ours '
+         f'{args.steps or "by time"} steps)') + ', one torch '
         f'thread each, one after the other (peer: {peer["epochs"]} epochs of '
         f'{PEER["steps_per_epoch"]} steps in {peer["train_s"]:.0f} s, {peer["train_cpu_s"]:.0f}'
         f' s CPU for its whole training process; prediction of all frames '
