@@ -33,7 +33,6 @@ Run: .venv/bin/python bench/detector_budget.py [--cameras 8 16] [--repeats 5] [-
 """
 import argparse
 import os
-from pathlib import Path
 import statistics
 import subprocess
 import sys
@@ -42,7 +41,7 @@ import time
 import cv2
 import numpy as np
 
-from monet_ros.cores import ViewThreads
+from monet_ros.cores import ViewThreads, cpu_model
 from monet_ros.geometry import Camera
 from monet_ros.io.images import raw_to_rgb8
 from monet_ros.io.jpeg_scale import decode_for_crop, decode_views
@@ -71,14 +70,6 @@ print('delays', len(delays), delays[len(delays) // 2] if delays else float('nan'
 """
 
 
-def cpu_model():
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                return line.partition(':')[2].strip()
-    except OSError:
-        pass
-    return 'unknown CPU'
 
 
 def frames(n, seed=0):

@@ -13,7 +13,6 @@ import argparse
 import importlib.util
 import os
 from pathlib import Path
-import platform
 import sys
 import time
 
@@ -30,15 +29,6 @@ def bench_real():
     return module
 
 
-def cpu_name():
-    try:
-        with open('/proc/cpuinfo') as f:
-            for line in f:
-                if line.startswith('model name'):
-                    return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
 
 
 def stats(values):
@@ -60,6 +50,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     import torch
 
+    from monet_ros.cores import cpu_model
     from monet_ros.learning.config import TrainConfig
     from monet_ros.learning.recording import load_recording
     from monet_ros.learning.trainer import Trainer, TrainingData
@@ -71,7 +62,7 @@ def main(argv=None):
     root = real.default_data_root()
     bag = root / real.BAG
     load = os.getloadavg()
-    print(f'# CPU: {cpu_name()}; load average at start '
+    print(f'# CPU: {cpu_model()}; load average at start '
           f'{load[0]:.2f} {load[1]:.2f} {load[2]:.2f}', file=sys.stderr)
     recording = load_recording(bag, skeleton='human14')
     reference = real.load_reference(root, recording.keypoints)
@@ -108,7 +99,7 @@ def main(argv=None):
     lines = [
         '# `--precision int8` accuracy on real video (Pose2Sim 4-camera recording)', '',
         f'Command: `python bench/int8_accuracy.py {" ".join(argv or sys.argv[1:])}`; '
-        f'{cpu_name()}, load average at the start '
+        f'{cpu_model()}, load average at the start '
         f'{load[0]:.2f}, at the end {os.getloadavg()[0]:.2f}. Detector: small net, input 128, '
         f'{args.steps} supervised steps on {args.labels} labelled instants (seed {args.seed}: '
         f'{instants.tolist()}), float32 training; scored on the {len(unlabelled)} unlabelled '

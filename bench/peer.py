@@ -51,7 +51,6 @@ import argparse
 import json
 import os
 from pathlib import Path
-import platform
 import resource
 import shutil
 import subprocess
@@ -340,14 +339,6 @@ def parse_overrides(parser, pairs, TrainConfig):
     return overrides
 
 
-def cpu_model():
-    try:
-        for line in Path('/proc/cpuinfo').read_text().splitlines():
-            if line.startswith('model name'):
-                return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or 'unknown'
 
 
 def main(argv=None):
@@ -390,6 +381,7 @@ def main(argv=None):
     import real
 
     from monet_ros.commands.demo import default_data_root
+    from monet_ros.cores import cpu_model
     from monet_ros.learning.config import TrainConfig
     from monet_ros.learning.recording import load_recording
 

@@ -26,11 +26,11 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(_var, '1')  # one core, before numpy loads BLAS
 
 import argparse  # noqa: E402
-import platform  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from monet_ros.cores import cpu_model  # noqa: E402
 from monet_ros.geometry import triangulate_robust  # noqa: E402
 from monet_ros.skeleton import load_skeleton  # noqa: E402
 from monet_ros.subjects import associate  # noqa: E402
@@ -42,17 +42,6 @@ from monet_ros.synth.subjects import (  # noqa: E402
     shuffled_instances,
     subjects_occlusion,
 )
-
-
-def cpu_name():
-    try:
-        with open('/proc/cpuinfo') as f:
-            for line in f:
-                if line.startswith('model name'):
-                    return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or 'unknown CPU'
 
 
 def run(points, cameras, times, C):
@@ -111,7 +100,7 @@ def main(argv=None):
     print(f'# bench/subjects.py: {args.frames} frames at 30/s, {args.cameras} cameras, '
           f'human14, noise {args.noise} px, occluded keypoints dropped, instances '
           f'shuffled per camera and frame')
-    print(f'# CPU: {cpu_name()}; loadavg at start {os.getloadavg()}')
+    print(f'# CPU: {cpu_model()}; loadavg at start {os.getloadavg()}')
     print('| subjects | closest pass (m) | hidden kp | IDSW | IDF1 | 3D error per subject '
           '(mm) | single-subject baseline (mm) | ratio | assoc+track ms/frame median '
           '(p90) | CPU ms/frame median | frames/s |')

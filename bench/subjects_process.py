@@ -36,7 +36,6 @@ import csv
 import json
 import os
 from pathlib import Path
-import platform
 import re
 import resource
 import shutil
@@ -50,21 +49,13 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
+from monet_ros.cores import cpu_model  # noqa: E402
 from monet_ros.subjects.metrics import identity_scores  # noqa: E402
 
 LOOP = re.compile(r'monet process: (\d+) frames .* in ([0-9.]+) s')
 IDENTITIES = re.compile(r'subjects: (\d+) identities .* (\d+) births, (\d+) deaths')
 
 
-def cpu_name():
-    try:
-        with open('/proc/cpuinfo') as f:
-            for line in f:
-                if line.startswith('model name'):
-                    return line.split(':', 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or 'unknown CPU'
 
 
 def load():
@@ -234,7 +225,7 @@ def main(argv=None):
     work.mkdir(parents=True, exist_ok=True)
     start_load = load()
     started = time.perf_counter()
-    say(f'CPU {cpu_name()}; load average {start_load}')
+    say(f'CPU {cpu_model()}; load average {start_load}')
     rig = ['--cameras', args.cameras, '--width', args.width, '--height', args.height,
            '--distinct-sides', '--quiet']
 
@@ -306,7 +297,7 @@ def main(argv=None):
     lines = [
         '# `monet process --subjects N` on synthetic humans (our detector)', '',
         f'`{command}`', '',
-        f'Measured {time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())} on {cpu_name()} '
+        f'Measured {time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime())} on {cpu_model()} '
         f'({os.cpu_count()} cores, shared), load average {start_load} at start, {end_load} '
         f'at end; {time.perf_counter() - started:.0f} s in all.', '',
         f'- Detector: `monet synth --frames {args.train_frames} --label-fraction '

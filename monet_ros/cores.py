@@ -1,13 +1,27 @@
 """The CPU cores this process may use, shared out between workers running at once: one
 rule for `monet process --jobs` (threads per job) and `monet pipeline`'s detector
-processes (threads per process)."""
+processes (threads per process); and the CPU's name, which every benchmark figure states."""
 import os
+import platform
 
 
 def usable_cores():
     """CPU cores this process may run on: its affinity mask (a container's or taskset's
     limit), not the machine's count."""
     return len(os.sched_getaffinity(0))
+
+
+def cpu_model(cpuinfo='/proc/cpuinfo'):
+    """The CPU's model name ('model name' of /proc/cpuinfo; platform.processor() or
+    platform.machine() where there is none, e.g. not Linux)."""
+    try:
+        with open(cpuinfo) as f:
+            for line in f:
+                if line.startswith('model name'):
+                    return line.split(':', 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine() or 'unknown CPU'
 
 
 def threads_each(workers, cores=None):

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from monet_ros.cores import ViewThreads, threads_each, usable_cores, view_threads
+from monet_ros.cores import ViewThreads, cpu_model, threads_each, usable_cores, view_threads
 
 
 @pytest.mark.parametrize('workers, cores, expected', [
@@ -47,3 +47,12 @@ def test_view_threads_run_every_view_once_and_reraise_an_error(threads):
         done = []
         pool.run(done.append, 6)            # still usable after an error
         assert sorted(done) == list(range(6))
+
+
+def test_cpu_model_reads_the_model_name_line(tmp_path):
+    info = tmp_path / 'cpuinfo'
+    info.write_text('processor\t: 0\nvendor_id\t: GenuineIntel\n'
+                    'model name\t: Intel(R) Xeon(R) Gold 6338 CPU @ 2.00GHz\nflags\t: fpu\n')
+    assert cpu_model(info) == 'Intel(R) Xeon(R) Gold 6338 CPU @ 2.00GHz'
+    missing = cpu_model(tmp_path / 'absent')          # not Linux: still a name, never raises
+    assert isinstance(missing, str) and missing
