@@ -38,7 +38,7 @@ import time
 
 import numpy as np
 
-from monet_ros.commands.views import crop_views, read_view
+from monet_ros.commands.views import crop_views, read_frame_views
 from monet_ros.config import ConfigError, config_subset, setting
 from monet_ros.fusion import PEAKS_PER_VIEW, FusionConfig
 
@@ -216,20 +216,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
         h_in, w_in = detector.input_size
         for frame in tqdm(frames, desc='monet process', unit='frame', disable=not progress,
                           file=sys.stderr):
-            present, images = [], []
-            for name in topics:
-                if name not in frame.images:
-                    continue
-                image, problem = read_view(frame.images[name], by_name[name], reader,
-                                           reduced_decode)
-                if problem is not None:
-                    figures['skipped_views'][name] += 1
-                    figures['skip_reasons'].setdefault(name, f'{problem} at stamp '
-                                                       f'{frame.stamp_ns}')
-                if image is None:
-                    continue
-                present.append(by_name[name])
-                images.append(image)
+            present, images = read_frame_views(frame, topics, by_name, reader,
+                                               reduced_decode, figures)
             if len(present) < fusion_config.min_views:
                 figures['missing_views'] += len(topics) - len(present)
                 continue

@@ -50,7 +50,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
 
     from tqdm import tqdm
 
-    from monet_ros.commands.views import read_view
+    from monet_ros.commands.views import read_frame_views
     from monet_ros.io import BagWriter, iter_multiview_frames
     from monet_ros.io.export_results import write_subject_results
     from monet_ros.io.export_tables import frame_numbers
@@ -69,21 +69,9 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                                        decode=False)
         for frame in tqdm(frames, desc='monet process', unit='frame', disable=not progress,
                           file=sys.stderr):
-            present, images, layouts = [], [], []
-            for name in topics:
-                if name not in frame.images:
-                    continue
-                image, problem = read_view(frame.images[name], by_name[name], reader,
-                                           reduced_decode=False)
-                if problem is not None:
-                    figures['skipped_views'][name] += 1
-                    figures['skip_reasons'].setdefault(name, f'{problem} at stamp '
-                                                       f'{frame.stamp_ns}')
-                if image is None:
-                    continue
-                present.append(by_name[name])
-                images.append(image[0])                 # (array, layout): read_view's view
-                layouts.append(image[1])
+            present, views = read_frame_views(frame, topics, by_name, reader, False, figures)
+            images = [view[0] for view in views]        # (array, layout): read_view's view
+            layouts = [view[1] for view in views]
             figures['missing_views'] += len(topics) - len(present)
             if len(present) < config.min_views:
                 continue

@@ -39,6 +39,26 @@ def read_view(message, camera, reader, reduced_decode=True):
     return (None, problem) if problem is not None else ((image, layout), None)
 
 
+def read_frame_views(frame, topics, by_name, reader, reduced_decode, figures):
+    """(cameras, views) of one synchronized frame (io.iter_multiview_frames' Frame): every
+    topic's view read by read_view, in `topics` order; by_name: camera name -> Camera. A
+    skipped view is counted in figures['skipped_views'][name] with its first reason in
+    figures['skip_reasons'][name]; a view absent from the frame or that does not decode is
+    left out (the caller counts missing views)."""
+    present, views = [], []
+    for name in topics:
+        if name not in frame.images:
+            continue
+        view, problem = read_view(frame.images[name], by_name[name], reader, reduced_decode)
+        if problem is not None:
+            figures['skipped_views'][name] += 1
+            figures['skip_reasons'].setdefault(name, f'{problem} at stamp {frame.stamp_ns}')
+        if view is not None:
+            present.append(by_name[name])
+            views.append(view)
+    return present, views
+
+
 def crop_views(views, cameras, boxes, out_size, reader, threads):
     """[(image, layout, camera, box) or None] to give Detector.predict for views read by
     read_view: an (array, layout) view as it is; the JPEG BagMessages decoded at their
