@@ -9,8 +9,10 @@ calibrates on its own crop mode (models.quantize's calibration rule):
   then around the projection of the fused 3D), and the crops the rule makes once the 3D is
   found are the calibration set (tracked_crops);
 - full-frame runs (`--no-track`, track false) on full-frame crops
-  (models.quantize.calibration_crops).
-The crops key ('full' or 'tracked-m<margin>-t<trim>-k<min_points>': crops_key) names the
+  (models.quantize.calibration_crops);
+- the detector node with track false and a fixed `box` on that box's crops.
+The crops key ('full', 'tracked-m<margin>-t<trim>-k<min_points>' or
+'box-<x0>_<y0>_<x1>_<y1>': crops_key) names the
 cached quant (`<model>.<sha256[:16]>.<key>.int8.onnx`), so the two modes of one checkpoint
 each have their quant and neither is used for the other; new weights need a new one.
 Measured on the Pose2Sim recording: bench/results/int8_accuracy.md.
@@ -22,19 +24,28 @@ import numpy as np
 from monet_ros.crop_rule import TrackedCrops, TrackedRule
 from monet_ros.fusion import FusionConfig, fuse_heatmaps
 from monet_ros.models.crop import crop_images
-from monet_ros.models.quantize import CALIBRATION_IMAGES, FULL_CROPS, INT8_SUFFIX, Int8Error
+from monet_ros.models.quantize import (
+    CALIBRATION_IMAGES,
+    FULL_CROPS,
+    INT8_SUFFIX,
+    Int8Error,
+    calibration_crops,
+)
 
 # passes of the float32 network per calibration instant: full frame, then tracked around
 # that 3D; the crops calibrated on are the rule's around the second pass's 3D
 PASSES = 2
 
 
-def crops_key(track, rule=None):
-    """The crops key of a run: 'full' (track False) or 'tracked-m<margin>-t<trim>-
-    k<min_points>' of its crop_rule.TrackedRule (None = the defaults). Everything of the
-    rule that moves the crops is in the key; the timeout is not (it only decides when the
-    rule falls back to the full frame)."""
+def crops_key(track, rule=None, box=None):
+    """The crops key of a run: 'tracked-m<margin>-t<trim>-k<min_points>' of its
+    crop_rule.TrackedRule (None = the defaults) when it tracks, else 'full', or with a fixed
+    `box` (x0, y0, x1, y1) 'box-<x0>_<y0>_<x1>_<y1>'. Everything of the rule that moves the
+    crops is in the key; the timeout and a tracked run's fallback box are not (they only
+    decide the crops before the subject is found)."""
     if not track:
+        if box is not None and len(box):
+            return 'box-' + '_'.join(f'{float(v):g}' for v in box)
         return FULL_CROPS
     rule = rule or TrackedRule()
     return f'tracked-m{rule.margin:g}-t{rule.trim:g}-k{rule.min_points}'
@@ -119,9 +130,11 @@ def _tracked_boxes(detector, images, cameras, rule, fusion):
     return detector.boxes_for(cameras, tracker.boxes(cameras))
 
 
-def int8_calibration(calibration, track, rule=None, cameras=None, slop_ns=0, fusion=None):
+def int8_calibration(calibration, track, rule=None, cameras=None, slop_ns=0, fusion=None,
+                     box=None):
     """(crops key, calibration) to give models.Detector (int8_crops=, calibration=) for a
-    run with tracking `track` (and its TrackedRule `rule`).
+    run with tracking `track` (and its TrackedRule `rule`; without tracking, its fixed
+    `box` when it has one).
 
     calibration: a recording (rosbag2 folder or .mcap), a cached quant (`*.int8.onnx`), crops
     (N, H, W, 3) uint8, or None / '' (the cached quant must exist). A recording of a
@@ -129,14 +142,17 @@ def int8_calibration(calibration, track, rule=None, cameras=None, slop_ns=0, fus
     cameras, slop_ns=slop_ns, fusion=fusion), which the Detector calls with a float32
     detector of the network only when no quant of that key is cached; anything else is
     given as it is (a recording of a full-frame run: its full-frame crops,
-    models.quantize.calibration_crops)."""
-    key = crops_key(track, rule)
+    models.quantize.calibration_crops), but a recording of a fixed-box run becomes a
+    function detector -> that box's crops of it."""
+    key = crops_key(track, rule, box)
     recording = isinstance(calibration, (str, os.PathLike)) and str(calibration) != '' \
         and not str(calibration).endswith(INT8_SUFFIX)
-    if not (track and recording):
+    if not recording or key == FULL_CROPS:
         return key, calibration
 
     def make(detector):
+        if not track:
+            return calibration_crops(calibration, detector.input_size, box=box)
         return tracked_crops(calibration, detector, rule, cameras, slop_ns=slop_ns,
                              fusion=fusion)
 

@@ -11,7 +11,9 @@ full-frame crops and run on tracked crops, where the subject fills the crop, lan
 from float32 on real video; calibrated on tracked crops, within 1 px). Its `crops` key
 names which: 'full' (full-frame crops, grown to the input's aspect: `--no-track`, the
 detector node with track false, Detector.predict without boxes; calibration_crops reads
-them from a recording) or a tracked key 'tracked-m<margin>-t<trim>-k<min_points>' (the
+them from a recording), 'box-<x0>_<y0>_<x1>_<y1>' (one fixed box: the detector node with
+track false and a `box`; calibration_crops with that box) or a tracked key
+'tracked-m<margin>-t<trim>-k<min_points>' (the
 crops the tracked rule of monet_ros.crop_rule makes around the subject, with those
 settings; made above this layer by monet_ros.int8_calibration, which runs the float32
 network with the rule over the recording, and given here as crops or a function that makes
@@ -41,8 +43,11 @@ INT8_FLAGS = (('amx_int8', 'AMX-INT8'), ('avx512_vnni', 'AVX512-VNNI'), ('avx_vn
 CALIBRATION_IMAGES = 64     # crops a recording gives for calibration (at most)
 INT8_SUFFIX = '.int8.onnx'
 FULL_CROPS = 'full'          # the crops key of full-frame calibration
-# crops keys: 'full', or 'tracked-m<margin>-t<trim>-k<min_points>' (int8_calibration.crops_key)
-CROPS_KEY = re.compile(r'full|tracked-m[0-9.e+-]+-t[0-9.e+-]+-k[0-9]+')
+# crops keys (int8_calibration.crops_key): 'full', 'tracked-m<margin>-t<trim>-k<min_points>'
+# or 'box-<x0>_<y0>_<x1>_<y1>' (a fixed box)
+_NUMBER = r'-?[0-9.]+(?:e[+-][0-9]+)?'
+CROPS_KEY = re.compile(rf'full|tracked-m{_NUMBER}-t{_NUMBER}-k[0-9]+|'
+                       rf'box-{_NUMBER}_{_NUMBER}_{_NUMBER}_{_NUMBER}')
 
 
 class Int8Error(ValueError):
@@ -84,8 +89,8 @@ def check_int8_cpu():
 def check_crops_key(crops):
     """`crops` (a crops key, see the module docstring) or ValueError naming it."""
     if not isinstance(crops, str) or not CROPS_KEY.fullmatch(crops):
-        raise ValueError(f"int8 crops key must be 'full' or 'tracked-m<margin>-t<trim>-"
-                         f"k<min_points>', got {crops!r}")
+        raise ValueError(f"int8 crops key must be 'full', 'tracked-m<margin>-t<trim>-"
+                         f"k<min_points>' or 'box-<x0>_<y0>_<x1>_<y1>', got {crops!r}")
     return crops
 
 
@@ -117,18 +122,19 @@ def crops_to_input(crops):
     return np.ascontiguousarray(crops.transpose(0, 3, 1, 2), dtype=np.float32) / 255.0
 
 
-def calibration_crops(recording, input_size, count=CALIBRATION_IMAGES):
+def calibration_crops(recording, input_size, count=CALIBRATION_IMAGES, box=None):
     """Up to `count` network-input crops (N, H, W, 3) uint8 RGB of a recording's frames.
 
-    The calibration set of crops key 'full' (full-frame runs: `--no-track`, track false).
+    The calibration set of crops key 'full' (full-frame runs: `--no-track`, track false)
+    or, with `box` (x0, y0, x1, y1) pixel edges, of that fixed box's key.
     recording: a rosbag2 folder or .mcap; input_size: (H, W) of the network. Every
     Image / CompressedImage topic is read; frames are taken evenly over the recording (each
-    topic's first frame, then every k-th message) and cropped full frame, grown to the
-    input's aspect (models.crop), as a full-frame run crops them. Raises Int8Error when the
-    recording cannot be read or has no image that decodes."""
+    topic's first frame, then every k-th message) and cropped full frame (or to `box`),
+    grown to the input's aspect (models.crop), as such a run crops them. Raises Int8Error
+    when the recording cannot be read or has no image that decodes."""
     from monet_ros.io import any_image_to_numpy, open_bag
     from monet_ros.io.images import to_rgb8
-    from monet_ros.models.crop import crop_images, full_frame_boxes
+    from monet_ros.models.crop import crop_images, fit_boxes_to_aspect, full_frame_boxes
 
     h, w = (int(v) for v in input_size)
     try:
@@ -149,8 +155,9 @@ def calibration_crops(recording, input_size, count=CALIBRATION_IMAGES):
                 image = to_rgb8(any_image_to_numpy(message.msg))
             except ValueError:
                 continue              # a view that does not decode: not calibration data
-            box = full_frame_boxes([(image.shape[1], image.shape[0])], w / h)
-            crops.append(crop_images([image], box, (w, h))[0])
+            crop = (full_frame_boxes([(image.shape[1], image.shape[0])], w / h) if box is None
+                    else fit_boxes_to_aspect(np.asarray([box], np.float64), w / h))
+            crops.append(crop_images([image], crop, (w, h))[0])
             if len(crops) >= count:
                 break
     except (OSError, ValueError) as error:
@@ -219,14 +226,14 @@ def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=F
     crops. checkpoint: the file `model` was loaded from (the quant is cached beside it,
     keyed by its sha256 and `crops`), or None (quantised in memory, never cached).
     calibration: None (the cached quant must exist), a recording (rosbag2 folder or .mcap:
-    with crops 'full' calibration_crops; a tracked key needs the crops the tracked rule
-    makes, monet_ros.int8_calibration), a cached quant (`*.<crops>.int8.onnx`, which must
+    with crops 'full' calibration_crops; other keys need the crops of their rule,
+    monet_ros.int8_calibration), a cached quant (`*.<crops>.int8.onnx`, which must
     be this checkpoint's and of these crops), crops (N, H, W, 3) uint8, or a function of no
     argument returning such crops (called only when no cached quant exists).
     A cached quant is used as it is (calibration is then not read). Where the folder is
     not writable the quant is used from memory. Raises Int8Error (one line) when there is
     no calibration data and no cached quant, or the quant given is another checkpoint's or
-    of other crops, or a recording is given for tracked crops."""
+    of other crops, or a recording is given for crops other than 'full'."""
     from monet_ros.models.onnx_backend import export_onnx
 
     check_crops_key(crops)
@@ -255,9 +262,9 @@ def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=F
                         f'quant: parameter calibration){where}')
     if isinstance(calibration, (str, Path)):
         if crops != FULL_CROPS:
-            raise Int8Error(f'calibration {calibration}: int8 with tracked crops ({crops}) '
-                            'calibrates on the crops the tracked rule makes, not on a '
-                            'recording read here (monet_ros.int8_calibration makes them)')
+            raise Int8Error(f'calibration {calibration}: int8 with crops {crops} calibrates '
+                            'on the crops the run makes, not on full frames of a recording '
+                            'read here (monet_ros.int8_calibration makes them)')
         crops_data = calibration_crops(calibration, model.input_size)
     elif callable(calibration):
         crops_data = np.asarray(calibration())

@@ -149,9 +149,9 @@ class DetectorConfig:
                                'calibrate the quantisation on, with the crops this node makes '
                                '(track true: tracked crops made by the float32 network with '
                                "the track_* rule, which needs the recording's rig; false: "
-                               'full-frame crops), or a cached <model>.<sha>.<crops>.int8.onnx '
-                               'quant of those crops; unused when the checkpoint has a cached '
-                               'quant of those crops')
+                               "box's crops, else full-frame crops), or a cached "
+                               '<model>.<sha>.<crops>.int8.onnx quant of those crops; unused '
+                               'when the checkpoint has a cached quant of those crops')
 
     def __post_init__(self):
         validate_config(self)
@@ -312,15 +312,15 @@ class DetectorNode(Node):
     def load_detector(self, path):
         """The Detector of checkpoint `path`; precision int8 calibrates on the crops this
         node makes (monet_ros.int8_calibration): tracked crops with the track_* rule when
-        it tracks (track true and every camera has rig extrinsics), else full-frame crops;
-        the quant is cached under that crop mode's name. Set at load: changing track live
-        keeps the loaded quant."""
+        it tracks (track true and every camera has rig extrinsics), else `box`'s crops,
+        else full-frame crops; the quant is cached under that crop mode's name. Set at
+        load: changing track live keeps the loaded quant."""
         if not Path(path).is_file():
             raise CheckpointError(f'{path}: checkpoint file not found (parameter model)')
         track = self.config.track and all(s.rig_camera is not None for s in self.slots)
         int8_crops, calibration = int8_calibration(
             self.config.calibration or None, track, self.tracked_rule(self.config),
-            slop_ns=int(round(self.config.slop_ms * 1e6)))
+            slop_ns=int(round(self.config.slop_ms * 1e6)), box=self.config.box or None)
         return Detector.from_checkpoint(path, device=self.device,
                                         backend=self.config.backend,
                                         threads=self.config.threads,

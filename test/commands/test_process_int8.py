@@ -16,7 +16,7 @@ from monet_ros.atomic import sha256_file
 from monet_ros.cli import main as monet
 from monet_ros.commands.process import ProcessConfig, process_recording
 from monet_ros.crop_rule import TrackedRule, crop_boxes
-from monet_ros.int8_calibration import tracked_crops
+from monet_ros.int8_calibration import int8_calibration, tracked_crops
 from monet_ros.io import BagWriter, cloud_to_keypoints3d, open_bag
 from monet_ros.models import Detector, save_checkpoint
 from monet_ros.models.crop import crop_images
@@ -180,3 +180,21 @@ def test_tracked_calibration_without_a_rig_is_one_line_exit_2(scene, tmp_path, c
     # full-frame crops need no rig: --no-track calibrates on the same recording
     assert monet(argv + ['--no-track']) == 0
     assert [p.name.split('.')[2] for p in tmp_path.glob('*.int8.onnx')] == ['full']
+
+
+def test_untracked_calibration_crops_are_the_runs_full_frame_or_fixed_box(scene):
+    """int8_calibration for an untracked run: full frames (read by models.quantize) or,
+    with a fixed box, that box grown to the input's aspect, as Detector.boxes_for crops."""
+    rec, (rig, X), model = scene
+    detector = Detector.from_checkpoint(model, device='cpu')
+    frames = render_blobs(rig, X, radius_px=10.0)
+    images = [frames[v][t] for t in range(len(X)) for v in range(len(rig))]
+    assert int8_calibration(str(rec), False) == ('full', str(rec))
+    box = (60.0, 50.0, 200.0, 170.0)
+    key, make = int8_calibration(str(rec), False, box=box)
+    assert key == 'box-60_50_200_170'
+    crops = make(detector)
+    boxes = np.concatenate([detector.boxes_for(rig, [box] * len(rig)) for _ in X])
+    expected = crop_images(images, boxes, (SIZE, SIZE))
+    diff = np.abs(crops.astype(float) - expected).mean(axis=(1, 2, 3))
+    assert crops.shape == expected.shape and diff.max() < 2.0, diff      # JPEG noise

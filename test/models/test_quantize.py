@@ -135,7 +135,12 @@ def test_the_cache_name_says_which_crops_the_quant_is_calibrated_on(tmp_path):
     assert int8_path_for(path, sha, TRACKED).name == f'model.{sha[:16]}.{TRACKED}.int8.onnx'
     assert crops_key(True) == TRACKED and crops_key(False) == 'full'
     assert crops_key(True, TrackedRule(margin=0.5, min_points=4)) == 'tracked-m0.5-t4-k4'
-    for bad in ('tracked', 'box', '', None, 'full/../x'):
+    # a fixed box is the crops of an untracked run that has one (the detector node's box)
+    assert crops_key(False, box=(10, 20.5, 300, 240)) == 'box-10_20.5_300_240'
+    assert crops_key(True, box=(10, 20.5, 300, 240)) == TRACKED
+    assert int8_path_for(path, sha, 'box-10_20.5_300_240').name.endswith(
+        '.box-10_20.5_300_240.int8.onnx')
+    for bad in ('tracked', 'box', 'box-1_2_3', '', None, 'full/../x'):
         with pytest.raises(ValueError, match='int8 crops key must be'):
             int8_path_for(path, sha, bad)
 
@@ -155,7 +160,7 @@ def test_a_quant_of_other_crops_is_never_used_and_tracked_needs_the_rules_crops(
                                  calibration=str(full.runner.path), int8_crops=TRACKED)
     assert '\n' not in str(caught.value)
     # a recording is read here only for full-frame crops; tracked crops are the crop rule's
-    with pytest.raises(Int8Error, match='calibrates on the crops the tracked rule makes'):
+    with pytest.raises(Int8Error, match='calibrates on the crops the run makes, not on full'):
         Detector.from_checkpoint(path, device='cpu', backend='onnxruntime', precision='int8',
                                  calibration=str(tmp_path / 'rec'), int8_crops=TRACKED)
     # a function making the crops gets a float32 detector of the network, and is called

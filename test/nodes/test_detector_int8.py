@@ -1,5 +1,6 @@
 """The detector node with precision int8 calibrates on the crops it will make: its track
-parameter (and track_* rule) picks tracked or full-frame calibration crops from the
+parameter (and track_* rule, or its fixed box) picks tracked, box or full-frame
+calibration crops from the
 `calibration` recording, and the quant is cached under that crop mode's name beside the
 checkpoint (monet_ros.int8_calibration). The real executable, started as a user would."""
 import time
@@ -33,11 +34,13 @@ def test_detector_node_calibrates_int8_on_the_crops_of_its_track_parameter(ros_e
     common = dict(rig=str(rec), model=str(model), device='cpu', backend='onnxruntime',
                   precision='int8', calibration=str(rec))
     for params, key in ((dict(track_margin=0.5), 'tracked-m0.5-t4-k3'),
-                        (dict(track=False), 'full')):
+                        (dict(track=False), 'full'),
+                        (dict(track=False, box=[40.0, 30.0, 280.0, 210.0]),
+                         'box-40_30_280_210')):
         with NodeProcess('detector', ros_env, {**common, **params}) as node:
             assert wait_started(node), node.output()
             assert 'int8' in node.output(), node.output()
             assert node.stop() == 0, node.output()
         assert (tmp_path / f'model.{sha}.{key}.int8.onnx').is_file(), node.output()
-    # one quant per crop mode, neither used for the other
-    assert len(list(tmp_path.glob('*.int8.onnx'))) == 2
+    # one quant per crop mode, none used for another
+    assert len(list(tmp_path.glob('*.int8.onnx'))) == 3
