@@ -12,9 +12,9 @@ calibrates on its own crop mode (models.quantize's calibration rule):
   (models.quantize.calibration_crops);
 - the detector node with track false and a fixed `box` on that box's crops.
 The crops key ('full', 'tracked-m<margin>-t<trim>-k<min_points>' or
-'box-<x0>_<y0>_<x1>_<y1>': crops_key) names the
-cached quant (`<model>.<sha256[:16]>.<key>.int8.onnx`), so the two modes of one checkpoint
-each have their quant and neither is used for the other; new weights need a new one.
+'box-<x0>_<y0>_<x1>_<y1>': crops_key) names the cached quant
+(`<model>.<sha256[:16]>.<key>.int8.onnx`), so each crop mode of one checkpoint has its
+quant and none is used for another; new weights need a new one.
 Measured on the Pose2Sim recording: bench/results/int8_accuracy.md.
 """
 import os

@@ -13,15 +13,16 @@ names which: 'full' (full-frame crops, grown to the input's aspect: `--no-track`
 detector node with track false, Detector.predict without boxes; calibration_crops reads
 them from a recording), 'box-<x0>_<y0>_<x1>_<y1>' (one fixed box: the detector node with
 track false and a `box`; calibration_crops with that box) or a tracked key
-'tracked-m<margin>-t<trim>-k<min_points>' (the
-crops the tracked rule of monet_ros.crop_rule makes around the subject, with those
-settings; made above this layer by monet_ros.int8_calibration, which runs the float32
-network with the rule over the recording, and given here as crops or a function that makes
-them). The quantised network is cached beside the checkpoint as
-`<checkpoint stem>.<sha256[:16]>.<crops key>.int8.onnx` (int8_path_for), written
-atomically; the name is keyed by the checkpoint's sha256 and the crops key, so new weights
-need a new calibration, a quant never belongs to other weights, and a tracked and a
-full-frame quant of one checkpoint sit side by side, neither used for the other.
+'tracked-m<margin>-t<trim>-k<min_points>' (the crops the tracked rule of
+monet_ros.crop_rule makes around the subject, with those settings; made above this layer by
+monet_ros.int8_calibration, which runs the float32 network with the rule over the
+recording, and given here as crops or a function that makes them). The quantised network is
+cached beside the checkpoint as `<checkpoint stem>.<sha256[:16]>.<crops key>.int8.onnx`
+(int8_path_for), written atomically; the name is keyed by the checkpoint's sha256 and the
+crops key, so new weights need a new calibration, a quant never belongs to other weights,
+and a tracked and a full-frame quant of one checkpoint sit side by side, neither used for
+the other. Quants cached before the crops key (`<stem>.<sha256[:16]>.int8.onnx`, full-frame
+calibrated) are no longer read.
 
 CPU rule (cpu_int8_feature): int8 is refused, not only warned about, on a CPU without
 AVX512-VNNI, AVX-VNNI or AMX-INT8. Without them ONNX Runtime's uint8 x int8 convolutions run
@@ -96,7 +97,7 @@ def check_crops_key(crops):
 
 def int8_path_for(checkpoint, sha256, crops=FULL_CROPS):
     """Where the int8 quant of a checkpoint with this sha256, calibrated on the crops
-    `crops` names (a crops key: 'full' or a tracked key), is cached (beside it):
+    `crops` names (a crops key: 'full', a tracked or a box key), is cached (beside it):
     `<stem>.<sha256[:16]>.<crops>.int8.onnx`."""
     checkpoint = Path(checkpoint)
     return checkpoint.with_name(f'{checkpoint.stem}.{sha256[:16]}.{check_crops_key(crops)}'
