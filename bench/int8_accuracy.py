@@ -2,10 +2,12 @@
 4-camera recording (bench/real.py's data, reference and scoring), one detector trained on a
 few labelled instants, then `monet process` (commands.process.process_recording, as a user
 runs it) in float32, bfloat16 (where native) and int8 (ONNX Runtime static QDQ quantisation
-calibrated on the recording, models.quantize). Reported: each precision's 2D detections and
-3D against float32's (px, mm: median / p90 / max over the keypoints both give), and each
-against Pose2Sim's reference on the unlabelled instants (3D median / mean / p90 mm, PCK@10
-px). The synthetic-rig check is test/commands/test_process_int8.py.
+calibrated on the recording's crops of the run's crop mode, models.quantize and
+monet_ros.int8_calibration), with tracked crops (the default) and full-frame crops
+(`--no-track`: float32 and int8). Reported: each run's 2D detections and 3D against
+float32's with the same crops (px, mm: median / p90 / max over the keypoints both give),
+and each against Pose2Sim's reference on the unlabelled instants (3D median / mean / p90
+mm, PCK@10 px). The synthetic-rig check is test/commands/test_process_int8.py.
 
     .venv/bin/python bench/int8_accuracy.py [--labels 6] [--steps 1000] [--work DIR]
 """
@@ -50,6 +52,7 @@ def main(argv=None):
     args = parser.parse_args(argv)
     import torch
 
+    from monet_ros.commands.process import ProcessConfig
     from monet_ros.cores import cpu_model
     from monet_ros.learning.config import TrainConfig
     from monet_ros.learning.recording import load_recording
@@ -82,20 +85,22 @@ def main(argv=None):
         trainer.run(progress=False)
         save_checkpoint(checkpoint, trainer.model, trainer.metadata())
         print(f'trained {args.steps} steps in {time.monotonic() - start:.0f} s', file=sys.stderr)
-    precisions = ['float32'] + (['bfloat16'] if bfloat16_native('cpu') else []) + ['int8']
+    # (precision, tracked crops): each compared with float32 of the same crop mode
+    runs = ([('float32', True)] + ([('bfloat16', True)] if bfloat16_native('cpu') else []) +
+            [('int8', True), ('float32', False), ('int8', False)])
     got = {}
-    for precision in precisions:
+    for precision, track in runs:
         start = time.monotonic()
-        options = {'precision': precision}
+        options = {'precision': precision, 'config': ProcessConfig(track=track)}
         if precision == 'int8':
+            # calibrated on the crops of the run (models.quantize): tracked or full frame
             options.update(backend='onnxruntime', calibration=bag)
         X, points, _ = real.process_path(bag, checkpoint, args.work / f'out-{precision}-'
-                                         f'{time.time_ns()}', recording.stamps,
+                                         f'{track}-{time.time_ns()}', recording.stamps,
                                          recording.cameras, **options)
-        got[precision] = (X, points)
-        print(f'{precision}: monet process in {time.monotonic() - start:.0f} s',
-              file=sys.stderr)
-    X0, p0 = got['float32']
+        got[precision, track] = (X, points)
+        print(f'{precision} (tracked {track}): monet process in '
+              f'{time.monotonic() - start:.0f} s', file=sys.stderr)
     lines = [
         '# `--precision int8` accuracy on real video (Pose2Sim 4-camera recording)', '',
         f'Command: `python bench/int8_accuracy.py {" ".join(argv or sys.argv[1:])}`; '
@@ -103,17 +108,22 @@ def main(argv=None):
         f'{load[0]:.2f}, at the end {os.getloadavg()[0]:.2f}. Detector: small net, input 128, '
         f'{args.steps} supervised steps on {args.labels} labelled instants (seed {args.seed}: '
         f'{instants.tolist()}), float32 training; scored on the {len(unlabelled)} unlabelled '
-        'instants through `monet process` (tracked crops, fuse_heatmaps).', '',
-        '| precision | 2D vs float32 (px): median / p90 / max | 3D vs float32 (mm): median / '
-        'p90 / max | 3D vs reference (mm): median / mean / p90 | PCK@10 px | triangulated |',
-        '|---|---|---|---|---|---|']
-    for precision in precisions:
-        X, points = got[precision]
+        'instants through `monet process` (fuse_heatmaps), with tracked crops (the default) '
+        'and full-frame crops (`--no-track`); int8 calibrated on the crops of the run; each '
+        'run against float32 with the same crops.', '',
+        '| precision | crops | 2D vs float32 (px): median / p90 / max | 3D vs float32 (mm): '
+        'median / p90 / max | 3D vs reference (mm): median / mean / p90 | PCK@10 px | '
+        'triangulated |',
+        '|---|---|---|---|---|---|---|']
+    for precision, track in runs:
+        X, points = got[precision, track]
+        X0, p0 = got['float32', track]
         d2 = np.linalg.norm(points - p0, axis=-1)[unlabelled]
         d3 = np.linalg.norm(X - X0, axis=-1)[unlabelled] * 1000.0
         r = real.score(X, points, reference, reference2d, unlabelled)
-        lines.append(f'| {precision} | {stats(d2)} | {stats(d3)} | {r["median_mm"]:.1f} / '
-                     f'{r["mean_mm"]:.1f} / {r["p90_mm"]:.1f} | {100 * r["pck10"]:.1f}% | '
+        lines.append(f'| {precision} | {"tracked" if track else "full frame"} | {stats(d2)} | '
+                     f'{stats(d3)} | {r["median_mm"]:.1f} / {r["mean_mm"]:.1f} / '
+                     f'{r["p90_mm"]:.1f} | {100 * r["pck10"]:.1f}% | '
                      f'{r["triangulated"]:.0%} |')
     text = '\n'.join(lines) + '\n'
     args.out.parent.mkdir(parents=True, exist_ok=True)

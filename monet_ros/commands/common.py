@@ -34,11 +34,14 @@ def add_precision_options(parser, calibration_default):
                         'native, else float32; never int8, measured slower; the choice is '
                         'printed), float32, bfloat16 (torch backend, 2-3x faster on CPUs with '
                         'AVX512-BF16 / AMX and on CUDA), or int8 (--backend onnxruntime, CPU '
-                        'with VNNI / AMX-INT8: quantised once, calibrated on the recording, '
-                        'cached beside the checkpoint)')
+                        'with VNNI / AMX-INT8: quantised once, calibrated on the crops the '
+                        'run makes (tracked crops around the subject, found by float32; full '
+                        'frames with `monet process --no-track`), cached beside the '
+                        'checkpoint per crop mode)')
     parser.add_argument('--calibration', default=None,
-                        help='int8: the recording (or cached *.int8.onnx quant) to calibrate '
-                        f'on (default: {calibration_default})')
+                        help='int8: the recording (tracked crops need its camera_info and '
+                        '/tf_static) or a cached *.<crops>.int8.onnx quant of the same crop '
+                        f'mode to calibrate on (default: {calibration_default})')
 
 def print_precision(owner, precision, backend='torch', device=None, checkpoint=None):
     """Resolve --precision (auto: bfloat16 with torch where native, else float32; int8 only

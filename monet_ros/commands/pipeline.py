@@ -350,12 +350,19 @@ def run(args):
     print_precision('monet pipeline', args.precision, args.backend, device, args.model)
     calibration = ''
     if args.precision == 'int8':     # quantised once here, before the detector processes
+        # calibrated on tracked crops (the detector nodes track, with the default rule)
+        from monet_ros.fusion import FusionConfig
+        from monet_ros.int8_calibration import int8_calibration
         from monet_ros.models import Detector
         from monet_ros.models.quantize import cached_int8
+        fusion = FusionConfig(threshold_px=args.threshold_px,
+                              confidence_threshold=args.confidence_threshold)
+        int8_crops, given = int8_calibration(args.calibration or args.bag, True, fusion=fusion)
         Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
-                                 threads=args.threads, precision='int8',
-                                 calibration=args.calibration or args.bag)
-        calibration = str(cached_int8(args.model) or args.calibration or args.bag)
+                                 threads=args.threads, precision='int8', calibration=given,
+                                 int8_crops=int8_crops)
+        calibration = str(cached_int8(args.model, crops=int8_crops) or args.calibration or
+                          args.bag)
     use_large_data_profile()
     import rclpy
     from rclpy.node import Node

@@ -148,7 +148,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     reduced_decode: JPEG views are decoded at the crop's scale (io.jpeg_scale; False: full
     decodes, for comparison). calibration: precision int8's calibration data (a recording
     or a cached quant; None = `bag` itself), read only when the checkpoint has no cached
-    quant (models.quantize).
+    quant of the run's crops: int8 calibrates on the crops the run makes
+    (monet_ros.int8_calibration: tracked crops made by the float32 network with the
+    tracked rule, or with config.track False full-frame crops; the quant's cache name says
+    which, run_calibration).
     subjects: a subjects.detection.SubjectsConfig; with subjects >= 2 several subjects
     (commands.process_subjects: figures then has 'subjects' (subjects.offline.SubjectRows)
     and 'subject_counts'; association: subjects.AssociationConfig (None: from config's
@@ -185,9 +188,10 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     if config.min_views > len(cameras):
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
+    int8_crops, calibration = run_calibration(config, calibration, bag, cameras, fusion_config)
     detector = Detector.from_checkpoint(model, device=device, backend=backend, threads=threads,
-                                        precision=precision,
-                                        calibration=bag if calibration is None else calibration)
+                                        precision=precision, calibration=calibration,
+                                        int8_crops=int8_crops)
     edges = None
     if skeleton is not None:
         edges = load_skeleton(skeleton).bone_indices
@@ -279,6 +283,21 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     return figures
 
 
+def run_calibration(config, calibration, bag, cameras=None, fusion=None):
+    """(int8 crops key, calibration) of a `monet process` run (int8_calibration.
+    int8_calibration): tracked crops (the tracked rule's defaults, as the run's
+    TrackedCrops; also with --subjects N, whose per-subject crops follow each track) unless
+    config.track is False (--no-track: full-frame crops). calibration None = `bag`, whose
+    tracked crops are then made with the run's `cameras` (another recording: its own rig),
+    with the run's stamp tolerance and fusion settings."""
+    from monet_ros.int8_calibration import int8_calibration
+
+    return int8_calibration(bag if calibration is None else calibration, config.track,
+                            cameras=cameras if calibration is None else None,
+                            slop_ns=int(config.slop_ms * 1e6),
+                            fusion=fusion or config_subset(config, FusionConfig))
+
+
 def _several(reader, topics, cameras, detector, units, frame_id, out, config, subjects,
              association, tracker, exports, edges, trc_axes, progress, figures):
     """process_recording with --subjects N >= 2 (commands.process_subjects)."""
@@ -351,8 +370,10 @@ def run(args):
         options.update(subjects=subjects, association=association, tracker=tracker)
     if len(args.bag) > 1 and args.precision == 'int8':   # quantised once, before the workers
         from monet_ros.models import Detector
+        int8_crops, calibration = run_calibration(config, args.calibration, args.bag[0])
         Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
-                                 precision='int8', calibration=args.calibration or args.bag[0])
+                                 precision='int8', calibration=calibration,
+                                 int8_crops=int8_crops)
     if len(args.bag) > 1:         # several recordings: worker processes (process_many.py)
         from monet_ros.commands.process_many import run_many
         return run_many(args, options, process_recording)

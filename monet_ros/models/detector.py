@@ -124,8 +124,15 @@ class Detector:
     torch.autocast in bfloat16, 2-3x faster on CPUs with AVX512-BF16 / AMX; heatmaps are
     returned as float32 and differ from float32 inference by ~1e-2 of their peak), or
     'int8' (backend onnxruntime, CPU with VNNI / AMX-INT8: the network quantised by ONNX
-    Runtime, models.quantize; `calibration` is a recording, a cached quant or crops (N, H,
-    W, 3) uint8, needed unless the checkpoint has a cached quant), or
+    Runtime, models.quantize, calibrated on the crops the run makes: `int8_crops` is the
+    crops key, 'full' (full-frame crops, what predict makes without boxes: the default)
+    or a tracked key (monet_ros.int8_calibration.crops_key: the tracked rule's crops
+    around the subject); it names the cached quant, so a quant of one crop mode is never
+    used for the other. `calibration`: a recording (full-frame crops only), a cached
+    quant of this checkpoint and crops key, crops (N, H, W, 3) uint8 of that mode, or a
+    function detector -> crops that makes them with a float32 Detector of the same network
+    (int8_calibration's tracked calibration), called only without a cached quant; needed
+    unless the checkpoint has a cached quant of these crops), or
     'auto' (bfloat16 with torch where native, else float32; never int8: resolve_precision;
     `precision` is then the one chosen and `precision_note` the line saying why).
     The torch backend keeps the network and its input channels-last (NHWC), the layout
@@ -135,7 +142,7 @@ class Detector:
     """
 
     def __init__(self, model, metadata, device=None, fuse=True, backend='torch', threads=0,
-                 checkpoint=None, precision='float32', calibration=None):
+                 checkpoint=None, precision='float32', calibration=None, int8_crops='full'):
         keypoints = list(metadata.get('keypoints', []))
         if len(keypoints) != model.num_keypoints:
             raise ValueError(f'Detector: metadata.keypoints has {len(keypoints)} names but the '
@@ -166,7 +173,12 @@ class Detector:
         if backend == 'onnxruntime' and self.precision == 'int8':
             from monet_ros.models.quantize import int8_onnx_for
             cpu_model = copy.deepcopy(self.model).cpu()
-            self.runner = OnnxRunner(int8_onnx_for(cpu_model, checkpoint, calibration),
+            if callable(calibration):        # crops made by float32 with the run's crop rule
+                make = calibration
+                calibration = lambda: make(Detector(     # noqa: E731 - called once, if at all
+                    cpu_model, metadata, device='cpu', fuse=False, threads=threads))
+            self.runner = OnnxRunner(int8_onnx_for(cpu_model, checkpoint, calibration,
+                                                   crops=int8_crops),
                                      self.device, threads)
         elif backend == 'onnxruntime':
             cpu_model = copy.deepcopy(self.model).cpu()
@@ -192,14 +204,16 @@ class Detector:
 
     @classmethod
     def from_checkpoint(cls, path, device=None, architecture=None, num_keypoints=None,
-                        backend='torch', threads=0, precision='float32', calibration=None):
+                        backend='torch', threads=0, precision='float32', calibration=None,
+                        int8_crops='full'):
         """Detector of a checkpoint file (CheckpointError names the file and field); with
-        backend 'onnxruntime' the export (and with precision int8 the quant) is cached
-        beside it, keyed by its sha256."""
+        backend 'onnxruntime' the export (and with precision int8 the quant, keyed also by
+        int8_crops) is cached beside it, keyed by its sha256."""
         model, metadata = load_checkpoint(path, architecture=architecture,
                                           num_keypoints=num_keypoints)
         return cls(model, metadata, device=device, backend=backend, threads=threads,
-                   checkpoint=path, precision=precision, calibration=calibration)
+                   checkpoint=path, precision=precision, calibration=calibration,
+                   int8_crops=int8_crops)
 
     def boxes_for(self, cameras, boxes=None, keep_aspect=True):
         """The crop boxes predict uses: (N, 4) edge coordinates.

@@ -3,12 +3,26 @@
 The float32 ONNX export (models.onnx_backend) is quantised with
 onnxruntime.quantization.quantize_static: QDQ format, weights int8 per output channel,
 activations uint8 per tensor (U8S8, the layout ONNX Runtime's x86 int8 kernels take), MinMax
-calibration on network-input crops. The crops come from a recording (its frames, every
-camera, full-frame crops as the detector makes them when it has no 3D yet:
-calibration_crops) or are given. The quantised network is cached beside the checkpoint as
-`<checkpoint stem>.<sha256[:16]>.int8.onnx` (int8_path_for), written atomically; the name
-is keyed by the checkpoint's sha256, so new weights need a new calibration and a quant never
-belongs to other weights.
+calibration on network-input crops.
+
+The calibration rule: a quant is calibrated on the crops the run will make, because the
+activation ranges follow the crops (bench/results/int8_accuracy.md: a quant calibrated on
+full-frame crops and run on tracked crops, where the subject fills the crop, lands 12 px
+from float32 on real video; calibrated on tracked crops, within 1 px). Its `crops` key
+names which: 'full' (full-frame crops, grown to the input's aspect: `--no-track`, the
+detector node with track false, Detector.predict without boxes; calibration_crops reads
+them from a recording), 'box-<x0>_<y0>_<x1>_<y1>' (one fixed box: the detector node with
+track false and a `box`; calibration_crops with that box) or a tracked key
+'tracked-m<margin>-t<trim>-k<min_points>' (the crops the tracked rule of
+monet_ros.crop_rule makes around the subject, with those settings; made above this layer by
+monet_ros.int8_calibration, which runs the float32 network with the rule over the
+recording, and given here as crops or a function that makes them). The quantised network is
+cached beside the checkpoint as `<checkpoint stem>.<sha256[:16]>.<crops key>.int8.onnx`
+(int8_path_for), written atomically; the name is keyed by the checkpoint's sha256 and the
+crops key, so new weights need a new calibration, a quant never belongs to other weights,
+and a tracked and a full-frame quant of one checkpoint sit side by side, neither used for
+the other. Quants cached before the crops key (`<stem>.<sha256[:16]>.int8.onnx`, full-frame
+calibrated) are no longer read.
 
 CPU rule (cpu_int8_feature): int8 is refused, not only warned about, on a CPU without
 AVX512-VNNI, AVX-VNNI or AMX-INT8. Without them ONNX Runtime's uint8 x int8 convolutions run
@@ -18,6 +32,7 @@ float32 is small there. `precision auto` then keeps float32 (resolve_precision).
 """
 import logging
 from pathlib import Path
+import re
 import tempfile
 
 import numpy as np
@@ -28,6 +43,12 @@ from monet_ros.atomic import atomic_write, sha256_file
 INT8_FLAGS = (('amx_int8', 'AMX-INT8'), ('avx512_vnni', 'AVX512-VNNI'), ('avx_vnni', 'AVX-VNNI'))
 CALIBRATION_IMAGES = 64     # crops a recording gives for calibration (at most)
 INT8_SUFFIX = '.int8.onnx'
+FULL_CROPS = 'full'          # the crops key of full-frame calibration
+# crops keys (int8_calibration.crops_key): 'full', 'tracked-m<margin>-t<trim>-k<min_points>'
+# or 'box-<x0>_<y0>_<x1>_<y1>' (a fixed box)
+_NUMBER = r'-?[0-9.]+(?:e[+-][0-9]+)?'
+CROPS_KEY = re.compile(rf'full|tracked-m{_NUMBER}-t{_NUMBER}-k[0-9]+|'
+                       rf'box-{_NUMBER}_{_NUMBER}_{_NUMBER}_{_NUMBER}')
 
 
 class Int8Error(ValueError):
@@ -66,17 +87,29 @@ def check_int8_cpu():
                         'float32 (precision auto picks it there)')
 
 
-def int8_path_for(checkpoint, sha256):
-    """Where the int8 quant of a checkpoint with this sha256 is cached (beside it)."""
+def check_crops_key(crops):
+    """`crops` (a crops key, see the module docstring) or ValueError naming it."""
+    if not isinstance(crops, str) or not CROPS_KEY.fullmatch(crops):
+        raise ValueError(f"int8 crops key must be 'full', 'tracked-m<margin>-t<trim>-"
+                         f"k<min_points>' or 'box-<x0>_<y0>_<x1>_<y1>', got {crops!r}")
+    return crops
+
+
+def int8_path_for(checkpoint, sha256, crops=FULL_CROPS):
+    """Where the int8 quant of a checkpoint with this sha256, calibrated on the crops
+    `crops` names (a crops key: 'full', a tracked or a box key), is cached (beside it):
+    `<stem>.<sha256[:16]>.<crops>.int8.onnx`."""
     checkpoint = Path(checkpoint)
-    return checkpoint.with_name(f'{checkpoint.stem}.{sha256[:16]}{INT8_SUFFIX}')
+    return checkpoint.with_name(f'{checkpoint.stem}.{sha256[:16]}.{check_crops_key(crops)}'
+                                f'{INT8_SUFFIX}')
 
 
-def cached_int8(checkpoint, sha256=None):
-    """The cached int8 quant of `checkpoint` (Path) when it exists, else None."""
+def cached_int8(checkpoint, sha256=None, crops=FULL_CROPS):
+    """The cached int8 quant of `checkpoint` (Path) calibrated on `crops` (a crops key)
+    when it exists, else None."""
     if checkpoint is None or not Path(checkpoint).is_file():
         return None
-    path = int8_path_for(checkpoint, sha256 or sha256_file(checkpoint))
+    path = int8_path_for(checkpoint, sha256 or sha256_file(checkpoint), crops)
     return path if path.is_file() else None
 
 
@@ -90,17 +123,19 @@ def crops_to_input(crops):
     return np.ascontiguousarray(crops.transpose(0, 3, 1, 2), dtype=np.float32) / 255.0
 
 
-def calibration_crops(recording, input_size, count=CALIBRATION_IMAGES):
+def calibration_crops(recording, input_size, count=CALIBRATION_IMAGES, box=None):
     """Up to `count` network-input crops (N, H, W, 3) uint8 RGB of a recording's frames.
 
+    The calibration set of crops key 'full' (full-frame runs: `--no-track`, track false)
+    or, with `box` (x0, y0, x1, y1) pixel edges, of that fixed box's key.
     recording: a rosbag2 folder or .mcap; input_size: (H, W) of the network. Every
     Image / CompressedImage topic is read; frames are taken evenly over the recording (each
-    topic's first frame, then every k-th message) and cropped full frame, grown to the
-    input's aspect (models.crop), as the detector crops before it has 3D. Raises Int8Error
+    topic's first frame, then every k-th message) and cropped full frame (or to `box`),
+    grown to the input's aspect (models.crop), as such a run crops them. Raises Int8Error
     when the recording cannot be read or has no image that decodes."""
     from monet_ros.io import any_image_to_numpy, open_bag
     from monet_ros.io.images import to_rgb8
-    from monet_ros.models.crop import crop_images, full_frame_boxes
+    from monet_ros.models.crop import crop_images, fit_boxes_to_aspect, full_frame_boxes
 
     h, w = (int(v) for v in input_size)
     try:
@@ -121,8 +156,9 @@ def calibration_crops(recording, input_size, count=CALIBRATION_IMAGES):
                 image = to_rgb8(any_image_to_numpy(message.msg))
             except ValueError:
                 continue              # a view that does not decode: not calibration data
-            box = full_frame_boxes([(image.shape[1], image.shape[0])], w / h)
-            crops.append(crop_images([image], box, (w, h))[0])
+            crop = (full_frame_boxes([(image.shape[1], image.shape[0])], w / h) if box is None
+                    else fit_boxes_to_aspect(np.asarray([box], np.float64), w / h))
+            crops.append(crop_images([image], crop, (w, h))[0])
             if len(crops) >= count:
                 break
     except (OSError, ValueError) as error:
@@ -183,27 +219,39 @@ def quantize_onnx(float_onnx, crops):
         return target.read_bytes()
 
 
-def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None):
+def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=FULL_CROPS):
     """The int8 network of `model` (eval mode, CPU) as a path (cached) or ONNX bytes.
 
-    checkpoint: the file `model` was loaded from (the quant is cached beside it, keyed by its
-    sha256), or None (quantised in memory, never cached). calibration: None (the cached
-    quant must exist), a recording (rosbag2 folder or .mcap: calibration_crops), a cached
-    quant (`*.int8.onnx`, which must be this checkpoint's) or crops (N, H, W, 3) uint8.
+    crops: the crops key of the run (the module docstring's calibration rule): 'full' or a
+    tracked key; it names the cached quant, and the calibration data must be of those
+    crops. checkpoint: the file `model` was loaded from (the quant is cached beside it,
+    keyed by its sha256 and `crops`), or None (quantised in memory, never cached).
+    calibration: None (the cached quant must exist), a recording (rosbag2 folder or .mcap:
+    with crops 'full' calibration_crops; other keys need the crops of their rule,
+    monet_ros.int8_calibration), a cached quant (`*.<crops>.int8.onnx`, which must
+    be this checkpoint's and of these crops), crops (N, H, W, 3) uint8, or a function of no
+    argument returning such crops (called only when no cached quant exists).
     A cached quant is used as it is (calibration is then not read). Where the folder is
     not writable the quant is used from memory. Raises Int8Error (one line) when there is
-    no calibration data and no cached quant, or the quant given is another checkpoint's."""
+    no calibration data and no cached quant, or the quant given is another checkpoint's or
+    of other crops, or a recording is given for crops other than 'full'."""
     from monet_ros.models.onnx_backend import export_onnx
 
+    check_crops_key(crops)
     path = None
     if checkpoint is not None:
         sha256 = sha256 or sha256_file(checkpoint)
-        path = int8_path_for(checkpoint, sha256)
+        path = int8_path_for(checkpoint, sha256, crops)
         if path.is_file():
             return path
     if isinstance(calibration, (str, Path)) and str(calibration).endswith(INT8_SUFFIX):
         given = Path(calibration)
-        if path is not None and not given.name.endswith(f'.{sha256[:16]}{INT8_SUFFIX}'):
+        if not given.name.endswith(f'.{crops}{INT8_SUFFIX}'):
+            raise Int8Error(f'calibration {given}: a quant calibrated on other crops than '
+                            f"this run's ({crops}: the quant must be named *.{crops}"
+                            f'{INT8_SUFFIX}; give the recording to calibrate on instead)')
+        if path is not None and not given.name.endswith(f'.{sha256[:16]}.{crops}'
+                                                        f'{INT8_SUFFIX}'):
             raise Int8Error(f'calibration {given}: a quant of other weights (this checkpoint '
                             f'is {Path(checkpoint).name}, sha256 {sha256[:16]}: {path.name})')
         if not given.is_file():
@@ -214,10 +262,16 @@ def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None):
         raise Int8Error(f'precision int8 needs calibration data (a recording or a cached '
                         f'quant: parameter calibration){where}')
     if isinstance(calibration, (str, Path)):
-        crops = calibration_crops(calibration, model.input_size)
+        if crops != FULL_CROPS:
+            raise Int8Error(f'calibration {calibration}: int8 with crops {crops} calibrates '
+                            'on the crops the run makes, not on full frames of a recording '
+                            'read here (monet_ros.int8_calibration makes them)')
+        crops_data = calibration_crops(calibration, model.input_size)
+    elif callable(calibration):
+        crops_data = np.asarray(calibration())
     else:
-        crops = np.asarray(calibration)
-    data = quantize_onnx(export_onnx(model), crops)
+        crops_data = np.asarray(calibration)
+    data = quantize_onnx(export_onnx(model), crops_data)
     if path is None:
         return data
     try:

@@ -36,6 +36,7 @@ from monet_ros.config import MAX_THREADS, ConfigError, setting, validate_config
 from monet_ros.crop_rule import TrackedCrops, TrackedRule
 from monet_ros.error_text import error_line
 from monet_ros.geometry.units import UNITS, rig_units
+from monet_ros.int8_calibration import int8_calibration
 from monet_ros.io import (
     camera_from_camera_info,
     camera_info_from_camera,
@@ -145,8 +146,12 @@ class DetectorConfig:
                              'CPU with VNNI / AMX-INT8; needs calibration or a cached quant)',
                              choices=PRECISIONS)
     calibration: str = setting('', 'precision int8: a recording (rosbag2 folder or .mcap) to '
-                               'calibrate the quantisation on, or a cached <model>.<sha>'
-                               '.int8.onnx quant; unused when the checkpoint has a cached quant')
+                               'calibrate the quantisation on, with the crops this node makes '
+                               '(track true: tracked crops made by the float32 network with '
+                               "the track_* rule, which needs the recording's rig; false: "
+                               "box's crops, else full-frame crops), or a cached "
+                               '<model>.<sha>.<crops>.int8.onnx quant of those crops; unused '
+                               'when the checkpoint has a cached quant of those crops')
 
     def __post_init__(self):
         validate_config(self)
@@ -305,13 +310,22 @@ class DetectorNode(Node):
         self.config, self.derived = config, derived
 
     def load_detector(self, path):
+        """The Detector of checkpoint `path`; precision int8 calibrates on the crops this
+        node makes (monet_ros.int8_calibration): tracked crops with the track_* rule when
+        it tracks (track true and every camera has rig extrinsics), else `box`'s crops,
+        else full-frame crops; the quant is cached under that crop mode's name. Set at
+        load: changing track live keeps the loaded quant."""
         if not Path(path).is_file():
             raise CheckpointError(f'{path}: checkpoint file not found (parameter model)')
+        track = self.config.track and all(s.rig_camera is not None for s in self.slots)
+        int8_crops, calibration = int8_calibration(
+            self.config.calibration or None, track, self.tracked_rule(self.config),
+            slop_ns=int(round(self.config.slop_ms * 1e6)), box=self.config.box or None)
         return Detector.from_checkpoint(path, device=self.device,
                                         backend=self.config.backend,
                                         threads=self.config.threads,
                                         precision=self.config.precision,
-                                        calibration=self.config.calibration or None)
+                                        calibration=calibration, int8_crops=int8_crops)
 
     # ------------------------------------------------------------------ input
     def bad_message(self, slot, topic, error):

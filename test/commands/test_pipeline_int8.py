@@ -1,6 +1,7 @@
 """`monet pipeline --precision int8` end to end on JPEG cameras: the network quantised once
-(calibrated on the recording, cached beside the checkpoint) before the detector process
-starts, the views decoded at the crop's scale in parallel, and every frame fused."""
+(calibrated on the tracked crops of the recording, cached beside the checkpoint under that
+crop mode's name) before the detector process starts, the views decoded at the crop's
+scale in parallel, and every frame fused."""
 import sys
 
 from helpers.recordings import noise_recording, small_checkpoint
@@ -26,7 +27,9 @@ def test_int8_pipeline_fuses_every_frame_of_a_jpeg_recording(ros_env, tmp_path):
             assert proc.wait(timeout=60) == 0, proc.output()
     output = proc.output()
     assert 'monet pipeline: precision int8' in output, output
-    assert len(list(tmp_path.glob('model.*.int8.onnx'))) == 1, output   # quantised once
+    # quantised once, on tracked crops (the detector nodes track, with the default rule)
+    assert [p.name.split('.', 2)[2] for p in tmp_path.glob('model.*.int8.onnx')] == \
+        ['tracked-m0.3-t4-k3.int8.onnx'], output
     assert [header_stamp_ns(c) for c in clouds] == stamps, output
     for cloud in clouds:
         assert cloud_to_keypoints3d(cloud, units='m')['X'].shape == (14, 3)

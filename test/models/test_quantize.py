@@ -1,13 +1,16 @@
 """precision int8 (models.quantize): ONNX Runtime static quantisation of a trained network
 finds the keypoints float32 finds; it is refused, in one line naming the cause, without
 calibration data, without onnxruntime, for training, and on CPUs without VNNI / AMX-INT8;
-its cache beside the checkpoint follows the checkpoint's sha256."""
+its cache beside the checkpoint follows the checkpoint's sha256 and the crops it is
+calibrated on (full frame or tracked), a quant of one crop mode never used for the other."""
 from helpers.blob_net import NAMES, SIZE, blob_images, train_blob_net
 import numpy as np
 import pytest
 
 from monet_ros.atomic import sha256_file
 from monet_ros.config import ConfigError
+from monet_ros.crop_rule import TrackedRule
+from monet_ros.int8_calibration import crops_key
 from monet_ros.learning.trainer import check_training_precision
 from monet_ros.models import save_checkpoint
 from monet_ros.models.detector import Detector, resolve_precision
@@ -120,3 +123,60 @@ def test_cache_follows_the_checkpoint_sha256(trained, calibration, tmp_path):
     new = int8_path_for(path, sha256_file(path))
     assert new != cached and renewed.runner.path == new
     assert sorted(tmp_path.glob('*.int8.onnx')) == sorted([cached, new])
+
+
+TRACKED = 'tracked-m0.3-t4-k3'
+
+
+def test_the_cache_name_says_which_crops_the_quant_is_calibrated_on(tmp_path):
+    path = tmp_path / 'model.pt'
+    sha = 'ab' * 32
+    assert int8_path_for(path, sha).name == f'model.{sha[:16]}.full.int8.onnx'
+    assert int8_path_for(path, sha, TRACKED).name == f'model.{sha[:16]}.{TRACKED}.int8.onnx'
+    assert crops_key(True) == TRACKED and crops_key(False) == 'full'
+    assert crops_key(True, TrackedRule(margin=0.5, min_points=4)) == 'tracked-m0.5-t4-k4'
+    # a fixed box is the crops of an untracked run that has one (the detector node's box)
+    assert crops_key(False, box=(10, 20.5, 300, 240)) == 'box-10_20.5_300_240'
+    assert crops_key(True, box=(10, 20.5, 300, 240)) == TRACKED
+    assert int8_path_for(path, sha, 'box-10_20.5_300_240').name.endswith(
+        '.box-10_20.5_300_240.int8.onnx')
+    for bad in ('tracked', 'box', 'box-1_2_3', '', None, 'full/../x'):
+        with pytest.raises(ValueError, match='int8 crops key must be'):
+            int8_path_for(path, sha, bad)
+
+
+@needs_int8
+def test_a_quant_of_other_crops_is_never_used_and_tracked_needs_the_rules_crops(
+        trained, calibration, tmp_path):
+    path = tmp_path / 'model.pt'
+    save_checkpoint(path, trained, {'keypoints': NAMES})
+    full = Detector.from_checkpoint(path, device='cpu', backend='onnxruntime',
+                                    precision='int8', calibration=calibration)
+    assert full.runner.path == int8_path_for(path, sha256_file(path))
+    assert cached_int8(path, crops=TRACKED) is None
+    # the full-frame quant is not the tracked run's: refused by name, one line
+    with pytest.raises(Int8Error, match='a quant calibrated on other crops') as caught:
+        Detector.from_checkpoint(path, device='cpu', backend='onnxruntime', precision='int8',
+                                 calibration=str(full.runner.path), int8_crops=TRACKED)
+    assert '\n' not in str(caught.value)
+    # a recording is read here only for full-frame crops; tracked crops are the crop rule's
+    with pytest.raises(Int8Error, match='calibrates on the crops the run makes, not on full'):
+        Detector.from_checkpoint(path, device='cpu', backend='onnxruntime', precision='int8',
+                                 calibration=str(tmp_path / 'rec'), int8_crops=TRACKED)
+    # a function making the crops gets a float32 detector of the network, and is called
+    # only while no quant of these crops is cached
+    calls = []
+
+    def make(detector):
+        calls.append((detector.precision, detector.backend, detector.input_size))
+        return calibration
+
+    for _ in range(2):
+        tracked = Detector.from_checkpoint(path, device='cpu', backend='onnxruntime',
+                                           precision='int8', calibration=make,
+                                           int8_crops=TRACKED)
+    assert calls == [('float32', 'torch', (SIZE, SIZE))]
+    assert tracked.runner.path == int8_path_for(path, sha256_file(path), TRACKED)
+    sha = sha256_file(path)[:16]
+    assert sorted(p.name for p in tmp_path.glob('*.int8.onnx')) == \
+        [f'model.{sha}.full.int8.onnx', f'model.{sha}.{TRACKED}.int8.onnx']

@@ -1,0 +1,159 @@
+"""precision int8 calibrated on the crops the run will make (no ROS): one rule for `monet
+process`, `monet pipeline` and the detector node.
+
+An int8 quant's activation ranges follow the crops it was calibrated on, so a run
+calibrates on its own crop mode (models.quantize's calibration rule):
+- tracked runs (the default: `monet process`, `monet pipeline`, the detector node with
+  track true) on tracked crops: the float32 network runs over instants of the calibration
+  recording with the tracked rule of monet_ros.crop_rule (TrackedCrops: full frame first,
+  then around the projection of the fused 3D), and the crops the rule makes once the 3D is
+  found are the calibration set (tracked_crops);
+- full-frame runs (`--no-track`, track false) on full-frame crops
+  (models.quantize.calibration_crops);
+- the detector node with track false and a fixed `box` on that box's crops.
+The crops key ('full', 'tracked-m<margin>-t<trim>-k<min_points>' or
+'box-<x0>_<y0>_<x1>_<y1>': crops_key) names the cached quant
+(`<model>.<sha256[:16]>.<key>.int8.onnx`), so each crop mode of one checkpoint has its
+quant and none is used for another; new weights need a new one.
+Measured on the Pose2Sim recording: bench/results/int8_accuracy.md.
+"""
+import os
+
+import numpy as np
+
+from monet_ros.crop_rule import TrackedCrops, TrackedRule
+from monet_ros.fusion import FusionConfig, fuse_heatmaps
+from monet_ros.models.crop import crop_images
+from monet_ros.models.quantize import (
+    CALIBRATION_IMAGES,
+    FULL_CROPS,
+    INT8_SUFFIX,
+    Int8Error,
+    calibration_crops,
+)
+
+# passes of the float32 network per calibration instant: full frame, then tracked around
+# that 3D; the crops calibrated on are the rule's around the second pass's 3D
+PASSES = 2
+
+
+def crops_key(track, rule=None, box=None):
+    """The crops key of a run: 'tracked-m<margin>-t<trim>-k<min_points>' of its
+    crop_rule.TrackedRule (None = the defaults) when it tracks, else 'full', or with a fixed
+    `box` (x0, y0, x1, y1) 'box-<x0>_<y0>_<x1>_<y1>'. Everything of the rule that moves the
+    crops is in the key; the timeout and a tracked run's fallback box are not (they only
+    decide the crops before the subject is found)."""
+    if not track:
+        if box is not None and len(box):
+            return 'box-' + '_'.join(f'{float(v):g}' for v in box)
+        return FULL_CROPS
+    rule = rule or TrackedRule()
+    return f'tracked-m{rule.margin:g}-t{rule.trim:g}-k{rule.min_points}'
+
+
+def tracked_crops(recording, detector, rule=None, cameras=None, count=CALIBRATION_IMAGES,
+                  slop_ns=0, fusion=None):
+    """Up to `count` network-input crops (N, H, W, 3) uint8 RGB that the tracked rule makes
+    around the subject on instants of `recording` (the calibration set of tracked runs).
+
+    recording: rosbag2 folder or .mcap; detector: a float32 (or bfloat16) models.Detector
+    of the network to quantise; rule: crop_rule.TrackedRule (None = the defaults);
+    cameras: the rig cameras of the run (None = the recording's camera_info + /tf_static);
+    slop_ns: stamp tolerance between views; fusion: FusionConfig (None = the defaults).
+    Instants are taken evenly over the recording (ceil(count / views) of them); on each the
+    detector runs on full frames, its heatmaps are fused to 3D, it runs again on the
+    rule's crops around that 3D, and the rule's crops around the new 3D are kept (a
+    subject that does not move between instants: the crops a tracked run makes once it
+    has found it). Views without enough 3D keypoints projecting into them keep the full
+    frame, as the rule does. Raises Int8Error (one line, naming the recording) when it
+    cannot be read, has no rig or fewer than 2 cameras with images, or no instant decodes."""
+    from monet_ros.io import any_image_to_numpy, open_bag
+    from monet_ros.io.images import to_rgb8
+    from monet_ros.io.multiview import image_topics, iter_multiview_frames
+    from monet_ros.rig_select import load_node_rig
+
+    rule = rule or TrackedRule()
+    fusion = fusion or FusionConfig()
+    try:
+        if cameras is None:
+            cameras, _ = load_node_rig(recording)
+        reader = open_bag(recording)
+        topics = image_topics(reader, cameras, recording)
+    except (OSError, ValueError) as error:
+        raise Int8Error(f'calibration {recording}: tracked crops need its images and rig '
+                        f'(camera_info + /tf_static) ({error})') from None
+    if len(cameras) < 2:
+        raise Int8Error(f'calibration {recording}: tracked crops need at least 2 cameras, '
+                        f'found {len(cameras)}')
+    by_name = {c.name: c for c in cameras}
+    counts = [int(getattr(reader.topics[t], 'count', 0) or 0) for t in topics.values()]
+    instants = -(-count // len(cameras))
+    every = max(1, min(counts) // instants) if min(counts) else 1
+    h, w = detector.input_size
+    crops = []
+    try:
+        frames = iter_multiview_frames(reader, topics, slop_ns=slop_ns, decode=False)
+        for n, frame in enumerate(frames):
+            if n % every:
+                continue
+            present, images = [], []
+            for name, message in frame.images.items():
+                try:
+                    images.append(to_rgb8(any_image_to_numpy(message.msg)))
+                except ValueError:
+                    continue          # a view that does not decode: not calibration data
+                present.append(by_name[name])
+            if not present or any(i.shape[:2] != (c.height, c.width)
+                                  for i, c in zip(images, present)):
+                continue
+            boxes = _tracked_boxes(detector, images, present, rule, fusion)
+            crops.extend(crop_images(images, boxes, (w, h)))
+            if len(crops) >= count:
+                break
+    except (OSError, ValueError) as error:
+        raise Int8Error(f'calibration {recording}: cannot read it ({error})') from None
+    if not crops:
+        raise Int8Error(f"calibration {recording}: no instant decodes at the rig's image size")
+    return np.stack(crops[:count])
+
+
+def _tracked_boxes(detector, images, cameras, rule, fusion):
+    """The boxes (V, 4) the tracked rule crops one instant with once it has its 3D."""
+    tracker = TrackedCrops(rule, units=cameras[0].units)
+    for _ in range(PASSES):
+        boxes = detector.boxes_for(cameras, tracker.boxes(cameras))
+        heat, heat_cameras = detector.predict(images, cameras, boxes, keep_aspect=False)
+        if len(cameras) >= 2:
+            result = fuse_heatmaps(heat, np.stack([c.K for c in heat_cameras]), cameras,
+                                   fusion)
+            tracker.update(result.X)
+    return detector.boxes_for(cameras, tracker.boxes(cameras))
+
+
+def int8_calibration(calibration, track, rule=None, cameras=None, slop_ns=0, fusion=None,
+                     box=None):
+    """(crops key, calibration) to give models.Detector (int8_crops=, calibration=) for a
+    run with tracking `track` (and its TrackedRule `rule`; without tracking, its fixed
+    `box` when it has one).
+
+    calibration: a recording (rosbag2 folder or .mcap), a cached quant (`*.int8.onnx`), crops
+    (N, H, W, 3) uint8, or None / '' (the cached quant must exist). A recording of a
+    tracked run becomes a function detector -> tracked_crops(recording, detector, rule,
+    cameras, slop_ns=slop_ns, fusion=fusion), which the Detector calls with a float32
+    detector of the network only when no quant of that key is cached; anything else is
+    given as it is (a recording of a full-frame run: its full-frame crops,
+    models.quantize.calibration_crops), but a recording of a fixed-box run becomes a
+    function detector -> that box's crops of it."""
+    key = crops_key(track, rule, box)
+    recording = isinstance(calibration, (str, os.PathLike)) and str(calibration) != '' \
+        and not str(calibration).endswith(INT8_SUFFIX)
+    if not recording or key == FULL_CROPS:
+        return key, calibration
+
+    def make(detector):
+        if not track:
+            return calibration_crops(calibration, detector.input_size, box=box)
+        return tracked_crops(calibration, detector, rule, cameras, slop_ns=slop_ns,
+                             fusion=fusion)
+
+    return key, make
