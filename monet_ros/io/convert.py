@@ -106,13 +106,16 @@ def heatmaps_to_image_msg(heatmaps, stamp, frame_id):
 
 
 def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error=None,
-                         num_views=None, *, units):
+                         num_views=None, *, units, keypoint=None, subject=None):
     """(N, 3) keypoints in the rig's length unit `units` (required) -> sensor_msgs.msg.
     PointCloud2 in metres with fields x y z confidence reprojection_error (FLOAT32),
-    num_views keypoint (UINT32), point_step 28; inverse: cloud_to_keypoints3d."""
+    num_views keypoint (UINT32), point_step 28; with subject (N,) identities, one more
+    UINT32 field `subject` (point_step 32; io.fields.keypoint_cloud_fields); inverse:
+    cloud_to_keypoints3d."""
     from sensor_msgs.msg import PointCloud2, PointField
 
-    f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views, units=units)
+    f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views, units=units,
+                              keypoint=keypoint, subject=subject)
     msg = PointCloud2(header=_header(stamp, frame_id), height=f['height'], width=f['width'],
                       fields=[PointField(name=n, offset=o, datatype=d, count=c)
                               for n, o, d, c in f['fields']],
