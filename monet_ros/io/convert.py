@@ -126,15 +126,17 @@ def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error
 
 
 def skeleton_marker_array(stamp, frame_id, X, bone_indices, ns='monet', scale=0.03,
-                          lifetime_ns=0, names=None, *, units):
+                          lifetime_ns=0, names=None, *, units, subject=0):
     """(N, 3) keypoints in the rig's length unit `units` (required) + (B, 2) bone index
     pairs -> visualization_msgs.msg.MarkerArray in metres (a SPHERE_LIST of the finite
     joints and a LINE_LIST of bones with both ends finite; with `names`, a text marker per
     finite joint). scale: joint size (m). lifetime_ns: how long a viewer shows them without
-    an update (0 = forever)."""
+    an update (0 = forever). subject: the identity whose colours are used
+    (io.markers.SUBJECT_COLOURS)."""
     return marker_array(stamp, frame_id,
                         skeleton_marker_specs(keypoints_to_metres(X, units), bone_indices,
-                                              ns=ns, scale=scale, names=names),
+                                              ns=ns, scale=scale, names=names,
+                                              subject=subject),
                         lifetime_ns)
 
 

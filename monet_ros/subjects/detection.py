@@ -122,6 +122,22 @@ class FrameSubjects:
     shared: int = 0
 
 
+def subject_keypoints(frame):
+    """The tracked subjects of a FrameSubjects, by identity: ids (K,) increasing, X (K, C, 3)
+    (rig units, NaN: not triangulated), score (K, C) (0: none), error (K, C) mean
+    reprojection error (px) over each keypoint's inlier views (NaN: none), views (K, C)
+    int inlier views. Subjects without an identity (-1) are left out."""
+    a = frame.association
+    tracked = frame.ids >= 0
+    order = np.argsort(frame.ids[tracked], kind='stable')
+    rows = frame.keep[tracked][order]
+    views = a.inliers[rows].sum(1)                                        # (K, C)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        error = np.where(a.inliers[rows], a.view_errors[rows], 0.0).sum(1) / views
+    return (frame.ids[tracked][order], a.X[rows], np.nan_to_num(a.score[rows]), error,
+            views)
+
+
 def group_points(points, keypoint, views, link):
     """Constrained single linkage of 3D points (module docstring, step 1d).
 
