@@ -32,6 +32,7 @@ from .markers import skeleton_marker_specs
 __all__ = [
     'any_image_to_numpy', 'camera_from_camera_info', 'camera_info_from_camera',
     'cloud_to_keypoints3d', 'compressed_image_msg', 'compressed_image_to_numpy',
+    'empty_crop_messages',
     'header_stamp_ns', 'heatmaps_to_image_msg', 'image_msg_to_heatmaps', 'image_to_numpy',
     'delete_all_markers', 'keypoints3d_to_cloud', 'marker_array', 'numpy_to_image_msg',
     'skeleton_marker_array',
@@ -103,6 +104,17 @@ def heatmaps_to_image_msg(heatmaps, stamp, frame_id):
                 encoding=f['encoding'], is_bigendian=0, step=f['step'])
     msg.data = _bytes_array(f['data'])
     return msg
+
+
+def empty_crop_messages(num_keypoints, stamp, frame_id):
+    """(Image, CameraInfo) of a crop slot without a crop at that instant (subjects >= 2):
+    a 0 x 0 heatmap of encoding 32FC<num_keypoints> and a 0 x 0 camera_info, same stamp."""
+    from sensor_msgs.msg import CameraInfo, Image
+
+    header = _header(stamp, frame_id)
+    return (Image(header=header, height=0, width=0, encoding=f'32FC{int(num_keypoints)}',
+                  is_bigendian=0, step=0),
+            CameraInfo(header=_header(stamp, frame_id)))
 
 
 def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error=None,

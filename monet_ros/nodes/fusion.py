@@ -83,6 +83,7 @@ from monet_ros.nodes.names import (
     RIG_MARKERS,
     SKELETON,
     TF_STATIC,
+    crop_slots,
     node_namespace,
 )
 from monet_ros.nodes.params import declare_config, duration_msg_ns
@@ -115,14 +116,6 @@ OUTCOMES = ('fused', 'bad_messages', 'unpaired', 'repeated', 'late', 'dropped', 
 STALE = object()
 # The item of a crop slot without a crop at that instant (subjects >= 2: an empty heatmap).
 EMPTY = object()
-# The crop slot `slot` of camera `camera` (subjects >= 2): the {camera} of the topic templates.
-CROP_SLOT = '{camera}/crop{slot}'
-
-
-def crop_slots(camera, subjects):
-    """The N + 1 slot names of a camera with `subjects` N >= 2 (CROP_SLOT): crop<k>, k < N,
-    the crops around subjects, crop<N> the full frame."""
-    return [CROP_SLOT.format(camera=camera, slot=k) for k in range(subjects + 1)]
 
 
 @dataclass(frozen=True)
