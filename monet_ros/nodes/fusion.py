@@ -540,9 +540,7 @@ class FusionNode(Node):
         through SubjectsCore.live_frame, the tracked subjects published."""
         keys = [key for key in self.keys if key in group.items]
         if any(group.items[key] is STALE for key in keys):
-            self.stale_frames += 1
-            for key in keys:
-                self.stats[key].stale += 1
+            self.skip_stale(group, keys)
             return
         filled = [key for key in keys if group.items[key] is not EMPTY]
         present = sorted({self.key_camera[key] for key in filled})
@@ -626,10 +624,11 @@ class FusionNode(Node):
 
     def skip_stale(self, group, views):
         """A frame with a view that waited too long in the input queue: not fused, each of
-        its views counted stale; logged once."""
+        its views (indices into names, or with subjects >= 2 crop slot names) counted
+        stale; logged once."""
         self.stale_frames += 1
         for i in views:
-            self.stats[self.names[i]].stale += 1
+            self.stats[i if isinstance(i, str) else self.names[i]].stale += 1
         if self.stale_frames == 1:
             self.get_logger().warning(
                 f'falling behind: frame {group.stamp_ns} had input queued longer than '

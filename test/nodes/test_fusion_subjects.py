@@ -113,6 +113,21 @@ def test_fusion_publishes_two_subjects_with_stable_identities(ros_env, tmp_path)
         assert ros.spin_until(lambda: markers and 'monet fusion: subject 1' in
                               fusion_statuses(diagnostics), timeout=30,
                               process=node), node.output()
+        status = fusion_statuses(diagnostics)
+        # a bad slot message (3 channels, the skeleton has 14) is counted against its slot,
+        # logged, and the node goes on
+        bad = heatmaps_to_image_msg(np.zeros((3, 8, 8), np.float32), int(stamps[-1]) + 1,
+                                    'cam0')
+        pubs['cam0', 0][1].publish(camera_info_from_camera(
+            cams[0].crop((0.0, 0.0, 40.0, 40.0), (8, 8)), int(stamps[-1]) + 1, 'cam0'))
+        pubs['cam0', 0][0].publish(bad)
+
+        def counted():
+            slot = fusion_statuses(diagnostics).get('monet fusion: cam0/crop0')
+            return slot is not None and {kv.key: kv.value for kv in slot.values}.get(
+                'bad_messages') == '1'
+        assert ros.spin_until(counted, timeout=30, process=node), node.output()
+        assert node.running()
         assert node.stop(signal.SIGINT) == 0, node.output()
 
     # every frame: two subjects, 14 keypoints each, in identity order
@@ -141,7 +156,6 @@ def test_fusion_publishes_two_subjects_with_stable_identities(ros_env, tmp_path)
     assert spaces == {f'human14/subject{i}' for i in identity_of.values()}
     joints = {m.ns: (m.color.r, m.color.g, m.color.b) for m in last if m.id == 0}
     assert len(set(joints.values())) == 2
-    status = fusion_statuses(diagnostics)
     summary = {kv.key: kv.value for kv in status['monet fusion'].values}
     assert summary['births'] == '2' and summary['deaths'] == '0', summary
     assert summary['subjects_tracked'] == '2'
