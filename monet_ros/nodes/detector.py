@@ -377,6 +377,11 @@ class DetectorNode(Node):
                 self.subject_tracks.update(points['X'], points['subject'], points['keypoint'],
                                            stamp, len(self.detector.keypoints))
             else:
+                if len(np.unique(points['subject'])) > 1:
+                    self.get_logger().warning(
+                        f'{self.resolve_topic_name(KEYPOINTS3D)} has several subjects: this '
+                        'detector crops around all of them as one (set subjects as on the '
+                        'fusion node)', throttle_duration_sec=60.0)
                 self.tracker.update(points['X'], stamp)
         except ValueError as error:
             self.get_logger().warning(f'{self.resolve_topic_name(KEYPOINTS3D)}: bad message '

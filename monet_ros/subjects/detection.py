@@ -359,9 +359,10 @@ class SubjectsCore:
         steps as SubjectsStep.step, the crops given instead of made:
 
         - hypotheses: the cropped tracks' predictions (step 1); with full-frame maps and
-          fewer than N of them, discovery on those maps (discover_heatmaps, steps 1a-e),
-          and each discovered hypothesis takes, as its crop in a view, that view's
-          full-frame map (the detector has no crop of it yet);
+          fewer than N of them, discovery on those maps (discover_heatmaps, steps 1a-e);
+          each discovered hypothesis, and each track without a crop of its own in a view,
+          takes that view's full-frame map as its crop there (the detector has no crop of
+          it);
         - each subject crop is the crop of the track given by match_crops (per view, the
           Hungarian assignment of crop centres to the tracks' crop-rule box centres); a crop
           matched to none is a hypothesis of unknown joints (its highest peaks, step 3);
@@ -382,10 +383,18 @@ class SubjectsCore:
         unknown = int((owner < 0).sum())
         owner[owner < 0] = len(predicted) + len(new) + np.arange(unknown)
         hyp = np.concatenate([predicted, new, np.full((unknown, self.C, 3), np.nan)])
-        v_idx = [c[0] for c in crops] + [f[0] for f in full for _ in range(len(new))]
-        h_idx = owner.tolist() + [len(predicted) + h for _ in full for h in range(len(new))]
-        heat = [c[1] for c in crops] + [f[1] for f in full for _ in range(len(new))]
-        K = [c[2] for c in crops] + [f[2] for f in full for _ in range(len(new))]
+        v_idx, h_idx = [c[0] for c in crops], owner.tolist()
+        heat, K = [c[1] for c in crops], [c[2] for c in crops]
+        # a track without a crop of its own in a view, and every discovered subject, takes
+        # that view's full-frame map as its crop
+        owned = set(zip(v_idx, h_idx))
+        for v, full_heat, full_K in full:
+            for h in range(len(predicted) + len(new)):
+                if (v, h) not in owned:
+                    v_idx.append(v)
+                    h_idx.append(h)
+                    heat.append(full_heat)
+                    K.append(full_K)
         return self.resolve(cameras, stamp_ns, hyp, v_idx, h_idx, heat, K,
                             tracked=len(predicted), discovered=discovered, counts=counts)
 

@@ -83,3 +83,35 @@ def test_the_subject_field_is_added_only_with_subjects():
         fields = [type('F', (), dict(name=n, offset=o, datatype=d, count=c))
                   for n, o, d, c in two['fields']]
     assert cloud_to_arrays(Msg)['subject'].tolist() == [3, 3, 7, 7]
+
+
+def test_full_frame_maps_alone_keep_two_subjects_tracked():
+    # a detector with track:=false sends only the full frame: discovery finds both in the
+    # first frame, then each track takes its instance from the full-frame maps
+    from helpers.scenes import cv2_project, gaussian_heatmaps
+
+    cams = ring_rig(3)
+    A, B = bodies()
+    core = SubjectsCore(14, 'm', SubjectsConfig(subjects=2))
+    box, grid = np.array([0.0, 0.0, 640.0, 480.0]), (160, 120)
+    identity = {}
+    for t in range(6):
+        step = np.array([0.02 * t, 0.0, 0.0])
+        truth = [A + step, B - step]
+        full = []
+        for v, cam in enumerate(cams):
+            heat = np.zeros((14, grid[1], grid[0]), np.float32)
+            for X in truth:
+                p = (cv2_project(cam, X) + 0.5) * grid[0] / 640 - 0.5
+                heat = np.maximum(heat, gaussian_heatmaps(p, grid[::-1], sigma=1.5))
+            full.append((v, heat, cam.crop(box, grid).K))
+        r = core.live_frame(cams, 1_000 + t * 33_333_333, [], full)
+        assert (r.ids >= 0).sum() == 2, t
+        assert r.discovered == (2 if t == 0 else -1)
+        for s, ident in zip(r.keep, r.ids):
+            X = r.association.X[s]
+            d = [np.abs(X - T).max() for T in truth]
+            body = int(np.argmin(d))
+            assert d[body] < 0.005, (t, d)
+            assert identity.setdefault(body, int(ident)) == int(ident)
+    assert core.tracker.births == 2
