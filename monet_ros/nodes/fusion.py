@@ -262,7 +262,8 @@ class FusionNode(Node):
         self.last_stamp_ns = None
         # callables(stamp_ns, result, filtered) (the pipeline's summary and score):
         # filtered (C, 3) the live filter's keypoints (rig unit: not the topic's m), None
-        # with it off
+        # with it off; with subjects >= 2 result holds the published points (X (K C, 3),
+        # confidence, reprojection_error, num_views, keypoint, subject), filtered None
         self.listeners = []
         self.first_heard = None   # monotonic time of the first heatmap (of any camera)
         self.sync = StampSynchronizer(self.keys, slop_ns=derived.slop_ns,
@@ -621,6 +622,13 @@ class FusionNode(Node):
                     units=self.units, subject=ident).markers
             self.pub_skeleton.publish(MarkerArray(markers=markers))
         self.timer.add('publish', time.perf_counter() - start)
+        if self.listeners:                # e.g. monet pipeline's summary: every subject
+            frame = SimpleNamespace(
+                X=X.reshape(-1, 3), confidence=score.reshape(-1),
+                reprojection_error=error.reshape(-1), num_views=views.reshape(-1),
+                keypoint=np.tile(np.arange(C), len(ids)), subject=np.repeat(ids, C))
+            for listener in self.listeners:
+                listener(group.stamp_ns, frame, None)
 
     def skip_stale(self, group, views):
         """A frame with a view that waited too long in the input queue: not fused, each of
