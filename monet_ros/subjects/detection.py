@@ -65,7 +65,7 @@ from monet_ros.crop_rule import TrackedRule, subject_boxes
 from monet_ros.fusion import MAX_PEAKS_PER_VIEW, crop_scales, heat_to_source_points
 from monet_ros.geometry import project_views, stack_cameras
 from monet_ros.geometry.units import from_mm
-from monet_ros.subjects.association import AssociationConfig, associate
+from monet_ros.subjects.association import Association, AssociationConfig, associate
 from monet_ros.subjects.tracking import SubjectTracker
 
 
@@ -323,7 +323,13 @@ class SubjectsCore:
             p, s = crop_instances(heat, heat_cameras, crop_cams, targets, self.config,
                                   self.association.confidence_threshold)
             points[v_idx, h_idx], score[v_idx, h_idx] = p, s
-        a = associate(points, cameras, score, self.association)
+        if V:
+            a = associate(points, cameras, score, self.association)
+        else:                     # no view at all (live: every slot of the instant empty)
+            a = Association(X=np.zeros((0, self.C, 3)), instance=np.zeros((0, 0), np.int64),
+                            inliers=np.zeros((0, 0, self.C), bool),
+                            view_errors=np.zeros((0, 0, self.C)), score=np.zeros((0, self.C)),
+                            cost=np.zeros(0), unmatched=0, instances=0)
         keep = []
         for s in range(len(a.X)):
             d = np.linalg.norm(a.X[s] - a.X[keep], axis=-1)               # (kept, C)

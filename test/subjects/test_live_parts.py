@@ -115,3 +115,14 @@ def test_full_frame_maps_alone_keep_two_subjects_tracked():
             assert d[body] < 0.005, (t, d)
             assert identity.setdefault(body, int(ident)) == int(ident)
     assert core.tracker.births == 2
+
+
+def test_an_instant_without_any_crop_ages_the_tracks():
+    # every slot of the instant empty (no view): no subject, the tracks age and die
+    core = SubjectsCore(14, 'm', SubjectsConfig(subjects=2))
+    A, _ = bodies()
+    core.tracker.step(A[None], 0)
+    r = core.live_frame([], 100_000_000, [], [])
+    assert len(r.ids) == 0 and core.tracker.ids.tolist() == [0]
+    core.live_frame([], 700_000_000, [], [])        # max_missed_s 0.5 s
+    assert core.tracker.deaths == 1
