@@ -39,6 +39,9 @@ ARGUMENTS = {
                   'float32), float32 or bfloat16 (CPUs with AVX512-BF16 / AMX, CUDA)'),
     'backend': ('torch', 'detector: inference backend, torch or onnxruntime'),
     'device': ('', "detector: torch device ('' = CUDA when available, else CPU)"),
+    'subjects': ('1', 'detector and fusion: most subjects tracked (>= 2: crop slots and the '
+                 'keypoints3d subject field, docs/subjects.md; the player then waits '
+                 'wait_for_subscribers_s for {camera}/heatmaps, which no node subscribes)'),
 }
 
 
@@ -70,10 +73,12 @@ def generate_launch_description():
                  'backend': ParameterValue(arg['backend'], value_type=str),
                  'device': ParameterValue(arg['device'], value_type=str),
                  'slop_ms': ParameterValue(arg['slop_ms'], value_type=float),
+                 'subjects': ParameterValue(arg['subjects'], value_type=int),
                  'use_sim_time': sim_time}], **common),
         Node(executable='fusion', name='fusion',
              parameters=[os.path.join(config, 'fusion.yaml'), {
                  'rig': ParameterValue(arg['rig'], value_type=str),
                  'slop_ms': ParameterValue(arg['slop_ms'], value_type=float),
+                 'subjects': ParameterValue(arg['subjects'], value_type=int),
                  'use_sim_time': sim_time}], **common),
     ])

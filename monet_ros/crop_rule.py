@@ -148,6 +148,60 @@ class TrackedCrops:
                           self.rule.min_points, self.rule.trim)
 
 
+class TrackedSubjects:
+    """The tracked rule with several subjects (the detector node's `subjects` >= 2): the
+    subjects of the last /monet/keypoints3d (its `subject` field) and their stamp.
+
+    `update(X, subject, keypoint, stamp_ns, num_keypoints)`; `current(stamp_ns)` -> [(identity,
+    (C, 3) keypoints)] by identity, [] when stale (rule.timeout_ns, as TrackedCrops);
+    `boxes(cameras, stamp_ns, subjects, fallback_box)` -> the crop slots' boxes. units: the
+    length unit of the keypoints and cameras (the rig's)."""
+
+    def __init__(self, rule=None, units='m'):
+        self.rule = rule or TrackedRule()
+        self.units = check_units(units)
+        self.subjects = []
+        self.stamp_ns = None
+
+    def update(self, X, subject, keypoint, stamp_ns, num_keypoints):
+        """X (M, 3) points in `units` (as read from the topic), subject (M,) identities,
+        keypoint (M,) keypoint indices (outside 0..num_keypoints-1: left out)."""
+        X = np.asarray(X, np.float64).reshape(-1, 3)
+        subject, keypoint = np.asarray(subject), np.asarray(keypoint)
+        ok = (keypoint >= 0) & (keypoint < num_keypoints)
+        out = []
+        for ident in np.unique(subject[ok]):
+            mine = ok & (subject == ident)
+            joints = np.full((num_keypoints, 3), np.nan)
+            joints[keypoint[mine]] = X[mine]
+            out.append((int(ident), joints))
+        self.subjects, self.stamp_ns = out, int(stamp_ns)
+
+    def current(self, stamp_ns=None):
+        """[(identity, (C, 3))] to crop an image of `stamp_ns` around ([] when none or
+        stale)."""
+        if self.stamp_ns is None or stamp_ns is not None and not \
+                0 <= int(stamp_ns) - self.stamp_ns <= self.rule.timeout_ns:
+            return []
+        return self.subjects
+
+    def boxes(self, cameras, stamp_ns, subjects, fallback_box=None, track=True):
+        """(V, subjects + 1, 4) boxes of the crop slots (NaN rows: no crop in that slot and
+        view): slot k < subjects around the k-th current subject (by identity; subject_boxes
+        with the rule's margin, min_points and trim: NaN in a view where too few of its
+        joints project); slot `subjects` the full frame (or `fallback_box`) while fewer than
+        `subjects` are current, else NaN. track False: no subject crops."""
+        V = len(cameras)
+        out = np.full((V, subjects + 1, 4), np.nan)
+        current = self.current(stamp_ns)[:subjects] if track else []
+        for k, (_, X) in enumerate(current):
+            out[:, k] = subject_boxes(cameras, X, self.rule.margin, self.rule.min_points,
+                                      trim=self.rule.trim)
+        if len(current) < subjects:
+            out[:, subjects] = crop_boxes(cameras, None, fallback_box)
+        return out
+
+
 def recording_boxes(recording, source, aspect, margin, pseudo=None, box=None):
     """(T, V, 4) crop boxes of every (instant, view) of a recording, for training and as the
     start of evaluation's tracked crops.

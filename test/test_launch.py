@@ -30,14 +30,14 @@ def test_launch_file_declares_its_arguments_and_nodes(repo_root, tmp_path, monke
     arguments = {a.name: a for a in description.get_launch_arguments()}
     assert set(arguments) == {'bag', 'rig', 'model', 'namespace', 'transport', 'debug_image',
                               'use_sim_time', 'slop_ms', 'rate', 'precision', 'backend',
-                              'device'}
+                              'device', 'subjects'}
     context = launch.LaunchContext()
     defaults = {name: ''.join(s.perform(context) for s in a.default_value)
                 for name, a in arguments.items() if name not in ('model', 'rig')}
     assert defaults == {'bag': '', 'namespace': 'monet', 'transport': 'auto',
                         'debug_image': 'false', 'use_sim_time': 'false', 'slop_ms': '0.0',
                         'rate': '1.0', 'precision': 'auto', 'backend': 'torch',
-                        'device': ''}
+                        'device': '', 'subjects': '1'}
     nodes = [e for e in description.entities if isinstance(e, Node)]
     assert sorted(n.node_executable for n in nodes) == ['detector', 'fusion', 'player']
     for node in nodes:

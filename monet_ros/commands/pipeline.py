@@ -4,6 +4,7 @@ processes.
     monet pipeline                           # demo: synthetic recording + a model for it
     monet pipeline --bag REC --model CKPT [--rig RIG] [--rate 0.5] [--loop] [--lockstep]
     monet pipeline --bag REC --model CKPT --loop --learn    # + online learner (hot reload)
+    monet pipeline --bag REC --model CKPT --subjects 2      # several subjects (subjects.md)
 
 This process runs the fusion node (and the learner, which trains in its own thread) in
 one SingleThreadedExecutor (pipeline_executor); the player (replaying REC) and the detector
@@ -86,6 +87,12 @@ def add_arguments(parser):
                         '(default: ~/.cache/monet_ros/demo)')
     parser.add_argument('--start-delay', type=float, default=0.5,
                         help='seconds between start-up and the first frame (discovery)')
+    parser.add_argument('--subjects', type=int, default=1,
+                        help='most subjects tracked (detector and fusion `subjects`; >= 2: '
+                        'crop slots, keypoints3d with a subject field; docs/subjects.md)')
+    parser.add_argument('--link-mm', type=float, default=600.0,
+                        help='--subjects >= 2: largest distance (mm) between two linked '
+                        'keypoints of one subject (fusion link_mm)')
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
     parser.add_argument('--detector-processes', type=int, default=0,
                         help='detector processes, each batching its share of the cameras '
@@ -135,6 +142,8 @@ class Summary:
         self.replay_ended = threading.Event()   # the player's end of the recording
         self.joint_fused = None   # (C,) frames in which each joint was triangulated
         self.joint_views = None   # (C,) sum of its inlier views over those frames
+        self.joint_frames = 0     # frames (with several subjects: subject-frames) counted
+        self.subject_counts = None  # callable: (tracked, births, deaths), subjects >= 2
         self.names = None         # keypoint names (the fusion node's skeleton)
         self.stale_frames = None  # callable: frames fusion skipped as stale (max_queue_ms)
 
@@ -166,11 +175,20 @@ class Summary:
                 self.error_count += 1
             self.last_stamp = max(self.last_stamp, stamp_ns)
             fused = np.isfinite(result.X).all(axis=1)
-            if self.joint_fused is None or len(self.joint_fused) != len(fused):
-                self.joint_fused = np.zeros(len(fused), np.int64)
-                self.joint_views = np.zeros(len(fused), np.int64)
-            self.joint_fused += fused
-            self.joint_views += np.where(fused, result.num_views, 0).astype(np.int64)
+            # several subjects: one point per keypoint and subject, `keypoint` its index
+            keypoint = getattr(result, 'keypoint', None)
+            C = len(fused) if keypoint is None else len(self.names or ()) or \
+                int(keypoint.max(initial=-1)) + 1
+            if self.joint_fused is None or len(self.joint_fused) != C:
+                self.joint_fused = np.zeros(C, np.int64)
+                self.joint_views = np.zeros(C, np.int64)
+                self.joint_frames = 0
+            if keypoint is None:
+                keypoint = np.arange(C)
+            np.add.at(self.joint_fused, keypoint, fused)
+            np.add.at(self.joint_views, keypoint,
+                      np.where(fused, result.num_views, 0).astype(np.int64))
+            self.joint_frames += len(fused) // max(C, 1)
 
     def line(self, window=None):
         """The status line: the last `window` seconds, or the whole run (latency percentiles
@@ -198,14 +216,18 @@ class Summary:
             parts.append(f'reprojection error {np.mean(err):5.2f} px')
         elif window is None and self.error_count:
             parts.append(f'reprojection error {error_mean:5.2f} px')
-        if window is None and self.joint_fused is not None and self.frames:
+        if self.subject_counts is not None:
+            tracked, births, deaths = self.subject_counts()
+            parts.append(f'subjects {tracked} tracked, {births} births, {deaths} deaths')
+        if window is None and self.joint_fused is not None and self.joint_frames:
             parts.append(self.joint_line())
         return ' | '.join(parts)
 
     def joint_line(self, names=None):
         """Per-joint dropout and inlier views, and what reprojection error means."""
         with self.lock:
-            fused, views, frames = self.joint_fused.copy(), self.joint_views.copy(), self.frames
+            fused, views = self.joint_fused.copy(), self.joint_views.copy()
+            frames = self.joint_frames
         dropout = 1.0 - fused / max(frames, 1)
         names = names or self.names or [f'joint {c}' for c in range(len(fused))]
         worst = int(np.argmax(dropout))
@@ -328,6 +350,14 @@ def run(args):
     heap_for_large_buffers()       # heatmap buffers reused, not mapped per message
     short_gil_switch()             # fusion's and the learner's callbacks share a GIL
     score = None
+    if args.subjects > 1:
+        if not args.bag:
+            raise ConfigError('monet pipeline', 'subjects', 'the demo is one subject; give '
+                              '--bag and --model with --subjects')
+        if getattr(args, 'learn', False):
+            raise ConfigError('monet pipeline', 'subjects', '--learn trains one subject; '
+                              'leave it out with --subjects')
+        args.debug_image = False          # not drawn with several subjects
     if not args.bag:
         from monet_ros.commands.pipeline_demo import prepare_demo
         assets = prepare_demo(args.workdir)
@@ -392,7 +422,9 @@ def run(args):
                                                    **({'max_queue_ms': 0.0}
                                                       if args.lockstep else {}),
                                                    threshold_px=args.threshold_px,
-                                                   confidence_threshold=args.confidence_threshold))
+                                                   confidence_threshold=args.confidence_threshold,
+                                                   subjects=args.subjects,
+                                                   link_mm=args.link_mm))
                 nodes.append(fusion)
                 # the detectors' and the player's parameters, checked here (one line, exit
                 # 2) before their processes start; with lockstep the detector waits for the
@@ -404,7 +436,7 @@ def run(args):
                                        device=args.device, backend=args.backend,
                                        threads=args.threads, debug_image=args.debug_image,
                                        lockstep=args.lockstep, precision=args.precision,
-                                       calibration=calibration)
+                                       calibration=calibration, subjects=args.subjects)
                 slots = camera_slots(DetectorConfig(**detector_params))
                 groups = detector_groups(slots, options.detector_processes)
                 check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],
@@ -427,6 +459,10 @@ def run(args):
                 fusion.listeners.append(score.on_fused)
             summary.names = list(fusion.skeleton.keypoints)
             summary.stale_frames = lambda: fusion.stale_frames
+            if fusion.subjects is not None:
+                summary.subject_counts = lambda: (len(fusion.subject_stats),
+                                                  fusion.subjects.tracker.births,
+                                                  fusion.subjects.tracker.deaths)
             listener = Node('pipeline', **node_namespace({}))
             frames_listener(listener, summary)
             nodes.append(listener)

@@ -54,7 +54,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     from monet_ros.io import BagWriter, iter_multiview_frames
     from monet_ros.io.export_results import write_subject_results
     from monet_ros.io.export_tables import frame_numbers
-    from monet_ros.subjects.detection import SubjectsStep
+    from monet_ros.subjects.detection import SubjectsStep, subject_keypoints
     from monet_ros.subjects.offline import RowCollector
 
     by_name = {cam.name: cam for cam in cameras}
@@ -87,15 +87,9 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                 counts[key] += getattr(r, key)
             counts['instances'] += a.instances
             counts['unmatched'] += a.unmatched
-            for s, ident in zip(r.keep, r.ids):
-                if ident < 0:
-                    continue
-                ncams = a.inliers[s].sum(0)
-                with np.errstate(invalid='ignore', divide='ignore'):
-                    error = np.where(a.inliers[s], a.view_errors[s], 0.0).sum(0) / ncams
+            for ident, X, score, error, ncams in zip(*subject_keypoints(r)):
                 writer.write_keypoints3d(f'/monet/subject{int(ident)}/keypoints3d',
-                                         frame.stamp_ns, frame_id, a.X[s],
-                                         np.nan_to_num(a.score[s]), error, ncams,
+                                         frame.stamp_ns, frame_id, X, score, error, ncams,
                                          units=units)
             figures['frames'] += 1
             figures['views'] += len(present)

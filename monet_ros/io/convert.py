@@ -32,6 +32,7 @@ from .markers import skeleton_marker_specs
 __all__ = [
     'any_image_to_numpy', 'camera_from_camera_info', 'camera_info_from_camera',
     'cloud_to_keypoints3d', 'compressed_image_msg', 'compressed_image_to_numpy',
+    'empty_crop_messages',
     'header_stamp_ns', 'heatmaps_to_image_msg', 'image_msg_to_heatmaps', 'image_to_numpy',
     'delete_all_markers', 'keypoints3d_to_cloud', 'marker_array', 'numpy_to_image_msg',
     'skeleton_marker_array',
@@ -105,14 +106,28 @@ def heatmaps_to_image_msg(heatmaps, stamp, frame_id):
     return msg
 
 
+def empty_crop_messages(num_keypoints, stamp, frame_id):
+    """(Image, CameraInfo) of a crop slot without a crop at that instant (subjects >= 2):
+    a 0 x 0 heatmap of encoding 32FC<num_keypoints> and a 0 x 0 camera_info, same stamp."""
+    from sensor_msgs.msg import CameraInfo, Image
+
+    header = _header(stamp, frame_id)
+    return (Image(header=header, height=0, width=0, encoding=f'32FC{int(num_keypoints)}',
+                  is_bigendian=0, step=0),
+            CameraInfo(header=_header(stamp, frame_id)))
+
+
 def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error=None,
-                         num_views=None, *, units):
+                         num_views=None, *, units, keypoint=None, subject=None):
     """(N, 3) keypoints in the rig's length unit `units` (required) -> sensor_msgs.msg.
     PointCloud2 in metres with fields x y z confidence reprojection_error (FLOAT32),
-    num_views keypoint (UINT32), point_step 28; inverse: cloud_to_keypoints3d."""
+    num_views keypoint (UINT32), point_step 28; with subject (N,) identities, one more
+    UINT32 field `subject` (point_step 32; io.fields.keypoint_cloud_fields); inverse:
+    cloud_to_keypoints3d."""
     from sensor_msgs.msg import PointCloud2, PointField
 
-    f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views, units=units)
+    f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views, units=units,
+                              keypoint=keypoint, subject=subject)
     msg = PointCloud2(header=_header(stamp, frame_id), height=f['height'], width=f['width'],
                       fields=[PointField(name=n, offset=o, datatype=d, count=c)
                               for n, o, d, c in f['fields']],
@@ -123,15 +138,17 @@ def keypoints3d_to_cloud(stamp, frame_id, X, confidence=None, reprojection_error
 
 
 def skeleton_marker_array(stamp, frame_id, X, bone_indices, ns='monet', scale=0.03,
-                          lifetime_ns=0, names=None, *, units):
+                          lifetime_ns=0, names=None, *, units, subject=0):
     """(N, 3) keypoints in the rig's length unit `units` (required) + (B, 2) bone index
     pairs -> visualization_msgs.msg.MarkerArray in metres (a SPHERE_LIST of the finite
     joints and a LINE_LIST of bones with both ends finite; with `names`, a text marker per
     finite joint). scale: joint size (m). lifetime_ns: how long a viewer shows them without
-    an update (0 = forever)."""
+    an update (0 = forever). subject: the identity whose colours are used
+    (io.markers.SUBJECT_COLOURS)."""
     return marker_array(stamp, frame_id,
                         skeleton_marker_specs(keypoints_to_metres(X, units), bone_indices,
-                                              ns=ns, scale=scale, names=names),
+                                              ns=ns, scale=scale, names=names,
+                                              subject=subject),
                         lifetime_ns)
 
 

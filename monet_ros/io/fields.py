@@ -25,6 +25,10 @@ KEYPOINT_CLOUD_FIELDS = (
     ('reprojection_error', 16, FLOAT32), ('num_views', 20, UINT32), ('keypoint', 24, UINT32),
 )
 KEYPOINT_POINT_STEP = 28
+# With several subjects (the fusion node's `subjects` >= 2): one more field, the subject's
+# identity, after the others (whose offsets are unchanged); point_step 32.
+SUBJECT_FIELD = ('subject', 28, UINT32)
+SUBJECT_POINT_STEP = 32
 
 
 def split_stamp(stamp_ns):
@@ -138,13 +142,15 @@ def keypoints_from_metres(X, units):
 
 
 def keypoint_cloud_fields(X, confidence=None, reprojection_error=None, num_views=None, *,
-                          units):
+                          units, keypoint=None, subject=None):
     """PointCloud2 fields (no header) for N keypoints, in PROTOCOL.md's layout.
 
     X (N, 3) world points in the rig's length unit `units` ('m', 'cm', 'mm'; required),
     NaN where not triangulated: written in metres (REP 103); confidence,
-    reprojection_error (px) (N,) float (NaN when None); num_views (N,) int (0 when None).
-    `fields` is a list of (name, offset, datatype, count) tuples."""
+    reprojection_error (px) (N,) float (NaN when None); num_views (N,) int (0 when None);
+    keypoint (N,) int (None: 0..N-1); subject (N,) int >= 0: each point's subject identity,
+    written as one more UINT32 field `subject` (point_step 32; None: no such field, the
+    one-subject layout). `fields` is a list of (name, offset, datatype, count) tuples."""
     X = keypoints_to_metres(X, units)
     n = X.shape[0]
 
@@ -156,7 +162,9 @@ def keypoint_cloud_fields(X, confidence=None, reprojection_error=None, num_views
             raise ValueError(f'{name} must have {n} values, got {value.size}')
         return value
 
-    rec = np.zeros(n, dtype=keypoint_cloud_dtype())
+    layout = KEYPOINT_CLOUD_FIELDS + ((SUBJECT_FIELD,) if subject is not None else ())
+    step = SUBJECT_POINT_STEP if subject is not None else KEYPOINT_POINT_STEP
+    rec = np.zeros(n, dtype=keypoint_cloud_dtype(subject is not None))
     rec['x'], rec['y'], rec['z'] = X[:, 0], X[:, 1], X[:, 2]
     rec['confidence'] = column(confidence, np.nan, 'confidence')
     rec['reprojection_error'] = column(reprojection_error, np.nan, 'reprojection_error')
@@ -164,20 +172,27 @@ def keypoint_cloud_fields(X, confidence=None, reprojection_error=None, num_views
     if np.any(nv < 0):
         raise ValueError('num_views must be >= 0')
     rec['num_views'] = nv
-    rec['keypoint'] = np.arange(n)
+    rec['keypoint'] = np.arange(n) if keypoint is None else column(keypoint, 0, 'keypoint')
+    if subject is not None:
+        subject = column(subject, 0, 'subject')
+        if np.any(subject < 0):
+            raise ValueError('subject must be >= 0')
+        rec['subject'] = subject
     return dict(height=1, width=n,
-                fields=[(name, off, dt, 1) for name, off, dt in KEYPOINT_CLOUD_FIELDS],
-                is_bigendian=False, point_step=KEYPOINT_POINT_STEP,
-                row_step=KEYPOINT_POINT_STEP * n, data=rec.view(np.uint8).reshape(-1),
+                fields=[(name, off, dt, 1) for name, off, dt in layout],
+                is_bigendian=False, point_step=step,
+                row_step=step * n, data=rec.view(np.uint8).reshape(-1),
                 is_dense=bool(np.isfinite(X).all()))
 
 
-def keypoint_cloud_dtype():
-    """numpy structured dtype of one /monet/keypoints3d point (itemsize 28)."""
-    return np.dtype({'names': [f[0] for f in KEYPOINT_CLOUD_FIELDS],
-                     'formats': ['<' + _POINTFIELD_DTYPE[f[2]] for f in KEYPOINT_CLOUD_FIELDS],
-                     'offsets': [f[1] for f in KEYPOINT_CLOUD_FIELDS],
-                     'itemsize': KEYPOINT_POINT_STEP})
+def keypoint_cloud_dtype(subject=False):
+    """numpy structured dtype of one /monet/keypoints3d point (itemsize 28; with
+    `subject`, the several-subject layout: itemsize 32)."""
+    layout = KEYPOINT_CLOUD_FIELDS + ((SUBJECT_FIELD,) if subject else ())
+    return np.dtype({'names': [f[0] for f in layout],
+                     'formats': ['<' + _POINTFIELD_DTYPE[f[2]] for f in layout],
+                     'offsets': [f[1] for f in layout],
+                     'itemsize': SUBJECT_POINT_STEP if subject else KEYPOINT_POINT_STEP})
 
 
 def cloud_to_arrays(msg):
@@ -210,7 +225,8 @@ def cloud_to_arrays(msg):
 def cloud_to_keypoints3d(msg, *, units):
     """/monet/keypoints3d PointCloud2 (metres) -> dict: X (N, 3) float64 in the length unit
     `units` ('m', 'cm', 'mm'; required: that of the rig the points are used with),
-    confidence, reprojection_error (N,) float64, num_views, keypoint (N,) int64.
+    confidence, reprojection_error (N,) float64, num_views, keypoint, subject (N,) int64
+    (subject: the several-subject field; 0 for every point of a one-subject cloud).
     Missing optional fields come back as NaN / 0; x, y, z are required."""
     cols = cloud_to_arrays(msg)
     missing = [k for k in ('x', 'y', 'z') if k not in cols]
@@ -225,6 +241,8 @@ def cloud_to_keypoints3d(msg, *, units):
         out[name] = cols[name].astype(dtype) if name in cols else np.full(n, fill, dtype)
     out['keypoint'] = cols['keypoint'].astype(np.int64) if 'keypoint' in cols \
         else np.arange(n, dtype=np.int64)
+    out['subject'] = cols['subject'].astype(np.int64) if 'subject' in cols \
+        else np.zeros(n, np.int64)
     return out
 
 

@@ -14,11 +14,24 @@ TEXT_VIEW_FACING = 9
 DELETEALL = 3
 
 
-def skeleton_marker_specs(X, bone_indices, ns='monet', scale=0.03, names=None):
+# Joint and bone colours (rgba) of subject identity i: SUBJECT_COLOURS[i % 6] (subject 0 is
+# the one-subject colours).
+SUBJECT_COLOURS = (
+    ((1.0, 0.3, 0.1, 1.0), (0.1, 0.8, 1.0, 1.0)),      # orange / sky
+    ((0.2, 0.9, 0.2, 1.0), (0.9, 0.2, 0.9, 1.0)),      # green / magenta
+    ((1.0, 0.9, 0.1, 1.0), (0.3, 0.3, 1.0, 1.0)),      # yellow / blue
+    ((0.9, 0.1, 0.3, 1.0), (0.2, 1.0, 0.8, 1.0)),      # red / aqua
+    ((0.6, 0.3, 1.0, 1.0), (1.0, 0.6, 0.2, 1.0)),      # violet / amber
+    ((1.0, 1.0, 1.0, 1.0), (0.5, 0.5, 0.5, 1.0)),      # white / grey
+)
+
+
+def skeleton_marker_specs(X, bone_indices, ns='monet', scale=0.03, names=None, subject=0):
     """X (N, 3) keypoints (NaN = missing), bone_indices (B, 2) -> list of dicts: joints
     (id 0), bones (id 1), and with `names` (N keypoint names) one text marker per finite
     joint (id 2 + keypoint index), just above it. NaN joints and bones with a NaN end are
-    left out. Raises ValueError for a bone index out of range or a wrong number of names."""
+    left out. subject: the identity whose colours (SUBJECT_COLOURS) are used. Raises
+    ValueError for a bone index out of range or a wrong number of names."""
     X = np.asarray(X, np.float64).reshape(-1, 3)
     bones = np.asarray(bone_indices, np.int64).reshape(-1, 2)
     if bones.size and (bones.min() < 0 or bones.max() >= len(X)):
@@ -26,11 +39,12 @@ def skeleton_marker_specs(X, bone_indices, ns='monet', scale=0.03, names=None):
     finite = np.isfinite(X).all(axis=1)
     ok = finite[bones[:, 0]] & finite[bones[:, 1]] if bones.size else np.zeros(0, bool)
     line_points = X[bones[ok].reshape(-1)] if bones.size else np.zeros((0, 3))
+    joints, lines = SUBJECT_COLOURS[int(subject) % len(SUBJECT_COLOURS)]
     specs = [
         dict(ns=ns, id=0, type=SPHERE_LIST, scale=(scale, scale, scale),
-             color=(1.0, 0.3, 0.1, 1.0), points=X[finite]),
+             color=joints, points=X[finite]),
         dict(ns=ns, id=1, type=LINE_LIST, scale=(scale / 3.0, 0.0, 0.0),
-             color=(0.1, 0.8, 1.0, 1.0), points=line_points),
+             color=lines, points=line_points),
     ]
     if names is not None:
         if len(names) != len(X):

@@ -16,6 +16,16 @@ The outputs keep the source stamp; the camera_info is the heatmap's virtual came
 out of the PENDING_FRAMES) is counted as dropped; a bad
 message is counted and logged, never fatal.
 The checkpoint is hot-reloaded from /monet/model (std_msgs/String JSON {path, sha256}).
+
+Several subjects (`subjects` N >= 2, with the fusion node's `subjects` the same; docs/
+subjects.md "Live"): per camera and instant, N + 1 crop slots are published on
+`<cam>/crop<k>/heatmaps` + `<cam>/crop<k>/camera_info` (the `<cam>/heatmaps` topics of one
+subject are not): slot k < N the crop rule's box around the k-th subject (by identity) of
+the latest /monet/keypoints3d (its `subject` field; crop_rule.TrackedSubjects), slot N the
+full frame (or `box`) while fewer than N subjects are in it; a slot without a crop in that
+view at that instant is an empty (0 x 0) heatmap and camera_info. All crops of the instant
+go through the network in one batch. JPEG views are decoded in full (each view has crops
+of several scales). Not with debug_image.
 """
 from collections import deque
 from dataclasses import dataclass
@@ -33,7 +43,7 @@ from std_msgs.msg import String
 
 from monet_ros.atomic import sha256_file
 from monet_ros.config import MAX_THREADS, ConfigError, setting, validate_config
-from monet_ros.crop_rule import TrackedCrops, TrackedRule
+from monet_ros.crop_rule import TrackedCrops, TrackedRule, TrackedSubjects
 from monet_ros.error_text import error_line
 from monet_ros.geometry.units import UNITS, rig_units
 from monet_ros.int8_calibration import int8_calibration
@@ -41,6 +51,7 @@ from monet_ros.io import (
     camera_from_camera_info,
     camera_info_from_camera,
     cloud_to_keypoints3d,
+    empty_crop_messages,
     header_stamp_ns,
     heatmaps_to_image_msg,
     numpy_to_image_msg,
@@ -59,6 +70,7 @@ from monet_ros.nodes.names import (
     HEATMAPS,
     KEYPOINTS3D,
     MODEL,
+    crop_slots,
     node_namespace,
 )
 from monet_ros.nodes.params import declare_config
@@ -152,6 +164,10 @@ class DetectorConfig:
                                "box's crops, else full-frame crops), or a cached "
                                '<model>.<sha>.<crops>.int8.onnx quant of those crops; unused '
                                'when the checkpoint has a cached quant of those crops')
+    subjects: int = setting(1, "most subjects cropped per view (as the fusion node's "
+                            'subjects); 1 = the one-subject topics; N >= 2 publishes the '
+                            'crop slots <cam>/crop<k>/heatmaps, k <= N (docs/subjects.md)',
+                            minimum=1)
 
     def __post_init__(self):
         validate_config(self)
@@ -242,6 +258,9 @@ class DetectorNode(Node):
             if not (x1 > x0 and y1 > y0):
                 raise ConfigError(self.get_name(), 'box', f'needs x1 > x0 and y1 > y0, got '
                                   f'{list(config.box)}')
+        if config.subjects > 1 and config.debug_image:
+            raise ConfigError(self.get_name(), 'debug_image', 'is not available with subjects '
+                              '>= 2')
         self.slots = camera_slots(config, self.get_name())
         self.detector = self.load_detector(config.model)
         self.model_sha256 = sha256_file(config.model)
@@ -255,6 +274,13 @@ class DetectorNode(Node):
                                          lambda m, s=slot: self.on_image(s, m), IMAGE_IN)
             self.create_subscription(CameraInfo, slot.info_topic,
                                      lambda m, s=slot: self.on_camera_info(s, m), STREAM_IN)
+            if config.subjects > 1:      # the crop slots (fusion.crop_slots)
+                self.pubs[slot.name] = [
+                    (self.create_publisher(Image, HEATMAPS.format(camera=key), STREAM_OUT),
+                     self.create_publisher(CameraInfo, HEATMAP_CAMERA_INFO.format(camera=key),
+                                           STREAM_OUT))
+                    for key in crop_slots(slot.name, config.subjects)]
+                continue
             self.pubs[slot.name] = (
                 self.create_publisher(Image, HEATMAPS.format(camera=slot.name), STREAM_OUT),
                 self.create_publisher(CameraInfo, HEATMAP_CAMERA_INFO.format(camera=slot.name),
@@ -267,6 +293,7 @@ class DetectorNode(Node):
         # keypoints3d (m) read into the rig's unit, that of the cameras they are projected with
         self.units = rig_units([s.rig_camera for s in self.slots if s.rig_camera is not None])
         self.tracker = TrackedCrops(self.derived.rule, self.units)
+        self.subject_tracks = TrackedSubjects(self.derived.rule, self.units)
         self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
         self.create_subscription(String, MODEL, self.on_model, LATCHED)
@@ -306,6 +333,7 @@ class DetectorNode(Node):
         """Use a changed config (a live parameter was set) from the next frame."""
         derived = derive(config)     # checked already (declare_config): cannot fail here
         self.tracker.rule = derived.rule
+        self.subject_tracks.rule = derived.rule
         self.flush_timer.timer_period_ns = derived.flush_period_ns
         self.config, self.derived = config, derived
 
@@ -358,7 +386,17 @@ class DetectorNode(Node):
     def on_keypoints(self, msg):
         try:
             stamp = header_stamp_ns(msg)
-            self.tracker.update(cloud_to_keypoints3d(msg, units=self.units)['X'], stamp)
+            points = cloud_to_keypoints3d(msg, units=self.units)
+            if self.config.subjects > 1:
+                self.subject_tracks.update(points['X'], points['subject'], points['keypoint'],
+                                           stamp, len(self.detector.keypoints))
+            else:
+                if len(np.unique(points['subject'])) > 1:
+                    self.get_logger().warning(
+                        f'{self.resolve_topic_name(KEYPOINTS3D)} has several subjects: this '
+                        'detector crops around all of them as one (set subjects as on the '
+                        'fusion node)', throttle_duration_sec=60.0)
+                self.tracker.update(points['X'], stamp)
         except ValueError as error:
             self.get_logger().warning(f'{self.resolve_topic_name(KEYPOINTS3D)}: bad message '
                                       f'({error})',
@@ -446,7 +484,7 @@ class DetectorNode(Node):
             return None
         return image, layout, camera
 
-    def decode_crops(self, work, boxes):
+    def decode_crops(self, work, boxes, reduce=True):
         """Decode the JPEG views of `work` (decode gave them as 'jpeg') at the scale of their
         crop (io.jpeg_scale.decode_views: 1/2, 1/4 or 1/8 when the crop shrinks that much, the
         views in parallel on the detector's view_threads); their camera and box become the
@@ -458,7 +496,7 @@ class DetectorNode(Node):
         h_in, w_in = self.detector.input_size
         decoded = dict(zip(jpegs, decode_views(
             [(work[i][1].data, work[i][4], boxes[i]) for i in jpegs], (w_in, h_in),
-            self.detector.view_threads)))
+            self.detector.view_threads, reduce=reduce)))
         kept, kept_boxes = [], []
         for i, ((slot, msg, image, layout, camera), box) in enumerate(zip(work, boxes)):
             if i in decoded:
@@ -497,6 +535,9 @@ class DetectorNode(Node):
         stamp = max(header_stamp_ns(w[1]) for w in work)
         if self.config.lockstep:
             self.awaiting_keypoints = stamp
+        if self.config.subjects > 1:
+            self.process_subjects(work, stamp)
+            return
         boxes = self.detector.boxes_for(cameras, self.crop_boxes(cameras, stamp))
         with self.timer('decode'):
             work, cameras, boxes = self.decode_crops(work, boxes)
@@ -529,6 +570,47 @@ class DetectorNode(Node):
                 if guard is None:
                     raise
                 guard.record(f'{slot.name}/debug_image', error)
+        self.timer.add('publish', time.perf_counter() - start)
+
+    def process_subjects(self, work, stamp):
+        """subjects >= 2: the crop slots of an instant (module docstring): every crop of
+        every view in one forward pass, each slot published (empty where no crop)."""
+        N = self.config.subjects
+        with self.timer('decode'):          # JPEG views in full: crops of several scales
+            work, cameras, _ = self.decode_crops(
+                work, np.array([(0, 0, w[4].width, w[4].height) for w in work], np.float64),
+                reduce=False)
+        if not work:
+            return
+        track = self.config.track and all(s.rig_camera is not None for s in self.slots)
+        boxes = self.subject_tracks.boxes(cameras, stamp, N, self.config.box or None, track)
+        v_idx, k_idx = np.nonzero(np.isfinite(boxes).all(-1))
+        heat, heat_cams = [], []
+        if len(v_idx):
+            crop_cams = [cameras[v] for v in v_idx]
+            start = time.perf_counter()
+            heat, heat_cams = self.detector.predict(
+                [work[v][2] for v in v_idx], crop_cams,
+                self.detector.boxes_for(crop_cams, boxes[v_idx, k_idx]), keep_aspect=False,
+                encodings=[work[v][3] for v in v_idx])
+            self.forward_seconds = (self.forward_seconds
+                                    + [time.perf_counter() - start])[-100:]
+            self.batches += 1
+        start = time.perf_counter()
+        crops = {(int(v), int(k)): n for n, (v, k) in enumerate(zip(v_idx, k_idx))}
+        C = len(self.detector.keypoints)
+        for v, (slot, msg, *_) in enumerate(work):
+            stamp_v, frame_id = header_stamp_ns(msg), msg.header.frame_id
+            for k, (heat_pub, info_pub) in enumerate(self.pubs[slot.name]):
+                n = crops.get((v, k))
+                if n is None:
+                    heat_msg, info_msg = empty_crop_messages(C, stamp_v, frame_id)
+                else:
+                    heat_msg = heatmaps_to_image_msg(heat[n], stamp_v, frame_id)
+                    info_msg = camera_info_from_camera(heat_cams[n], stamp_v, frame_id)
+                info_pub.publish(info_msg)
+                heat_pub.publish(heat_msg)
+            slot.processed += 1
         self.timer.add('publish', time.perf_counter() - start)
 
     def publish_debug(self, slot, pubs, image, layout, camera, box, heat, heat_cam, stamp,

@@ -26,6 +26,22 @@ waited longer than `max_queue_ms` in the input queue (from its reception by the 
 MessageInfo received_timestamp, to its callback) is not decoded or fused but counted stale,
 and the newer frames behind it are fused in time (0 = fuse every frame however late).
 
+Several subjects (`subjects` N >= 2; docs/subjects.md "Live"): the detector nodes publish,
+per camera and instant, N + 1 crop slots `<cam>/crop<k>/heatmaps` + `<cam>/crop<k>/camera_info`
+(the heatmap_topic / camera_info_topic templates with camera = `<cam>/crop<k>`): k < N the
+crops around the subjects of the latest keypoints3d, k = N the full frame while fewer than N
+subjects were published; a slot without a crop at that instant carries an empty (0 x 0)
+heatmap and camera_info, so every slot has one message per instant. The node runs the same
+algorithm as `monet process --subjects` (subjects.detection.SubjectsCore.live_frame: crops
+matched to the tracks, discovery on the full-frame maps, association across views, the
+identity tracker) and publishes keypoints3d with one more UINT32 field `subject` (the
+identity; one point per keypoint and subject, ordered by identity), skeleton markers per
+subject (namespace <skeleton>/subject<id>, colours io.markers.SUBJECT_COLOURS) and a
+/diagnostics status per tracked subject. Its source counters are per slot. Not with
+`filter` (per-subject filters are not written), keypoints3d_raw is not published.
+With N = 1 (the default) nothing of this exists: the topics and fields are the one-subject
+ones, byte for byte.
+
 Every heatmap received ends in exactly one per-camera counter of /diagnostics and of the
 stop summary (OUTCOMES): received = fused + bad_messages + unpaired + repeated + late +
 dropped + stale + waiting. A heatmap or camera_info whose partner (same stamp) has not come
@@ -37,6 +53,7 @@ from dataclasses import dataclass
 import sys
 import time
 from types import SimpleNamespace
+import warnings
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 import numpy as np
@@ -47,7 +64,7 @@ from sensor_msgs.msg import CameraInfo, Image, PointCloud2
 from visualization_msgs.msg import MarkerArray
 
 from monet_ros.config import MAX_THREADS, ConfigError, config_subset, derive_checked, setting
-from monet_ros.fusion import FusionConfig, fuse_heatmaps
+from monet_ros.fusion import FusionConfig, crop_scales, fuse_heatmaps
 from monet_ros.geometry.units import UNITS, rig_units
 from monet_ros.io import (
     header_stamp_ns,
@@ -66,6 +83,7 @@ from monet_ros.nodes.names import (
     RIG_MARKERS,
     SKELETON,
     TF_STATIC,
+    crop_slots,
     node_namespace,
 )
 from monet_ros.nodes.params import declare_config, duration_msg_ns
@@ -74,6 +92,9 @@ from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.nodes.tf import rig_tf_message, tf_message_class
 from monet_ros.rig_select import load_node_rig, select_cameras
 from monet_ros.skeleton import load_skeleton
+from monet_ros.subjects.association import AssociationConfig
+from monet_ros.subjects.detection import SubjectsConfig, SubjectsCore, subject_keypoints
+from monet_ros.subjects.tracking import TrackerConfig
 from monet_ros.sync import StampSynchronizer
 from monet_ros.temporal.live import LiveFilter, LiveFilterConfig
 from monet_ros.timing import StageTimer
@@ -93,10 +114,12 @@ OUTCOMES = ('fused', 'bad_messages', 'unpaired', 'repeated', 'late', 'dropped', 
             'waiting')
 # The item a stale view holds in the synchroniser (not decoded): its frame is not fused.
 STALE = object()
+# The item of a crop slot without a crop at that instant (subjects >= 2: an empty heatmap).
+EMPTY = object()
 
 
 @dataclass(frozen=True)
-class FusionNodeConfig(LiveFilterConfig, FusionConfig):
+class FusionNodeConfig(LiveFilterConfig, FusionConfig, SubjectsConfig, TrackerConfig):
     rig: str = setting('', 'rig file (any format load_rig reads) or a recording whose '
                        'camera_info + /tf_static give the rig; required')
     rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
@@ -142,6 +165,10 @@ class FusionNodeConfig(LiveFilterConfig, FusionConfig):
     threads: int = setting(1, 'torch CPU threads for heatmap decoding (0 = leave as is); one '
                            'thread is fastest for these small tensors', minimum=0,
                            maximum=MAX_THREADS)
+    association_px: float = setting(
+        15.0, 'subjects >= 2: largest median symmetric epipolar distance (px) between two '
+        'instances of one subject (threshold_px is the triangulation inlier error)',
+        minimum=0.0, exclusive_minimum=True)
 
 
 def derive(config, units='m'):
@@ -217,7 +244,16 @@ class FusionNode(Node):
         self.names = [cam.name for cam in self.cameras]
         self.skeleton = load_skeleton(config.skeleton)
         self.frame_id = config.frame_id or rig_frame
-        self.stats = {name: CameraStats() for name in self.names}
+        self.subjects = self.subjects_core(config) if config.subjects > 1 else None
+        # the message sources: the cameras, or with subjects >= 2 their crop slots
+        self.keys = self.names if self.subjects is None else [
+            key for name in self.names for key in crop_slots(name, config.subjects)]
+        self.key_camera = {key: i for i, name in enumerate(self.names)
+                           for key in ([name] if self.subjects is None
+                                       else crop_slots(name, config.subjects))}
+        self.subject_counts = dict(resets=0, duplicates=0, discoveries=0, shared=0, extra=0)
+        self.subject_stats = {}   # identity -> {frames, keypoints, error, last_stamp_ns}
+        self.stats = {name: CameraStats() for name in self.keys}
         self.frames = 0
         self.partial_frames = 0
         self.stale_frames = 0
@@ -226,16 +262,17 @@ class FusionNode(Node):
         self.last_stamp_ns = None
         # callables(stamp_ns, result, filtered) (the pipeline's summary and score):
         # filtered (C, 3) the live filter's keypoints (rig unit: not the topic's m), None
-        # with it off
+        # with it off; with subjects >= 2 result holds the published points (X (K C, 3),
+        # confidence, reprojection_error, num_views, keypoint, subject), filtered None
         self.listeners = []
         self.first_heard = None   # monotonic time of the first heatmap (of any camera)
-        self.sync = StampSynchronizer(self.names, slop_ns=derived.slop_ns,
+        self.sync = StampSynchronizer(self.keys, slop_ns=derived.slop_ns,
                                       timeout_s=config.timeout_s, min_keys=config.min_views)
-        self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.names}
+        self.pending = {name: (OrderedDict(), OrderedDict()) for name in self.keys}
         inputs = copy.copy(HEATMAPS_IN)
         if config.input_reliability == 'reliable':
             inputs.reliability = ReliabilityPolicy.RELIABLE
-        for name in self.names:
+        for name in self.keys:
             self.create_subscription(
                 Image, config.heatmap_topic.format(camera=name),
                 lambda msg, info, n=name: self.on_message(n, 0, msg, info), inputs)
@@ -259,7 +296,24 @@ class FusionNode(Node):
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
             f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}, '
-            f'3D in {self.units} (the rig unit), published in m')
+            f'3D in {self.units} (the rig unit), published in m'
+            + (f'; up to {config.subjects} subjects from the crop slots '
+               f'{self.config.heatmap_topic.format(camera=crop_slots("<camera>", 1)[0])}'
+               f'..crop{config.subjects}' if self.subjects is not None else ''))
+
+    def subjects_core(self, config):
+        """The several-subject core (subjects >= 2) of a config; ConfigError for a setting
+        it does not take."""
+        if config.filter:
+            raise ConfigError(self.get_name(), 'filter', 'is not available with subjects >= '
+                              '2 (per-subject filters are not written yet)')
+        association = AssociationConfig(
+            threshold_px=config.association_px, confidence_threshold=config.confidence_threshold,
+            min_views=config.min_views, triangulation_px=config.threshold_px,
+            method=config.method)
+        return SubjectsCore(self.skeleton.num_keypoints, self.units,
+                            config_subset(config, SubjectsConfig), association,
+                            config_subset(config, TrackerConfig))
 
     def derive(self, config):
         """derive(config) in this node's rig unit (None before the rig is loaded: the start
@@ -271,6 +325,9 @@ class FusionNode(Node):
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
+        if self.subjects is not None and config.filter:
+            raise ConfigError(self.get_name(), 'filter', 'is not available with subjects >= '
+                              '2 (per-subject filters are not written yet)')
         derived = self.derive(config)    # checked already (declare_config): cannot fail
         self.core_config = derived.core
         self.sync.min_keys = config.min_views
@@ -370,6 +427,11 @@ class FusionNode(Node):
                 self.fuse(group)
             return
         start = time.perf_counter()
+        if self.subjects is not None and not (heat_msg.width and heat_msg.height) \
+                and not (info_msg.width and info_msg.height):
+            for group in self.sync.add(name, stamp, EMPTY):    # a slot without a crop
+                self.fuse(group)
+            return
         try:
             heat = image_msg_to_heatmaps(heat_msg)
             if heat.shape[0] != self.skeleton.num_keypoints:
@@ -411,6 +473,9 @@ class FusionNode(Node):
 
     # ------------------------------------------------------------------ fusion
     def fuse(self, group):
+        if self.subjects is not None:
+            self.fuse_subjects(group)
+            return
         views = [i for i, name in enumerate(self.names) if name in group.items]
         if any(group.items[self.names[i]] is STALE for i in views):
             self.skip_stale(group, views)
@@ -471,12 +536,107 @@ class FusionNode(Node):
         for listener in self.listeners:
             listener(group.stamp_ns, result, X if self.live_filter is not None else None)
 
+    def fuse_subjects(self, group):
+        """subjects >= 2: the crops of one instant (every slot of every camera present)
+        through SubjectsCore.live_frame, the tracked subjects published."""
+        keys = [key for key in self.keys if key in group.items]
+        if any(group.items[key] is STALE for key in keys):
+            self.skip_stale(group, keys)
+            return
+        filled = [key for key in keys if group.items[key] is not EMPTY]
+        present = sorted({self.key_camera[key] for key in filled})
+        cameras = [self.cameras[i] for i in present]
+        view = {camera: v for v, camera in enumerate(present)}
+        full_slot = self.config.subjects
+        crops, full, sources = [], [], []
+        for key in filled:
+            heat, K = group.items[key]
+            v = view[self.key_camera[key]]
+            _, bad = crop_scales(K, cameras[v].K)
+            if bad[0]:
+                self.bad_message(key, 'heatmap K is not a crop/scale of the rig camera '
+                                 f'{cameras[v].name}')
+                continue
+            sources.append(key)
+            (full if key.endswith(f'/crop{full_slot}') else crops).append((v, heat, K))
+        tracker = self.subjects.tracker
+        if tracker.stamp is not None and group.stamp_ns <= tracker.stamp:
+            # time went back (a replay looped, a new recording): identities start again
+            self.subjects = self.subjects_core(self.config)
+            self.subject_counts['resets'] += 1
+            self.subject_stats.clear()
+        start = time.perf_counter()
+        try:
+            result = self.subjects.live_frame(cameras, group.stamp_ns, crops, full)
+        except ValueError as error:
+            self.get_logger().error(f'fusion failed at stamp {group.stamp_ns}: {error}')
+            for key in keys:
+                if key in sources or group.items[key] is EMPTY:
+                    self.stats[key].dropped += 1
+            return
+        self.timer.add('subjects', time.perf_counter() - start)
+        self.frames += 1
+        self.partial_frames += bool(group.missing)
+        self.fusion_seconds = (self.fusion_seconds + [time.perf_counter() - start])[-100:]
+        for key in ('duplicates', 'shared', 'extra'):
+            self.subject_counts[key] += getattr(result, key)
+        self.subject_counts['discoveries'] += result.discovered >= 0
+        a = result.association
+        with warnings.catch_warnings():
+            warnings.simplefilter('ignore', RuntimeWarning)         # views without inliers
+            errors = np.nanmean(np.where(a.inliers[result.keep], a.view_errors[result.keep],
+                                         np.nan), axis=(0, 2)) if len(result.keep) \
+                else np.full(len(cameras), np.nan)
+        for key in keys:
+            if key in sources or group.items[key] is EMPTY:
+                stats = self.stats[key]
+                stats.fused += 1
+                if key in sources:
+                    error = errors[view[self.key_camera[key]]]
+                    stats.errors = (stats.errors + [float(error)])[-100:]
+        ids, X, score, error, views = subject_keypoints(result)
+        self.last_stamp_ns = group.stamp_ns
+        for k, ident in enumerate(ids.tolist()):
+            entry = self.subject_stats.setdefault(ident, dict(frames=0))
+            entry.update(frames=entry['frames'] + 1, last_stamp_ns=group.stamp_ns,
+                         keypoints=int(np.isfinite(X[k]).all(-1).sum()),
+                         error=float(np.nanmean(error[k])) if np.isfinite(error[k]).any()
+                         else float('nan'))
+        alive = set(self.subjects.tracker.ids.tolist())
+        for ident in [i for i in self.subject_stats if i not in alive]:
+            del self.subject_stats[ident]                 # died (or the identities restarted)
+        start = time.perf_counter()
+        C = self.skeleton.num_keypoints
+        self.pub_points.publish(keypoints3d_to_cloud(
+            group.stamp_ns, self.frame_id, X.reshape(-1, 3), score.reshape(-1),
+            error.reshape(-1), views.reshape(-1), units=self.units,
+            keypoint=np.tile(np.arange(C), len(ids)), subject=np.repeat(ids, C)))
+        if self.pub_skeleton.get_subscription_count() and len(ids):
+            markers = []
+            for k, ident in enumerate(ids.tolist()):
+                markers += skeleton_marker_array(
+                    group.stamp_ns, self.frame_id, X[k], self.skeleton.bone_indices,
+                    ns=f'{self.skeleton.name}/subject{ident}',
+                    lifetime_ns=self.derived.marker_lifetime_ns, scale=0.03,
+                    names=self.skeleton.keypoints if self.config.marker_labels else None,
+                    units=self.units, subject=ident).markers
+            self.pub_skeleton.publish(MarkerArray(markers=markers))
+        self.timer.add('publish', time.perf_counter() - start)
+        if self.listeners:                # e.g. monet pipeline's summary: every subject
+            frame = SimpleNamespace(
+                X=X.reshape(-1, 3), confidence=score.reshape(-1),
+                reprojection_error=error.reshape(-1), num_views=views.reshape(-1),
+                keypoint=np.tile(np.arange(C), len(ids)), subject=np.repeat(ids, C))
+            for listener in self.listeners:
+                listener(group.stamp_ns, frame, None)
+
     def skip_stale(self, group, views):
         """A frame with a view that waited too long in the input queue: not fused, each of
-        its views counted stale; logged once."""
+        its views (indices into names, or with subjects >= 2 crop slot names) counted
+        stale; logged once."""
         self.stale_frames += 1
         for i in views:
-            self.stats[self.names[i]].stale += 1
+            self.stats[i if isinstance(i, str) else self.names[i]].stale += 1
         if self.stale_frames == 1:
             self.get_logger().warning(
                 f'falling behind: frame {group.stamp_ns} had input queued longer than '
@@ -525,6 +685,37 @@ class FusionNode(Node):
                          f'{info["camera_info_unpaired"]}, waiting {info["camera_info_waiting"]}')
         return lines
 
+    def subject_values(self):
+        """subjects >= 2: the summary's several-subject counts (none with one subject)."""
+        if self.subjects is None:
+            return []
+        tracker = self.subjects.tracker
+        return [('subjects', self.config.subjects),
+                ('subjects_tracked', len(self.subject_stats)),
+                ('identities', sorted(self.subject_stats)),
+                ('births', tracker.births), ('deaths', tracker.deaths),
+                ('identity_resets', self.subject_counts['resets']),
+                *((f'subject_{key}', value) for key, value in self.subject_counts.items()
+                  if key != 'resets')]
+
+    def subject_statuses(self):
+        """subjects >= 2: one status per tracked identity ('monet fusion: subject <id>')."""
+        statuses = []
+        for ident, entry in sorted(self.subject_stats.items()):
+            current = entry['last_stamp_ns'] == self.last_stamp_ns
+            statuses.append(DiagnosticStatus(
+                level=DiagnosticStatus.OK if current else DiagnosticStatus.WARN,
+                name=f'monet fusion: subject {ident}', hardware_id=f'subject{ident}',
+                message=(f'{entry["keypoints"]} keypoints, mean reprojection error '
+                         f'{entry["error"]:.2f} px' if current else 'not seen in the last '
+                         'frame (kept until max_missed_s)'),
+                values=[KeyValue(key=k, value=str(v)) for k, v in (
+                    ('subject', ident), ('frames', entry['frames']),
+                    ('keypoints', entry['keypoints']),
+                    ('mean_reprojection_error_px', f'{entry["error"]:.4f}'),
+                    ('last_stamp_ns', entry['last_stamp_ns']))]))
+        return statuses
+
     def publish_diagnostics(self):
         now = time.monotonic()
         msg = DiagnosticArray()
@@ -545,8 +736,10 @@ class FusionNode(Node):
                 *((f'filter_{key}', value) for key, value in self.filter_totals().items()),
                 # mean ms per call since start: receive (per view), decode, undistort,
                 # triangulate, errors, publish (per frame)
-                *self.timer.summary().items())])
+                *self.timer.summary().items(),
+                *self.subject_values())])
         msg.status.append(summary)
+        msg.status.extend(self.subject_statuses())
         for name, stats in self.stats.items():
             silent_for = None if stats.last_seen is None else now - stats.last_seen
             error = stats.mean_error()

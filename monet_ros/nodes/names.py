@@ -17,9 +17,18 @@ HEATMAPS = '{camera}/heatmaps'
 HEATMAP_CAMERA_INFO = '{camera}/camera_info'
 DEBUG_IMAGE = '{camera}/debug_image'
 DEBUG_CAMERA_INFO = '{camera}/debug_image/camera_info'
+# Several subjects (`subjects` N >= 2): the {camera} of the heatmap and camera_info topics
+# becomes each crop slot's name, <camera>/crop<k>: k < N the crops around subjects, k = N the
+# full frame (docs/subjects.md "Live").
+CROP_SLOT = '{camera}/crop{slot}'
 DIAGNOSTICS = '/diagnostics'
 TF_STATIC = '/tf_static'
 PLAYED_FRAMES = 'played_frames'   # the player's [stamp, wall time] per frame
+
+
+def crop_slots(camera, subjects):
+    """The N + 1 crop slot names (CROP_SLOT) of a camera with `subjects` N >= 2."""
+    return [CROP_SLOT.format(camera=camera, slot=k) for k in range(subjects + 1)]
 
 
 def node_namespace(kwargs):

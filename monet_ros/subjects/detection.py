@@ -65,7 +65,7 @@ from monet_ros.crop_rule import TrackedRule, subject_boxes
 from monet_ros.fusion import MAX_PEAKS_PER_VIEW, crop_scales, heat_to_source_points
 from monet_ros.geometry import project_views, stack_cameras
 from monet_ros.geometry.units import from_mm
-from monet_ros.subjects.association import AssociationConfig, associate
+from monet_ros.subjects.association import Association, AssociationConfig, associate
 from monet_ros.subjects.tracking import SubjectTracker
 
 
@@ -122,6 +122,22 @@ class FrameSubjects:
     shared: int = 0
 
 
+def subject_keypoints(frame):
+    """The tracked subjects of a FrameSubjects, by identity: ids (K,) increasing, X (K, C, 3)
+    (rig units, NaN: not triangulated), score (K, C) (0: none), error (K, C) mean
+    reprojection error (px) over each keypoint's inlier views (NaN: none), views (K, C)
+    int inlier views. Subjects without an identity (-1) are left out."""
+    a = frame.association
+    tracked = frame.ids >= 0
+    order = np.argsort(frame.ids[tracked], kind='stable')
+    rows = frame.keep[tracked][order]
+    views = a.inliers[rows].sum(1)                                        # (K, C)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        error = np.where(a.inliers[rows], a.view_errors[rows], 0.0).sum(1) / views
+    return (frame.ids[tracked][order], a.X[rows], np.nan_to_num(a.score[rows]), error,
+            views)
+
+
 def group_points(points, keypoint, views, link):
     """Constrained single linkage of 3D points (module docstring, step 1d).
 
@@ -169,16 +185,22 @@ def shared_joints(X, near):
     return drop
 
 
+def heat_matrices(heat_cameras):
+    """(N, 3, 3) K_heat of heatmap Cameras or of (3, 3) matrices."""
+    return np.stack([np.asarray(getattr(c, 'K', c), np.float64) for c in heat_cameras])
+
+
 def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_threshold):
     """One instance per crop (module docstring, step 3).
 
-    heat: N heatmaps (C, h, w); heat_cameras / cameras: their heatmap and source Cameras;
+    heat: N heatmaps (C, h, w); heat_cameras / cameras: their heatmap (or (3, 3) K_heat)
+    and source Cameras;
     targets (N, C, 2) source px of the hypothesis' joints in each crop's view (NaN:
     unknown). -> points (N, C, 2) source px (NaN: no peak), score (N, C)."""
     from monet_ros.models import decode_heatmap_peaks
 
     rig = stack_cameras(cameras)
-    S, _ = crop_scales(np.stack([c.K for c in heat_cameras]), rig['K'], rig['K_inv'])
+    S, _ = crop_scales(heat_matrices(heat_cameras), rig['K'], rig['K_inv'])
     k = config.crop_peaks
     peaks, conf, _ = decode_heatmap_peaks(list(heat), k, floor=confidence_threshold)
     pts = heat_to_source_points(peaks, S)                          # (N, C, k, 2)
@@ -193,21 +215,24 @@ def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_thre
     return np.where(found[..., None], chosen, np.nan), np.where(found, score, 0.0)
 
 
-class SubjectsStep:
-    """The several-subject step of the module docstring over a stream of frames.
+class SubjectsCore:
+    """The detector-free part of the module docstring's algorithm, shared by `monet process
+    --subjects` (SubjectsStep, which runs the detector) and the live fusion node with
+    `subjects` >= 2 (its crops come from the detector nodes): the hypotheses (step 1's
+    tracks), discovery from full-frame heatmaps (steps 1a-e) and, from the crops' heatmaps,
+    steps 3-6 (resolve). No ROS, no network.
 
-    detector: a models.Detector; num_keypoints: its C; units: the rig's length unit;
-    config: SubjectsConfig; association: AssociationConfig (its confidence_threshold is
-    the peaks' too); tracker: subjects.TrackerConfig; rule: crop_rule.TrackedRule.
-    step(images, cameras, stamp_ns) -> FrameSubjects. Counters: tracker.births / deaths."""
+    num_keypoints: C; units: the rig's length unit; config: SubjectsConfig; association:
+    AssociationConfig (its confidence_threshold is the peaks' too); tracker:
+    subjects.TrackerConfig; rule: crop_rule.TrackedRule. Counters: tracker.births /
+    deaths."""
 
-    def __init__(self, detector, units, config=None, association=None, tracker=None,
+    def __init__(self, num_keypoints, units, config=None, association=None, tracker=None,
                  rule=None):
-        self.detector = detector
         self.config = config or SubjectsConfig()
         self.association = association or AssociationConfig()
         self.rule = rule or TrackedRule()
-        self.C = len(detector.keypoints)
+        self.C = int(num_keypoints)
         self.units = units
         self.tracker = SubjectTracker(self.C, tracker, units=units)
         self._gate = from_mm(self.tracker.config.gate_mm, units)
@@ -219,15 +244,20 @@ class SubjectsStep:
                 'threshold_px', 'confidence_threshold', 'min_views', 'triangulation_px',
                 'method')}, 'min_common': 1, 'strong_common': 1})
 
-    def discover(self, images, cameras, predicted, encodings=None):
-        """(hypotheses (H, C, 3), counts dict: points, explained, loose) of a full-frame
-        detection (module docstring step 1), none near the predicted joints (tracks, C, 3)
-        of the live tracks; encodings: as in step."""
+    def hypotheses(self, stamp_ns):
+        """Step 1: the predicted joints (cropped, C, 3) at stamp_ns of the tracks that get
+        crops (cropped_tracks; NaN: joints not started)."""
+        return self.tracker.predicted(stamp_ns)[self.cropped_tracks()]
+
+    def discover_heatmaps(self, heat, heat_cameras, cameras, predicted):
+        """(hypotheses (H, C, 3), counts dict: points, explained, loose) of full-frame
+        heatmaps (module docstring step 1a-e), none near the predicted joints (tracks, C, 3)
+        of the cropped tracks. heat: V maps (C, h, w), one per view; heat_cameras: their
+        heatmap Cameras (or (3, 3) K_heat arrays); cameras: their source Cameras."""
         from monet_ros.models import decode_heatmap_peaks
 
         rig = stack_cameras(cameras)
-        heat, heat_cameras = self.detector.predict(images, cameras, encodings=encodings)
-        S, _ = crop_scales(np.stack([c.K for c in heat_cameras]), rig['K'], rig['K_inv'])
+        S, _ = crop_scales(heat_matrices(heat_cameras), rig['K'], rig['K_inv'])
         thr = self.association.confidence_threshold
         peaks, conf, _ = decode_heatmap_peaks(list(heat), self.config.candidates, floor=thr)
         pts = heat_to_source_points(peaks, S)                       # (V, C, k, 2)
@@ -259,35 +289,32 @@ class SubjectsStep:
             found.append(X)
         return np.array(found).reshape(-1, self.C, 3), counts
 
-    def step(self, images, cameras, stamp_ns, encodings=None):
-        """images: (H, W, 3) uint8 RGB of the present views, or each in its own layout
-        (encodings: one per image, as models.Detector.predict takes them: converted to RGB
-        only after cropping); cameras: their Cameras (at least 2); stamp_ns: the frame's
-        stamp. -> FrameSubjects."""
-        tracker = self.tracker
-        crop = self.cropped_tracks()
-        predicted = tracker.predicted(stamp_ns)[crop]                 # (cropped, C, 3)
-        discovered = -1
-        hyp = predicted
-        counts = {}
-        if len(predicted) < self.config.subjects:
-            new, counts = self.discover(images, cameras, predicted, encodings)
-            discovered = len(new)
-            hyp = np.concatenate([predicted, new])
-        V, H = len(cameras), len(hyp)
-        boxes = np.full((V, H, 4), np.nan)
-        for h in range(H):
+    def crop_boxes(self, cameras, hyp):
+        """Step 2: (V, H, 4) boxes (x0, y0, x1, y1, source px edges; NaN: too few joints
+        project into the view) of the hypotheses hyp (H, C, 3) in every view."""
+        boxes = np.full((len(cameras), len(hyp), 4), np.nan)
+        for h in range(len(hyp)):
             boxes[:, h] = subject_boxes(cameras, hyp[h], self.rule.margin,
                                         self.rule.min_points, trim=self.rule.trim)
-        has = np.isfinite(boxes).all(-1)                              # (V, H)
-        v_idx, h_idx = np.nonzero(has)
+        return boxes
+
+    def resolve(self, cameras, stamp_ns, hyp, v_idx, h_idx, heat, heat_cameras, tracked=0,
+                discovered=-1, counts=None):
+        """Steps 3-6 of the module docstring: one instance per crop, association across
+        views, duplicates and shared joints, the tracker. -> FrameSubjects.
+
+        cameras: the V source Cameras of the frame; stamp_ns: its stamp (increasing);
+        hyp (H, C, 3): the hypotheses (rig units; NaN joints: unknown, the crop takes its
+        highest peaks); crop n is of view v_idx[n] and hypothesis h_idx[n] (at most one crop
+        per view and hypothesis), heat[n] its map (C, h, w), heat_cameras[n] its heatmap
+        Camera (or (3, 3) K_heat); tracked: how many hypotheses are tracks, discovered: how
+        many were discovered (-1: no discovery), counts: discovery's counts."""
+        V, H = len(cameras), len(hyp)
+        v_idx, h_idx = np.asarray(v_idx, np.int64), np.asarray(h_idx, np.int64)
         points = np.full((V, H, self.C, 2), np.nan)
         score = np.zeros((V, H, self.C))
         if len(v_idx):
             crop_cams = [cameras[v] for v in v_idx]
-            heat, heat_cameras = self.detector.predict(
-                [images[v] for v in v_idx], crop_cams, boxes[v_idx, h_idx],
-                encodings=None if encodings is None else [encodings[v] for v in v_idx])
             known = np.isfinite(hyp).all(-1)                          # (H, C)
             targets = project_views(stack_cameras(cameras),
                                     np.where(known[..., None], hyp, 0.0).reshape(-1, 3))
@@ -296,7 +323,13 @@ class SubjectsStep:
             p, s = crop_instances(heat, heat_cameras, crop_cams, targets, self.config,
                                   self.association.confidence_threshold)
             points[v_idx, h_idx], score[v_idx, h_idx] = p, s
-        a = associate(points, cameras, score, self.association)
+        if V:
+            a = associate(points, cameras, score, self.association)
+        else:                     # no view at all (live: every slot of the instant empty)
+            a = Association(X=np.zeros((0, self.C, 3)), instance=np.zeros((0, 0), np.int64),
+                            inliers=np.zeros((0, 0, self.C), bool),
+                            view_errors=np.zeros((0, 0, self.C)), score=np.zeros((0, self.C)),
+                            cost=np.zeros(0), unmatched=0, instances=0)
         keep = []
         for s in range(len(a.X)):
             d = np.linalg.norm(a.X[s] - a.X[keep], axis=-1)               # (kept, C)
@@ -315,14 +348,93 @@ class SubjectsStep:
             a.inliers[keep[s], :, c] = False
             a.view_errors[keep[s], :, c] = np.nan
             a.score[keep[s], c] = np.nan
+        tracker = self.tracker
         before = dict(zip(tracker.ids.tolist(), self._missed.tolist()))
         ids = tracker.step(a.X[keep], stamp_ns)
         self.count_misses(before, ids)
         self.restart(ids, drop)
         return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
-                             extra=extra, tracked=len(predicted), shared=int(drop.sum()),
-                             **counts)
+                             extra=extra, tracked=tracked, shared=int(drop.sum()),
+                             **(counts or {}))
+
+    def live_frame(self, cameras, stamp_ns, crops, full=()):
+        """One frame of the live fusion node (`subjects` >= 2): the crops were cut by the
+        detector nodes, around the subjects of the latest /monet/keypoints3d, plus a
+        full-frame crop per view while fewer than N subjects were published. The same
+        steps as SubjectsStep.step, the crops given instead of made:
+
+        - hypotheses: the cropped tracks' predictions (step 1); with full-frame maps and
+          fewer than N of them, discovery on those maps (discover_heatmaps, steps 1a-e);
+          each discovered hypothesis, and each track without a crop of its own in a view,
+          takes that view's full-frame map as its crop there (the detector has no crop of
+          it);
+        - each subject crop is the crop of the track given by match_crops (per view, the
+          Hungarian assignment of crop centres to the tracks' crop-rule box centres); a crop
+          matched to none is a hypothesis of unknown joints (its highest peaks, step 3);
+        - resolve (steps 3-6).
+
+        cameras: the V source Cameras of the views present; crops / full: (view index,
+        heat (C, h, w), K_heat (3, 3)) of the subject crops / full-frame crops.
+        -> FrameSubjects."""
+        predicted = self.hypotheses(stamp_ns)
+        new, counts, discovered = np.zeros((0, self.C, 3)), {}, -1
+        if len(full) and len(predicted) < self.config.subjects:
+            new, counts = self.discover_heatmaps(
+                [f[1] for f in full], [f[2] for f in full], [cameras[f[0]] for f in full],
+                predicted)
+            discovered = len(new)
+        owner = self.match_crops(cameras, predicted, [c[0] for c in crops],
+                                 [c[2] for c in crops], [c[1].shape[1:] for c in crops])
+        unknown = int((owner < 0).sum())
+        owner[owner < 0] = len(predicted) + len(new) + np.arange(unknown)
+        hyp = np.concatenate([predicted, new, np.full((unknown, self.C, 3), np.nan)])
+        v_idx, h_idx = [c[0] for c in crops], owner.tolist()
+        heat, K = [c[1] for c in crops], [c[2] for c in crops]
+        # a track without a crop of its own in a view, and every discovered subject, takes
+        # that view's full-frame map as its crop
+        owned = set(zip(v_idx, h_idx))
+        for v, full_heat, full_K in full:
+            for h in range(len(predicted) + len(new)):
+                if (v, h) not in owned:
+                    v_idx.append(v)
+                    h_idx.append(h)
+                    heat.append(full_heat)
+                    K.append(full_K)
+        return self.resolve(cameras, stamp_ns, hyp, v_idx, h_idx, heat, K,
+                            tracked=len(predicted), discovered=discovered, counts=counts)
+
+    def match_crops(self, cameras, hyp, views, K_heat, sizes):
+        """Which hypothesis each live crop was cut for: per view, the assignment
+        (scipy linear_sum_assignment) of the crops' centres to the centres of the
+        hypotheses' crop-rule boxes (crop_boxes) minimising the total distance, a pair
+        allowed where the box centre lies within the crop's half-size (max of its half
+        width and height) of the crop's centre. cameras: V source Cameras; hyp (H, C, 3);
+        views (N,) the crops' view indices, K_heat (N, 3, 3), sizes (N,) (h, w) of their
+        maps. -> (N,) int: the hypothesis of each crop, -1 for none."""
+        from scipy.optimize import linear_sum_assignment
+
+        N = len(views)
+        owner = np.full(N, -1, np.int64)
+        if not N or not len(hyp):
+            return owner
+        views = np.asarray(views, np.int64)
+        rig = stack_cameras([cameras[v] for v in views])
+        S, _ = crop_scales(heat_matrices(K_heat), rig['K'], rig['K_inv'])
+        hw = np.asarray(sizes, np.float64).reshape(N, 2)
+        centre = heat_to_source_points(((hw[:, ::-1] - 1) / 2)[:, None], S)[:, 0]   # (N, 2)
+        half = (hw[:, ::-1] / 2 / np.diagonal(S, axis1=1, axis2=2)[:, :2]).max(-1)   # (N,)
+        boxes = self.crop_boxes(cameras, hyp)                         # (V, H, 4)
+        box_centre = (boxes[..., :2] + boxes[..., 2:]) / 2 - 0.5      # pixel centres
+        for v in np.unique(views):
+            mine = np.flatnonzero(views == v)
+            d = np.linalg.norm(centre[mine, None] - box_centre[v][None], axis=-1)
+            allowed = np.isfinite(d) & (d <= half[mine, None])
+            big = 1e6 * (np.nanmax(np.where(allowed, d, 0.0)) + 1.0)
+            rows, cols = linear_sum_assignment(np.where(allowed, d, big))
+            ok = allowed[rows, cols]
+            owner[mine[rows[ok]]] = cols[ok]
+        return owner
 
     def restart(self, ids, drop):
         """Unstart the tracker joints `drop` (K, C) bool of the subjects given the
@@ -349,3 +461,45 @@ class SubjectsStep:
         ok = np.flatnonzero(self._missed < self.config.crop_missed)
         order = np.lexsort((self.tracker.ids[ok], self._missed[ok]))
         return ok[order][:self.config.subjects]
+
+
+class SubjectsStep(SubjectsCore):
+    """The several-subject step of the module docstring over a stream of frames, with the
+    detector in the loop (`monet process --subjects`; SubjectsCore is the rest).
+
+    detector: a models.Detector; its keypoints give C; the other arguments as
+    SubjectsCore's. step(images, cameras, stamp_ns) -> FrameSubjects."""
+
+    def __init__(self, detector, units, config=None, association=None, tracker=None,
+                 rule=None):
+        super().__init__(len(detector.keypoints), units, config, association, tracker, rule)
+        self.detector = detector
+
+    def discover(self, images, cameras, predicted, encodings=None):
+        """discover_heatmaps of one full-frame detection of every view (module docstring
+        step 1); encodings: as in step."""
+        heat, heat_cameras = self.detector.predict(images, cameras, encodings=encodings)
+        return self.discover_heatmaps(heat, heat_cameras, cameras, predicted)
+
+    def step(self, images, cameras, stamp_ns, encodings=None):
+        """images: (H, W, 3) uint8 RGB of the present views, or each in its own layout
+        (encodings: one per image, as models.Detector.predict takes them: converted to RGB
+        only after cropping); cameras: their Cameras (at least 2); stamp_ns: the frame's
+        stamp. -> FrameSubjects."""
+        predicted = self.hypotheses(stamp_ns)                         # (cropped, C, 3)
+        discovered = -1
+        hyp = predicted
+        counts = {}
+        if len(predicted) < self.config.subjects:
+            new, counts = self.discover(images, cameras, predicted, encodings)
+            discovered = len(new)
+            hyp = np.concatenate([predicted, new])
+        boxes = self.crop_boxes(cameras, hyp)
+        v_idx, h_idx = np.nonzero(np.isfinite(boxes).all(-1))        # (V, H)
+        heat, heat_cameras = [], []
+        if len(v_idx):
+            heat, heat_cameras = self.detector.predict(
+                [images[v] for v in v_idx], [cameras[v] for v in v_idx], boxes[v_idx, h_idx],
+                encodings=None if encodings is None else [encodings[v] for v in v_idx])
+        return self.resolve(cameras, stamp_ns, hyp, v_idx, h_idx, heat, heat_cameras,
+                            tracked=len(predicted), discovered=discovered, counts=counts)

@@ -50,9 +50,11 @@ def render(cameras, X, sigma_px=2.2):
     return frames
 
 
-def write_two_subjects(out, T=12, width=96, height=96, focal=190.0):
+def write_two_subjects(out, T=12, width=96, height=96, focal=190.0, camera_info=False):
     """Write the folder (rig.yaml, recording/, ground_truth.npz: stamps, keypoints3d
-    (subject 0's) and subjects_keypoints3d (T, 2, 3, 3) m); returns (out, cameras, X)."""
+    (subject 0's) and subjects_keypoints3d (T, 2, 3, 3) m); with camera_info, the
+    recording also holds /<cam>/camera_info per frame (what `monet pipeline` replays);
+    returns (out, cameras, X)."""
     out = Path(out)
     out.mkdir(parents=True)
     cams = ring_rig(4, radius=3.0, width=width, height=height, focal=focal)
@@ -65,6 +67,9 @@ def write_two_subjects(out, T=12, width=96, height=96, focal=190.0):
         for t, stamp in enumerate(stamps):
             for cam, f in zip(cams, frames):
                 bag.write_image(cam.topic, int(stamp), f[t], f'{cam.name}_optical')
+                if camera_info:
+                    bag.write_camera_info(f'/{cam.name}/camera_info', int(stamp), cam,
+                                          f'{cam.name}_optical')
     np.savez_compressed(out / 'ground_truth.npz', stamps=stamps, keypoints3d=X[:, 0],
                         subjects_keypoints3d=X)
     return out, cams, X

@@ -1,0 +1,61 @@
+"""`monet pipeline --subjects 2` as a user runs it: the blob scene of two subjects walking
+past each other (helpers.subject_blobs, the trained blob net) through the player, a
+detector child process and fusion with several subjects, lockstep: keypoints3d of both
+subjects for every frame, each body one identity, the summary says so."""
+import sys
+
+from helpers.blob_net import NAMES, train_blob_net
+from helpers.ros import NodeProcess, RosHarness
+from helpers.subject_blobs import blob_checkpoint, write_two_subjects
+import numpy as np
+from sensor_msgs.msg import PointCloud2
+import yaml
+
+from monet_ros.io import cloud_to_keypoints3d, header_stamp_ns
+
+T = 12
+
+
+def test_pipeline_tracks_two_subjects(ros_env, tmp_path):
+    folder, _, X = write_two_subjects(tmp_path / 'rec', T=T, camera_info=True)
+    stamps = np.load(folder / 'ground_truth.npz')['stamps'].tolist()
+    model = blob_checkpoint(train_blob_net(steps=400, sigma=(1.2, 4.0)), tmp_path / 'b.pt')
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text(yaml.safe_dump({'name': 'blobs', 'keypoints': list(NAMES),
+                                        'bones': [[NAMES[0], NAMES[1]]]}))
+    argv = [sys.executable, '-m', 'monet_ros.cli', 'pipeline', '--bag',
+            str(folder / 'recording'), '--rig', str(folder / 'rig.yaml'), '--model',
+            str(model), '--skeleton', str(skeleton), '--subjects', '2', '--lockstep',
+            '--precision', 'float32', '--threads', '1', '--quiet', '--start-delay', '2.0']
+    with RosHarness(ros_env) as ros:
+        clouds = ros.collect('/monet/keypoints3d', PointCloud2, 100)
+        with NodeProcess('pipeline', ros_env, argv=argv) as proc:
+            ros.spin_until(lambda: len(clouds) >= T or not proc.running(), timeout=180)
+            assert proc.wait(timeout=120) == 0, proc.output()
+    assert [header_stamp_ns(c) for c in clouds] == stamps, proc.output()
+    identity_of = {}
+    for t, cloud in enumerate(clouds):
+        k = cloud_to_keypoints3d(cloud, units='m')
+        assert len(np.unique(k['subject'])) == 2, f'frame {t}'
+        for ident in np.unique(k['subject']):
+            mine = k['X'][k['subject'] == ident]
+            d = np.linalg.norm(mine[None] - X[t], axis=-1).mean(-1)
+            body = int(np.argmin(d))
+            assert d[body] < 0.030, (t, d)
+            assert identity_of.setdefault(body, int(ident)) == int(ident), f'frame {t}'
+    last = proc.output().strip().splitlines()
+    line = next(x for x in reversed(last) if x.startswith('monet pipeline:'))
+    assert f'frames {T} fused of {T} played' in line, line
+    assert 'subjects 2 tracked, 2 births, 0 deaths' in line, line
+    assert 'joints triangulated 100%' in line, line
+
+
+def test_subjects_refuse_the_one_subject_demo_and_learn(ros_env):
+    import subprocess
+    for extra in ([], ['--bag', 'rec', '--model', 'm.pt', '--learn']):
+        done = subprocess.run([sys.executable, '-m', 'monet_ros.cli', 'pipeline',
+                               '--subjects', '2', *extra], env=ros_env, capture_output=True,
+                              text=True, timeout=120)
+        assert done.returncode == 2, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and 'subjects' in lines[0], done.stderr

@@ -1,0 +1,178 @@
+"""The detector executable with subjects:=2 in its own process over DDS: the crop slots
+<cam>/crop<k>/heatmaps + camera_info (docs/subjects.md "Live"): a crop per subject of the
+latest /monet/keypoints3d (its `subject` field), the full frame while fewer than 2 are
+tracked, empty slots elsewhere, every crop's heatmaps those of the network on that crop."""
+import signal
+
+from helpers.ros import NodeProcess, RosHarness
+from helpers.scenes import ring_rig
+import numpy as np
+from sensor_msgs.msg import CameraInfo, Image, PointCloud2
+import torch
+
+from monet_ros.crop_rule import subject_boxes
+from monet_ros.geometry import save_rig
+from monet_ros.io import (
+    camera_info_from_camera,
+    header_stamp_ns,
+    image_msg_to_heatmaps,
+    keypoints3d_to_cloud,
+    numpy_to_image_msg,
+)
+from monet_ros.models import Detector, build_model, load_checkpoint, save_checkpoint
+from monet_ros.skeleton import load_skeleton
+
+INPUT = (96, 128)     # network input (H, W) -> heatmaps (24, 32)
+T0 = 1_650_000_000_000_000_000
+SLOTS = 3          # subjects 2: crop0, crop1 (subjects), crop2 (full frame)
+
+
+def make_checkpoint(path, seed):
+    torch.manual_seed(seed)
+    model = build_model('small', 14, input_size=INPUT)
+    save_checkpoint(path, model, {'keypoints': list(load_skeleton('human14').keypoints)})
+    return path
+
+
+def expected_box(box, aspect):
+    """A box grown about its centre to width / height = aspect (by hand)."""
+    x0, y0, x1, y1 = box
+    w, h = x1 - x0, y1 - y0
+    w, h = max(w, h * aspect), max(h, w / aspect)
+    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
+    return cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2
+
+
+def expected_K(K, box, out_w, out_h):
+    x0, y0, x1, y1 = box
+    sx, sy = out_w / (x1 - x0), out_h / (y1 - y0)
+    S = np.array([[sx, 0, (0.5 - x0) * sx - 0.5], [0, sy, (0.5 - y0) * sy - 0.5], [0, 0, 1]])
+    return S @ K
+
+
+def detector_boxes(checkpoint, rig, boxes):
+    model, metadata = load_checkpoint(checkpoint)
+    return Detector(model, metadata, device='cpu').boxes_for(rig, boxes)
+
+
+def reference(checkpoint, images, cameras, boxes):
+    model, metadata = load_checkpoint(checkpoint)
+    return Detector(model, metadata, device='cpu', precision='auto').predict(
+        list(images), cameras, boxes, keep_aspect=False)[0]
+
+
+class SlotStream:
+    """Publishes images + camera_info of the rig and collects every crop slot."""
+
+    def __init__(self, ros, rig):
+        self.ros, self.rig = ros, rig
+        self.pubs = {c.name: (ros.publisher(f'/{c.name}/image_raw', Image),
+                              ros.publisher(f'/{c.name}/camera_info', CameraInfo))
+                     for c in rig}
+        self.heat = {(c.name, k): ros.collect(f'/monet/{c.name}/crop{k}/heatmaps', Image, 100)
+                     for c in rig for k in range(SLOTS)}
+        self.info = {(c.name, k): ros.collect(f'/monet/{c.name}/crop{k}/camera_info',
+                                              CameraInfo, 100)
+                     for c in rig for k in range(SLOTS)}
+        self.one = ros.collect('/monet/cam0/heatmaps', Image, 100)
+
+    def result(self, key, stamp):
+        heat = [m for m in self.heat[key] if header_stamp_ns(m) == stamp]
+        info = [m for m in self.info[key] if header_stamp_ns(m) == stamp]
+        return (heat[-1], info[-1]) if heat and info else None
+
+    def roundtrip(self, stamp, images, node, cloud=None, cloud_pub=None, tries=30):
+        for _ in range(tries):
+            if cloud is not None:
+                cloud_pub.publish(cloud)
+            for cam, image in zip(self.rig, images):
+                self.pubs[cam.name][1].publish(camera_info_from_camera(cam, stamp, cam.name))
+                self.pubs[cam.name][0].publish(numpy_to_image_msg(image, stamp, cam.name))
+            if self.ros.spin_until(lambda: all(self.result(k, stamp) for k in self.heat),
+                                   timeout=1.5, process=node):
+                return {k: self.result(k, stamp) for k in self.heat}
+        raise AssertionError(f'no crop slots for stamp {stamp}\n{node.output()}')
+
+
+def crop_K(info):
+    return np.reshape(info.k, (3, 3))
+
+
+def test_one_crop_per_subject_and_the_full_frame_while_fewer(ros_env, tmp_path):
+    rig = ring_rig(2)
+    rig_path = tmp_path / 'rig.yaml'
+    save_rig(rig_path, rig)
+    checkpoint = make_checkpoint(tmp_path / 'model.pt', 1)
+    images = np.random.default_rng(0).integers(0, 255, (2, 480, 640, 3), dtype=np.uint8)
+    aspect = INPUT[1] / INPUT[0]
+    rng = np.random.default_rng(5)
+    A = rng.uniform([-0.4, -0.4, 0.6], [-0.1, -0.1, 1.5], (14, 3))     # two bodies apart
+    B = rng.uniform([0.1, 0.1, 0.6], [0.4, 0.4, 1.5], (14, 3))
+    params = dict(rig=str(rig_path), model=str(checkpoint), subjects=2, device='cpu',
+                  track_timeout_s=3600.0)
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = SlotStream(ros, rig)
+        for image_pub, info_pub in stream.pubs.values():
+            ros.wait_for_subscribers(image_pub, timeout=120, process=node)
+            ros.wait_for_subscribers(info_pub, process=node)
+        cloud_pub = ros.publisher('/monet/keypoints3d', PointCloud2)
+        ros.wait_for_subscribers(cloud_pub, process=node)
+
+        # 1. nothing tracked: the subject slots are empty, the full-frame slot the image
+        got = stream.roundtrip(T0, images, node)
+        full = expected_box((0, 0, 640, 480), aspect)
+        want = reference(checkpoint, images, rig, np.array([full, full]))
+        for v, cam in enumerate(rig):
+            for k in (0, 1):
+                heat, info = got[cam.name, k]
+                assert (heat.width, heat.height, info.width, info.height) == (0, 0, 0, 0)
+                assert heat.encoding == '32FC14'
+            heat, info = got[cam.name, 2]
+            assert (heat.width, heat.height) == (32, 24)
+            np.testing.assert_allclose(crop_K(info), expected_K(cam.K, full, 32, 24),
+                                       rtol=1e-12)
+            np.testing.assert_allclose(image_msg_to_heatmaps(heat), want[v], atol=1e-4)
+
+        # 2. two subjects (identities 9 and 4, sent in that order): crop0 around identity 4,
+        # crop1 around 9 (by identity), no full frame
+        X = np.concatenate([B, A]).astype(np.float32)
+        cloud = keypoints3d_to_cloud(T0 + 1, 'world', X, units='m',
+                                     keypoint=np.tile(np.arange(14), 2),
+                                     subject=np.repeat([9, 4], 14))
+        boxes = [detector_boxes(checkpoint, rig, subject_boxes(rig, S.astype(np.float32)))
+                 for S in (A, B)]                                  # (slot, V, 4)
+
+        def around_subjects(got):
+            return all(got[c.name, k][1].width and np.allclose(
+                crop_K(got[c.name, k][1]), expected_K(c.K, boxes[k][v], 32, 24), rtol=1e-9)
+                for v, c in enumerate(rig) for k in (0, 1))
+        for stamp in range(T0 + 100, T0 + 160):           # until the cloud is in
+            got = stream.roundtrip(stamp, images, node, cloud, cloud_pub)
+            if around_subjects(got):
+                break
+        assert around_subjects(got), node.output()
+        # one batch of all crops: the network on each crop
+        crops = np.array([boxes[k][v] for v in range(2) for k in (0, 1)])
+        want = reference(checkpoint, [images[v] for v in range(2) for _ in (0, 1)],
+                         [rig[v] for v in range(2) for _ in (0, 1)], crops)
+        for v, cam in enumerate(rig):
+            for k in (0, 1):
+                np.testing.assert_allclose(image_msg_to_heatmaps(got[cam.name, k][0]),
+                                           want[2 * v + k], atol=1e-4)
+            assert got[cam.name, 2][0].width == 0 and got[cam.name, 2][1].width == 0
+
+        # 3. one subject (identity 9): crop0 around it, crop1 empty, the full frame again
+        one = keypoints3d_to_cloud(T0 + 2, 'world', B.astype(np.float32), units='m',
+                                   subject=np.full(14, 9))
+
+        def one_subject(got):
+            return (got['cam0', 2][1].width > 0 and got['cam0', 1][1].width == 0
+                    and np.allclose(crop_K(got['cam0', 0][1]),
+                                    expected_K(rig[0].K, boxes[1][0], 32, 24), rtol=1e-9))
+        for stamp in range(T0 + 200, T0 + 260):
+            got = stream.roundtrip(stamp, images, node, one, cloud_pub)
+            if one_subject(got):
+                break
+        assert one_subject(got), node.output()
+        assert not stream.one, 'the one-subject topics are not published with subjects 2'
+        assert node.stop(signal.SIGINT) == 0, node.output()

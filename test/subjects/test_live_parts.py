@@ -1,0 +1,128 @@
+"""The no-ROS parts of several subjects live: which track a detector's crop was cut for
+(SubjectsCore.match_crops), the detector's crop slots (crop_rule.TrackedSubjects) and the
+keypoints3d cloud's `subject` field (io.fields)."""
+from helpers.scenes import ring_rig
+import numpy as np
+
+from monet_ros.crop_rule import TrackedRule, TrackedSubjects, subject_boxes
+from monet_ros.io.fields import cloud_to_arrays, keypoint_cloud_fields
+from monet_ros.subjects.detection import SubjectsConfig, SubjectsCore
+
+GRID = (32, 24)      # heatmap (w, h)
+
+
+def bodies():
+    rng = np.random.default_rng(4)
+    A = rng.uniform([-0.5, -0.4, 0.6], [-0.2, -0.1, 1.5], (14, 3))
+    B = rng.uniform([0.2, 0.1, 0.6], [0.5, 0.4, 1.5], (14, 3))
+    return A, B
+
+
+def test_crops_are_matched_to_the_tracks_they_were_cut_around_whatever_their_order():
+    cams = ring_rig(3)
+    A, B = bodies()
+    core = SubjectsCore(14, 'm', SubjectsConfig(subjects=2))
+    # the detector cut its crops around the previous frame's 3D (1 cm off the prediction),
+    # in the order B, A in every view, plus one crop around nothing near either
+    views, K, sizes = [], [], []
+    for v, cam in enumerate(cams):
+        for S in (B + 0.01, A + 0.01):
+            box = subject_boxes([cam], S)[0]
+            views.append(v)
+            K.append(cam.crop(box, GRID).K)
+            sizes.append(GRID[::-1])
+    views.append(0)
+    K.append(cams[0].crop(np.array([0.0, 0.0, 40.0, 30.0]), GRID).K)
+    sizes.append(GRID[::-1])
+    owner = core.match_crops(cams, np.stack([A, B]), views, K, sizes)
+    assert owner.tolist() == [1, 0] * 3 + [-1]
+    # no hypotheses: every crop is of an unknown subject
+    assert (core.match_crops(cams, np.zeros((0, 14, 3)), views, K, sizes) == -1).all()
+
+
+def test_crop_slots_follow_the_subjects_by_identity_and_the_full_frame_while_fewer():
+    cams = ring_rig(2)
+    A, B = bodies()
+    tracks = TrackedSubjects(TrackedRule(timeout_ns=1_000), 'm')
+    full = np.array([[0, 0, c.width, c.height] for c in cams], np.float64)
+    assert np.array_equal(tracks.boxes(cams, 5, 2)[:, 2], full)        # nothing yet
+    assert np.isnan(tracks.boxes(cams, 5, 2)[:, :2]).all()
+    X = np.concatenate([B, A])
+    tracks.update(X, np.repeat([9, 4], 14), np.tile(np.arange(14), 2), 100, 14)
+    boxes = tracks.boxes(cams, 100, 2)
+    np.testing.assert_array_equal(boxes[:, 0], subject_boxes(cams, A))  # identity 4 first
+    np.testing.assert_array_equal(boxes[:, 1], subject_boxes(cams, B))
+    assert np.isnan(boxes[:, 2]).all()                                  # both tracked
+    boxes = tracks.boxes(cams, 100 + 1_001, 2)                          # stale (timeout)
+    assert np.isnan(boxes[:, :2]).all() and np.array_equal(boxes[:, 2], full)
+    assert np.isnan(tracks.boxes(cams, 100, 2, track=False)[:, :2]).all()
+    tracks.update(B, np.full(14, 9), np.arange(14), 200, 14)
+    boxes = tracks.boxes(cams, 200, 2, fallback_box=(1.0, 2.0, 30.0, 40.0))
+    np.testing.assert_array_equal(boxes[:, 0], subject_boxes(cams, B))
+    assert np.isnan(boxes[:, 1]).all()
+    assert np.array_equal(boxes[:, 2], [[1.0, 2.0, 30.0, 40.0]] * 2)
+
+
+def test_the_subject_field_is_added_only_with_subjects():
+    X = np.arange(12, dtype=np.float64).reshape(4, 3)
+    one = keypoint_cloud_fields(X, units='m')
+    assert one['point_step'] == 28
+    assert [f[0] for f in one['fields']] == ['x', 'y', 'z', 'confidence',
+                                             'reprojection_error', 'num_views', 'keypoint']
+    two = keypoint_cloud_fields(X, units='mm', keypoint=[0, 1, 0, 1], subject=[3, 3, 7, 7])
+    assert two['point_step'] == 32 and two['row_step'] == 128
+    assert two['fields'][:7] == one['fields'] and two['fields'][7] == ('subject', 28, 6, 1)
+    raw = np.frombuffer(two['data'].tobytes(), np.uint8).reshape(4, 32)
+    assert raw[:, 28:32].copy().view('<u4').ravel().tolist() == [3, 3, 7, 7]
+    assert raw[:, 24:28].copy().view('<u4').ravel().tolist() == [0, 1, 0, 1]
+    np.testing.assert_allclose(raw[:, :12].copy().view('<f4'), X / 1000, rtol=1e-6)
+
+    class Msg:                                # what cloud_to_arrays reads of a message
+        width, height, is_bigendian = 4, 1, False
+        point_step, row_step, data = 32, 128, two['data'].tobytes()
+        fields = [type('F', (), dict(name=n, offset=o, datatype=d, count=c))
+                  for n, o, d, c in two['fields']]
+    assert cloud_to_arrays(Msg)['subject'].tolist() == [3, 3, 7, 7]
+
+
+def test_full_frame_maps_alone_keep_two_subjects_tracked():
+    # a detector with track:=false sends only the full frame: discovery finds both in the
+    # first frame, then each track takes its instance from the full-frame maps
+    from helpers.scenes import cv2_project, gaussian_heatmaps
+
+    cams = ring_rig(3)
+    A, B = bodies()
+    core = SubjectsCore(14, 'm', SubjectsConfig(subjects=2))
+    box, grid = np.array([0.0, 0.0, 640.0, 480.0]), (160, 120)
+    identity = {}
+    for t in range(6):
+        step = np.array([0.02 * t, 0.0, 0.0])
+        truth = [A + step, B - step]
+        full = []
+        for v, cam in enumerate(cams):
+            heat = np.zeros((14, grid[1], grid[0]), np.float32)
+            for X in truth:
+                p = (cv2_project(cam, X) + 0.5) * grid[0] / 640 - 0.5
+                heat = np.maximum(heat, gaussian_heatmaps(p, grid[::-1], sigma=1.5))
+            full.append((v, heat, cam.crop(box, grid).K))
+        r = core.live_frame(cams, 1_000 + t * 33_333_333, [], full)
+        assert (r.ids >= 0).sum() == 2, t
+        assert r.discovered == (2 if t == 0 else -1)
+        for s, ident in zip(r.keep, r.ids):
+            X = r.association.X[s]
+            d = [np.abs(X - T).max() for T in truth]
+            body = int(np.argmin(d))
+            assert d[body] < 0.005, (t, d)
+            assert identity.setdefault(body, int(ident)) == int(ident)
+    assert core.tracker.births == 2
+
+
+def test_an_instant_without_any_crop_ages_the_tracks():
+    # every slot of the instant empty (no view): no subject, the tracks age and die
+    core = SubjectsCore(14, 'm', SubjectsConfig(subjects=2))
+    A, _ = bodies()
+    core.tracker.step(A[None], 0)
+    r = core.live_frame([], 100_000_000, [], [])
+    assert len(r.ids) == 0 and core.tracker.ids.tolist() == [0]
+    core.live_frame([], 700_000_000, [], [])        # max_missed_s 0.5 s
+    assert core.tracker.deaths == 1
