@@ -124,6 +124,10 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
     rows = result.rows
     if not rows:
         raise LabelError(f'{", ".join(map(str, paths))}: no 2D detections found')
+    if result.instance_keypoints:    # several animals: '<instance>/<keypoint>' per camera
+        rows = [replace(r, keypoint=f'{r.instance}/{r.keypoint}') if r.instance else r
+                for r in rows]
+        result = replace(result, rows=rows, keypoints=result.instance_keypoints)
     for r in rows:
         if r.camera not in cameras:
             raise LabelError(f'{r.place}: field camera: {r.camera!r} is not a camera of the '

@@ -12,16 +12,16 @@ of the documented shapes):
   score of a present point (e.g. a user-placed point) is no score: the point is kept;
 - video_path: the video the file belongs to (its name gives the camera).
 The frame axis is the video's frame index; its length is the file's frame count (the
-video's), even when the animal is missing from the last frames. With several tracks the
-keypoint is named
-'<track>/<node>'.
+video's), even when the animal is missing from the last frames. With several tracks each
+track is a subject (labels_import: ids by track name, in order of first appearance over
+the files) and the keypoint is the node; `monet triangulate` names it '<track>/<node>'.
 """
 from pathlib import Path
 
 import numpy as np
 
 from monet_ros.labels import LabelError, LabelRow
-from monet_ros.labels_import import ImportResult, camera_for
+from monet_ros.labels_import import ImportResult, camera_for, join_notes, subject_note
 
 
 def _text(value):
@@ -30,10 +30,13 @@ def _text(value):
     return value.decode('utf-8', 'replace') if isinstance(value, bytes) else str(value)
 
 
-def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
+def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None, ids=None):
     """(rows, keypoints, dropped, frames) of one SLEAP analysis HDF5 file: LabelRow list,
-    keypoint names, points below min_score left out, the file's frame count. Raises
-    LabelError naming the file and field."""
+    keypoint names ('<track>/<node>' with several tracks), points below min_score left out,
+    the file's frame count. With several tracks a row's keypoint is the node, its instance
+    the track name and its subject the name's id in `ids` ({name: id}, filled in order of
+    first appearance). Raises LabelError naming the file and field."""
+    ids = {} if ids is None else ids
     import h5py
     try:
         handle = h5py.File(path, 'r')
@@ -80,14 +83,17 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
         low = ok & ~(score >= min_score) & ~np.isnan(score)     # NaN: no score, kept
         dropped = int(low.sum())
         ok &= ~low
+    several = n_tracks > 1
+    subject = [ids.setdefault(n, len(ids)) if several else 0 for n in names]
     rows = []
     for frame, track, node in zip(*np.nonzero(ok)):
         u, v = points[frame, track, node]
         s = None if score is None else float(score[frame, track, node])
         rows.append(LabelRow(str(path), int(frame) + 1, None, int(frame), cam,
-                             keypoints[track * len(nodes) + node], float(u), float(v),
+                             nodes[node], float(u), float(v),
                              f'frame {frame} track {names[track]} node {nodes[node]}',
-                             None if s is None or np.isnan(s) else s))
+                             None if s is None or np.isnan(s) else s,
+                             subject=subject[track], instance=names[track] if several else ''))
     return rows, tuple(keypoints), dropped, n_frames
 
 
@@ -97,12 +103,15 @@ def import_sleap(paths, cameras=(), camera=None, min_score=0.0, camera_map=None)
         files += sorted(p.rglob('*.h5')) + sorted(p.rglob('*.hdf5')) if p.is_dir() else [p]
     if not files:
         raise LabelError(f'{", ".join(map(str, paths))}: no SLEAP analysis .h5 file found')
-    rows, keypoints, dropped, counts = [], {}, 0, {}
+    rows, keypoints, dropped, counts, ids = [], {}, 0, {}, {}
     for f in files:
-        r, k, d, n = read_sleap(f, cameras, camera, min_score, camera_map)
+        r, k, d, n = read_sleap(f, cameras, camera, min_score, camera_map, ids)
         rows += r
         keypoints.update(dict.fromkeys(k))
         dropped += d
         counts[str(f)] = n
-    note = f'{dropped} points below --min-score {min_score} left out' if dropped else ''
-    return ImportResult(rows, tuple(keypoints), note, counts)
+    note = join_notes(f'{dropped} points below --min-score {min_score} left out'
+                      if dropped else '', subject_note(ids, 'SLEAP tracks'))
+    plain = tuple(dict.fromkeys(k.split('/', 1)[-1] for k in keypoints)) if ids \
+        else tuple(keypoints)
+    return ImportResult(rows, plain, note, counts, ids, tuple(keypoints) if ids else ())

@@ -76,13 +76,17 @@ def test_lightning_pose_multiview_csv_and_multi_animal(tmp_path):
     assert sorted((r.camera, r.frame, r.keypoint, r.u, r.v) for r in result.rows) == [
         ('cam1', 9, 'snout', 1.5, 2.5), ('cam1', 9, 'tail', 3.5, 4.5),
         ('cam2', 9, 'snout', 1.5, 2.5), ('cam2', 9, 'tail', 3.5, 4.5)]
-    # multi-animal: 4 header rows; keypoints named individual/bodypart
+    # multi-animal: 4 header rows; each individual a subject (the keypoint the bodypart);
+    # monet triangulate's names individual/bodypart kept as instance_keypoints
     ma = dlc_frame(pd.MultiIndex.from_tuples([('labeled-data', 'cam1', 'img5.png')]),
                    np.arange(8.0)[None], individuals=['m1', 'm2'])
     ma.to_csv(tmp_path / 'ma.csv')
     result = import_labels('dlc', tmp_path / 'ma.csv', cameras=CAMERAS)
-    assert result.keypoints == ('m1/snout', 'm1/tail', 'm2/snout', 'm2/tail')
-    assert [(r.keypoint, r.u, r.v) for r in result.rows][3] == ('m2/tail', 6.0, 7.0)
+    assert result.keypoints == ('snout', 'tail') and result.subjects == {'m1': 0, 'm2': 1}
+    assert result.instance_keypoints == ('m1/snout', 'm1/tail', 'm2/snout', 'm2/tail')
+    assert [(r.keypoint, r.u, r.v, r.subject, r.instance) for r in result.rows][3] == \
+        ('tail', 6.0, 7.0, 1, 'm2')
+    assert 'subjects: m1=0, m2=1 (DeepLabCut individuals)' in result.note
 
 
 def test_deeplabcut_errors_name_file_line_and_field(tmp_path):
