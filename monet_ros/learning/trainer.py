@@ -234,6 +234,11 @@ class TrainingData:
         self.cache = CropCache(recording, boxes, input_size, heatmap_size,
                                config.cache_scale, instants=rows)
 
+    @property
+    def num_other_labelled(self):
+        """Labelled (instant, subject) rows of subjects other than 0 in the train split."""
+        return int(np.isfinite(self.other_labels[..., 0]).any(axis=(1, 2)).sum())
+
     def label_points(self, pairs):
         """(N, C, 2) px labels of crop rows x views `pairs` (N, 2): subject 0's labels for a
         row t < T (an instant), the other subject's for a row T + j (other_labels[j])."""

@@ -124,3 +124,26 @@ def test_one_track_stays_one_subject_without_a_subject_column(scene, tmp_path):
     assert monet(['labels', 'import', 'sleap', str(sleap), '--rec', str(folder / 'recording'),
                   '--rig', str(folder / 'rig.yaml'), '--out', str(out)]) == 0
     assert out.read_text().splitlines()[0] == 'stamp_ns,camera,keypoint,u,v'
+
+
+def test_info_counts_every_subject_and_eval_refuses_them(scene, tmp_path, capsys):
+    from monet_ros.evaluation.reference import load_reference
+    from monet_ros.labels import LabelError, write_labels
+    from monet_ros.learning.recording_index import recording_index
+
+    folder, cams, uv, _ = scene
+    index = recording_index(folder)
+    rows = [(int(index.stamps[t]), cam.name, NAMES[c], *uv[t, v, s, c], s)
+            for t in (1, 4) for v, cam in enumerate(cams) for s in (0, 1) for c in range(3)
+            if np.isfinite(uv[t, v, s, c, 0])]
+    path = tmp_path / 'labels.csv'
+    write_labels(path, rows)
+    assert monet(['info', str(folder), '--labels', str(path)]) == 0
+    text = capsys.readouterr().out
+    assert 'subjects: 0, 1' in text
+    for cam in cams:
+        n = sum(r[1] == cam.name for r in rows)
+        assert f'  {cam.name}: {n} labelled keypoints' in text
+    with pytest.raises(LabelError, match=r'labels.csv: field subject: the reference labels '
+                       'hold subjects 0, 1; monet eval scores one subject'):
+        load_reference(path, index, NAMES)

@@ -141,3 +141,22 @@ def test_a_network_trained_on_two_subjects_finds_both(scene):
     for s in (0, 1):
         err_s = err[s][np.isfinite(err[s])]
         assert err_s.size > 40 and np.median(err_s) < 1.5 and err_s.max() < 3.0, (s, err_s)
+
+
+def test_monet_train_says_what_the_other_subjects_add(scene, repo_root):
+    from helpers.commands import run_monet_process
+    folder, cams, X, uv, root = scene
+    skeleton = root / 'blobs3.yaml'
+    skeleton.write_text('name: blobs3\nkeypoints: [a, b, c]\n')
+    out = root / 'run'
+    done = run_monet_process(
+        repo_root, 'train', folder, '--labels', root / 'labels.csv', '--skeleton', skeleton,
+        '--out', out, '--steps', 2, '--holdout-labelled', 1, '--architecture', 'small',
+        '--input-size', 48, '--width', 16, '--batch-labelled', 4, '--mode', 'supervised',
+        '--device', 'cpu', '--threads', 1, '--no-progress')
+    assert done.returncode == 0, done.stderr
+    # 6 labelled instants, one held out (both its subjects): 5 more subject-instants
+    assert '5 labelled (5 more labelled subject-instants: crops around subjects other than ' \
+        '0, up to 2 per instant)' in done.stderr, done.stderr
+    held = (out / 'heldout_labels.csv').read_text().splitlines()
+    assert held[0] == 'stamp_ns,camera,keypoint,u,v'           # subject 0's, as scored
