@@ -136,18 +136,15 @@ def spread_instants(candidates, n):
     return candidates[np.unique(picks)]
 
 
-def validation_split(labels, held_out, fraction, labelled=None):
+def validation_split(labels, held_out, fraction):
     """(K,) sorted instants whose labels are held out for validation (never trained on).
 
     labels (T, V, C, 2) px, NaN = none; held_out: the eval_fraction tail (already never
-    trained on); labelled: (L,) the labelled instants when not those of `labels` (a table
-    with several subjects: instants with any subject's label). fraction 0 -> none; else the
-    target is max(1, round(fraction x labelled instants)): the tail's labelled instants
-    count first, the rest are spread_instants of the labelled instants before the tail,
-    always leaving at least one of those to train on. Deterministic: a resumed run (same
-    labels, tail and fraction) gets the same split."""
-    if labelled is None:
-        labelled = np.flatnonzero(np.isfinite(labels[..., 0]).any(axis=(1, 2)))
+    trained on). fraction 0 -> none; else the target is max(1, round(fraction x labelled
+    instants)): the tail's labelled instants count first, the rest are spread_instants of
+    the labelled instants before the tail, always leaving at least one of those to train on.
+    Deterministic: a resumed run (same labels, tail and fraction) gets the same split."""
+    labelled = np.flatnonzero(np.isfinite(labels[..., 0]).any(axis=(1, 2)))
     if fraction <= 0 or labelled.size == 0:
         return np.zeros(0, dtype=np.int64)
     target = max(1, int(round(fraction * labelled.size)))
@@ -190,9 +187,10 @@ class TrainingData:
         self.recording = recording
         self.config = config
         self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
+        # among the instants labelled for subject 0 (validation labels are its); the
+        # other subjects of those instants are held out of training with them
         self.validation_instants = validation_split(recording.labels, self.held_out,
-                                                    config.validation_labels,
-                                                    recording.labelled_instants)
+                                                    config.validation_labels)
         self.validation_labels = recording.labels[self.validation_instants].copy()
         self.labels = recording.labels.copy()
         self.labels[self.held_out] = np.nan

@@ -160,3 +160,39 @@ def test_monet_train_says_what_the_other_subjects_add(scene, repo_root):
         '0, up to 2 per instant)' in done.stderr, done.stderr
     held = (out / 'heldout_labels.csv').read_text().splitlines()
     assert held[0] == 'stamp_ns,camera,keypoint,u,v'           # subject 0's, as scored
+
+
+def test_validation_and_held_out_instants_hold_every_subject_out(scene):
+    folder, cams, X, uv, root = scene
+    rec = load_recording(folder, labels=root / 'labels.csv', skeleton=list(NAMES))
+    config = TrainConfig(mode='supervised', steps=1, validation_labels=0.34, **CONFIG)
+    data = TrainingData(rec, config, (48, 48), (12, 12))
+    trainer = Trainer(config, data)
+    held = set(data.validation_instants.tolist()) | set(data.held_out.tolist())
+    assert len(data.validation_instants) == 2
+    rows = trainer.labelled_pool[:, 0]
+    instants = np.where(rows < T, rows, data.other_instants[np.maximum(rows - T, 0)])
+    assert not held & set(instants.tolist())
+    assert set(instants.tolist()) == set(LABELLED) - held
+    assert trainer.validate(instants=[])['labelled_keypoints'] > 0      # subject 0's
+
+
+def test_a_subject_column_of_zeros_trains_as_no_column(scene, tmp_path):
+    folder, cams, X, uv, root = scene
+    zeros = tmp_path / 'zeros.csv'
+    text = (root / 'labels0.csv').read_text().splitlines()
+    zeros.write_text('\n'.join([text[0] + ',subject'] + [f'{r},0' for r in text[1:]]) + '\n')
+    runs = []
+    for path in (root / 'labels0.csv', zeros):
+        rec = load_recording(folder, labels=path, skeleton=list(NAMES))
+        config = TrainConfig(mode='supervised', steps=3, **CONFIG)
+        trainer = Trainer(config, TrainingData(rec, config, (48, 48), (12, 12)))
+        plans = []
+        for _ in range(3):
+            trainer.step()
+            plans.append([(k, p.tolist()) for k, p, *_ in trainer.last_plan])
+        runs.append((plans, [v.clone() for v in trainer.model.state_dict().values()],
+                     trainer.data.cache.crops.copy()))
+    assert runs[0][0] == runs[1][0]
+    assert all(torch.equal(a, b) for a, b in zip(runs[0][1], runs[1][1]))
+    np.testing.assert_array_equal(runs[0][2], runs[1][2])
