@@ -19,7 +19,8 @@ labeled-data/<session>_<view>/...), else the one in the file name
 likelihoods). A prediction table's length is its rows (last frame number + 1), whatever
 its last detection. With several individuals each individual is a subject (labels_import:
 ids by name, in order of first appearance over the files) and the keypoint is the
-bodypart; `monet triangulate` names it '<individual>/<bodypart>'.
+bodypart; `monet triangulate` names it '<individual>/<bodypart>'. The unique bodyparts
+(individual 'single') are no animal: plain names, subject 0.
 """
 import csv
 import math
@@ -32,6 +33,7 @@ from monet_ros.labels import LabelError, LabelRow
 from monet_ros.labels_import import ImportResult, camera_for, join_notes, subject_note
 
 LEVELS = ('scorer', 'individuals', 'bodyparts', 'coords')
+UNIQUE = 'single'      # multi-animal DeepLabCut's individual of the unique bodyparts
 _NUMBER = re.compile(r'(\d+)(?!.*\d)')
 
 
@@ -68,7 +70,8 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
     frame count (largest frame number + 1) when the index is frame numbers (predictions),
     else None. With several individuals a row's keypoint is the bodypart, its instance the
     individual and its subject the individual's id in `ids` ({name: id}, filled in order of
-    first appearance)."""
+    first appearance). The unique bodyparts of a multi-animal project (individual 'single':
+    the arena's landmarks, no animal's) keep their plain name and subject 0."""
     ids = {} if ids is None else ids
     levels = [tuple(c) for c in columns]
     groups = {}
@@ -76,9 +79,9 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
         if len(col) < 3:
             raise LabelError(f'{source}: column {col} has no (scorer, bodyparts, coords) '
                              'levels')
-        name = col[-2] if len(col) == 3 else f'{col[-3]}/{col[-2]}'
+        name = col[-2] if len(col) == 3 or col[-3] == UNIQUE else f'{col[-3]}/{col[-2]}'
         groups.setdefault(name, {})[str(col[-1])] = k
-    individuals = {c[-3] for c in levels if len(c) == 4}
+    individuals = {c[-3] for c in levels if len(c) == 4 and c[-3] != UNIQUE}
     if len(individuals) == 1:
         groups = {k.split('/', 1)[1]: v for k, v in groups.items()}
     several = len(individuals) > 1

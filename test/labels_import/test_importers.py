@@ -194,3 +194,21 @@ def test_dannce_label3d_real_file(shared_data):
     stamps = np.arange(int(frames.max()) + 1, dtype=np.int64) * 10_000_000
     labels, report = resolve_labels(result.rows, stamps, cameras, result.keypoints)
     assert report.kept == len(result.rows) and len(labels) == 81
+
+
+def test_multi_animal_unique_bodyparts_are_no_subject(tmp_path):
+    """maDLC's individual 'single' holds the unique bodyparts (arena landmarks): plain names,
+    subject 0, not an id of their own."""
+    cols = pd.MultiIndex.from_tuples(
+        [('a', m, p, c) for m in ('m1', 'm2') for p in BODYPARTS for c in ('x', 'y')]
+        + [('a', 'single', 'corner', c) for c in ('x', 'y')],
+        names=['scorer', 'individuals', 'bodyparts', 'coords'])
+    frame = pd.DataFrame(np.arange(10.0)[None],
+                         index=pd.MultiIndex.from_tuples([('labeled-data', 'cam1', 'img5.png')]),
+                         columns=cols)
+    frame.to_csv(tmp_path / 'ma.csv')
+    result = import_labels('dlc', tmp_path / 'ma.csv', cameras=CAMERAS)
+    assert result.subjects == {'m1': 0, 'm2': 1}
+    assert result.keypoints == ('snout', 'tail', 'corner')
+    assert [(r.keypoint, r.subject, r.instance, r.u) for r in result.rows][-1] == \
+        ('corner', 0, '', 8.0)
