@@ -238,3 +238,24 @@ def recording_boxes(recording, source, aspect, margin, pseudo=None, box=None):
         raise ValueError(f'unknown crop source {source!r} (one of {", ".join(SOURCES)})')
     return fill_boxes(boxes_from_points(points, aspect=aspect, margin=margin),
                       recording.cameras)
+
+
+def subject_label_boxes(labels, instants, boxes, cameras, aspect, margin):
+    """(J, V, 4) training crop boxes of other subjects' labels (Recording.other_labels): the
+    rule of recording_boxes' 'labels' source (the subject's labels + their spatial
+    augmentation) on each labelled (instant, subject). A view with neither takes the box of
+    its instant in `boxes` (T, V, 4) (it has no label of that subject, so it is never a
+    training crop of it).
+
+    labels (J, V, C, 2) px NaN = none; instants (J,) their instants; cameras: V Camera."""
+    from monet_ros.learning.pseudo_labels import spatial_pseudo_labels
+
+    labels = np.asarray(labels, np.float64)
+    instants = np.asarray(instants, np.int64)
+    if not len(labels):
+        return np.zeros((0,) + np.shape(boxes)[1:])
+    spatial = spatial_pseudo_labels(labels, cameras).points
+    points = np.where(np.isfinite(labels), labels, spatial)
+    out = boxes_from_points(points, aspect=aspect, margin=margin)
+    missing = ~np.isfinite(out[..., 0])
+    return np.where(missing[..., None], np.asarray(boxes, np.float64)[instants], out)

@@ -15,7 +15,20 @@ Format (UTF-8 CSV, one labelled keypoint per row, comma separated, header requir
   distortion NOT removed), finite decimals.
 
 A keypoint that is not labelled in a view simply has no row. Rows may come in any order;
-a (stamp_ns, camera, keypoint) triple may appear only once. `monet synth` labels every
+a (stamp_ns, camera, keypoint[, subject]) may appear only once.
+
+Several subjects (two mice, two monkeys in view): an optional last column `subject`, an
+integer >= 0 (default 0: a file without the column is all subject 0)::
+
+    stamp_ns,camera,keypoint,u,v,subject
+    1767225600000000000,cam0,head,312.25,101.5,0
+    1767225600000000000,cam0,head,512.0,140.25,1
+
+A subject id is an instance label WITHIN one labelled instant: the same id in every view
+of that instant names the same animal (so the views of an instant can be triangulated
+together), but ids need not follow an animal from one labelled instant to the next.
+write_labels writes the column only when some label is of a subject other than 0, so a
+single-subject table is written exactly as before. `monet synth` labels every
 keypoint that projects inside the image, occluded ones included (see its README).
 
 A frame-indexed variant has `frame` (the 0-based index of the recording's multiview
@@ -23,6 +36,8 @@ instant, as `monet info` lists them) instead of `stamp_ns`::
 
     frame,camera,keypoint,u,v
     42,cam0,head,312.25,101.5
+
+(with the same optional `subject` column).
 
 A 2D points table (`monet triangulate`, read with read_label_rows(path, points=True))
 is frame-indexed, may add a detection score column (frame,camera,keypoint,u,v,score) and
@@ -46,7 +61,8 @@ keypoints, options)`:
   microseconds / seconds instead of nanoseconds;
 - u must lie in [-0.5, width - 0.5] and v in [-0.5, height - 0.5] (pixel-edge box of the
   camera's image, the convention of `monet synth`);
-- a (instant, camera, keypoint) may be labelled once.
+- a subject must be an integer >= 0;
+- a (instant, camera, keypoint, subject) may be labelled once.
 Every bad row raises LabelError naming file, line and field; with
 `LabelOptions(skip_bad=True)` (`--skip-bad-labels`) it is dropped and counted by kind in
 the returned LabelReport instead. Nothing is dropped silently.
@@ -64,6 +80,8 @@ HEADER = ('stamp_ns', 'camera', 'keypoint', 'u', 'v')
 FRAME_HEADER = ('frame', 'camera', 'keypoint', 'u', 'v')
 SCORED_FRAME_HEADER = FRAME_HEADER + ('score',)
 SUBJECT_HEADERS = (FRAME_HEADER + ('subject',), SCORED_FRAME_HEADER + ('subject',))
+# labels files with the optional subject column (an integer id; module docstring)
+LABEL_SUBJECT_HEADERS = (HEADER + ('subject',), FRAME_HEADER + ('subject',))
 
 
 class LabelError(ValueError):
@@ -79,50 +97,87 @@ class LabelResolutionError(LabelError):
 class Labels:
     """Labels of a recording.
 
-    keypoints: names in channel order; frames: {stamp_ns: {camera: (C, 2) float64 array}},
-    NaN where a keypoint is not labelled in that view.
+    keypoints: names in channel order; frames: {stamp_ns: {camera: (C, 2) float64 array}}
+    of subject 0, NaN where a keypoint is not labelled in that view; others: the same for
+    every other subject, {subject (int >= 1): {stamp_ns: {camera: (C, 2)}}} ({} for a
+    single-subject table). A subject id names one animal within one instant (module
+    docstring).
     """
 
     keypoints: tuple
     frames: dict
+    others: dict = field(default_factory=dict)
+
+    def _by_subject(self):
+        """{subject: {stamp: {camera: (C, 2)}}} of every subject with a label."""
+        out = {0: self.frames} if self.frames else {}
+        out.update((s, f) for s, f in sorted(self.others.items()) if f)
+        return out
+
+    @property
+    def subjects(self):
+        """Subject ids with at least one label, sorted (list of int; [0] for a
+        single-subject table, [] for an empty one)."""
+        return sorted(self._by_subject())
 
     @property
     def stamps(self):
-        """Labelled instants, sorted (list of int ns)."""
-        return sorted(self.frames)
+        """Labelled instants (of any subject), sorted (list of int ns)."""
+        return sorted({s for f in self._by_subject().values() for s in f})
 
     @property
     def cameras(self):
         """Camera names with at least one label, sorted."""
-        return sorted({cam for views in self.frames.values() for cam in views})
+        return sorted({cam for f in self._by_subject().values() for views in f.values()
+                       for cam in views})
 
     @property
     def num_points(self):
-        """Number of labelled (instant, camera, keypoint) triples."""
-        return int(sum(np.isfinite(a[:, 0]).sum() for v in self.frames.values()
-                       for a in v.values()))
+        """Number of labelled (instant, camera, keypoint, subject) cells."""
+        return int(sum(np.isfinite(a[:, 0]).sum() for f in self._by_subject().values()
+                       for v in f.values() for a in v.values()))
 
     def __len__(self):
-        return len(self.frames)
+        """Labelled instants (of any subject)."""
+        return len(self.stamps)
 
-    def points(self, stamp_ns, cameras):
-        """(V, C, 2) labels of one instant in the order of `cameras` (names), NaN where a
-        view or keypoint is unlabelled."""
-        views = self.frames.get(int(stamp_ns), {})
+    def points(self, stamp_ns, cameras, subject=0):
+        """(V, C, 2) labels of one subject (default 0) at one instant in the order of
+        `cameras` (names), NaN where a view or keypoint is unlabelled."""
+        frames = self.frames if subject == 0 else self.others.get(int(subject), {})
+        views = frames.get(int(stamp_ns), {})
         out = np.full((len(cameras), len(self.keypoints), 2), np.nan)
         for i, cam in enumerate(cameras):
             if cam in views:
                 out[i] = views[cam]
         return out
 
+    def instant_subjects(self, stamp_ns):
+        """Subjects labelled at one instant, sorted (list of int)."""
+        return [s for s, f in self._by_subject().items() if int(stamp_ns) in f]
+
     def rows(self):
-        """(stamp_ns, camera, keypoint, u, v) tuples, sorted by stamp, camera, channel."""
+        """(stamp_ns, camera, keypoint, u, v) tuples of subject 0, sorted by stamp, camera,
+        channel (subject_rows: every subject's)."""
+        for stamp, cam, keypoint, u, v, _ in self.subject_rows(subjects=(0,)):
+            yield stamp, cam, keypoint, u, v
+
+    def subject_rows(self, subjects=None):
+        """(stamp_ns, camera, keypoint, u, v, subject) tuples of `subjects` (default all),
+        sorted by stamp, camera, subject, channel."""
+        by_subject = self._by_subject()
+        wanted = sorted(by_subject) if subjects is None else \
+            [s for s in subjects if s in by_subject]
         for stamp in self.stamps:
-            views = self.frames[stamp]
-            for cam in sorted(views):
-                for c, (u, v) in enumerate(views[cam]):
-                    if np.isfinite(u) and np.isfinite(v):
-                        yield stamp, cam, self.keypoints[c], float(u), float(v)
+            cams = sorted({c for s in wanted for c in by_subject[s].get(stamp, {})})
+            for cam in cams:
+                for s in wanted:
+                    view = by_subject[s].get(stamp, {}).get(cam)
+                    if view is None:
+                        continue
+                    for c, (u, v) in enumerate(view):
+                        if np.isfinite(u) and np.isfinite(v):
+                            yield stamp, cam, self.keypoints[c], float(u), float(v), s
 
 
 def _keypoint_names(keypoints):
@@ -140,7 +195,9 @@ class LabelRow:
     stamp_ns or frame (exactly one is not None); camera, keypoint: names as in the source;
     u, v: pixels (finite; NaN only in a 2D points table). where: how to name the place in
     messages (default 'line N'). score: the detection's confidence (likelihood) when the
-    source has one, else None."""
+    source has one, else None. subject: the labelled subject (int >= 0, checked by
+    resolve_labels; module docstring); instance: the source's name of that subject (a
+    SLEAP track, a DeepLabCut individual; '' when the source has one subject)."""
     source: str
     line: int
     stamp_ns: int | None
@@ -151,6 +208,8 @@ class LabelRow:
     v: float
     where: str = ''
     score: float | None = None
+    subject: int = 0
+    instance: str = ''
 
     @property
     def place(self):
@@ -183,6 +242,8 @@ def read_label_rows(path, points=False):
             allowed = (FRAME_HEADER, SCORED_FRAME_HEADER) if points else (HEADER, FRAME_HEADER)
             if points and header in SUBJECT_HEADERS:
                 allowed = SUBJECT_HEADERS
+            if not points and header in LABEL_SUBJECT_HEADERS:
+                allowed = LABEL_SUBJECT_HEADERS
             if header not in allowed:
                 raise LabelError(f'{path}:1: header is {",".join(header)!r}, expected '
                                  f'{",".join(allowed[0])!r} or {",".join(allowed[1])!r}')
@@ -209,6 +270,7 @@ def read_labels(path, keypoints=None):
     rows = read_label_rows(path)
     names = _keypoint_names(keypoints)
     for row in rows:
+        _check_subject(row)
         if row.stamp_ns is None:
             raise LabelError(f'{row.place}: field frame: a frame-indexed labels file needs '
                              'a recording to resolve frames to stamps (monet train/eval '
@@ -222,23 +284,38 @@ def read_labels(path, keypoints=None):
                          [r.keypoint for r in rows])
 
 
+def _check_subject(row):
+    """None when row.subject is an integer >= 0, else the reason (text)."""
+    s = row.subject
+    if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0:
+        return f'{s!r} is not an integer >= 0 (the subject id within its instant)'
+    return None
+
+
 def _build_labels(rows, names, stamps, cameras, keypoints):
-    """Labels from rows and their resolved stamp, camera, keypoint; duplicates raise."""
+    """Labels from rows and their resolved stamp, camera, keypoint (subject from the
+    row); a bad subject or a duplicate raises."""
     index = {k: i for i, k in enumerate(names)}
-    frames = {}
+    by_subject = {}
     seen = {}
     for row, stamp, camera, keypoint in zip(rows, stamps, cameras, keypoints):
-        key = (stamp, camera, keypoint)
+        problem = _check_subject(row)
+        if problem:
+            raise LabelError(f'{row.place}: field subject: {problem}')
+        subject = int(row.subject)
+        key = (stamp, camera, keypoint, subject)
         if key in seen:
             raise LabelError(f'{row.place}: duplicate label for stamp_ns={stamp} '
-                             f'camera={camera} keypoint={keypoint} '
-                             f'({_first(seen[key], row)})')
+                             f'camera={camera} keypoint={keypoint}'
+                             + (f' subject={subject}' if subject else '')
+                             + f' ({_first(seen[key], row)})')
         seen[key] = row
-        views = frames.setdefault(stamp, {})
+        views = by_subject.setdefault(subject, {}).setdefault(stamp, {})
         if camera not in views:
             views[camera] = np.full((len(names), 2), np.nan)
         views[camera][index[keypoint]] = (row.u, row.v)
-    return Labels(keypoints=tuple(names), frames=frames)
+    frames = by_subject.pop(0, {})
+    return Labels(keypoints=tuple(names), frames=frames, others=by_subject)
 
 
 def _first(first, row):
@@ -272,7 +349,17 @@ def _parse_row(path, line, row, header, points=False):
         coords.append(_number(path, line, name, text, points))
     score = _number(path, line, 'score', row[5].strip(), True) \
         if len(header) > 5 and header[5] == 'score' else None
-    if header[-1] == 'subject':
+    subject_id = 0
+    if header[-1] == 'subject' and not points:            # a labels file: an integer id
+        text = row[-1].strip()
+        try:
+            subject_id = int(text)
+        except ValueError:
+            raise LabelError(f'{path}:{line}: field subject: {text!r} is not an integer '
+                             '>= 0 (the subject id within its instant)') from None
+        if subject_id < 0:
+            raise LabelError(f'{path}:{line}: field subject: must be >= 0, got {subject_id}')
+    elif header[-1] == 'subject':
         subject = row[-1].strip()
         if not subject or '/' in subject:
             raise LabelError(f'{path}:{line}: field subject: {subject!r} must be a '
@@ -280,7 +367,7 @@ def _parse_row(path, line, row, header, points=False):
         keypoint = f'{subject}/{keypoint}'
     stamp, frame = (value, None) if key == 'stamp_ns' else (None, value)
     return LabelRow(str(path), line, stamp, frame, camera, keypoint, coords[0], coords[1],
-                    score=score)
+                    score=score, subject=subject_id)
 
 
 def _number(path, line, name, text, missing_ok):
@@ -299,22 +386,33 @@ def _number(path, line, name, text, missing_ok):
 def write_labels(path, rows):
     """Write labels atomically (tmp file + os.replace).
 
-    rows: a Labels, or an iterable of (stamp_ns, camera, keypoint, u, v); rows with a
-    non-finite u or v are skipped (unlabelled). Floats are written with repr, so reading
-    back gives the same float64 values. Returns the number of rows written.
+    rows: a Labels (every subject), or an iterable of (stamp_ns, camera, keypoint, u, v) or
+    (stamp_ns, camera, keypoint, u, v, subject); rows with a non-finite u or v are skipped
+    (unlabelled). The subject column is written only when some row's subject is not 0: a
+    single-subject table is written exactly as without subjects. Floats are written with
+    repr, so reading back gives the same float64 values. Returns the number of rows
+    written. Raises ValueError for a subject that is not an integer >= 0.
     """
     path = Path(path)
-    items = rows.rows() if isinstance(rows, Labels) else rows
+    items = rows.subject_rows() if isinstance(rows, Labels) else rows
+    items = [(*item, 0) if len(item) == 5 else tuple(item) for item in items]
+    for item in items:
+        s = item[5]
+        if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0:
+            raise ValueError(f'write_labels: subject {s!r} of {item[:3]} is not an integer '
+                             '>= 0')
+    with_subject = any(item[5] != 0 for item in items)
     tmp = path.with_name(path.name + '.tmp')
     count = 0
     with open(tmp, 'w', newline='', encoding='utf-8') as handle:
         writer = csv.writer(handle, lineterminator='\n')
-        writer.writerow(HEADER)
-        for stamp, camera, keypoint, u, v in items:
+        writer.writerow(HEADER + (('subject',) if with_subject else ()))
+        for stamp, camera, keypoint, u, v, subject in items:
             u, v = float(u), float(v)
             if not (math.isfinite(u) and math.isfinite(v)):
                 continue
-            writer.writerow((int(stamp), str(camera), str(keypoint), repr(u), repr(v)))
+            writer.writerow((int(stamp), str(camera), str(keypoint), repr(u), repr(v))
+                            + ((int(subject),) if with_subject else ()))
             count += 1
     os.replace(tmp, path)
     return count
@@ -338,7 +436,7 @@ def label_rows(stamps, cameras, keypoints, points2d):
 # ------------------------------------------------------------------- the label validator
 
 STAMP_UNITS = (('milliseconds', 1_000_000), ('microseconds', 1_000), ('seconds', 1_000_000_000))
-SKIP_KINDS = ('camera', 'keypoint', 'instant', 'bounds', 'duplicate')
+SKIP_KINDS = ('camera', 'keypoint', 'instant', 'bounds', 'duplicate', 'subject')
 
 
 def parse_name_map(items, what='camera'):
@@ -491,6 +589,10 @@ def resolve_labels(rows, stamps, cameras, keypoints, options=None, valid=None):
 
     for row in rows:
         report.rows += 1
+        problem = _check_subject(row)
+        if problem:
+            bad('subject', row, 'subject', problem)
+            continue
         camera = camera_map.get(row.camera, row.camera)
         if camera not in sizes:
             hint = _name_hint(row.camera, sizes, 'camera')
@@ -532,10 +634,11 @@ def resolve_labels(rows, stamps, cameras, keypoints, options=None, valid=None):
             bad('bounds', row, f, f'{x!r} lies outside the image of {camera} '
                 f'({width}x{height}: -0.5 .. {n - 0.5})')
             continue
-        key = (t, camera, keypoint)
+        key = (t, camera, keypoint, int(row.subject))
         if key in seen:
-            bad('duplicate', row, 'keypoint', f'{keypoint} of {camera} at instant {t} is '
-                f'labelled twice ({_first(seen[key], row)})')
+            bad('duplicate', row, 'keypoint', f'{keypoint} of {camera} at instant {t}'
+                + (f' (subject {row.subject})' if row.subject else '')
+                + f' is labelled twice ({_first(seen[key], row)})')
             continue
         seen[key] = row
         kept.append(row)

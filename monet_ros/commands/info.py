@@ -93,10 +93,14 @@ def run(args):
         frames = sorted(where[s] for s in labels.stamps)
         print(f'labels: {args.labels}: {report.summary()}', file=out)
         print(f'labelled instants ({len(frames)}): {_ranges(frames) or "none"}', file=out)
+        if labels.subjects not in ([], [0]):
+            print(f'subjects: {", ".join(map(str, labels.subjects))} (the labels\' subject '
+                  'column; ids within an instant)', file=out)
+        counts = {}
+        for _, cam, *_ in labels.subject_rows():
+            counts[cam] = counts.get(cam, 0) + 1
         for cam in index.cameras:
-            n = sum(int(np.isfinite(v[cam.name][:, 0]).sum()) for v in labels.frames.values()
-                    if cam.name in v)
-            print(f'  {cam.name}: {n} labelled keypoints', file=out)
+            print(f'  {cam.name}: {counts.get(cam.name, 0)} labelled keypoints', file=out)
     report = index.reader.report
     if report is not None and not report.ok:
         print(f'monet info: reading {args.rec}: {report.summary()}', file=sys.stderr)

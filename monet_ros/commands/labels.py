@@ -3,7 +3,7 @@ the canonical stamp-keyed labels CSV of a recording (monet_ros.labels), checked 
 label validator. Also the label options shared by train, eval and info.
 
 Formats (monet_ros.labels_import): dlc (DeepLabCut / Lightning Pose CollectedData CSV or
-H5), sleap (SLEAP analysis HDF5), anipose (pose-2d H5 per camera), dannce (Label3D .mat),
+H5), sleap (SLEAP analysis HDF5 or .slp), anipose (pose-2d H5 per camera), dannce (Label3D .mat),
 frames (frame-indexed CSV frame,camera,keypoint,u,v), stamps (stamp-keyed CSV).
 """
 import sys

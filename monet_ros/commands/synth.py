@@ -69,6 +69,10 @@ def add_arguments(parser):
                         help='subjects (1-3) walking rings that pass and hide each other; '
                         'with 2 or more, ground_truth.npz holds them all and points2d.csv '
                         'their per-camera instances, shuffled (default %(default)s)')
+    parser.add_argument('--label-subjects', action='store_true',
+                        help='with --subjects 2 or more: labels.csv labels every subject '
+                        '(a subject column: slot s of ground_truth.npz is subject s; default: '
+                        'subject 0 only)')
     parser.add_argument('--quiet', action='store_true', help='no progress bar')
 
 
@@ -87,7 +91,8 @@ def config_from_args(args):
         radius=args.radius, hfov_deg=args.hfov, noise=args.noise,
         label_occluded=not args.visible_labels_only, height_spread=args.height_spread,
         occluders=args.occluders, distinct_sides=args.distinct_sides,
-        subjects=args.subjects, motion_seed=args.motion_seed)
+        subjects=args.subjects, motion_seed=args.motion_seed,
+        label_subjects=args.label_subjects)
 
 
 def run(args):

@@ -168,7 +168,11 @@ def run(args):
     trainer.skeleton_name = skeleton.name
     if world.writer:
         print(f'{recording.name}: {recording.num_instants} instants x {recording.num_views} '
-              f'views, {len(data.labelled_instants)} labelled, {len(data.unlabeled_instants)} '
+              f'views, {len(data.labelled_instants)} labelled'
+              + (f' ({data.num_other_labelled} more labelled subject-instants: crops '
+                 f'around subjects other than 0, up to {recording.num_subjects} per '
+                 'instant)' if data.num_other_labelled else '')
+              + f', {len(data.unlabeled_instants)} '
               f'unlabeled, {len(data.held_out)} held out; mode {config.mode} '
               f'({trainer.objective_text()}), '
               f'{trainer.pseudo_label_count} pseudo-labels{_gate_text(data.pseudo_gate)}, '

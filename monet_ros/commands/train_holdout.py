@@ -36,6 +36,9 @@ def hold_out(recording, n, out):
     write_labels(path, label_rows(recording.stamps[held], [c.name for c in recording.cameras],
                                   recording.keypoints, recording.labels[held]))
     recording.labels[held] = np.nan
+    # the other subjects' labels of those instants are held out too (not written: the
+    # held-out figures are subject 0's, as the reference labels are)
+    recording.other_labels[np.isin(recording.other_instants, held)] = np.nan
     return held, path
 
 

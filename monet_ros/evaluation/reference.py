@@ -311,6 +311,11 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
         raise LabelError(f'{path}: no reference keypoint ({", ".join(names)}) is a model '
                          f'keypoint ({", ".join(keypoints)}); map names with --keypoint-map')
     labels, _ = resolve_labels(rows, stamps, index.cameras, keypoints, options)
+    if labels.subjects not in ([], [0]):
+        raise LabelError(f'{path}: field subject: the reference labels hold subjects '
+                         f'{", ".join(map(str, labels.subjects))}; monet eval scores one '
+                         'subject against them: keep the rows of one subject (subject 0, no '
+                         'subject column)')
     cam_names = [c.name for c in index.cameras]
     points2d = np.full((T, V, C, 2), np.nan)
     where = {int(s): i for i, s in enumerate(stamps)}

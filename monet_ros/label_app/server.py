@@ -4,13 +4,17 @@
                                    <meta name="monet-token">; every asset ships here)
     GET  /api/summary              cameras (name, width, height, K, dist, R, t), instants
                                    (index, stamp_ns as a string, complete, views),
-                                   keypoints, bones, labels path, flag_px
+                                   keypoints, bones, labels path, flag_px, subjects
+                                   [{id, name}] (name: an import's track / individual, '')
     GET  /api/image/<t>/<camera>   the view's image (JPEG / PNG)
-    GET  /api/labels/<t>           {labels: {camera: {keypoint: [u, v]}}, prefill: bool,
-                                   version: the instant's version (opaque string)}
-    PUT  /api/labels/<t>           body {labels: ..., version}: replaces the instant's labels
-                                   and saves the table (atomic) when `version` is still the
-                                   instant's -> {rows, labelled, version}; else 409
+    GET  /api/labels/<t>?subject=s {labels: {camera: {keypoint: [u, v]}} of subject s
+                                   (default 0), prefill: bool (subject 0 only), version: the
+                                   (instant, subject)'s version (opaque string), subject,
+                                   others: {subject: labels} of the instant's other subjects}
+    PUT  /api/labels/<t>           body {labels: ..., version, subject (default 0)}: replaces
+                                   that subject's labels of the instant and saves the table
+                                   (atomic; every subject's rows) when `version` is still
+                                   theirs -> {rows, labelled, version}; else 409
                                    {error, version, labels: the saved labels}, nothing
                                    changed (a stale tab never overwrites another's save)
     POST /api/triangulate          body {labels: ...}: -> {keypoint: {X, robust, views:
@@ -40,7 +44,7 @@ from werkzeug.exceptions import HTTPException, RequestEntityTooLarge
 
 from monet_ros.label_app import guard
 from monet_ros.label_app.assist import assist_instant, assist_to_json, epipolar_polyline
-from monet_ros.label_app.session import NAME_CHARS, VersionConflict, short
+from monet_ros.label_app.session import NAME_CHARS, VersionConflict, check_subject, short
 
 # The page's placeholder for the run's token (static/index.html).
 TOKEN_MARK = '__MONET_TOKEN__'
@@ -200,6 +204,7 @@ def create_app(session, hosts, predictor=None, token=None):
         out = session.summary()
         out['labelled'] = session.labelled_instants()
         out['model'] = predictor is not None
+        out['subjects'] = [{'id': s, 'name': name} for s, name in session.subjects().items()]
         return jsonify(out)
 
     @app.get('/api/image/<int:t>/<camera>')
@@ -207,22 +212,32 @@ def create_app(session, hosts, predictor=None, token=None):
         data, mimetype = session.image_bytes(t, camera)
         return Response(data, mimetype=mimetype, headers={'Cache-Control': 'max-age=3600'})
 
+    def query_subject():
+        text = request.args.get('subject', '0')
+        if not (text.isascii() and text.isdigit() and len(text) <= 3):
+            raise ValueError(f'subject: expected an integer, got {short(text)}')
+        return check_subject(int(text))
+
     @app.get('/api/labels/<int:t>')
     def get_labels(t):
-        points, version = session.instant_state(t)          # IndexError: 404
+        subject = query_subject()
+        points, version = session.instant_state(t, subject)        # IndexError: 404
         prefill = False
-        if not np.isfinite(points).any():
+        if subject == 0 and not np.isfinite(points).any():   # the detector: one subject
             pred = {} if predictor is None else predictor.instants([t])
             if t in pred:
                 points, prefill = pred[t]['points2d'], True
+        others = {str(s): session.points_to_json(session.instant_labels(t, s))
+                  for s in session.instant_subjects(t) if s != subject}
         return jsonify(labels=session.points_to_json(points), prefill=prefill,
-                       version=version)
+                       version=version, subject=subject, others=others)
 
     @app.put('/api/labels/<int:t>')
     def put_labels(t):
         body, points = body_points()
         version = name_field(body, 'version', 'the version of GET /api/labels/<t>')
-        rows, version = session.set_instant(t, points, version)
+        subject = check_subject(body.get('subject', 0))
+        rows, version = session.set_instant(t, points, version, subject)
         return jsonify(rows=rows, labelled=session.labelled_instants(), version=version)
 
     @app.post('/api/triangulate')

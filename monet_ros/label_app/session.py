@@ -70,6 +70,20 @@ class LabelConfig:
         validate_config(self)
 
 
+# Most subjects a page may address (ids 0 .. MAX_SUBJECT): a bound on what a request makes
+# the session keep, far above any scene labelled by hand.
+MAX_SUBJECT = 99
+
+
+def check_subject(value):
+    """A request's subject id: an integer 0..MAX_SUBJECT (not a bool or a string), else
+    ValueError naming the field."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or \
+            not 0 <= int(value) <= MAX_SUBJECT:
+        raise ValueError(f'subject: expected an integer 0..{MAX_SUBJECT}, got {short(value)}')
+    return int(value)
+
+
 class LabelSession:
     """A recording opened for labelling.
 
@@ -82,10 +96,13 @@ class LabelSession:
     rig file that states none (geometry.read_rig).
 
     Attributes: cameras (V Camera), stamps (T,) int64 ns, skeleton, keypoints (C names),
-    labels {stamp_ns: (V, C, 2) float64 px, NaN = unlabelled}, report (one line: rows used /
-    skipped per source), notes (what was adapted). Images are kept in memory as the
-    recording's messages (JPEG / PNG bytes of compressed views are served as they are).
-    Raises LabelError / RecordingError / ValueError naming the file or field.
+    labels {stamp_ns: (V, C, 2) float64 px, NaN = unlabelled} of subject 0, others
+    {subject >= 1: {stamp_ns: (V, C, 2)}} of the other subjects (the labels table's subject
+    column: an animal within one instant, the same id in every view), subject_names
+    {subject: name} from the imports (SLEAP tracks, DeepLabCut individuals), report (one
+    line: rows used / skipped per source), notes (what was adapted). Images are kept in
+    memory as the recording's messages (JPEG / PNG bytes of compressed views are served
+    as they are). Raises LabelError / RecordingError / ValueError naming the file or field.
     """
 
     def __init__(self, rec, labels_path, rig=None, skeleton='human14', imports=(),
@@ -115,7 +132,9 @@ class LabelSession:
                                   for s in self.stamps], bool)
         self._lock = threading.Lock()
         self.labels = {}
-        # per instant: saves since start; a version is '<run>.<saves>' so that a page
+        self.others = {}
+        self.subject_names = {}
+        # per (instant, subject): saves since start; a version is '<run>.<saves>' so that a page
         # loaded before a restart never matches (the run part is new at each start)
         self._saves = {}
         self._run = secrets.token_hex(4)
@@ -228,6 +247,10 @@ class LabelSession:
                                              camera_map=dict(self.options.camera_map))
             if note:
                 self.notes.append(f'{fmt}={path}: {note}')
+            if result.note:
+                self.notes.append(f'{fmt}={path}: {result.note}')
+            for name, subject in result.subjects.items():
+                self.subject_names.setdefault(int(subject), str(name))
             sources.append((f'{fmt}={path}', rows))
         if self.labels_path.is_file():
             sources.append((str(self.labels_path), read_label_rows(self.labels_path)))
@@ -236,36 +259,60 @@ class LabelSession:
             labels, report = self._resolve(rows)
             notes.append(f'{name}: {report.summary()}')
             for stamp in labels.stamps:
-                points = labels.points(stamp, self.names)
-                old = self.labels.get(int(stamp))
-                if old is not None:
-                    points = np.where(np.isfinite(points), points, old)
-                self.labels[int(stamp)] = points
+                for subject in labels.instant_subjects(stamp):
+                    points = labels.points(stamp, self.names, subject)
+                    table = self._table(subject)
+                    old = table.get(int(stamp))
+                    if old is not None:
+                        points = np.where(np.isfinite(points), points, old)
+                    table[int(stamp)] = points
         self.report = '; '.join(notes) or 'no labels yet'
 
     def _resolve(self, rows):
         from monet_ros.labels import resolve_labels
         return resolve_labels(rows, self.stamps, self.cameras, self.keypoints, self.options)
 
-    def instant_labels(self, t):
-        """(V, C, 2) labels of instant t (a copy; NaN = unlabelled)."""
-        return self.instant_state(t)[0]
+    def _table(self, subject):
+        """{stamp: (V, C, 2)} of one subject (created when new)."""
+        return self.labels if subject == 0 else self.others.setdefault(int(subject), {})
 
-    def instant_state(self, t):
-        """((V, C, 2) labels, version) of instant t, read together. The version (an
-        opaque string) changes at every save of the instant; set_instant needs it."""
+    def instant_labels(self, t, subject=0):
+        """(V, C, 2) labels of one subject (default 0) at instant t (a copy; NaN =
+        unlabelled)."""
+        return self.instant_state(t, subject)[0]
+
+    def instant_state(self, t, subject=0):
+        """((V, C, 2) labels, version) of one subject (default 0) at instant t, read
+        together. The version (an opaque string) changes at every save of the subject at
+        that instant; set_instant needs it."""
+        stamp = self.instant(t)
+        subject = check_subject(subject)
+        with self._lock:
+            return self._points(stamp, subject), self._version(stamp, subject)
+
+    def instant_subjects(self, t):
+        """Subjects labelled at instant t, sorted (list of int)."""
         stamp = self.instant(t)
         with self._lock:
-            return self._points(stamp), self._version(stamp)
+            return sorted(s for s, table in [(0, self.labels), *self.others.items()]
+                          if stamp in table and np.isfinite(table[stamp]).any())
 
-    def _points(self, stamp):
-        points = self.labels.get(stamp)
+    def subjects(self):
+        """{subject: name or ''} of every subject labelled anywhere or named by an import,
+        sorted; subject 0 always."""
+        with self._lock:
+            ids = {0, *self.subject_names, *(s for s, table in self.others.items() if table)}
+        return {s: self.subject_names.get(s, '') for s in sorted(ids)}
+
+    def _points(self, stamp, subject=0):
+        points = self._table(subject).get(stamp) if subject == 0 or subject in self.others \
+            else None
         if points is None:
             return np.full((len(self.cameras), len(self.keypoints), 2), np.nan)
         return points.copy()
 
-    def _version(self, stamp):
-        return f'{self._run}.{self._saves.get(stamp, 0)}'
+    def _version(self, stamp, subject=0):
+        return f'{self._run}.{self._saves.get((stamp, subject), 0)}'
 
     def points_from_json(self, views):
         """{camera: {keypoint: [u, v] | null}} -> (V, C, 2) float64 (NaN = none).
@@ -311,38 +358,46 @@ class LabelSession:
                 out[cam] = got
         return out
 
-    def set_instant(self, t, points, version):
-        """Replace the labels of instant t by (V, C, 2) `points` and save the table at once
-        (atomically), if `version` is the instant's version (instant_state): a save built
-        on an older reading raises VersionConflict and changes nothing (compare and set
-        under one lock). Returns (rows written, the instant's new version)."""
+    def set_instant(self, t, points, version, subject=0):
+        """Replace the labels of one subject (default 0) at instant t by (V, C, 2) `points`
+        and save the table at once (atomically; every subject's labels), if `version` is
+        that subject's version at the instant (instant_state): a save built on an older
+        reading raises VersionConflict and changes nothing (compare and set under one
+        lock). Returns (rows written, the new version)."""
         stamp = self.instant(t)
+        subject = check_subject(subject)
         with self._lock:
-            current = self._version(stamp)
+            current = self._version(stamp, subject)
             if version != current:
-                raise VersionConflict(t, version, current, self._points(stamp))
+                raise VersionConflict(t, version, current, self._points(stamp, subject))
+            table = self._table(subject)
             if np.isfinite(points).any():
-                self.labels[stamp] = np.array(points, np.float64)
+                table[stamp] = np.array(points, np.float64)
             else:
-                self.labels.pop(stamp, None)
-            self._saves[stamp] = self._saves.get(stamp, 0) + 1
-            return self._save(), self._version(stamp)
+                table.pop(stamp, None)
+            self._saves[(stamp, subject)] = self._saves.get((stamp, subject), 0) + 1
+            return self._save(), self._version(stamp, subject)
 
     def _save(self):
         from monet_ros.labels import write_labels
 
         rows = []
-        for stamp in sorted(self.labels):
-            points = self.labels[stamp]
+        stamps = sorted({s for table in [self.labels, *self.others.values()] for s in table})
+        for stamp in stamps:
             for j, cam in enumerate(self.names):
-                for c, (u, v) in enumerate(points[j]):
-                    if np.isfinite(u) and np.isfinite(v):
-                        rows.append((stamp, cam, self.keypoints[c], u, v))
+                for subject in [0, *sorted(self.others)]:
+                    points = self._table(subject).get(stamp)
+                    if points is None:
+                        continue
+                    for c, (u, v) in enumerate(points[j]):
+                        if np.isfinite(u) and np.isfinite(v):
+                            rows.append((stamp, cam, self.keypoints[c], u, v, subject))
         self.labels_path.parent.mkdir(parents=True, exist_ok=True)
         return write_labels(self.labels_path, rows)
 
     def labelled_instants(self):
-        """Indices of instants with at least one label."""
+        """Indices of instants with at least one label (of any subject)."""
         where = {int(s): i for i, s in enumerate(self.stamps)}
         with self._lock:
-            return sorted(where[s] for s, p in self.labels.items() if np.isfinite(p).any())
+            return sorted({where[s] for table in [self.labels, *self.others.values()]
+                           for s, p in table.items() if np.isfinite(p).any()})

@@ -3,8 +3,19 @@ format). The rows keep the source's camera / keypoint names and frame indices; t
 validator, monet_ros.labels.resolve_labels, checks them against a recording.
 
 import_labels(fmt, paths, cameras=..., camera=None, min_score=0.0, camera_map=None)
--> ImportResult(rows, keypoints, note). Errors are monet_ros.labels.LabelError naming the
-file and the row / field.
+-> ImportResult(rows, keypoints, note, frame_counts, subjects). Errors are
+monet_ros.labels.LabelError naming the file and the row / field.
+
+Several animals (SLEAP tracks, multi-animal DeepLabCut individuals) become subjects: each
+distinct track / individual name gets an id 0, 1, ... in order of first appearance (files
+in the order read, tracks / individuals in the file's order), the same id for the same
+name in every file; a row's `subject` is that id, its `instance` the name, its keypoint
+the plain node / bodypart. ImportResult.subjects is the mapping (and the note says it).
+Training takes a subject id as naming one animal in every view of an instant
+(monet_ros.labels), so the names must: a SLEAP project's tracks assigned across its
+camera files, a DeepLabCut project's individuals. `monet triangulate --subjects` assumes
+no such thing: its reader (points2d) names a detection '<instance>/<keypoint>' per camera
+as before.
 """
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,11 +28,28 @@ class ImportResult:
     """rows: LabelRow list; keypoints: names in the source's order; note: what was left
     out on purpose (e.g. points below --min-score), '' when nothing; frame_counts:
     {source: frames} for the files that declare their length (a SLEAP analysis file's
-    frame axis, a prediction table's rows), whatever their last detection."""
+    frame axis, a prediction table's rows), whatever their last detection; subjects:
+    {instance name: subject id} of a source with several animals ({} for one);
+    instance_keypoints: the sources' '<instance>/<keypoint>' names in their order (the
+    keypoints of `monet triangulate --subjects`), () for one animal."""
     rows: list
     keypoints: tuple
     note: str = ''
     frame_counts: dict = field(default_factory=dict)
+    subjects: dict = field(default_factory=dict)
+    instance_keypoints: tuple = ()
+
+
+def subject_note(subjects, what):
+    """'subjects: m1=0, m2=1 (DeepLabCut individuals)' or '' for none."""
+    if not subjects:
+        return ''
+    return ('subjects: ' + ', '.join(f'{name}={i}' for name, i in subjects.items())
+            + f' ({what})')
+
+
+def join_notes(*notes):
+    return '; '.join(n for n in notes if n)
 
 
 def camera_for(source_name, cameras=(), camera=None, camera_map=None):

@@ -17,8 +17,10 @@ labeled-data/<session>_<view>/...), else the one in the file name
 (CollectedData_<view>.csv). Empty / NaN x or y cells are unlabelled keypoints; an empty
 / NaN likelihood beside a point is no score (the point is kept, as from a table without
 likelihoods). A prediction table's length is its rows (last frame number + 1), whatever
-its last detection. With several individuals the keypoint is named
-'<individual>/<bodypart>'.
+its last detection. With several individuals each individual is a subject (labels_import:
+ids by name, in order of first appearance over the files) and the keypoint is the
+bodypart; `monet triangulate` names it '<individual>/<bodypart>'. The unique bodyparts
+(individual 'single') are no animal: plain names, subject 0.
 """
 import csv
 import math
@@ -28,9 +30,10 @@ import re
 import numpy as np
 
 from monet_ros.labels import LabelError, LabelRow
-from monet_ros.labels_import import ImportResult, camera_for
+from monet_ros.labels_import import ImportResult, camera_for, join_notes, subject_note
 
 LEVELS = ('scorer', 'individuals', 'bodyparts', 'coords')
+UNIQUE = 'single'      # multi-animal DeepLabCut's individual of the unique bodyparts
 _NUMBER = re.compile(r'(\d+)(?!.*\d)')
 
 
@@ -56,26 +59,39 @@ def _files(paths, suffixes):
 
 
 def table_rows(source, columns, index, values, cameras=(), camera=None, min_score=0.0,
-               camera_map=None, where_of=None, line_of=None):
+               camera_map=None, where_of=None, line_of=None, ids=None):
     """LabelRows of one DeepLabCut-layout table.
 
     columns: list of tuples whose last two levels are (bodypart, coord) and, with 3 levels
     after the scorer, the individual before them; index: per row an image path / parts
     tuple / frame number; values (N, K) float. Returns (rows, keypoints, dropped, frames)
-    where dropped counts points below min_score (a NaN likelihood is no score: kept) and
-    frames is the table's frame count (largest frame number + 1) when the index is frame
-    numbers (predictions), else None."""
+    where keypoints are '<individual>/<bodypart>' with several individuals, dropped counts
+    points below min_score (a NaN likelihood is no score: kept) and frames is the table's
+    frame count (largest frame number + 1) when the index is frame numbers (predictions),
+    else None. With several individuals a row's keypoint is the bodypart, its instance the
+    individual and its subject the individual's id in `ids` ({name: id}, filled in order of
+    first appearance). The unique bodyparts of a multi-animal project (individual 'single':
+    the arena's landmarks, no animal's) keep their plain name and subject 0."""
+    ids = {} if ids is None else ids
     levels = [tuple(c) for c in columns]
     groups = {}
     for k, col in enumerate(levels):
         if len(col) < 3:
             raise LabelError(f'{source}: column {col} has no (scorer, bodyparts, coords) '
                              'levels')
-        name = col[-2] if len(col) == 3 else f'{col[-3]}/{col[-2]}'
+        name = col[-2] if len(col) == 3 or col[-3] == UNIQUE else f'{col[-3]}/{col[-2]}'
         groups.setdefault(name, {})[str(col[-1])] = k
-    individuals = {c[-3] for c in levels if len(c) == 4}
+    individuals = {c[-3] for c in levels if len(c) == 4 and c[-3] != UNIQUE}
     if len(individuals) == 1:
         groups = {k.split('/', 1)[1]: v for k, v in groups.items()}
+    several = len(individuals) > 1
+    who = {}                        # group name -> (subject id, instance, bodypart)
+    for name in groups:
+        if several and '/' in name:
+            instance, part = name.split('/', 1)
+            who[name] = (ids.setdefault(instance, len(ids)), instance, part)
+        else:
+            who[name] = (0, '', name)
     for name, coords in groups.items():
         if 'x' not in coords or 'y' not in coords:
             raise LabelError(f'{source}: field coords: bodypart {name!r} lacks x or y '
@@ -110,8 +126,9 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
             if score is not None and not score >= min_score:
                 dropped += 1
                 continue
-            rows.append(LabelRow(str(source), line, None, frame, cam, name, float(u),
-                                 float(v), where, score))
+            subject, instance, part = who[name]
+            rows.append(LabelRow(str(source), line, None, frame, cam, part, float(u),
+                                 float(v), where, score, subject, instance))
     numbered = len(index) and all(isinstance(k, (int, np.integer)) for k in index)
     frames = int(max(index)) + 1 if numbered else None
     return rows, tuple(groups), dropped, frames
@@ -204,14 +221,17 @@ def import_dlc(paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
 def import_dlc_files(files, cameras=(), camera=None, min_score=0.0, camera_map=None):
     """ImportResult of DeepLabCut-layout tables (CSV or H5), one after the other; points
     below min_score are left out and counted in the note."""
-    rows, keypoints, dropped, counts = [], {}, 0, {}
+    rows, keypoints, dropped, counts, ids = [], {}, 0, {}, {}
     for f in files:
         r, k, d, n = read_dlc_file(f, cameras=cameras, camera=camera, min_score=min_score,
-                                   camera_map=camera_map)
+                                   camera_map=camera_map, ids=ids)
         rows += r
         keypoints.update(dict.fromkeys(k))
         dropped += d
         if n is not None:
             counts[str(f)] = n
-    note = f'{dropped} points below --min-score {min_score} left out' if dropped else ''
-    return ImportResult(rows, tuple(keypoints), note, counts)
+    note = join_notes(f'{dropped} points below --min-score {min_score} left out'
+                      if dropped else '', subject_note(ids, 'DeepLabCut individuals'))
+    plain = tuple(dict.fromkeys(k.split('/', 1)[-1] for k in keypoints)) if ids \
+        else tuple(keypoints)
+    return ImportResult(rows, plain, note, counts, ids, tuple(keypoints) if ids else ())

@@ -22,7 +22,7 @@ from monet_ros.labels_import import ImportResult, import_labels
 
 FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'openpose', 'frames')
 READ = ('DeepLabCut / Lightning Pose prediction .csv or .h5 per camera, SLEAP analysis .h5 '
-        'per camera, an anipose pose-2d folder, OpenPose / Pose2Sim JSON folders (one per '
+        'or .slp per camera, an anipose pose-2d folder, OpenPose / Pose2Sim JSON folders (one per '
         'camera), or a frame,camera,keypoint,u,v[,score] .csv')
 
 
@@ -74,6 +74,8 @@ def detect_format(paths):
         return 'openpose'
     if suffix in ('.h5', '.hdf5'):
         return 'sleap' if _h5_is_sleap(first) else 'dlc'
+    if suffix == '.slp':
+        return 'sleap'
     if suffix == '.csv':
         try:
             with open(first, encoding='utf-8-sig') as f:
@@ -124,6 +126,10 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
     rows = result.rows
     if not rows:
         raise LabelError(f'{", ".join(map(str, paths))}: no 2D detections found')
+    if result.instance_keypoints:    # several animals: '<instance>/<keypoint>' per camera
+        rows = [replace(r, keypoint=f'{r.instance}/{r.keypoint}') if r.instance else r
+                for r in rows]
+        result = replace(result, rows=rows, keypoints=result.instance_keypoints)
     for r in rows:
         if r.camera not in cameras:
             raise LabelError(f'{r.place}: field camera: {r.camera!r} is not a camera of the '

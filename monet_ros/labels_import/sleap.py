@@ -1,4 +1,5 @@
-"""SLEAP analysis HDF5 (File > Export Analysis HDF5, `sleap-convert --format analysis`).
+"""SLEAP analysis HDF5 (File > Export Analysis HDF5, `sleap-convert --format analysis`) and
+SLEAP project / prediction files (.slp; read_slp below).
 
 Published layout (datasets stored column-major for MATLAB, so h5py reads the transpose
 of the documented shapes):
@@ -12,16 +13,17 @@ of the documented shapes):
   score of a present point (e.g. a user-placed point) is no score: the point is kept;
 - video_path: the video the file belongs to (its name gives the camera).
 The frame axis is the video's frame index; its length is the file's frame count (the
-video's), even when the animal is missing from the last frames. With several tracks the
-keypoint is named
-'<track>/<node>'.
+video's), even when the animal is missing from the last frames. With several tracks each
+track is a subject (labels_import: ids by track name, in order of first appearance over
+the files) and the keypoint is the node; `monet triangulate` names it '<track>/<node>'.
 """
+import json
 from pathlib import Path
 
 import numpy as np
 
 from monet_ros.labels import LabelError, LabelRow
-from monet_ros.labels_import import ImportResult, camera_for
+from monet_ros.labels_import import ImportResult, camera_for, join_notes, subject_note
 
 
 def _text(value):
@@ -30,10 +32,13 @@ def _text(value):
     return value.decode('utf-8', 'replace') if isinstance(value, bytes) else str(value)
 
 
-def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
+def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None, ids=None):
     """(rows, keypoints, dropped, frames) of one SLEAP analysis HDF5 file: LabelRow list,
-    keypoint names, points below min_score left out, the file's frame count. Raises
-    LabelError naming the file and field."""
+    keypoint names ('<track>/<node>' with several tracks), points below min_score left out,
+    the file's frame count. With several tracks a row's keypoint is the node, its instance
+    the track name and its subject the name's id in `ids` ({name: id}, filled in order of
+    first appearance). Raises LabelError naming the file and field."""
+    ids = {} if ids is None else ids
     import h5py
     try:
         handle = h5py.File(path, 'r')
@@ -80,29 +85,146 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None):
         low = ok & ~(score >= min_score) & ~np.isnan(score)     # NaN: no score, kept
         dropped = int(low.sum())
         ok &= ~low
+    several = n_tracks > 1
+    subject = [ids.setdefault(n, len(ids)) if several else 0 for n in names]
     rows = []
     for frame, track, node in zip(*np.nonzero(ok)):
         u, v = points[frame, track, node]
         s = None if score is None else float(score[frame, track, node])
         rows.append(LabelRow(str(path), int(frame) + 1, None, int(frame), cam,
-                             keypoints[track * len(nodes) + node], float(u), float(v),
+                             nodes[node], float(u), float(v),
                              f'frame {frame} track {names[track]} node {nodes[node]}',
-                             None if s is None or np.isnan(s) else s))
+                             None if s is None or np.isnan(s) else s,
+                             subject=subject[track], instance=names[track] if several else ''))
     return rows, tuple(keypoints), dropped, n_frames
 
 
+SLP_INSTANCE_USER = 0          # instances.instance_type: 0 user-labelled, 1 predicted
+
+
+def _slp_json(value):
+    return json.loads(value.decode('utf-8') if isinstance(value, bytes) else str(value))
+
+
+def read_slp(path, cameras=(), camera=None, min_score=0.0, camera_map=None, ids=None):
+    """(rows, keypoints, dropped, None) of one SLEAP .slp file (HDF5; SLEAP's layout, format
+    1.x):
+    - metadata attribute json: nodes [{name}], skeletons [{nodes: [{id: index into
+      nodes}]}]: an instance's points are in its skeleton's node order;
+    - videos_json: one JSON per video, backend.filename (its name gives the camera);
+      tracks_json: one JSON [spawned_on, name] per track;
+    - frames (frame_id, video, frame_idx, instance_id_start, instance_id_end);
+    - instances (instance_id, instance_type 0 user / 1 predicted, frame_id, skeleton, track
+      (-1: none), from_predicted, score, point_id_start, point_id_end);
+    - points (user: x, y, visible, complete) and pred_points (+ score): pixels, NaN or
+      visible False where a node is not placed.
+    A predicted instance that a user instance of the frame was made from (from_predicted) is
+    left out: the user's correction wins. Tracks are subjects as in the analysis file (ids by
+    track name); two instances without a track in one frame of a camera are an error (their
+    identity across cameras is unknown: assign tracks in SLEAP). The frame count is not in
+    the file (None). Raises LabelError naming the file and field."""
+    import h5py
+    ids = {} if ids is None else ids
+    try:
+        handle = h5py.File(path, 'r')
+    except (OSError, ValueError) as error:
+        raise LabelError(f'{path}: cannot open as HDF5 ({error})') from None
+    with handle as f:
+        for key in ('frames', 'instances', 'metadata'):
+            if key not in f:
+                raise LabelError(f'{path}: field {key}: missing; not a SLEAP .slp file (has '
+                                 f'{", ".join(sorted(f.keys()))})')
+        try:
+            meta = _slp_json(f['metadata'].attrs['json'])
+            names = [str(n['name']) for n in meta['nodes']]
+            skeletons = [[names[int(n['id'])] for n in sk['nodes']] for sk in meta['skeletons']]
+            videos = [_slp_json(v).get('backend', {}).get('filename', '')
+                      for v in f['videos_json'][()]] if 'videos_json' in f else []
+            tracks = [str(_slp_json(t)[1]) for t in f['tracks_json'][()]] \
+                if 'tracks_json' in f else []
+        except (KeyError, IndexError, TypeError, ValueError) as error:
+            raise LabelError(f"{path}: field metadata: not SLEAP's skeleton / video / track "
+                             f'JSON ({type(error).__name__}: {error})') from None
+        frames = f['frames'][()]
+        instances = f['instances'][()]
+        user = f['points'][()] if 'points' in f else None
+        pred = f['pred_points'][()] if 'pred_points' in f else None
+    several = len(tracks) > 1
+    subject = [ids.setdefault(t, len(ids)) if several else 0 for t in tracks]
+    cams = [camera_for(Path(str(v).replace('\\', '/')).stem if v else Path(path).stem,
+                       cameras, camera, camera_map) for v in videos]
+    replaced = {int(i['from_predicted']) for i in instances
+                if i['instance_type'] == SLP_INSTANCE_USER and i['from_predicted'] >= 0}
+    rows, dropped, seen = [], 0, {}
+    for i in instances:
+        if int(i['instance_id']) in replaced:
+            continue
+        frame = frames[int(i['frame_id'])]
+        t, video, track = int(frame['frame_idx']), int(frame['video']), int(i['track'])
+        cam = cams[video] if video < len(cams) else camera_for(Path(path).stem, cameras,
+                                                                camera, camera_map)
+        is_user = i['instance_type'] == SLP_INSTANCE_USER
+        table = user if is_user else pred
+        where = f'frame {t} video {video} instance {int(i["instance_id"])}'
+        if table is None or not 0 <= int(i['skeleton']) < len(skeletons) or \
+                track >= len(tracks):
+            raise LabelError(f'{path}: {where}: field instances: refers to a missing '
+                             'points table, skeleton or track')
+        if track < 0:
+            key = (cam, t)
+            if key in seen:
+                raise LabelError(f'{path}: {where}: field track: two instances without a '
+                                 f'track in frame {t} of camera {cam} (also instance '
+                                 f'{seen[key]}): assign tracks in SLEAP so that each animal '
+                                 'is one subject')
+            seen[key] = int(i['instance_id'])
+        nodes = skeletons[int(i['skeleton'])]
+        pts = table[int(i['point_id_start']):int(i['point_id_end'])]
+        track_name = tracks[track] if track >= 0 and several else ''
+        for node, point in zip(nodes, pts):
+            u, v = float(point['x']), float(point['y'])
+            if not (point['visible'] and np.isfinite(u) and np.isfinite(v)):
+                continue
+            score = None if is_user or 'score' not in pts.dtype.names \
+                else float(point['score'])
+            if score is not None and np.isnan(score):
+                score = None
+            if score is not None and min_score > 0 and not score >= min_score:
+                dropped += 1
+                continue
+            rows.append(LabelRow(str(path), t + 1, None, t, cam, node, u, v,
+                                 f'{where} node {node}', score,
+                                 subject=subject[track] if track_name else 0,
+                                 instance=track_name))
+    nodes = list(dict.fromkeys(n for sk in skeletons for n in sk))
+    keypoints = [f'{t}/{n}' for t in tracks for n in nodes] if several else nodes
+    return rows, tuple(keypoints), dropped, None
+
+
 def import_sleap(paths, cameras=(), camera=None, min_score=0.0, camera_map=None):
+    """ImportResult of SLEAP analysis .h5 and .slp files or folders (a folder: its .h5 /
+    .hdf5 files, or its .slp files when it has none)."""
     files = []
     for p in paths:
-        files += sorted(p.rglob('*.h5')) + sorted(p.rglob('*.hdf5')) if p.is_dir() else [p]
+        if p.is_dir():
+            found = sorted(p.rglob('*.h5')) + sorted(p.rglob('*.hdf5'))
+            files += found or sorted(p.rglob('*.slp'))
+        else:
+            files.append(p)
     if not files:
-        raise LabelError(f'{", ".join(map(str, paths))}: no SLEAP analysis .h5 file found')
-    rows, keypoints, dropped, counts = [], {}, 0, {}
+        raise LabelError(f'{", ".join(map(str, paths))}: no SLEAP analysis .h5 or .slp file '
+                         'found')
+    rows, keypoints, dropped, counts, ids = [], {}, 0, {}, {}
     for f in files:
-        r, k, d, n = read_sleap(f, cameras, camera, min_score, camera_map)
+        read = read_slp if f.suffix.lower() == '.slp' else read_sleap
+        r, k, d, n = read(f, cameras, camera, min_score, camera_map, ids)
         rows += r
         keypoints.update(dict.fromkeys(k))
         dropped += d
-        counts[str(f)] = n
-    note = f'{dropped} points below --min-score {min_score} left out' if dropped else ''
-    return ImportResult(rows, tuple(keypoints), note, counts)
+        if n is not None:
+            counts[str(f)] = n
+    note = join_notes(f'{dropped} points below --min-score {min_score} left out'
+                      if dropped else '', subject_note(ids, 'SLEAP tracks'))
+    plain = tuple(dict.fromkeys(k.split('/', 1)[-1] for k in keypoints)) if ids \
+        else tuple(keypoints)
+    return ImportResult(rows, plain, note, counts, ids, tuple(keypoints) if ids else ())

@@ -152,20 +152,30 @@ class ViewBatch:
 class CropCache:
     """Cached square-ish crops of every (instant, view) around the subject.
 
-    recording: a learning.recording.Recording; boxes (T, V, 4) edge-coordinate boxes of the
-    nominal crop (aspect of the network input); input_size (H, W); heatmap_size (h, w).
+    recording: a learning.recording.Recording; boxes (R, V, 4) edge-coordinate boxes of the
+    nominal crop (aspect of the network input); input_size (H, W); heatmap_size (h, w);
+    instants (R,): the recording instant of each row of crops, default the T instants in
+    order (R = T). More rows than instants crop one instant around several subjects: row
+    T + j is instant instants[T + j] cropped around another subject (TrainingData). The
+    `instants` of views() and of a ViewBatch are these rows.
     """
 
-    def __init__(self, recording, boxes, input_size, heatmap_size, cache_scale=1.3):
+    def __init__(self, recording, boxes, input_size, heatmap_size, cache_scale=1.3,
+                 instants=None):
         self.recording = recording
         self.input_size = tuple(int(x) for x in input_size)
         self.heatmap_size = tuple(int(x) for x in heatmap_size)
         if cache_scale < 1:
             raise ValueError(f'cache_scale must be >= 1, got {cache_scale}')
         T, V = recording.num_instants, recording.num_views
+        rows = np.arange(T) if instants is None else np.asarray(instants, np.int64).ravel()
+        if rows.size and not (rows.min() >= 0 and rows.max() < T):
+            raise ValueError(f'instants must index the {T} instants of the recording')
+        self.row_instants = rows
+        T = len(rows)
         boxes = np.asarray(boxes, dtype=np.float64)
         if boxes.shape != (T, V, 4) or not np.all(np.isfinite(boxes)):
-            raise ValueError(f'boxes must be finite (T={T}, V={V}, 4), got {boxes.shape}')
+            raise ValueError(f'boxes must be finite (R={T}, V={V}, 4), got {boxes.shape}')
         H, W = self.input_size
         self.cache_size = (int(round(W * cache_scale)), int(round(H * cache_scale)))  # (W, H)
         self.cache_scale = float(cache_scale)
@@ -179,7 +189,7 @@ class CropCache:
                 S = crop_transform(self.cache_boxes[t, v], self.cache_size)
                 self.S_cache[t, v] = S
                 self.crops[t, v] = cv2.warpAffine(
-                    recording.frames[v][t], S[:2], self.cache_size, flags=cv2.INTER_AREA
+                    recording.frames[v][rows[t]], S[:2], self.cache_size, flags=cv2.INTER_AREA
                     if S[0, 0] < 1 else cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT)
         Ks = np.stack([c.K for c in recording.cameras])
         self.K_cache = self.S_cache @ Ks[None]

@@ -211,7 +211,8 @@ def _write_json_atomic(path, payload):
 
 
 def concatenate_recordings(recordings):
-    """One Recording of several with the same cameras (by name) and keypoints."""
+    """One Recording of several with the same cameras (by name) and keypoints (the other
+    subjects' labels kept, their instants renumbered)."""
     from monet_ros.learning.recording import Recording, RecordingError
     first = recordings[0]
     if len(recordings) == 1:
@@ -228,7 +229,11 @@ def concatenate_recordings(recordings):
                      np.concatenate([r.stamps for r in recordings]),
                      [np.concatenate([r.frames[v] for r in recordings])
                       for v in range(len(names))],
-                     first.keypoints, np.concatenate([r.labels for r in recordings]), gt)
+                     first.keypoints, np.concatenate([r.labels for r in recordings]), gt,
+                     np.concatenate([r.other_labels for r in recordings]),
+                     np.concatenate([r.other_instants + start for r, start in zip(
+                         recordings, np.cumsum([0] + [len(r.stamps) for r in recordings]))]),
+                     np.concatenate([r.other_subjects for r in recordings]))
 
 
 def load_bags(config, keypoints):

@@ -2,7 +2,10 @@
 
 Frames are decoded once and kept in memory (fine for the small recordings used for
 training on one machine). Points are in original image pixels; labels are (T, V, C, 2)
-with NaN for "not labelled".
+with NaN for "not labelled": subject 0's. A labels table with several subjects per instant
+(monet_ros.labels, the `subject` column) adds the other subjects' labels as a list of
+(instant, subject) entries: other_labels (J, V, C, 2), other_instants (J,), other_subjects
+(J,), empty for a single-subject table.
 """
 from dataclasses import dataclass
 from pathlib import Path
@@ -17,7 +20,9 @@ class RecordingError(ValueError):
 @dataclass
 class Recording:
     """name; cameras (V Camera); stamps (T,) int64 ns; frames: V arrays (T, H_v, W_v, 3) uint8
-    rgb; keypoints (C names); labels (T, V, C, 2) px NaN = none; gt3d (T, C, 3) or None."""
+    rgb; keypoints (C names); labels (T, V, C, 2) px NaN = none, subject 0's; gt3d (T, C, 3)
+    or None; other_labels (J, V, C, 2) px: the labels of every other labelled subject
+    (subject id other_subjects[j] >= 1 at instant other_instants[j]), None = none (J = 0)."""
     name: str
     cameras: list
     stamps: np.ndarray
@@ -25,8 +30,26 @@ class Recording:
     keypoints: tuple
     labels: np.ndarray
     gt3d: np.ndarray = None
+    other_labels: np.ndarray = None
+    other_instants: np.ndarray = None
+    other_subjects: np.ndarray = None
 
     def __post_init__(self):
+        V, C = len(self.cameras), len(self.keypoints)
+        if self.other_labels is None:
+            self.other_labels = np.full((0, V, C, 2), np.nan)
+            self.other_instants = np.zeros(0, np.int64)
+            self.other_subjects = np.zeros(0, np.int64)
+        self.other_instants = np.asarray(self.other_instants, np.int64)
+        self.other_subjects = np.asarray(self.other_subjects, np.int64)
+        J = len(self.other_instants)
+        if self.other_labels.shape != (J, V, C, 2) or self.other_subjects.shape != (J,):
+            raise RecordingError(f"{self.name}: other subjects' labels "
+                                 f'{self.other_labels.shape} / {self.other_subjects.shape}, '
+                                 f'expected {(J, V, C, 2)} / {(J,)}')
+        if J and not (0 <= self.other_instants.min() and
+                      self.other_instants.max() < len(self.stamps)):
+            raise RecordingError(f"{self.name}: other subjects' instants out of range")
         T, V, C = len(self.stamps), len(self.cameras), len(self.keypoints)
         if len(self.frames) != V:
             raise RecordingError(f'{self.name}: {len(self.frames)} frame arrays for {V} cameras')
@@ -58,15 +81,31 @@ class Recording:
 
     @property
     def labelled_instants(self):
-        """(L,) indices of instants with at least one label."""
-        return np.flatnonzero(np.isfinite(self.labels[..., 0]).any(axis=(1, 2)))
+        """(L,) indices of instants with at least one label (of any subject)."""
+        mask = np.isfinite(self.labels[..., 0]).any(axis=(1, 2))
+        mask[self.other_instants[np.isfinite(self.other_labels[..., 0]).any(axis=(1, 2))]] = True
+        return np.flatnonzero(mask)
+
+    @property
+    def num_subjects(self):
+        """Most subjects labelled at one instant (1 for a single-subject table)."""
+        if not len(self.other_instants):
+            return 1
+        return 1 + int(np.bincount(self.other_instants).max())
 
     def subset(self, instants, name=None):
-        """A recording of some instants (views and frames shared as array slices)."""
-        idx = np.asarray(instants)
+        """A recording of some instants (views and frames shared as array slices; the other
+        subjects' labels of those instants kept, their instants renumbered)."""
+        idx = np.arange(len(self.stamps))[np.asarray(instants)]
+        where = {int(t): i for i, t in enumerate(idx)}
+        keep = np.array([int(t) in where for t in self.other_instants], bool)
         return Recording(name or self.name, self.cameras, self.stamps[idx],
                          [f[idx] for f in self.frames], self.keypoints, self.labels[idx],
-                         None if self.gt3d is None else self.gt3d[idx])
+                         None if self.gt3d is None else self.gt3d[idx],
+                         self.other_labels[keep],
+                         np.array([where[int(t)] for t in self.other_instants[keep]],
+                                  np.int64),
+                         self.other_subjects[keep])
 
 
 def load_ground_truth(path, stamps, num_keypoints):
@@ -175,6 +214,7 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
     stamps = np.array(stamps, dtype=np.int64)
     label_array = np.full((len(stamps), len(names), len(keypoints), 2), np.nan)
     label_report = None
+    other_labels, other_instants, other_subjects = [], [], []
     if labels is not None:
         rows = read_label_rows(labels) if isinstance(labels, (str, Path)) else list(labels)
         truncated = bool(max_instants) and len(stamps) >= max_instants
@@ -208,9 +248,17 @@ def load_recording(path, rig=None, labels=None, ground_truth=None, skeleton='hum
         index = {int(s): i for i, s in enumerate(stamps)}
         for stamp in table.stamps:
             label_array[index[int(stamp)]] = table.points(stamp, names)
+            for subject in table.instant_subjects(stamp):
+                if subject:
+                    other_labels.append(table.points(stamp, names, subject))
+                    other_instants.append(index[int(stamp)])
+                    other_subjects.append(subject)
     gt = load_ground_truth(ground_truth, stamps, len(keypoints)) if ground_truth else None
-    recording = Recording(name or Path(path).name, cameras, stamps,
-                          [np.stack(frames[n]) for n in names], keypoints, label_array, gt)
+    recording = Recording(
+        name or Path(path).name, cameras, stamps, [np.stack(frames[n]) for n in names],
+        keypoints, label_array, gt,
+        np.array(other_labels).reshape(-1, len(names), len(keypoints), 2),
+        np.array(other_instants, np.int64), np.array(other_subjects, np.int64))
     recording.skipped = skipped
     recording.read_report = reader.report      # what the bag read skipped (ok False: print)
     recording.label_report = label_report

@@ -53,7 +53,7 @@ from tqdm import tqdm
 
 from monet_ros.atomic import atomic_write, write_error
 from monet_ros.config import ConfigError
-from monet_ros.crop_rule import recording_boxes
+from monet_ros.crop_rule import recording_boxes, subject_label_boxes
 from monet_ros.evaluation.reprojection import multiview_reprojection
 from monet_ros.learning.config import LOSS_TERMS, TrainConfig
 from monet_ros.learning.dataset import CropCache
@@ -171,20 +171,38 @@ class TrainingData:
     config.validation_labels) and validation_labels (K, V, C, 2) px: held-out labelled views,
     in no training pool (no L_L, no pseudo-label, not an unlabeled instant of L_E), and their
     crop boxes do not come from their own labels. Every index is an instant of the full
-    recording."""
+    recording.
+
+    Several subjects (Recording.other_labels, a labels table with a subject column): each
+    other labelled (instant, subject) j is one more row T + j of the crop cache, the
+    instant's images cropped around THAT subject's labels by the same crop rule
+    (crop_rule.subject_label_boxes), supervised by that subject's labels only (L_L;
+    label_points): the other subject seen in such a crop is not a positive, and neither is
+    subject j in subject 0's crops. other_labels (J, V, C, 2) are those labels on the train
+    split (NaN at held-out and validation instants), other_instants (J,) their instants.
+    Pseudo-labels, the crops of unlabelled instants and L_B / L_E / L_R / L_T follow subject
+    0 only; validation labels are subject 0's."""
 
     def __init__(self, recording, config, input_size, heatmap_size, tracked=None):
         self.recording = recording
         self.config = config
         self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
+        # among the instants labelled for subject 0 (validation labels are its); the
+        # other subjects of those instants are held out of training with them
         self.validation_instants = validation_split(recording.labels, self.held_out,
                                                     config.validation_labels)
         self.validation_labels = recording.labels[self.validation_instants].copy()
         self.labels = recording.labels.copy()
         self.labels[self.held_out] = np.nan
         self.labels[self.validation_instants] = np.nan
+        self.other_instants = recording.other_instants.copy()
+        self.other_labels = recording.other_labels.copy()
+        self.other_labels[np.isin(self.other_instants, np.union1d(
+            self.held_out, self.validation_instants))] = np.nan
         labelled = np.isfinite(self.labels[..., 0]).any(axis=2)             # (T, V)
-        self.labelled_instants = np.flatnonzero(labelled.any(axis=1))
+        other = np.isfinite(self.other_labels[..., 0]).any(axis=(1, 2))       # (J,)
+        self.labelled_instants = np.union1d(np.flatnonzero(labelled.any(axis=1)),
+                                            self.other_instants[other]).astype(np.int64)
         self.unlabeled_instants = np.setdiff1d(self.train, np.union1d(
             self.labelled_instants, self.validation_instants))
         if self.labelled_instants.size == 0:
@@ -203,8 +221,33 @@ class TrainingData:
             boxed = replace(recording, labels=masked)
         self.boxes = crop_boxes(boxed, config.box_source, w_in / h_in, config.box_margin,
                                 pseudo)
-        self.cache = CropCache(recording, self.boxes, input_size, heatmap_size,
-                               config.cache_scale)
+        boxes, rows = self.boxes, None
+        if len(self.other_instants):       # one more row of crops per other subject
+            other_boxes = self.boxes[self.other_instants] if config.box_source in (
+                'fixed', 'full') else subject_label_boxes(
+                    self.other_labels, self.other_instants, self.boxes, recording.cameras,
+                    w_in / h_in, config.box_margin)
+            boxes = np.concatenate([self.boxes, other_boxes])
+            rows = np.concatenate([np.arange(recording.num_instants), self.other_instants])
+        self.cache = CropCache(recording, boxes, input_size, heatmap_size,
+                               config.cache_scale, instants=rows)
+
+    @property
+    def num_other_labelled(self):
+        """Labelled (instant, subject) rows of subjects other than 0 in the train split."""
+        return int(np.isfinite(self.other_labels[..., 0]).any(axis=(1, 2)).sum())
+
+    def label_points(self, pairs):
+        """(N, C, 2) px labels of crop rows x views `pairs` (N, 2): subject 0's labels for a
+        row t < T (an instant), the other subject's for a row T + j (other_labels[j])."""
+        pairs = np.asarray(pairs, np.int64)
+        T = self.recording.num_instants
+        row, view = pairs[:, 0], pairs[:, 1]
+        own = row < T
+        out = np.empty((len(pairs),) + self.labels.shape[2:])
+        out[own] = self.labels[row[own], view[own]]
+        out[~own] = self.other_labels[row[~own] - T, view[~own]]
+        return out
 
     @property
     def cameras(self):
@@ -478,7 +521,12 @@ class Trainer:
         labelled = np.isfinite(self.data.labels[..., 0])                     # (T, V, C)
         pseudo = np.isfinite(self.pseudo[..., 0]) & ~labelled
         self.pseudo_only = np.where(pseudo[..., None], self.pseudo, np.nan)
-        self.labelled_pool = np.argwhere(labelled.any(axis=2))               # (N, 2) (t, v)
+        # (N, 2) (crop row, view): the instants' (subject 0), then the other subjects' rows
+        # T + j (TrainingData); a single-subject table gives the instants' pool alone
+        other = np.isfinite(self.data.other_labels[..., 0]).any(axis=2)      # (J, V)
+        self.labelled_pool = np.concatenate([
+            np.argwhere(labelled.any(axis=2)),
+            np.argwhere(other) + [self.data.recording.num_instants, 0]]).astype(np.int64)
         self.pseudo_pool = np.argwhere(pseudo.any(axis=2))
         if self.labelled_pool.size == 0:
             raise ValueError('no labelled view in the training split')
@@ -612,8 +660,8 @@ class Trainer:
             n = len(p)
             sl = slice(start, start + n)
             if kind in ('L', 'B'):
-                source = self.data.labels if kind == 'L' else self.pseudo_only
-                heat_pts = batch.to_heatmap(source[p[:, 0], p[:, 1]], sl)
+                heat_pts = batch.to_heatmap(self.data.label_points(p) if kind == 'L' else
+                                            self.pseudo_only[p[:, 0], p[:, 1]], sl)
                 terms[kind] = masked_heatmap_mse([s[sl] for s in stages], heat_pts,
                                                  self.config.sigma)
                 if kind == 'L' and (self.spec.reprojection or self.spec.epipolar):
@@ -1037,13 +1085,20 @@ class Trainer:
 
     def fit_error(self):
         """How well the detector fits its own labelled views (no augmentation): label_error
-        over every labelled keypoint of every labelled view of the training split."""
+        over every labelled keypoint of every labelled view of the training split (every
+        subject's: the other subjects' crop rows too)."""
         inst = self.data.labelled_instants
-        return self.label_error(inst, self.data.labels[inst])
+        labels = self.data.labels[inst]
+        if len(self.data.other_instants):
+            T = self.data.recording.num_instants
+            inst = np.concatenate([inst, T + np.arange(len(self.data.other_instants))])
+            labels = np.concatenate([labels, self.data.other_labels])
+        return self.label_error(inst, labels)
 
     def label_error(self, instants, labels):
         """Distance between the detections (detect: cached crops, no augmentation) of every
-        view of `instants` (N,) and `labels` (N, V, C, 2) original image px, NaN = not
+        view of `instants` (N,) (crop rows: T + j is other subject j, TrainingData) and
+        `labels` (N, V, C, 2) original image px, NaN = not
         labelled: dict of `count` (labelled keypoints) and the median, mean and 90th
         percentile in original image pixels (`*_px`) and in heatmap pixels (`*_heat`: the
         network's output grid, independent of the image resolution); a lost keypoint counts

@@ -13,7 +13,8 @@ Output folder DIR (must not exist or be empty):
                         keypoint_names
   DIR/README.md         what, seed, cameras, frames, labels, how to train / evaluate
 With --subjects N > 1 (SynthConfig.subjects) the images show N subjects; the ground-truth
-topic and labels.csv are subject 0's; ground_truth.npz adds subjects_keypoints3d
+topic and labels.csv are subject 0's (--label-subjects: labels.csv labels every subject,
+with a subject column); ground_truth.npz adds subjects_keypoints3d
 (T, S, C, 3), subjects_keypoints2d (T, V, S, C, 2), subjects_in_image and
 subjects_occluded (T, V, S, C) (hidden by any subject's limbs), subject s in slot s (its
 identity); DIR/points2d.csv holds every subject's visible keypoints per camera as the
@@ -78,8 +79,10 @@ class SynthConfig:
     alike otherwise, the symmetric ambiguity of real subjects); subjects: 1, or 2..3
     subjects walking rings of synth.subjects.PATH_RADII that pass and hide each other
     (subject 0 is the one of the ground-truth topic and labels.csv; ground_truth.npz holds
-    them all and points2d.csv their per-camera instances). All off by default: a seed's
-    bytes do not change.
+    them all and points2d.csv their per-camera instances); label_subjects: labels.csv labels
+    every subject at the labelled instants (its subject column: subject s is slot s of
+    ground_truth.npz, the same id in every view), by the same rule as subject 0. All off by
+    default: a seed's bytes do not change.
     """
 
     cameras: int = 8
@@ -103,6 +106,7 @@ class SynthConfig:
     distinct_sides: bool = False
     subjects: int = 1
     motion_seed: int | None = None
+    label_subjects: bool = False
     rig: RigConfig = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
@@ -131,7 +135,7 @@ class SynthConfig:
             bad('layout', f'must be one of {LAYOUTS}, got {self.layout!r}')
         if not (np.isfinite(self.noise) and 0 <= self.noise <= 50):
             bad('noise', f'must be in 0..50, got {self.noise!r}')
-        for name in ('label_occluded', 'distinct_sides'):
+        for name in ('label_occluded', 'distinct_sides', 'label_subjects'):
             if not isinstance(getattr(self, name), bool):
                 bad(name, f'must be a bool, got {getattr(self, name)!r}')
         if isinstance(self.occluders, bool) or not isinstance(self.occluders, (int, np.integer)) \
@@ -185,6 +189,8 @@ class SynthConfig:
         data.pop('rig', None)
         if self.motion_seed is None:          # a seed's README stays as it was
             data.pop('motion_seed')
+        if not self.label_subjects:
+            data.pop('label_subjects')
         data['distortion'] = list(self.distortion)
         return data
 
@@ -289,6 +295,22 @@ def plan(config):
                 subjects_occluded=hidden_all.reshape(T, V, S, C))
 
 
+def subject_label_rows(p, labelled, label_occluded=True):
+    """(stamp_ns, camera, keypoint, u, v, subject) rows of every subject at the `labelled`
+    instants (indices): the exact projections inside the image (and not hidden, unless
+    label_occluded), subject s = slot s of subjects_keypoints2d; sorted by instant, camera,
+    subject, keypoint."""
+    uv = p['subjects_keypoints2d'][labelled]                       # (L, V, S, C, 2)
+    ok = p['subjects_in_image'][labelled]
+    if not label_occluded:
+        ok = ok & ~p['subjects_occluded'][labelled]
+    names = [c.name for c in p['cameras']]
+    keypoints = p['skeleton'].keypoints
+    stamps = p['stamps'][labelled]
+    return [(int(stamps[t]), names[v], keypoints[c], float(uv[t, v, s, c, 0]),
+             float(uv[t, v, s, c, 1]), int(s)) for t, v, s, c in zip(*np.nonzero(ok))]
+
+
 def write_instances_table(path, p, seed):
     """The frames table (labels_import.points2d) with a `subject` column of every subject's
     visible keypoints (in the image, not hidden): exact projections, the instance labels
@@ -365,8 +387,11 @@ def synthesize(config, out, progress=True):
     save_rig(out / 'rig.yaml', cameras, frame_id=FRAME_ID)
     labelled = np.flatnonzero(p['labelled'])
     points = np.where(p['label_mask'][labelled][..., None], p['keypoints2d'][labelled], np.nan)
-    rows = write_labels(out / 'labels.csv', label_rows(
-        stamps[labelled], [c.name for c in cameras], p['skeleton'].keypoints, points))
+    rows = label_rows(stamps[labelled], [c.name for c in cameras], p['skeleton'].keypoints,
+                      points)
+    if config.label_subjects and config.subjects > 1:
+        rows = subject_label_rows(p, labelled, config.label_occluded)
+    rows = write_labels(out / 'labels.csv', rows)
     np.savez_compressed(
         out / 'ground_truth.npz', stamps=stamps, keypoints3d=p['keypoints3d'],
         keypoints2d=p['keypoints2d'], in_image=p['in_image'], occluded=p['occluded'],
@@ -410,12 +435,16 @@ def readme_text(config, p, result):
                      'another limb')
     settings = '\n'.join(f'- {k}: {v}' for k, v in config.to_dict().items())
     motion = '' if config.motion_seed is None else f' (motion seed {config.motion_seed})'
+    labels_text = ("The ground-truth topic is subject 0's, `labels.csv` labels every "
+                   'subject (its `subject` column: the slot in\n`ground_truth.npz`); '
+                   if config.label_subjects else
+                   "The ground-truth topic and\n`labels.csv` are subject 0's; ") + \
+        '`ground_truth.npz` adds subjects_keypoints3d (T, S, C, 3),'
     several = '' if config.subjects == 1 else f"""
 ## Several subjects
 
 {config.subjects} subjects walk rings of {', '.join(f'{r:g}' for r in
-PATH_RADII[:config.subjects])} m and pass (and hide) each other. The ground-truth topic and
-`labels.csv` are subject 0's; `ground_truth.npz` adds subjects_keypoints3d (T, S, C, 3),
+PATH_RADII[:config.subjects])} m and pass (and hide) each other. {labels_text}
 subjects_keypoints2d (T, V, S, C, 2), subjects_in_image and subjects_occluded (T, V, S, C)
 (subject s = identity s); `points2d.csv` holds their visible keypoints per camera with a
 `subject` column of instance labels shuffled per camera and frame:

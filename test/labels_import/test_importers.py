@@ -76,13 +76,17 @@ def test_lightning_pose_multiview_csv_and_multi_animal(tmp_path):
     assert sorted((r.camera, r.frame, r.keypoint, r.u, r.v) for r in result.rows) == [
         ('cam1', 9, 'snout', 1.5, 2.5), ('cam1', 9, 'tail', 3.5, 4.5),
         ('cam2', 9, 'snout', 1.5, 2.5), ('cam2', 9, 'tail', 3.5, 4.5)]
-    # multi-animal: 4 header rows; keypoints named individual/bodypart
+    # multi-animal: 4 header rows; each individual a subject (the keypoint the bodypart);
+    # monet triangulate's names individual/bodypart kept as instance_keypoints
     ma = dlc_frame(pd.MultiIndex.from_tuples([('labeled-data', 'cam1', 'img5.png')]),
                    np.arange(8.0)[None], individuals=['m1', 'm2'])
     ma.to_csv(tmp_path / 'ma.csv')
     result = import_labels('dlc', tmp_path / 'ma.csv', cameras=CAMERAS)
-    assert result.keypoints == ('m1/snout', 'm1/tail', 'm2/snout', 'm2/tail')
-    assert [(r.keypoint, r.u, r.v) for r in result.rows][3] == ('m2/tail', 6.0, 7.0)
+    assert result.keypoints == ('snout', 'tail') and result.subjects == {'m1': 0, 'm2': 1}
+    assert result.instance_keypoints == ('m1/snout', 'm1/tail', 'm2/snout', 'm2/tail')
+    assert [(r.keypoint, r.u, r.v, r.subject, r.instance) for r in result.rows][3] == \
+        ('tail', 6.0, 7.0, 1, 'm2')
+    assert 'subjects: m1=0, m2=1 (DeepLabCut individuals)' in result.note
 
 
 def test_deeplabcut_errors_name_file_line_and_field(tmp_path):
@@ -190,3 +194,21 @@ def test_dannce_label3d_real_file(shared_data):
     stamps = np.arange(int(frames.max()) + 1, dtype=np.int64) * 10_000_000
     labels, report = resolve_labels(result.rows, stamps, cameras, result.keypoints)
     assert report.kept == len(result.rows) and len(labels) == 81
+
+
+def test_multi_animal_unique_bodyparts_are_no_subject(tmp_path):
+    """maDLC's individual 'single' holds the unique bodyparts (arena landmarks): plain names,
+    subject 0, not an id of their own."""
+    cols = pd.MultiIndex.from_tuples(
+        [('a', m, p, c) for m in ('m1', 'm2') for p in BODYPARTS for c in ('x', 'y')]
+        + [('a', 'single', 'corner', c) for c in ('x', 'y')],
+        names=['scorer', 'individuals', 'bodyparts', 'coords'])
+    frame = pd.DataFrame(np.arange(10.0)[None],
+                         index=pd.MultiIndex.from_tuples([('labeled-data', 'cam1', 'img5.png')]),
+                         columns=cols)
+    frame.to_csv(tmp_path / 'ma.csv')
+    result = import_labels('dlc', tmp_path / 'ma.csv', cameras=CAMERAS)
+    assert result.subjects == {'m1': 0, 'm2': 1}
+    assert result.keypoints == ('snout', 'tail', 'corner')
+    assert [(r.keypoint, r.subject, r.instance, r.u) for r in result.rows][-1] == \
+        ('corner', 0, '', 8.0)

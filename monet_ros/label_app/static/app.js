@@ -1,8 +1,10 @@
 // monet label: the page. Plain JavaScript, no build step, no external asset.
 // Image pixel coordinates: pixel centres on integers (the labels table's convention);
 // a view's transform maps them to canvas pixels: x = u * s + tx, y = v * s + ty.
-// Names (cameras, keypoints) come from rig and skeleton files: they are put in the page as
-// text only (textContent / text nodes), never parsed as HTML.
+// Names (cameras, keypoints, subjects' track / individual names) come from files: they are
+// put in the page as text only (textContent / text nodes), never parsed as HTML.
+// Subjects: the labels of one subject (an animal of the instant, id 0, 1, ...) are edited
+// at a time; a click labels the selected subject; the others are drawn as grey marks.
 'use strict';
 
 const COLORS = ['#e6194b', '#3cb44b', '#ffe119', '#4363d8', '#f58231', '#911eb4', '#46f0f0',
@@ -14,7 +16,7 @@ const S = {
   summary: null, t: 0, labels: {}, assist: {}, epipolar: {}, selected: 0, history: [],
   views: [], busy: 0, ready: false, prefill: false, suggest: null, labelled: [],
   hoverView: null, error: null, generation: 0, saves: Promise.resolve(), loaded: false,
-  sync: {}, notice: null,
+  sync: {}, notice: null, subject: 0, others: {}, subjectIds: [0],
 };
 window.monetLabel = S;
 
@@ -311,19 +313,22 @@ function applyDelta(labels, delta) {
 // version, the same change is applied to them and sent again - per keypoint and view, so
 // both tabs' points survive (a point both changed takes this tab's value, the later
 // edit). Reloading the server's version instead would drop this tab's edit.
-async function saveInstant(t, mine) {
-  const sync = S.sync[t];
+function syncKey(t, subject) { return `${t}/${subject}`; }
+
+async function saveInstant(t, subject, mine) {
+  const sync = S.sync[syncKey(t, subject)];
   if (!sync) throw new Error(`instant ${t}: its saved labels were not loaded`);
   const delta = labelDelta(sync.local, mine);
   let merged = false;
   for (let attempt = 0; ; attempt += 1) {
     const labels = applyDelta(sync.base, delta);
     try {
-      const saved = await api('PUT', `/api/labels/${t}`, { labels, version: sync.version });
+      const saved = await api('PUT', `/api/labels/${t}`,
+        { labels, version: sync.version, subject });
       sync.base = labels;
       sync.version = saved.version;
       sync.local = mine;
-      if (merged) adoptMerge(t, mine, labels);
+      if (merged) adoptMerge(t, subject, mine, labels);
       return saved;
     } catch (error) {
       if (error.status !== 409 || attempt >= 5) throw error;
@@ -336,13 +341,13 @@ async function saveInstant(t, mine) {
 
 // The page takes in the points another tab or client saved (those this tab has not
 // changed since `mine`), in its labels and its undo history, and says so.
-function adoptMerge(t, mine, saved) {
+function adoptMerge(t, subject, mine, saved) {
   const later = new Set(labelDelta(mine, S.labels).map(([c, k]) => c + '\n' + k));
   const foreign = labelDelta(mine, saved).filter(([c, k]) => !later.has(c + '\n' + k));
   S.notice = `instant ${t} was saved by another tab or client meanwhile: merged, ` +
     `${foreign.length} of its points taken in, your changes kept`;
   $('notice').textContent = S.notice;
-  if (t !== S.t || !foreign.length) return;
+  if (t !== S.t || subject !== S.subject || !foreign.length) return;
   S.labels = applyDelta(S.labels, foreign);
   S.history = S.history.map((h) => JSON.stringify(applyDelta(JSON.parse(h), foreign)));
   S.generation += 1;
@@ -355,16 +360,18 @@ function changed() {
   S.prefill = false;
   S.generation += 1;
   const t = S.t;
+  const subject = S.subject;
   const labels = JSON.parse(snapshot());
   draw();
   // saves go out one after the other, in the order of the changes (never a stale one last)
-  const save = S.saves.then(() => saveInstant(t, labels));
+  const save = S.saves.then(() => saveInstant(t, subject, labels));
   S.saves = save.catch(() => null);
   busy(async () => {
     const saved = await save;
     S.labelled = saved.labelled;
     renderLabelled();
-    await refreshAssist(t, t === S.t ? JSON.parse(snapshot()) : labels);
+    const current = t === S.t && subject === S.subject;
+    await refreshAssist(t, current ? JSON.parse(snapshot()) : labels);
   });
 }
 
@@ -409,14 +416,18 @@ async function openInstant(t) {
   renderSuggestions();
   await busy(async () => {
     await S.saves;                       // this tab's own saves are in what comes back
-    const data = await api('GET', `/api/labels/${t}`);
-    if (S.t !== t) return;
+    const subject = S.subject;
+    const data = await api('GET', `/api/labels/${t}?subject=${subject}`);
+    if (S.t !== t || S.subject !== subject) return;
     S.labels = data.labels;
+    S.others = data.others || {};
     S.prefill = data.prefill;
     // a pre-fill is the detector's, not saved: the server has no labels there yet
     const base = data.prefill ? {} : data.labels;
-    S.sync[t] = { version: data.version, base, local: JSON.parse(JSON.stringify(base)) };
+    S.sync[syncKey(t, subject)] = { version: data.version, base,
+      local: JSON.parse(JSON.stringify(base)) };
     S.loaded = true;
+    renderSubjects();
     renderSuggestions();
     const loads = S.views.map((view) => new Promise((resolve) => {
       const image = new Image();
@@ -466,6 +477,21 @@ function viewPoints(view) {
   return out;
 }
 
+// The other subjects' labels of the instant: small grey squares with the subject's id.
+function drawOthers(ctx, view) {
+  ctx.lineWidth = 1;
+  ctx.font = '10px sans-serif';
+  for (const [subject, labels] of Object.entries(S.others)) {
+    for (const uv of Object.values(labels[view.cam.name] || {})) {
+      const [x, y] = toCanvas(view, uv[0], uv[1]);
+      ctx.strokeStyle = 'rgba(200,200,200,0.9)';
+      ctx.strokeRect(x - 3, y - 3, 6, 6);
+      ctx.fillStyle = 'rgba(200,200,200,0.9)';
+      ctx.fillText(subject, x + 4, y - 4);
+    }
+  }
+}
+
 function drawView(view) {
   if (!view.fitted) fit(view);
   const ctx = view.canvas.getContext('2d');
@@ -496,6 +522,7 @@ function drawView(view) {
     ctx.stroke();
   }
   ctx.setLineDash([]);
+  drawOthers(ctx, view);
   // epipolar curves of the selected keypoint
   const curves = S.epipolar[view.cam.name] || {};
   ctx.strokeStyle = COLORS[S.selected % COLORS.length];
@@ -558,6 +585,46 @@ function renderKeypoints() {
     list.append(li);
   });
 }
+
+// ------------------------------------------------------------------ subjects
+// The subject buttons: every subject the table or an import knows, those labelled at this
+// instant, the selected one, and 'new' (the next free id). Names are text only.
+function renderSubjects() {
+  const holder = $('subjects');
+  holder.replaceChildren();
+  const names = {};
+  (S.summary.subjects || []).forEach((s) => { names[s.id] = s.name; });
+  const ids = new Set([0, S.subject, ...Object.keys(names).map(Number),
+    ...Object.keys(S.others).map(Number), ...S.subjectIds]);
+  S.subjectIds = [...ids].sort((a, b) => a - b);
+  S.subjectIds.forEach((id) => {
+    const label = names[id] ? `${id} (${names[id]})` : String(id);
+    const here = id === S.subject ? Object.keys(S.labels).length > 0
+      : Boolean(S.others[String(id)]);
+    const button = element('button', { textContent: label + (here ? ' *' : '') });
+    button.className = id === S.subject ? 'current' : '';
+    button.dataset.subject = String(id);
+    button.addEventListener('click', () => selectSubject(id));
+    holder.append(button);
+  });
+  const next = Math.max(...S.subjectIds) + 1;
+  const add = element('button', { textContent: 'new' });
+  add.dataset.subject = 'new';
+  add.title = `label a new subject (id ${next})`;
+  add.addEventListener('click', () => selectSubject(next));
+  holder.append(add);
+  $('subject-current').textContent = names[S.subject]
+    ? `subject ${S.subject} (${names[S.subject]})` : `subject ${S.subject}`;
+}
+
+// Edit another subject's labels of this instant (this tab's saves go out first).
+function selectSubject(id) {
+  if (id === S.subject || id < 0 || id > 99) return Promise.resolve();
+  S.subject = id;
+  if (!S.subjectIds.includes(id)) S.subjectIds.push(id);
+  return openInstant(S.t);
+}
+S.selectSubject = selectSubject;
 
 function instantButton(t, extra) {
   const button = document.createElement('button');
@@ -625,6 +692,9 @@ document.addEventListener('keydown', (event) => {
   } else if (key === 'f') {
     S.views.forEach(fit);
     draw();
+  } else if (key === 's') {
+    const i = S.subjectIds.indexOf(S.subject);
+    selectSubject(S.subjectIds[(i + 1) % S.subjectIds.length]);
   }
 });
 
