@@ -87,10 +87,15 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                 counts[key] += getattr(r, key)
             counts['instances'] += a.instances
             counts['unmatched'] += a.unmatched
-            for ident, X, score, error, ncams in zip(*subject_keypoints(r)):
-                writer.write_keypoints3d(f'/monet/subject{int(ident)}/keypoints3d',
-                                         frame.stamp_ns, frame_id, X, score, error, ncams,
-                                         units=units)
+            # the live fusion's message (subjects >= 2): one cloud per frame, one point per
+            # keypoint and tracked subject, the subject field its identity
+            ids, X, score, error, ncams = subject_keypoints(r)
+            C = X.shape[1]
+            writer.write_keypoints3d('/monet/keypoints3d', frame.stamp_ns, frame_id,
+                                     X.reshape(-1, 3), score.reshape(-1), error.reshape(-1),
+                                     ncams.reshape(-1), units=units,
+                                     keypoint=np.tile(np.arange(C), len(ids)),
+                                     subject=np.repeat(ids, C))
             figures['frames'] += 1
             figures['views'] += len(present)
     figures['seconds'] = time.perf_counter() - figures['start']

@@ -203,10 +203,14 @@ class BagWriter:
         self.write(topic, 'tf2_msgs/msg/TFMessage', msg, _log(stamp_ns, log_time_ns))
 
     def write_keypoints3d(self, topic, stamp_ns, frame_id, X, confidence=None,
-                          reprojection_error=None, num_views=None, log_time_ns=None, *, units):
+                          reprojection_error=None, num_views=None, log_time_ns=None, *, units,
+                          keypoint=None, subject=None):
         """(N, 3) keypoints in the rig's length unit `units` (required) ->
-        sensor_msgs/PointCloud2 in the /monet/keypoints3d layout, in metres (REP 103)."""
-        f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views, units=units)
+        sensor_msgs/PointCloud2 in the /monet/keypoints3d layout, in metres (REP 103);
+        keypoint / subject (N,) int: as io.fields.keypoint_cloud_fields (subject None: the
+        one-subject layout, no subject field)."""
+        f = keypoint_cloud_fields(X, confidence, reprojection_error, num_views, units=units,
+                                  keypoint=keypoint, subject=subject)
         T = self._store.types
         fields = [T['sensor_msgs/msg/PointField'](name=n, offset=o, datatype=d, count=c)
                   for n, o, d, c in f.pop('fields')]

@@ -61,12 +61,17 @@ def test_two_subjects_are_found_and_keep_their_identity(scene, tmp_path, capsys)
              for g in range(2)]
     per_frame = np.linalg.norm(pred[:, owner] - X, axis=-1).mean(-1)          # (T, 2)
     assert per_frame.max() < 0.030, per_frame
+    # the MCAP holds what the live fusion publishes: /monet/keypoints3d with a subject field
     clouds = {t for t in open_bag(out).topics if t.endswith('/keypoints3d')}
-    assert clouds == {f'/monet/subject{i}/keypoints3d' for i in ids}
-    msgs = [m for m in open_bag(out).messages([f'/monet/subject{ids[0]}/keypoints3d'])]
+    assert clouds == {'/monet/keypoints3d'}
+    msgs = list(open_bag(out).messages(['/monet/keypoints3d']))
     assert len(msgs) == T
-    got = cloud_to_keypoints3d(msgs[0].msg, units='m')
-    np.testing.assert_allclose(got['X'], pred[0, 0], atol=1e-6)
+    for t in (0, T - 1):
+        got = cloud_to_keypoints3d(msgs[t].msg, units='m')
+        for slot, i in enumerate(ids):
+            mine = got['subject'] == i
+            np.testing.assert_array_equal(got['keypoint'][mine], np.arange(pred.shape[2]))
+            np.testing.assert_allclose(got['X'][mine], pred[t, slot], atol=1e-6)
     from ndx_pose import MultiCameraPoseEstimation  # noqa: F401 (registers the types)
     from pynwb import NWBHDF5IO
     with NWBHDF5IO(str(out / 'keypoints.nwb'), 'r') as io:
