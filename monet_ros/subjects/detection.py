@@ -35,7 +35,9 @@ Algorithm, per synchronized frame (stamps increasing):
    crop's map (>= the confidence threshold), the one nearest the hypothesis' joint
    projected into the view (the highest where the joint is unknown); source pixels and
    the peak value as its score. So a crop showing two subjects decodes the one it was cut
-   for.
+   for. With rival_peaks (off by default), a chosen peak that lies nearer another
+   hypothesis' joint of the same keypoint (projected into the view) than its own is left
+   out: the joint is hidden in that view and the peak is the neighbour's.
 4. The instances of all views (slot h = hypothesis h's crop) go through associate (the
    instance order is not trusted) and are triangulated per subject; a subject whose mean
    joint distance to a subject seen by more cameras (association's order) is below
