@@ -141,4 +141,6 @@ def add_subjects_detection_arguments(parser):
                        ('duplicate_mm', float), ('crop_missed', int)):
         parser.add_argument('--' + name.replace('_', '-'), type=kind, default=d[name].default,
                             help='--subjects: ' + d[name].metadata['description'])
+    parser.add_argument('--rival-peaks', action='store_true',
+                        help='--subjects: ' + d['rival_peaks'].metadata['description'])
     add_subject_tracking_arguments(parser)

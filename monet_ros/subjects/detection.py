@@ -35,7 +35,9 @@ Algorithm, per synchronized frame (stamps increasing):
    crop's map (>= the confidence threshold), the one nearest the hypothesis' joint
    projected into the view (the highest where the joint is unknown); source pixels and
    the peak value as its score. So a crop showing two subjects decodes the one it was cut
-   for.
+   for. With rival_peaks (off by default), a chosen peak that lies nearer another
+   hypothesis' joint of the same keypoint (projected into the view) than its own is left
+   out: the joint is hidden in that view and the peak is the neighbour's.
 4. The instances of all views (slot h = hypothesis h's crop) go through associate (the
    instance order is not trusted) and are triangulated per subject; a subject whose mean
    joint distance to a subject seen by more cameras (association's order) is below
@@ -91,6 +93,10 @@ class SubjectsConfig:
     crop_missed: int = setting(
         1, 'per-subject crops: a track missed in this many consecutive frames gets no crops '
         '(discovery looks for its subject again)', minimum=1)
+    rival_peaks: bool = setting(
+        False, "per-subject crops: leave out a keypoint's chosen peak when it lies nearer "
+        "another subject's predicted joint of that keypoint than its own (a joint hidden "
+        "in the view would otherwise take the neighbour's peak)")
 
     def __post_init__(self):
         validate_config(self)
@@ -190,13 +196,16 @@ def heat_matrices(heat_cameras):
     return np.stack([np.asarray(getattr(c, 'K', c), np.float64) for c in heat_cameras])
 
 
-def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_threshold):
+def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_threshold,
+                   rivals=None):
     """One instance per crop (module docstring, step 3).
 
     heat: N heatmaps (C, h, w); heat_cameras / cameras: their heatmap (or (3, 3) K_heat)
     and source Cameras;
     targets (N, C, 2) source px of the hypothesis' joints in each crop's view (NaN:
-    unknown). -> points (N, C, 2) source px (NaN: no peak), score (N, C)."""
+    unknown); rivals (N, R, C, 2) or None: the other hypotheses' joints in that view (NaN:
+    none): a chosen peak nearer a rival's joint than its target is left out
+    (config.rival_peaks). -> points (N, C, 2) source px (NaN: no peak), score (N, C)."""
     from monet_ros.models import decode_heatmap_peaks
 
     rig = stack_cameras(cameras)
@@ -212,6 +221,11 @@ def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_thre
     chosen = np.take_along_axis(pts, pick[..., None, None], axis=2)[:, :, 0]
     score = np.take_along_axis(conf, pick[..., None], axis=2)[..., 0]
     found = np.take_along_axis(usable, pick[..., None], axis=2)[..., 0]
+    if rivals is not None and rivals.shape[1]:
+        own = np.linalg.norm(chosen - targets, axis=-1)                       # (N, C)
+        rival = np.linalg.norm(chosen[:, None] - rivals, axis=-1)             # (N, R, C)
+        with np.errstate(invalid='ignore'):
+            found &= ~(rival < own[:, None]).any(1)                # NaN compares False
     return np.where(found[..., None], chosen, np.nan), np.where(found, score, 0.0)
 
 
@@ -316,12 +330,17 @@ class SubjectsCore:
         if len(v_idx):
             crop_cams = [cameras[v] for v in v_idx]
             known = np.isfinite(hyp).all(-1)                          # (H, C)
-            targets = project_views(stack_cameras(cameras),
-                                    np.where(known[..., None], hyp, 0.0).reshape(-1, 3))
-            targets = targets.reshape(V, H, self.C, 2)[v_idx, h_idx]
-            targets[~known[h_idx]] = np.nan
+            projected = project_views(stack_cameras(cameras),
+                                      np.where(known[..., None], hyp, 0.0).reshape(-1, 3))
+            projected = projected.reshape(V, H, self.C, 2)
+            projected[:, ~known] = np.nan
+            targets = projected[v_idx, h_idx]
+            rivals = None
+            if self.config.rival_peaks:      # (crops, H - 1, C, 2): the other hypotheses
+                others = np.arange(H)[None] != h_idx[:, None]                 # (N, H)
+                rivals = projected[v_idx][others].reshape(len(v_idx), H - 1, self.C, 2)
             p, s = crop_instances(heat, heat_cameras, crop_cams, targets, self.config,
-                                  self.association.confidence_threshold)
+                                  self.association.confidence_threshold, rivals)
             points[v_idx, h_idx], score[v_idx, h_idx] = p, s
         if V:
             a = associate(points, cameras, score, self.association)

@@ -126,3 +126,29 @@ def test_an_instant_without_any_crop_ages_the_tracks():
     assert len(r.ids) == 0 and core.tracker.ids.tolist() == [0]
     core.live_frame([], 700_000_000, [], [])        # max_missed_s 0.5 s
     assert core.tracker.deaths == 1
+
+
+def test_a_hidden_joint_does_not_take_the_neighbours_peak_with_rival_peaks():
+    # subject 0's keypoint is hidden in this view, subject 1's (a rival hypothesis) shows:
+    # the crop's nearest peak is the neighbour's; with rival_peaks it is left out
+    from monet_ros.geometry import Camera
+    from monet_ros.subjects.detection import crop_instances
+
+    cam = Camera(name='c', K=np.array([[50.0, 0, 32], [0, 50.0, 24], [0, 0, 1]]),
+                 dist=np.zeros(5), R=np.eye(3), t=np.zeros(3), width=64, height=48)
+    heat_cam = cam.crop(np.array([0.0, 0.0, 64.0, 48.0]), (16, 12))
+    yy, xx = np.mgrid[0:12, 0:16]
+    heat = (0.9 * np.exp(-((xx - 12) ** 2 + (yy - 6) ** 2) / 2))[None, None]
+    neighbour = (np.array([12.0, 6.0]) + 0.5) * 4 - 0.5               # source px
+    own = np.array([[[10.0, 26.0]]])                                 # (1 crop, 1 kp, 2)
+    rivals = neighbour[None, None, None]                             # (1, 1 rival, 1, 2)
+    config = SubjectsConfig()
+    p, _ = crop_instances(heat.astype(np.float32), [heat_cam], [cam], own, config, 0.1)
+    assert np.linalg.norm(p[0, 0] - neighbour) < 1.0                  # taken without
+    p, s = crop_instances(heat.astype(np.float32), [heat_cam], [cam], own, config, 0.1,
+                          rivals)
+    assert np.isnan(p).all() and s[0, 0] == 0.0
+    # its own peak, nearer its target than the rival's, stays
+    p, _ = crop_instances(heat.astype(np.float32), [heat_cam], [cam], neighbour[None, None],
+                          config, 0.1, own[:, None])
+    assert np.linalg.norm(p[0, 0] - neighbour) < 1.0
