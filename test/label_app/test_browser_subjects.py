@@ -4,7 +4,8 @@
 that is HTML stays text: no element is made of it); a click labels the selected subject
 only; choosing 'new' labels a third subject; the autosaved table carries the subject
 column and round-trips through the labels loader with every subject's points (the
-imported ones kept); a reload shows them again, and the API refuses a bad subject."""
+imported ones kept); a reload shows them again, `s` steps to the next subject, and the API
+refuses a bad subject."""
 from helpers.label_app import TOKEN_HEADER, page_token, request
 import numpy as np
 
@@ -101,6 +102,11 @@ def test_clicks_label_the_selected_subject(synth, tmp_path, browser, label_page)
         texts = [b.text for b in browser.find_elements('css selector', '#subjects button')]
         assert texts == ['0 (mouse) *', f'1 ({EVIL}) *', '2 *', 'new']
         assert sorted(page.state('others')) == ['1', '2']
+        page.key('s')                                   # the next subject: 1
+        page.wait_idle()
+        assert page.state('subject') == 1
+        assert np.hypot(*(np.array(page.state('labels')[names[0]][KP]) - s1[0])) < 1e-9
+        assert sorted(page.state('others')) == ['0', '2']
 
         # the API: a bad subject is a 400 naming the field; nothing changes
         status, _, body = request(f'{url}/api/labels/{T}?subject=x')
