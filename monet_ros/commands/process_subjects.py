@@ -6,8 +6,9 @@ candidates associated across views to find subjects, subjects.association across
 subjects.tracking over time). The outputs are those of `monet triangulate --subjects N`
 (io.export_results.write_subject_results): keypoints3d.csv with a `subject` column, one
 TRC per subject (keypoints3d_subject<id>.trc), NWB with one 3D series per subject; the
-MCAP holds /monet/subject<id>/keypoints3d (PointCloud2 in the /monet/keypoints3d layout,
-metres) per frame and subject. Views are decoded in full (no reduced JPEG decode).
+MCAP holds /monet/keypoints3d as the live fusion publishes it with several subjects
+(PointCloud2, metres, one cloud per frame, one point per keypoint and tracked subject, the
+`subject` field its identity). Views are decoded in full (no reduced JPEG decode).
 Not with --no-track, --heatmaps, --filter or --export npz (ConfigError).
 """
 import sys
