@@ -47,10 +47,14 @@ Algorithm, per synchronized frame (stamps increasing):
    crops (a joint captured from the neighbour: the capturing track's prediction follows
    it, so its next crop would decode the neighbour's joint again): the subject whose
    joint lies farther from its own other joints (their median distance) loses it (NaN,
-   counted as `shared`), the other keeps it.
+   counted as `shared`), the other keeps it. Then a joint farther than link_mm from every
+   other joint of its subject is linked to no part of that body (discovery's rule, step
+   1d): a ghost, triangulated from peaks of different subjects in different views, whose
+   track's prediction would keep its crops' peaks on the ghost's rays. It goes too (NaN,
+   counted as `detached`).
 6. They go to the SubjectTracker: Hungarian assignment to the tracks' predictions
    (gated), births, deaths (subjects.tracking). Its identities are the output's. A
-   joint lost in step 5 is restarted in its track (unstarted: no prediction), so the
+   joint dropped in step 5 is restarted in its track (unstarted: no prediction), so the
    next frame's crops take their highest peak for it (step 3): the crop is centred on
    the track's own body.
 
@@ -112,7 +116,8 @@ class FrameSubjects:
     -1: no discovery this frame), points (discovery's 3D keypoint points), explained (of
     those, near a cropped track's joint), loose (in groups with too few keypoints, or
     beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N),
-    shared (joints dropped as decoded by two subjects, step 5)."""
+    shared (joints dropped as decoded by two subjects, step 5), detached (joints dropped as
+    farther than link_mm from every other joint of their subject, step 5)."""
     association: object
     keep: np.ndarray
     ids: np.ndarray
@@ -126,6 +131,7 @@ class FrameSubjects:
     loose: int = 0
     tracked: int = 0
     shared: int = 0
+    detached: int = 0
 
 
 def subject_keypoints(frame):
@@ -189,6 +195,21 @@ def shared_joints(X, near):
     loser = np.where(fit[t, c] >= fit[s, c], t, s)
     drop[loser, c] = True
     return drop
+
+
+def detached_joints(X, link):
+    """Joints linked to no other joint of their subject (module docstring, step 5): X (K,
+    C, 3) the subjects' joints (NaN: none), link: the largest distance (rig units) of two
+    joints of one body that are linked. -> (K, C) bool, True where a joint lies farther than
+    `link` from every other triangulated joint of its subject (a subject with one joint
+    keeps it)."""
+    K, C = X.shape[:2]
+    d = np.linalg.norm(X[:, :, None] - X[:, None], axis=-1)               # (K, C, C)
+    d[:, np.arange(C), np.arange(C)] = np.nan
+    with np.errstate(invalid='ignore'):
+        linked = (d <= link).any(-1)                                      # NaN: False
+    others = np.isfinite(d).any(-1)                   # finite, with another finite joint
+    return others & ~linked
 
 
 def heat_matrices(heat_cameras):
@@ -360,7 +381,10 @@ class SubjectsCore:
         duplicates = len(a.X) - len(keep)
         extra = max(0, len(keep) - self.config.subjects)
         keep = np.array(keep[:self.config.subjects], np.int64)
-        drop = shared_joints(a.X[keep], self._duplicate)
+        shared = shared_joints(a.X[keep], self._duplicate)
+        X = np.where(shared[..., None], np.nan, a.X[keep])
+        detached = detached_joints(X, self._link)
+        drop = shared | detached
         if drop.any():
             s, c = np.nonzero(drop)
             a.X[keep[s], c] = np.nan
@@ -374,7 +398,8 @@ class SubjectsCore:
         self.restart(ids, drop)
         return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
-                             extra=extra, tracked=tracked, shared=int(drop.sum()),
+                             extra=extra, tracked=tracked, shared=int(shared.sum()),
+                             detached=int(detached.sum()),
                              **(counts or {}))
 
     def live_frame(self, cameras, stamp_ns, crops, full=()):
