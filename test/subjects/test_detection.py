@@ -122,3 +122,30 @@ def test_a_captured_joint_is_restarted_and_its_crop_takes_its_own_peak():
     own_joint[0, 0, 0] = 0.0
     assert step.tracker.step(own_joint, 66_666_666).tolist() == [0]   # its other joint matches
     assert step.tracker.ids.tolist() == [0] and step.tracker.started.all()
+
+
+def test_a_joint_linked_to_no_other_joint_of_its_subject_goes():
+    from monet_ros.subjects.detection import detached_joints
+
+    # a body of four keypoints in a column (0.3 m apart) whose keypoint 2 is a ghost 1.9 m
+    # away (triangulated from different subjects' peaks in different views); the other
+    # subject whole
+    A = np.array([[0.0, 0, 1.6], [0.0, 0, 1.3], [0.0, 0, 1.0], [0.0, 0, 0.7]])
+    B = A + [1.0, 0, 0]
+    A[2] = [1.9, 0.0, 1.0]
+    X = np.stack([A, B])
+    drop = detached_joints(X, link=0.65)
+    assert drop.tolist() == [[False, False, True, False], [False] * 4]
+    # independently: the ghost's nearest other joint of its subject is beyond the link
+    nearest = np.linalg.norm(np.delete(A, 2, 0) - A[2], axis=-1).min()
+    assert nearest > 0.65
+    # with a link longer than that nearest distance it stays; a joint whose neighbours are
+    # missing but another joint is within the link stays; one joint alone stays
+    assert not detached_joints(X, link=nearest + 0.01).any()
+    X[0, 1] = np.nan                          # keypoints 0 and 3 now 0.9 m apart, the ghost
+    assert detached_joints(X, link=0.65)[0].tolist() == [True, False, True, True]
+    assert detached_joints(X, link=1.0)[0].tolist() == [False, False, True, False]
+    one = np.full((1, 4, 3), np.nan)
+    one[0, 1] = [5.0, 5.0, 5.0]
+    assert not detached_joints(one, link=0.65).any()
+    assert detached_joints(np.zeros((0, 4, 3)), link=0.65).shape == (0, 4)
