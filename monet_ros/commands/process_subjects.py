@@ -137,6 +137,6 @@ def print_subjects(figures, out):
     print(f'{name}: skipped: {s.unmatched} of {s.instances} crop instances matched in no '
           f'other camera, {n["duplicates"]} duplicate subjects (one body from two crops), '
           f'{n["shared"]} joints decoded by two subjects (kept by one), {n["detached"]} '
-          f'joints farther than --link-mm from the rest of their subject, '
+          f'joints not linked within --link-mm to the body of their subject, '
           f'{s.extra} subjects beyond --subjects, {s.untracked} with too few keypoints for '
           'a track')

@@ -35,7 +35,7 @@ Algorithm, per synchronized frame (stamps increasing):
    crop's map (>= the confidence threshold), the one nearest the hypothesis' joint
    projected into the view (the highest where the joint is unknown); source pixels and
    the peak value as its score. So a crop showing two subjects decodes the one it was cut
-   for. With rival_peaks (off by default), a chosen peak that lies nearer another
+   for. With rival_peaks (on by default), a chosen peak that lies nearer another
    hypothesis' joint of the same keypoint (projected into the view) than its own is left
    out: the joint is hidden in that view and the peak is the neighbour's.
 4. The instances of all views (slot h = hypothesis h's crop) go through associate (the
@@ -47,11 +47,12 @@ Algorithm, per synchronized frame (stamps increasing):
    crops (a joint captured from the neighbour: the capturing track's prediction follows
    it, so its next crop would decode the neighbour's joint again): the subject whose
    joint lies farther from its own other joints (their median distance) loses it (NaN,
-   counted as `shared`), the other keeps it. Then a joint farther than link_mm from every
-   other joint of its subject is linked to no part of that body (discovery's rule, step
-   1d): a ghost, triangulated from peaks of different subjects in different views, whose
-   track's prediction would keep its crops' peaks on the ghost's rays. It goes too (NaN,
-   counted as `detached`).
+   counted as `shared`), the other keeps it. Then each subject's joints are grouped by
+   single linkage within link_mm (discovery's linkage, step 1d); joints in a group smaller
+   than the subject's largest are not linked to its body: a ghost (triangulated from
+   peaks of different subjects in different views) or a limb taken from the neighbour,
+   whose track's prediction would keep its crops' peaks there. They go too (NaN, counted
+   as `detached`).
 6. They go to the SubjectTracker: Hungarian assignment to the tracks' predictions
    (gated), births, deaths (subjects.tracking). Its identities are the output's. A
    joint dropped in step 5 is restarted in its track (unstarted: no prediction), so the
@@ -98,7 +99,7 @@ class SubjectsConfig:
         1, 'per-subject crops: a track missed in this many consecutive frames gets no crops '
         '(discovery looks for its subject again)', minimum=1)
     rival_peaks: bool = setting(
-        False, "per-subject crops: leave out a keypoint's chosen peak when it lies nearer "
+        True, "per-subject crops: leave out a keypoint's chosen peak when it lies nearer "
         "another subject's predicted joint of that keypoint than its own (a joint hidden "
         "in the view would otherwise take the neighbour's peak)")
 
@@ -117,7 +118,7 @@ class FrameSubjects:
     those, near a cropped track's joint), loose (in groups with too few keypoints, or
     beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N),
     shared (joints dropped as decoded by two subjects, step 5), detached (joints dropped as
-    farther than link_mm from every other joint of their subject, step 5)."""
+    not linked within link_mm to their subject's largest group of joints, step 5)."""
     association: object
     keep: np.ndarray
     ids: np.ndarray
@@ -198,18 +199,21 @@ def shared_joints(X, near):
 
 
 def detached_joints(X, link):
-    """Joints linked to no other joint of their subject (module docstring, step 5): X (K,
-    C, 3) the subjects' joints (NaN: none), link: the largest distance (rig units) of two
-    joints of one body that are linked. -> (K, C) bool, True where a joint lies farther than
-    `link` from every other triangulated joint of its subject (a subject with one joint
-    keeps it)."""
+    """Joints linked to no larger part of their subject's body (module docstring, step 5):
+    X (K, C, 3) the subjects' joints (NaN: none), link: the largest distance (rig units) of
+    two linked joints of one body. The triangulated joints of a subject fall into groups by
+    single linkage within `link` (discovery's linkage, step 1d); a joint goes when its
+    group has fewer joints than the subject's largest group (two largest groups of equal
+    size both stay: nothing tells which is the body). -> (K, C) bool, True where it goes."""
     K, C = X.shape[:2]
-    d = np.linalg.norm(X[:, :, None] - X[:, None], axis=-1)               # (K, C, C)
-    d[:, np.arange(C), np.arange(C)] = np.nan
+    finite = np.isfinite(X).all(-1)                                       # (K, C)
     with np.errstate(invalid='ignore'):
-        linked = (d <= link).any(-1)                                      # NaN: False
-    others = np.isfinite(d).any(-1)                   # finite, with another finite joint
-    return others & ~linked
+        reach = np.linalg.norm(X[:, :, None] - X[:, None], axis=-1) <= link   # NaN: False
+    reach |= np.eye(C, dtype=bool) & finite[:, :, None]
+    for _ in range(max(1, int(np.ceil(np.log2(max(C, 2)))))):        # paths up to C joints
+        reach = np.matmul(reach.astype(np.int64), reach.astype(np.int64)) > 0
+    size = reach.sum(-1)                                  # (K, C): joints in its group
+    return finite & (size < size.max(-1, initial=0, keepdims=True))
 
 
 def heat_matrices(heat_cameras):

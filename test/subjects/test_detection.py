@@ -124,7 +124,7 @@ def test_a_captured_joint_is_restarted_and_its_crop_takes_its_own_peak():
     assert step.tracker.ids.tolist() == [0] and step.tracker.started.all()
 
 
-def test_a_joint_linked_to_no_other_joint_of_its_subject_goes():
+def test_joints_not_linked_to_their_subjects_body_go():
     from monet_ros.subjects.detection import detached_joints
 
     # a body of four keypoints in a column (0.3 m apart) whose keypoint 2 is a ghost 1.9 m
@@ -139,13 +139,36 @@ def test_a_joint_linked_to_no_other_joint_of_its_subject_goes():
     # independently: the ghost's nearest other joint of its subject is beyond the link
     nearest = np.linalg.norm(np.delete(A, 2, 0) - A[2], axis=-1).min()
     assert nearest > 0.65
-    # with a link longer than that nearest distance it stays; a joint whose neighbours are
-    # missing but another joint is within the link stays; one joint alone stays
+    # with a link longer than that it is linked: nothing goes
     assert not detached_joints(X, link=nearest + 0.01).any()
-    X[0, 1] = np.nan                          # keypoints 0 and 3 now 0.9 m apart, the ghost
-    assert detached_joints(X, link=0.65)[0].tolist() == [True, False, True, True]
+    # keypoint 1 missing: keypoints 0 and 3 are 0.9 m apart, three lone joints: no largest
+    # group, nothing goes; with a 1 m link 0 and 3 are the body and the ghost goes
+    X[0, 1] = np.nan
+    assert not detached_joints(X, link=0.65)[0].any()
     assert detached_joints(X, link=1.0)[0].tolist() == [False, False, True, False]
+    # one joint alone stays; no subject at all
     one = np.full((1, 4, 3), np.nan)
     one[0, 1] = [5.0, 5.0, 5.0]
-    assert not detached_joints(one, link=0.65).any()
-    assert detached_joints(np.zeros((0, 4, 3)), link=0.65).shape == (0, 4)
+    assert not detached_joints(one, link=0.6).any()
+    assert detached_joints(np.zeros((0, 4, 3)), link=0.6).shape == (0, 4)
+
+
+def test_a_limb_linked_only_to_itself_goes_with_the_body_kept():
+    from monet_ros.subjects.detection import detached_joints
+
+    # six joints of a body within 0.3 m of the next, and an arm of three (shoulder, elbow,
+    # wrist) 0.3 m apart but 1.5 m from the body: taken from elsewhere, it goes
+    body = np.array([[0.0, 0, z] for z in (1.7, 1.5, 1.2, 1.0, 0.7, 0.4)])
+    arm = np.array([[1.5, 0, z] for z in (1.5, 1.2, 0.9)])
+    X = np.concatenate([body[:3], arm, body[3:]])[None]              # the arm at 3..5
+    drop = detached_joints(X, link=0.6)
+    assert drop[0].tolist() == [False] * 3 + [True] * 3 + [False] * 3
+    # independently: single linkage by hand (the arm's nearest body joint is beyond the link)
+    gap = np.linalg.norm(arm[:, None] - body[None], axis=-1).min()
+    assert gap > 0.6
+    # two groups of equal size: both stay
+    X = np.concatenate([body[:3], arm])[None]
+    assert not detached_joints(X, link=0.6).any()
+    # a rig in mm: the same joints go with the link in mm
+    X = 1000 * np.concatenate([body[:3], arm, body[3:]])[None]
+    assert (detached_joints(X, link=600.0) == drop).all()
