@@ -13,7 +13,7 @@ the crop is for) at their projection plus --noise source px of Gaussian noise. S
 measures what fusion adds live (crop-to-track matching, instance decoding, association,
 duplicates, tracking) and the cost per frame, not a network's accuracy.
 
-Rows, with SubjectsConfig.rival_peaks off (the default) and on: identity switches and IDF1
+Rows, with SubjectsConfig.rival_peaks off and on (the default): identity switches and IDF1
 (subjects.metrics, match within --match-m), 3D error per subject (mm, matched frames),
 live_frame per frame (wall median and p90, CPU of the thread median; heatmap peak decoding
 included), crops per frame and the discovery runs. One subject through the same loop (N =
