@@ -42,7 +42,11 @@ Algorithm, per synchronized frame (stamps increasing):
    instance order is not trusted) and are triangulated per subject; a subject whose mean
    joint distance to a subject seen by more cameras (association's order) is below
    duplicate_mm is the same body decoded by two hypotheses' crops: dropped, counted.
-5. The first N subjects (most cameras first; the others counted as `extra`). A keypoint
+5. N subjects: first, per hypothesis in order (tracks first), the subject holding most
+   of that hypothesis' crop instances, if any is left (a subject seen by fewer cameras,
+   e.g. one cut by the image borders, is not pushed out by a neighbour's extra or mixed
+   subject seen by more); then the rest, most cameras first. The others are counted as
+   `extra`. A keypoint
    of two of them closer than duplicate_mm is one body part decoded by two subjects'
    crops (a joint captured from the neighbour: the capturing track's prediction follows
    it, so its next crop would decode the neighbour's joint again): the subject whose
@@ -196,6 +200,27 @@ def shared_joints(X, near):
     loser = np.where(fit[t, c] >= fit[s, c], t, s)
     drop[loser, c] = True
     return drop
+
+
+def claimed_first(instance, keep, H):
+    """The subjects `keep` (K,) (indices into instance's rows, in association order:
+    most cameras first) reordered as module docstring step 5: per hypothesis h = 0..H-1,
+    the not yet claimed subject with the most instances from h's crops (ties: the earlier)
+    comes first, in hypothesis order; then the unclaimed ones in their order. instance
+    (S, V) int: each subject's crop slot (hypothesis) per view, -1 = none. -> (K,) int."""
+    keep = np.asarray(keep, np.int64)
+    if not len(keep) or not H:
+        return keep
+    count = (instance[keep][:, :, None] == np.arange(H)).sum(1)           # (K, H)
+    claimed = np.zeros(len(keep), bool)
+    first = []
+    for h in range(H):                                  # a few hypotheses: at most N + new
+        free = np.where(claimed, -1, count[:, h])
+        k = int(np.argmax(free))
+        if free[k] > 0:
+            claimed[k] = True
+            first.append(k)
+    return np.concatenate([keep[first], keep[~claimed]])
 
 
 def detached_joints(X, link):
@@ -384,7 +409,8 @@ class SubjectsCore:
                 keep.append(s)
         duplicates = len(a.X) - len(keep)
         extra = max(0, len(keep) - self.config.subjects)
-        keep = np.array(keep[:self.config.subjects], np.int64)
+        keep = claimed_first(a.instance, np.array(keep, np.int64), H)
+        keep = keep[:self.config.subjects]
         shared = shared_joints(a.X[keep], self._duplicate)
         X = np.where(shared[..., None], np.nan, a.X[keep])
         detached = detached_joints(X, self._link)

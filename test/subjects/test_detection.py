@@ -172,3 +172,32 @@ def test_a_limb_linked_only_to_itself_goes_with_the_body_kept():
     # a rig in mm: the same joints go with the link in mm
     X = 1000 * np.concatenate([body[:3], arm, body[3:]])[None]
     assert (detached_joints(X, link=600.0) == drop).all()
+
+
+def test_a_subject_seen_by_fewer_cameras_keeps_its_place_among_n():
+    # a frame of 3 hypotheses (0: the outer subject, cut by the image borders, 1 and 2:
+    # two subjects passing each other) on 8 cameras; the association found 4 subjects,
+    # most cameras first: A (7 cameras, mostly hypothesis 1's crops), B (6, hypothesis
+    # 2's), C (6, a mixture of 1's and 2's leftovers) and D (5, all hypothesis 0's: the
+    # outer subject). Most cameras first would keep A, B, C and push D out as extra.
+    from monet_ros.subjects.detection import claimed_first
+
+    _ = -1
+    instance = np.array([
+        [1, 1, 1, 1, 1, 2, 1, _],        # A
+        [2, 2, 2, _, 2, _, 2, 2],        # B
+        [_, _, _, 2, _, 1, _, 1],        # C: only 3 cameras of its own...
+        [0, 0, _, 0, 0, 0, _, _],        # D
+    ])
+    instance[2, :3] = [2, 1, 2]          # ...and 3 more: 6 cameras, a mixture
+    assert ((instance >= 0).sum(1) == [7, 6, 6, 5]).all()
+    order = claimed_first(instance, np.arange(4), 3)
+    assert order.tolist() == [3, 0, 1, 2]                    # D (h 0), A (h 1), B (h 2), C
+    assert sorted(order[:3].tolist()) == [0, 1, 3]           # N = 3 keeps D, not C
+    # independently: the subject holding most of each hypothesis' crops
+    assert [int(np.argmax((instance == h).sum(1))) for h in range(3)] == [3, 0, 1]
+    # a hypothesis whose crops are in no subject claims none; duplicates left out of keep
+    # (here B) are not claimed; no hypotheses, no subjects
+    assert claimed_first(instance, np.array([0, 2, 3]), 5).tolist() == [3, 0, 2]
+    assert claimed_first(instance, np.arange(4), 0).tolist() == [0, 1, 2, 3]
+    assert claimed_first(instance, np.zeros(0, np.int64), 3).tolist() == []
