@@ -13,7 +13,7 @@ the crop is for) at their projection plus --noise source px of Gaussian noise. S
 measures what fusion adds live (crop-to-track matching, instance decoding, association,
 duplicates, tracking) and the cost per frame, not a network's accuracy.
 
-Rows, with SubjectsConfig.rival_peaks off (the default) and on: identity switches and IDF1
+Rows, with SubjectsConfig.rival_peaks off and on (the default): identity switches and IDF1
 (subjects.metrics, match within --match-m), 3D error per subject (mm, matched frames),
 live_frame per frame (wall median and p90, CPU of the thread median; heatmap peak decoding
 included), crops per frame and the discovery runs. One subject through the same loop (N =
@@ -27,14 +27,11 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(_var, '1')  # one core, before numpy loads BLAS
 
 import argparse  # noqa: E402
-import sys  # noqa: E402
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from subjects import cpu_name  # noqa: E402
-
+from monet_ros.cores import cpu_model  # noqa: E402
 from monet_ros.crop_rule import TrackedSubjects  # noqa: E402
 from monet_ros.skeleton import load_skeleton  # noqa: E402
 from monet_ros.subjects.detection import (  # noqa: E402
@@ -126,7 +123,7 @@ def main(argv=None):
     cameras = make_rig(RigConfig(num_cameras=args.cameras), seed=args.seed)
     print(f'# bench/subjects_live.py: {args.frames} frames at 30/s, {args.cameras} cameras, '
           f'human14, noise {args.noise} px, occluded keypoints not rendered, lockstep')
-    print(f'# CPU: {cpu_name()}; loadavg at start {os.getloadavg()}')
+    print(f'# CPU: {cpu_model()}; loadavg at start {os.getloadavg()}')
     print('| subjects | rival_peaks | closest pass (m) | IDSW | IDF1 | 3D error per subject '
           '(mm) | crops/frame | discovery runs | live_frame ms/frame median (p90) | CPU '
           'ms/frame median |')

@@ -149,14 +149,14 @@ def score(csv_path, gt_folder, match_m):
     return identity_scores(truth, X, ids, match_m), len(np.unique(ids[ids >= 0]))
 
 
-def process(rec, model, out, subjects, threads):
-    """One `monet process` run -> dict(wall, cpu, frames, loop_s, identities, births,
-    deaths, stdout)."""
+def process(rec, model, out, subjects, threads, extra=()):
+    """One `monet process` run (extra: more options, with --subjects) -> dict(wall, cpu,
+    frames, loop_s, identities, births, deaths, stdout)."""
     shutil.rmtree(out, ignore_errors=True)
     args = ['process', Path(rec) / 'recording', '--model', model, '--out', out,
             '--threads', threads, '--export', 'csv', '--quiet']
     if subjects is not None:
-        args += ['--subjects', subjects]
+        args += ['--subjects', subjects, *extra]
     stdout, wall, cpu = monet(args, log=Path(str(out) + '.log'))
     loop = LOOP.search(stdout)
     ident = IDENTITIES.search(stdout)
@@ -217,8 +217,14 @@ def main(argv=None):
     p.add_argument('--threads', type=int, default=1, help='torch threads of train/process')
     p.add_argument('--match-m', type=float, default=0.3,
                    help='largest mean keypoint distance (m) of a match')
+    p.add_argument('--rival-peaks', action=argparse.BooleanOptionalAction, default=None,
+                   help='pass --rival-peaks / --no-rival-peaks to monet process --subjects '
+                   "(default: neither, the command's default); outputs in WORK/out-nN-rival "
+                   '/ out-nN-norival')
     p.add_argument('--out', default=str(REPO / 'bench' / 'results' / 'subjects_process.md'))
     args = p.parse_args(argv)
+    extra, suffix = {None: ([], ''), True: (['--rival-peaks'], '-rival'),
+                     False: (['--no-rival-peaks'], '-norival')}[args.rival_peaks]
     if args.train_seed is None:
         args.train_seed = args.seed
     work = Path(args.work)
@@ -275,9 +281,9 @@ def main(argv=None):
     base_mm = 1000 * float(base.error[0])
     rows, plots = [], [('one subject, no --subjects', base, args.frames)]
     for n in args.subjects_list:
-        say(f'N={n}: monet process --subjects {n}; load {load()}')
-        run = process(recordings[n], model, work / f'out-n{n}', n, args.threads)
-        s, identities = score(work / f'out-n{n}' / 'keypoints3d.csv', recordings[n],
+        say(f'N={n}: monet process --subjects {n} {" ".join(extra)}; load {load()}')
+        run = process(recordings[n], model, work / f'out-n{n}{suffix}', n, args.threads, extra)
+        s, identities = score(work / f'out-n{n}{suffix}' / 'keypoints3d.csv', recordings[n],
                               args.match_m)
         _, _, truth = ground_truth(recordings[n])
         rows.append((n, run, s, identities, closest_pass(truth)))
@@ -311,7 +317,8 @@ def main(argv=None):
         f'--cameras {args.cameras} --width {args.width} --height {args.height} '
         '--distinct-sides` (30 frames/s; rings of 0.7 / 1.4 / 2.1 m); processed with '
         f'`monet process REC/recording --model M --subjects N --threads {args.threads} '
-        '--export csv` (the other options at their defaults); baseline: the same without '
+        f'--export csv{"".join(" " + e for e in extra)}` (the other options at their '
+        'defaults); baseline: the same without '
         '`--subjects` on the N = 1 recording.',
         f'- Scores: keypoints3d.csv against ground_truth.npz, match within {args.match_m} m '
         '(mean keypoint distance); 3D error: mean over matched frames; found: frames matched '

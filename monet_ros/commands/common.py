@@ -1,5 +1,6 @@
 """What every `monet` subcommand shares: bounded option checks and output folders written
 atomically (their messages name the path or option, not a subcommand)."""
+import argparse
 from contextlib import contextmanager
 import os
 from pathlib import Path
@@ -141,6 +142,8 @@ def add_subjects_detection_arguments(parser):
                        ('duplicate_mm', float), ('crop_missed', int)):
         parser.add_argument('--' + name.replace('_', '-'), type=kind, default=d[name].default,
                             help='--subjects: ' + d[name].metadata['description'])
-    parser.add_argument('--rival-peaks', action='store_true',
-                        help='--subjects: ' + d['rival_peaks'].metadata['description'])
+    parser.add_argument('--rival-peaks', action=argparse.BooleanOptionalAction,
+                        default=d['rival_peaks'].default,
+                        help='--subjects: ' + d['rival_peaks'].metadata['description']
+                        + ' (default: %(default)s)')
     add_subject_tracking_arguments(parser)

@@ -5,7 +5,7 @@ possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 
         [--heatmaps] [--threads N] [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx]
         [--filter none|kalman|optim]
         [--subjects N [--candidates 3] [--link-mm 600] [--crop-peaks 3] [--duplicate-mm 100]
-         [--crop-missed 1] [--rival-peaks] [--association-px 15] [--gate-mm 400]
+         [--crop-missed 1] [--[no-]rival-peaks] [--association-px 15] [--gate-mm 400]
          [--max-missed-s 0.5]]
 
 Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools

@@ -35,22 +35,31 @@ Algorithm, per synchronized frame (stamps increasing):
    crop's map (>= the confidence threshold), the one nearest the hypothesis' joint
    projected into the view (the highest where the joint is unknown); source pixels and
    the peak value as its score. So a crop showing two subjects decodes the one it was cut
-   for. With rival_peaks (off by default), a chosen peak that lies nearer another
+   for. With rival_peaks (on by default), a chosen peak that lies nearer another
    hypothesis' joint of the same keypoint (projected into the view) than its own is left
    out: the joint is hidden in that view and the peak is the neighbour's.
 4. The instances of all views (slot h = hypothesis h's crop) go through associate (the
    instance order is not trusted) and are triangulated per subject; a subject whose mean
    joint distance to a subject seen by more cameras (association's order) is below
    duplicate_mm is the same body decoded by two hypotheses' crops: dropped, counted.
-5. The first N subjects (most cameras first; the others counted as `extra`). A keypoint
+5. N subjects: first, per hypothesis in order (tracks first), the subject holding most
+   of that hypothesis' crop instances, if any is left (a subject seen by fewer cameras,
+   e.g. one cut by the image borders, is not pushed out by a neighbour's extra or mixed
+   subject seen by more); then the rest, most cameras first. The others are counted as
+   `extra`. A keypoint
    of two of them closer than duplicate_mm is one body part decoded by two subjects'
    crops (a joint captured from the neighbour: the capturing track's prediction follows
    it, so its next crop would decode the neighbour's joint again): the subject whose
    joint lies farther from its own other joints (their median distance) loses it (NaN,
-   counted as `shared`), the other keeps it.
+   counted as `shared`), the other keeps it. Then each subject's joints are grouped by
+   single linkage within link_mm (discovery's linkage, step 1d); joints in a group smaller
+   than the subject's largest are not linked to its body: a ghost (triangulated from
+   peaks of different subjects in different views) or a limb taken from the neighbour,
+   whose track's prediction would keep its crops' peaks there. They go too (NaN, counted
+   as `detached`).
 6. They go to the SubjectTracker: Hungarian assignment to the tracks' predictions
    (gated), births, deaths (subjects.tracking). Its identities are the output's. A
-   joint lost in step 5 is restarted in its track (unstarted: no prediction), so the
+   joint dropped in step 5 is restarted in its track (unstarted: no prediction), so the
    next frame's crops take their highest peak for it (step 3): the crop is centred on
    the track's own body.
 
@@ -94,7 +103,7 @@ class SubjectsConfig:
         1, 'per-subject crops: a track missed in this many consecutive frames gets no crops '
         '(discovery looks for its subject again)', minimum=1)
     rival_peaks: bool = setting(
-        False, "per-subject crops: leave out a keypoint's chosen peak when it lies nearer "
+        True, "per-subject crops: leave out a keypoint's chosen peak when it lies nearer "
         "another subject's predicted joint of that keypoint than its own (a joint hidden "
         "in the view would otherwise take the neighbour's peak)")
 
@@ -112,7 +121,8 @@ class FrameSubjects:
     -1: no discovery this frame), points (discovery's 3D keypoint points), explained (of
     those, near a cropped track's joint), loose (in groups with too few keypoints, or
     beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N),
-    shared (joints dropped as decoded by two subjects, step 5)."""
+    shared (joints dropped as decoded by two subjects, step 5), detached (joints dropped as
+    not linked within link_mm to their subject's largest group of joints, step 5)."""
     association: object
     keep: np.ndarray
     ids: np.ndarray
@@ -126,6 +136,7 @@ class FrameSubjects:
     loose: int = 0
     tracked: int = 0
     shared: int = 0
+    detached: int = 0
 
 
 def subject_keypoints(frame):
@@ -189,6 +200,45 @@ def shared_joints(X, near):
     loser = np.where(fit[t, c] >= fit[s, c], t, s)
     drop[loser, c] = True
     return drop
+
+
+def claimed_first(instance, keep, H):
+    """The subjects `keep` (K,) (indices into instance's rows, in association order:
+    most cameras first) reordered as module docstring step 5: per hypothesis h = 0..H-1,
+    the not yet claimed subject with the most instances from h's crops (ties: the earlier)
+    comes first, in hypothesis order; then the unclaimed ones in their order. instance
+    (S, V) int: each subject's crop slot (hypothesis) per view, -1 = none. -> (K,) int."""
+    keep = np.asarray(keep, np.int64)
+    if not len(keep) or not H:
+        return keep
+    count = (instance[keep][:, :, None] == np.arange(H)).sum(1)           # (K, H)
+    claimed = np.zeros(len(keep), bool)
+    first = []
+    for h in range(H):                                  # a few hypotheses: at most N + new
+        free = np.where(claimed, -1, count[:, h])
+        k = int(np.argmax(free))
+        if free[k] > 0:
+            claimed[k] = True
+            first.append(k)
+    return np.concatenate([keep[first], keep[~claimed]])
+
+
+def detached_joints(X, link):
+    """Joints linked to no larger part of their subject's body (module docstring, step 5):
+    X (K, C, 3) the subjects' joints (NaN: none), link: the largest distance (rig units) of
+    two linked joints of one body. The triangulated joints of a subject fall into groups by
+    single linkage within `link` (discovery's linkage, step 1d); a joint goes when its
+    group has fewer joints than the subject's largest group (two largest groups of equal
+    size both stay: nothing tells which is the body). -> (K, C) bool, True where it goes."""
+    K, C = X.shape[:2]
+    finite = np.isfinite(X).all(-1)                                       # (K, C)
+    with np.errstate(invalid='ignore'):
+        reach = np.linalg.norm(X[:, :, None] - X[:, None], axis=-1) <= link   # NaN: False
+    reach |= np.eye(C, dtype=bool) & finite[:, :, None]
+    for _ in range(max(1, int(np.ceil(np.log2(max(C, 2)))))):        # paths up to C joints
+        reach = np.matmul(reach.astype(np.int64), reach.astype(np.int64)) > 0
+    size = reach.sum(-1)                                  # (K, C): joints in its group
+    return finite & (size < size.max(-1, initial=0, keepdims=True))
 
 
 def heat_matrices(heat_cameras):
@@ -359,8 +409,12 @@ class SubjectsCore:
                 keep.append(s)
         duplicates = len(a.X) - len(keep)
         extra = max(0, len(keep) - self.config.subjects)
-        keep = np.array(keep[:self.config.subjects], np.int64)
-        drop = shared_joints(a.X[keep], self._duplicate)
+        keep = claimed_first(a.instance, np.array(keep, np.int64), H)
+        keep = keep[:self.config.subjects]
+        shared = shared_joints(a.X[keep], self._duplicate)
+        X = np.where(shared[..., None], np.nan, a.X[keep])
+        detached = detached_joints(X, self._link)
+        drop = shared | detached
         if drop.any():
             s, c = np.nonzero(drop)
             a.X[keep[s], c] = np.nan
@@ -374,7 +428,8 @@ class SubjectsCore:
         self.restart(ids, drop)
         return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
-                             extra=extra, tracked=tracked, shared=int(drop.sum()),
+                             extra=extra, tracked=tracked, shared=int(shared.sum()),
+                             detached=int(detached.sum()),
                              **(counts or {}))
 
     def live_frame(self, cameras, stamp_ns, crops, full=()):

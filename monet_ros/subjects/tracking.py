@@ -15,7 +15,11 @@ Rule, per frame (stamps increasing):
    started, cv_kalman.start);
 5. birth: a subject left unmatched with >= min_keypoints triangulated keypoints starts a
    new track with a new identity (identities count up from 0 and are never reused);
-6. death: a track not matched for longer than max_missed_s is removed.
+6. death: a track not matched for longer than max_missed_s is removed; a joint of a
+   live track not measured for longer than max_missed_s is unstarted (predicted NaN, left
+   out of step 2's distance, started again from its next measurement): its prediction
+   would drift on its last velocity, and once measured again its distance could push
+   its own subject past the gate.
 """
 from dataclasses import dataclass
 
@@ -73,6 +77,7 @@ class SubjectTracker:
         self.P = np.zeros((3, 0, self.C))
         self.started = np.zeros((0, self.C), bool)
         self.last_seen = np.zeros(0, np.int64)
+        self.joint_seen = np.zeros((0, self.C), np.int64)    # each joint's last measurement
         self.stamp = None
         self.next_id = 0
         self.births = 0
@@ -117,19 +122,21 @@ class SubjectTracker:
             out[cols] = self.ids[rows]
             matched_t[rows] = True
             self._update(p, P, rows, X[cols], finite[cols])
+            self.joint_seen[rows] = np.where(finite[cols], stamp_ns, self.joint_seen[rows])
         else:
             self.p, self.P = p, P
         self.last_seen[matched_t] = stamp_ns
         born = (out < 0) & (finite.sum(-1) >= self.config.min_keypoints)
         if born.any():
             out[born] = self._birth(X[born], finite[born], stamp_ns)
+        self.started &= (stamp_ns - self.joint_seen) <= self.config.max_missed_s * 1e9
         old = (stamp_ns - self.last_seen) > self.config.max_missed_s * 1e9
         if old.any():
             self.deaths += int(old.sum())
             keep = ~old
             self.ids, self.p, self.v = self.ids[keep], self.p[keep], self.v[keep]
             self.P, self.started = self.P[:, keep], self.started[keep]
-            self.last_seen = self.last_seen[keep]
+            self.last_seen, self.joint_seen = self.last_seen[keep], self.joint_seen[keep]
         self.stamp = stamp_ns
         return out
 
@@ -166,4 +173,5 @@ class SubjectTracker:
         self.P = np.concatenate([self.P, P.reshape(3, k, self.C)], axis=1)
         self.started = np.concatenate([self.started, finite])
         self.last_seen = np.concatenate([self.last_seen, np.full(k, stamp_ns)])
+        self.joint_seen = np.concatenate([self.joint_seen, np.full((k, self.C), stamp_ns)])
         return ids

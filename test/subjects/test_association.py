@@ -191,3 +191,37 @@ def test_frames_without_a_subject(crossing):
     assert len(a.X) == 0 and a.instances == 2 and a.unmatched == 2
     tracker = SubjectTracker(SKELETON.num_keypoints)
     assert tracker.step(a.X, 1).shape == (0,) and tracker.births == 0
+
+
+def test_a_joint_unseen_longer_than_max_missed_is_restarted_not_extrapolated():
+    # a subject of 4 keypoints walking at 1 m/s along x; its keypoint 3 (a hand) swings
+    # forward at 4 m/s for 10 frames, then is not triangulated for 1 s (30 frames, more
+    # than max_missed_s 0.5 s) and comes back beside the body. Its last velocity carried on
+    # would put it ~3 m ahead and the subject's mean distance past the 400 mm gate: a new
+    # identity. Unstarted after 0.5 s unseen, it is left out and started again.
+    dt = 1 / 30
+    body = np.array([[0.0, 0, 1.6], [0.0, 0, 1.3], [0.0, 0, 1.0], [0.3, 0, 1.0]])
+    tracker = SubjectTracker(4)
+    config = tracker.config
+    stamp = lambda t: int(round(t * dt * 1e9))                        # noqa: E731
+    X = body.copy()
+    for t in range(10):
+        X = body + [t * dt * 1.0, 0, 0]
+        X[3, 0] = 0.3 + t * dt * 4.0
+        assert tracker.step(X[None], stamp(t)).tolist() == [0]
+    v_hand = tracker.v[0, 3, 0]
+    assert v_hand > 2.0                                   # the swing is in the track
+    for t in range(10, 40):
+        X = body + [t * dt * 1.0, 0, 0]
+        X[3] = np.nan
+        assert tracker.step(X[None], stamp(t)).tolist() == [0]
+        if (t - 9) * dt > config.max_missed_s:
+            assert np.isnan(tracker.predicted(stamp(t + 1))[0, 3]).all()
+    X = body + [40 * dt * 1.0, 0, 0]
+    # independently: the hand's last position carried on at its last velocity to frame 40
+    # lies more than 4 gates from the hand: alone it would take the mean of 4 joints past
+    # the gate
+    carried = 0.3 + 9 * dt * 4.0 + v_hand * 31 * dt
+    assert abs(X[3, 0] - carried) > 4 * config.gate_mm / 1000
+    assert tracker.step(X[None], stamp(40)).tolist() == [0]        # the same identity
+    assert tracker.births == 1 and tracker.started[0].all()       # the hand started again

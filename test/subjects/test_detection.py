@@ -122,3 +122,82 @@ def test_a_captured_joint_is_restarted_and_its_crop_takes_its_own_peak():
     own_joint[0, 0, 0] = 0.0
     assert step.tracker.step(own_joint, 66_666_666).tolist() == [0]   # its other joint matches
     assert step.tracker.ids.tolist() == [0] and step.tracker.started.all()
+
+
+def test_joints_not_linked_to_their_subjects_body_go():
+    from monet_ros.subjects.detection import detached_joints
+
+    # a body of four keypoints in a column (0.3 m apart) whose keypoint 2 is a ghost 1.9 m
+    # away (triangulated from different subjects' peaks in different views); the other
+    # subject whole
+    A = np.array([[0.0, 0, 1.6], [0.0, 0, 1.3], [0.0, 0, 1.0], [0.0, 0, 0.7]])
+    B = A + [1.0, 0, 0]
+    A[2] = [1.9, 0.0, 1.0]
+    X = np.stack([A, B])
+    drop = detached_joints(X, link=0.65)
+    assert drop.tolist() == [[False, False, True, False], [False] * 4]
+    # independently: the ghost's nearest other joint of its subject is beyond the link
+    nearest = np.linalg.norm(np.delete(A, 2, 0) - A[2], axis=-1).min()
+    assert nearest > 0.65
+    # with a link longer than that it is linked: nothing goes
+    assert not detached_joints(X, link=nearest + 0.01).any()
+    # keypoint 1 missing: keypoints 0 and 3 are 0.9 m apart, three lone joints: no largest
+    # group, nothing goes; with a 1 m link 0 and 3 are the body and the ghost goes
+    X[0, 1] = np.nan
+    assert not detached_joints(X, link=0.65)[0].any()
+    assert detached_joints(X, link=1.0)[0].tolist() == [False, False, True, False]
+    # one joint alone stays; no subject at all
+    one = np.full((1, 4, 3), np.nan)
+    one[0, 1] = [5.0, 5.0, 5.0]
+    assert not detached_joints(one, link=0.6).any()
+    assert detached_joints(np.zeros((0, 4, 3)), link=0.6).shape == (0, 4)
+
+
+def test_a_limb_linked_only_to_itself_goes_with_the_body_kept():
+    from monet_ros.subjects.detection import detached_joints
+
+    # six joints of a body within 0.3 m of the next, and an arm of three (shoulder, elbow,
+    # wrist) 0.3 m apart but 1.5 m from the body: taken from elsewhere, it goes
+    body = np.array([[0.0, 0, z] for z in (1.7, 1.5, 1.2, 1.0, 0.7, 0.4)])
+    arm = np.array([[1.5, 0, z] for z in (1.5, 1.2, 0.9)])
+    X = np.concatenate([body[:3], arm, body[3:]])[None]              # the arm at 3..5
+    drop = detached_joints(X, link=0.6)
+    assert drop[0].tolist() == [False] * 3 + [True] * 3 + [False] * 3
+    # independently: single linkage by hand (the arm's nearest body joint is beyond the link)
+    gap = np.linalg.norm(arm[:, None] - body[None], axis=-1).min()
+    assert gap > 0.6
+    # two groups of equal size: both stay
+    X = np.concatenate([body[:3], arm])[None]
+    assert not detached_joints(X, link=0.6).any()
+    # a rig in mm: the same joints go with the link in mm
+    X = 1000 * np.concatenate([body[:3], arm, body[3:]])[None]
+    assert (detached_joints(X, link=600.0) == drop).all()
+
+
+def test_a_subject_seen_by_fewer_cameras_keeps_its_place_among_n():
+    # a frame of 3 hypotheses (0: the outer subject, cut by the image borders, 1 and 2:
+    # two subjects passing each other) on 8 cameras; the association found 4 subjects,
+    # most cameras first: A (7 cameras, mostly hypothesis 1's crops), B (6, hypothesis
+    # 2's), C (6, a mixture of 1's and 2's leftovers) and D (5, all hypothesis 0's: the
+    # outer subject). Most cameras first would keep A, B, C and push D out as extra.
+    from monet_ros.subjects.detection import claimed_first
+
+    _ = -1
+    instance = np.array([
+        [1, 1, 1, 1, 1, 2, 1, _],        # A
+        [2, 2, 2, _, 2, _, 2, 2],        # B
+        [_, _, _, 2, _, 1, _, 1],        # C: only 3 cameras of its own...
+        [0, 0, _, 0, 0, 0, _, _],        # D
+    ])
+    instance[2, :3] = [2, 1, 2]          # ...and 3 more: 6 cameras, a mixture
+    assert ((instance >= 0).sum(1) == [7, 6, 6, 5]).all()
+    order = claimed_first(instance, np.arange(4), 3)
+    assert order.tolist() == [3, 0, 1, 2]                    # D (h 0), A (h 1), B (h 2), C
+    assert sorted(order[:3].tolist()) == [0, 1, 3]           # N = 3 keeps D, not C
+    # independently: the subject holding most of each hypothesis' crops
+    assert [int(np.argmax((instance == h).sum(1))) for h in range(3)] == [3, 0, 1]
+    # a hypothesis whose crops are in no subject claims none; duplicates left out of keep
+    # (here B) are not claimed; no hypotheses, no subjects
+    assert claimed_first(instance, np.array([0, 2, 3]), 5).tolist() == [3, 0, 2]
+    assert claimed_first(instance, np.arange(4), 0).tolist() == [0, 1, 2, 3]
+    assert claimed_first(instance, np.zeros(0, np.int64), 3).tolist() == []
