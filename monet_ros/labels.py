@@ -61,7 +61,7 @@ keypoints, options)`:
   microseconds / seconds instead of nanoseconds;
 - u must lie in [-0.5, width - 0.5] and v in [-0.5, height - 0.5] (pixel-edge box of the
   camera's image, the convention of `monet synth`);
-- a subject must be an integer >= 0;
+- a subject must be an integer 0..2**31 - 1 (MAX_SUBJECT);
 - a (instant, camera, keypoint, subject) may be labelled once.
 Every bad row raises LabelError naming file, line and field; with
 `LabelOptions(skip_bad=True)` (`--skip-bad-labels`) it is dropped and counted by kind in
@@ -81,6 +81,9 @@ FRAME_HEADER = ('frame', 'camera', 'keypoint', 'u', 'v')
 SCORED_FRAME_HEADER = FRAME_HEADER + ('score',)
 SUBJECT_HEADERS = (FRAME_HEADER + ('subject',), SCORED_FRAME_HEADER + ('subject',))
 # labels files with the optional subject column (an integer id; module docstring)
+# the largest subject id: it travels as the UINT32 `subject` field of /monet/keypoints3d and
+# as int32 / int64 arrays, so it must fit a signed 32-bit integer
+MAX_SUBJECT = 2 ** 31 - 1
 LABEL_SUBJECT_HEADERS = (HEADER + ('subject',), FRAME_HEADER + ('subject',))
 
 
@@ -285,10 +288,12 @@ def read_labels(path, keypoints=None):
 
 
 def _check_subject(row):
-    """None when row.subject is an integer >= 0, else the reason (text)."""
+    """None when row.subject is an integer 0..MAX_SUBJECT, else the reason (text)."""
     s = row.subject
     if isinstance(s, bool) or not isinstance(s, (int, np.integer)) or s < 0:
         return f'{s!r} is not an integer >= 0 (the subject id within its instant)'
+    if s > MAX_SUBJECT:
+        return f'{s} is above {MAX_SUBJECT} (the largest subject id)'
     return None
 
 
@@ -355,10 +360,7 @@ def _parse_row(path, line, row, header, points=False):
         try:
             subject_id = int(text)
         except ValueError:
-            raise LabelError(f'{path}:{line}: field subject: {text!r} is not an integer '
-                             '>= 0 (the subject id within its instant)') from None
-        if subject_id < 0:
-            raise LabelError(f'{path}:{line}: field subject: must be >= 0, got {subject_id}')
+            subject_id = text       # _check_subject refuses it (or --skip-bad-labels drops it)
     elif header[-1] == 'subject':
         subject = row[-1].strip()
         if not subject or '/' in subject:

@@ -63,16 +63,22 @@ def test_two_subjects_round_trip(tmp_path):
     assert table.points(3000, ['cam1'], 1)[0, 1].tolist() == [5.0, 6.0]
 
 
-@pytest.mark.parametrize('cell,reason', [('-1', 'must be >= 0, got -1'),
+@pytest.mark.parametrize('cell,reason', [('-1', '-1 is not an integer >= 0'),
                                          ('a', "'a' is not an integer >= 0"),
                                          ('1.5', "'1.5' is not an integer >= 0"),
-                                         ('', "'' is not an integer >= 0")])
+                                         ('', "'' is not an integer >= 0"),
+                                         ('99999999999999999999', 'is above 2147483647')])
 def test_a_bad_subject_cell_names_file_line_and_field(tmp_path, cell, reason):
     path = tmp_path / 'bad.csv'
     path.write_text(f'stamp_ns,camera,keypoint,u,v,subject\n1000,cam0,head,1,2,0\n'
                     f'1000,cam0,head,1,2,{cell}\n')
-    with pytest.raises(LabelError, match=rf'^{path}:3: field subject: {reason}'):
-        read_label_rows(path)
+    rows = read_label_rows(path)
+    with pytest.raises(LabelError, match=rf'^{path}:3: field subject: .*{reason}'):
+        resolve_labels(rows, STAMPS, CAMERAS, KEYPOINTS)
+    # --skip-bad-labels: the row is dropped and counted, the rest kept
+    table, report = resolve_labels(rows, STAMPS, CAMERAS, KEYPOINTS,
+                                   LabelOptions(skip_bad=True))
+    assert report.skipped == {'subject': 1} and report.kept == 1 and table.subjects == [0]
 
 
 def test_the_validator_checks_subjects_and_duplicates_per_subject():
