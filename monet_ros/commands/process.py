@@ -387,6 +387,7 @@ def run(args):
         print_subjects(figures, args.out)
         for fmt, path in figures['exports'].items():
             print(f'monet process: wrote {fmt}: {path}')
+        print_reading(figures, args.bag)
         return 0
     fps = figures['frames'] / figures['seconds'] if figures['seconds'] else 0.0
     skipped = figures['skipped_views']
@@ -397,9 +398,6 @@ def run(args):
           f'{figures["mean_error"]:.2f} px; mean inlier views '
           f'{0.0 if figures["mean_views"] != figures["mean_views"] else figures["mean_views"]:.2f}'
           f' -> {args.out} (3D in {figures["units"]}, the rig\'s unit)')
-    for name, count in sorted(skipped.items()):
-        print(f'monet process: skipped {count} views of {name}: '
-              f'{figures["skip_reasons"][name]}', file=sys.stderr)
     summary = figures['summary']
     if summary['frames']:
         dropout = ', '.join(f'{k} {100 * v:.0f}%' for k, v in summary['dropout'].items())
@@ -414,7 +412,18 @@ def run(args):
             print(f'monet process: filter: {note}')
     for fmt, path in figures['exports'].items():
         print(f'monet process: wrote {fmt}: {path}')
+    print_reading(figures, args.bag)
+    return 0
+
+
+def print_reading(figures, bag):
+    """What reading the recording skipped (stderr): views per camera with their first
+    reason, and the reader's report when it is not clean (a truncated file, records that
+    do not decode); the same for one subject and for --subjects N."""
+    skipped = figures['skipped_views']
+    for name, count in sorted(skipped.items()):
+        print(f'monet process: skipped {count} views of {name}: '
+              f'{figures["skip_reasons"][name]}', file=sys.stderr)
     report = figures['report']
     if report is not None and not report.ok:
-        print(f'monet process: reading {args.bag}: {report.summary()}', file=sys.stderr)
-    return 0
+        print(f'monet process: reading {bag}: {report.summary()}', file=sys.stderr)

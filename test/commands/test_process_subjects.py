@@ -125,3 +125,28 @@ def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
         err = [line for line in err if 'precision' not in line]
         assert code == 2 and len(err) == 1 and words in err[0], (extra, err)
         assert not (tmp_path / 'x').exists()
+
+
+def test_a_truncated_recording_is_reported_as_with_one_subject(scene, tmp_path, capsys):
+    """A recording cut short (no footer, a record running past the end) is read as far as
+    it goes and the reader's report is printed, with --subjects 2 as with one subject."""
+    import shutil
+
+    folder, _, _ = scene
+    cut = tmp_path / 'cut'
+    shutil.copytree(folder / 'recording', cut)
+    mcap = next(cut.glob('*.mcap'))
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[:-200])              # the footer and the end of the summary lost
+    reports = []
+    for extra in ([], ['--subjects', '2', '--link-mm', '450']):
+        code = monet(['process', str(cut), '--rig', str(folder / 'rig.yaml'), '--model',
+                      str(scene[2]), '--out', str(tmp_path / f'out{len(extra)}'), *COMMON,
+                      *extra])
+        err = capsys.readouterr().err
+        lines = [line for line in err.splitlines()
+                 if line.startswith(f'monet process: reading {cut}: ')]
+        assert code == 0 and len(lines) == 1, (extra, err)
+        reports.append(lines[0])
+    assert reports[0] == reports[1]
+    assert 'footer' in reports[0] or 'truncated' in reports[0], reports[0]
