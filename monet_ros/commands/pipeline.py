@@ -143,7 +143,9 @@ class Summary:
         self.joint_fused = None   # (C,) frames in which each joint was triangulated
         self.joint_views = None   # (C,) sum of its inlier views over those frames
         self.joint_frames = 0     # frames (with several subjects: subject-frames) counted
-        self.subject_counts = None  # callable: (tracked, births, deaths), subjects >= 2
+        # callable: (identities alive, of them matched in the last frame, births, deaths),
+        # subjects >= 2
+        self.subject_counts = None
         self.names = None         # keypoint names (the fusion node's skeleton)
         self.stale_frames = None  # callable: frames fusion skipped as stale (max_queue_ms)
 
@@ -217,8 +219,11 @@ class Summary:
         elif window is None and self.error_count:
             parts.append(f'reprojection error {error_mean:5.2f} px')
         if self.subject_counts is not None:
-            tracked, births, deaths = self.subject_counts()
-            parts.append(f'subjects {tracked} tracked, {births} births, {deaths} deaths')
+            alive, last, births, deaths = self.subject_counts()
+            # alive: identities the tracker still holds (missed ones until max_missed_s),
+            # which can be more than --subjects; at most N are output per frame
+            parts.append(f'subjects {last} in the last frame ({alive} identities alive), '
+                         f'{births} births, {deaths} deaths')
         if window is None and self.joint_fused is not None and self.joint_frames:
             parts.append(self.joint_line())
         return ' | '.join(parts)
@@ -460,9 +465,11 @@ def run(args):
             summary.names = list(fusion.skeleton.keypoints)
             summary.stale_frames = lambda: fusion.stale_frames
             if fusion.subjects is not None:
-                summary.subject_counts = lambda: (len(fusion.subject_stats),
-                                                  fusion.subjects.tracker.births,
-                                                  fusion.subjects.tracker.deaths)
+                summary.subject_counts = lambda: (
+                    len(fusion.subject_stats),
+                    sum(e['last_stamp_ns'] == fusion.last_stamp_ns
+                        for e in fusion.subject_stats.values()),
+                    fusion.subjects.tracker.births, fusion.subjects.tracker.deaths)
             listener = Node('pipeline', **node_namespace({}))
             frames_listener(listener, summary)
             nodes.append(listener)

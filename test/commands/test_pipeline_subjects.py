@@ -46,7 +46,7 @@ def test_pipeline_tracks_two_subjects(ros_env, tmp_path):
     last = proc.output().strip().splitlines()
     line = next(x for x in reversed(last) if x.startswith('monet pipeline:'))
     assert f'frames {T} fused of {T} played' in line, line
-    assert 'subjects 2 tracked, 2 births, 0 deaths' in line, line
+    assert 'subjects 2 in the last frame (2 identities alive), 2 births, 0 deaths' in line, line
     assert 'joints triangulated 100%' in line, line
 
 
