@@ -134,6 +134,12 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,
                         camera_map=camera_map, pose_model=pose_model)
     notes += pts.notes
+    instances = {k.split('/', 1)[0] for k in pts.keypoints if '/' in k}
+    if instances:        # several instances per camera (a subject column, tracks) need N
+        raise ConfigError('monet triangulate', 'subjects', f'{", ".join(map(str, paths))} '
+                          f'holds {len(instances)} instances per camera (a subject column, '
+                          f'SLEAP tracks or DeepLabCut individuals: {sorted(instances)[0]!r}'
+                          ', ...): give --subjects N (the most subjects in a frame)')
     used = [v for v in range(len(names)) if np.isfinite(pts.points[:, v]).any()]
     if len(used) < max(2, fusion_config.min_views):
         raise ValueError(f'{", ".join(map(str, paths))}: detections in '
