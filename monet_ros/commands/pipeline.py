@@ -537,6 +537,13 @@ def run(args):
         rclpy.try_shutdown()
     if failed:
         return 2
+    if summary.replay_ended.is_set() and not summary.frames_published:
+        # the whole recording went by without one frame (unreadable, truncated, no image
+        # of the rig's cameras): an error, not an empty success
+        print(f'monet pipeline: error: {args.bag}: the replay ended without playing a frame '
+              "(the player's warnings above say why; `monet info` shows what it holds)",
+              file=sys.stderr, flush=True)
+        return 2
     if nodes and nodes[0].last_result is not None:
         print(keypoint_table(nodes[0]), flush=True)
     if score is not None:

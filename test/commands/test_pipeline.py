@@ -199,3 +199,18 @@ def test_player_and_two_detectors_run_in_child_processes_and_lockstep_fuses_ever
     share = max(1, len(os.sched_getaffinity(0)) // 2)
     assert all(f'threads:={share}' in cmd.split() for cmd in detectors.values()), detectors
     assert [header_stamp_ns(c) for c in clouds[:len(expected)]] == expected, proc.output()
+
+
+def test_a_recording_that_plays_no_frame_is_an_error(ros_env, tmp_path):
+    """A recording cut short before its first complete chunk (its rig given as a file):
+    the replay ends without a frame, which exits 2 with one error line, not an empty 0."""
+    rig, _ = noise_recording(tmp_path / 'rec', cameras=2, frames=3)
+    save_rig(tmp_path / 'rig.yaml', rig)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    mcap = next((tmp_path / 'rec').glob('*.mcap'))
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[:len(data) // 3])
+    with pipeline(ros_env, '--bag', tmp_path / 'rec', '--rig', tmp_path / 'rig.yaml',
+                  '--model', model) as proc:
+        assert proc.wait(timeout=120) == 2, proc.output()
+    assert 'the replay ended without playing a frame' in proc.output(), proc.output()
