@@ -124,6 +124,19 @@ def bad_input_errors():
     return tuple(errors)
 
 
+def given_option(error, argv):
+    """'--link-mm: ' when `error` is a ConfigError of a setting the user gave as that
+    option on the command line (the config's field, dashes for underscores), else ''. So
+    the line names what was typed, not only the setting inside (a value from a file or a
+    default is not attributed to an option)."""
+    field = getattr(error, 'field', None)
+    if not isinstance(field, str) or not field:
+        return ''
+    option = '--' + field.replace('_', '-')
+    given = any(a == option or a.startswith(option + '=') for a in argv)
+    return f'{option}: ' if given else ''
+
+
 def main(argv=None):
     """Run `monet ARGV`; returns the exit code (see the module docstring)."""
     name = 'monet'
@@ -145,8 +158,8 @@ def main(argv=None):
             except bad_input_errors() as error:
                 if os.environ.get('MONET_TRACEBACK'):
                     raise
-                print(f'{name}: error: {error_line(error, name)}', file=sys.stderr,
-                      flush=True)
+                print(f'{name}: error: {given_option(error, argv)}{error_line(error, name)}',
+                      file=sys.stderr, flush=True)
                 return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print(f'{name}: stopped', file=sys.stderr, flush=True)

@@ -31,3 +31,16 @@ def test_abbreviations_still_parse(capsys, tmp_path):
                   '--rig-u', 'mm', '--out', str(tmp_path / 'o')]) == 2
     err = capsys.readouterr().err
     assert 'unrecognized' not in err and ('x.csv' in err or 'r.yaml' in err)
+
+
+@pytest.mark.parametrize('extra, start', [
+    (['--fps', '-1'], "monet triangulate: error: --fps: parameter 'fps': must be > 0"),
+    (['--fps=-1'], "monet triangulate: error: --fps: parameter 'fps': must be > 0"),
+    # the setting is named, but its value was not typed as --fps: no option is named
+    (['--filter', 'kalman'], "monet triangulate: error: parameter 'fps': --filter kalman"),
+])
+def test_a_bad_setting_given_as_an_option_names_the_option(extra, start, capsys, tmp_path):
+    assert monet(['triangulate', str(tmp_path / 'x.csv'), '--rig', str(tmp_path / 'r.yaml'),
+                  '--out', str(tmp_path / 'o'), *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(start) and '\n' not in err, err
