@@ -143,17 +143,30 @@ def int8_calibration(calibration, track, rule=None, cameras=None, slop_ns=0, fus
     detector of the network only when no quant of that key is cached; anything else is
     given as it is (a recording of a full-frame run: its full-frame crops,
     models.quantize.calibration_crops), but a recording of a fixed-box run becomes a
-    function detector -> that box's crops of it."""
+    function detector -> that box's crops of it. The functions are RecordingCrops, whose
+    `recording` the Detector checks first, cached quant or not (a missing path, or one that
+    is no recording, is refused the same either way: models.quantize.check_calibration)."""
     key = crops_key(track, rule, box)
     recording = isinstance(calibration, (str, os.PathLike)) and str(calibration) != '' \
         and not str(calibration).endswith(INT8_SUFFIX)
     if not recording or key == FULL_CROPS:
         return key, calibration
+    if not track:
+        return key, RecordingCrops(calibration, lambda detector: calibration_crops(
+            calibration, detector.input_size, box=box))
+    return key, RecordingCrops(calibration, lambda detector: tracked_crops(
+        calibration, detector, rule, cameras, slop_ns=slop_ns, fusion=fusion))
 
-    def make(detector):
-        if not track:
-            return calibration_crops(calibration, detector.input_size, box=box)
-        return tracked_crops(calibration, detector, rule, cameras, slop_ns=slop_ns,
-                             fusion=fusion)
 
-    return key, make
+class RecordingCrops:
+    """The calibration crops of `recording` for one crop mode: called with a float32
+    models.Detector of the network, `make(detector)` -> (N, H, W, 3) uint8. `recording` is
+    what models.quantize checks (check_recording) before looking for a cached quant, and
+    names in the note of the quant it writes."""
+
+    def __init__(self, recording, make):
+        self.recording = recording
+        self.make = make
+
+    def __call__(self, detector):
+        return self.make(detector)

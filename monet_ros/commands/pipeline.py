@@ -393,9 +393,10 @@ def run(args):
         fusion = FusionConfig(threshold_px=args.threshold_px,
                               confidence_threshold=args.confidence_threshold)
         int8_crops, given = int8_calibration(args.calibration or args.bag, True, fusion=fusion)
-        Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
-                                 threads=args.threads, precision='int8', calibration=given,
-                                 int8_crops=int8_crops)
+        detector = Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
+                                            threads=args.threads, precision='int8',
+                                            calibration=given, int8_crops=int8_crops)
+        print(f'monet pipeline: {detector.int8_note}', file=sys.stderr, flush=True)
         calibration = str(cached_int8(args.model, crops=int8_crops) or args.calibration or
                           args.bag)
     use_large_data_profile()

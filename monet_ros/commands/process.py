@@ -129,7 +129,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
                       skeleton=None, progress=True, backend='torch', threads=0, exports=(),
                       trc_axes='xyz', camera_map=(), precision='auto', filter_config=None,
                       rig_units=None, reduced_decode=True, calibration=None, subjects=None,
-                      association=None, tracker=None):
+                      association=None, tracker=None, log=None):
     """Detect + fuse every instant of `bag`; write `out` (a rosbag2 folder, written
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
@@ -148,11 +148,12 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     figures['units'] is the rig's unit, that of the 3D outputs.
     reduced_decode: JPEG views are decoded at the crop's scale (io.jpeg_scale; False: full
     decodes, for comparison). calibration: precision int8's calibration data (a recording
-    or a cached quant; None = `bag` itself), read only when the checkpoint has no cached
-    quant of the run's crops: int8 calibrates on the crops the run makes
+    or a cached quant; None = `bag` itself), checked always but read only when the
+    checkpoint has no cached quant of the run's crops: int8 calibrates on the crops the run makes
     (monet_ros.int8_calibration: tracked crops made by the float32 network with the
     tracked rule, or with config.track False full-frame crops; the quant's cache name says
-    which, run_calibration).
+    which, run_calibration). log: None, or a function given one-line notes (int8: what it
+    calibrated on and which quant it wrote, or which cached quant it uses).
     subjects: a subjects.detection.SubjectsConfig; with subjects >= 2 several subjects
     (commands.process_subjects: figures then has 'subjects' (subjects.offline.SubjectRows)
     and 'subject_counts'; association: subjects.AssociationConfig (None: from config's
@@ -193,6 +194,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     detector = Detector.from_checkpoint(model, device=device, backend=backend, threads=threads,
                                         precision=precision, calibration=calibration,
                                         int8_crops=int8_crops)
+    if log is not None and detector.int8_note:
+        log(detector.int8_note)
     edges = None
     if skeleton is not None:
         edges = load_skeleton(skeleton).bone_indices
@@ -359,6 +362,10 @@ def run(args):
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)
     print_precision('monet process', args.precision, args.backend, device, args.model)
+
+    def note(line):            # the notes of the run (int8's quant), as the other notes
+        print(f'monet process: {line}', file=sys.stderr, flush=True)
+
     options = dict(model=args.model, rig=args.rig, cameras=args.cameras or (), config=config,
                    skeleton=args.skeleton, backend=args.backend,
                    exports=parse_formats(args.export if args.export is not None else
@@ -373,15 +380,17 @@ def run(args):
     if len(args.bag) > 1 and args.precision == 'int8':   # quantised once, before the workers
         from monet_ros.models import Detector
         int8_crops, calibration = run_calibration(config, args.calibration, args.bag[0])
-        Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
-                                 precision='int8', calibration=calibration,
-                                 int8_crops=int8_crops)
+        detector = Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
+                                            precision='int8', calibration=calibration,
+                                            int8_crops=int8_crops)
+        note(detector.int8_note)
     if len(args.bag) > 1:         # several recordings: worker processes (process_many.py)
         from monet_ros.commands.process_many import run_many
         return run_many(args, options, process_recording)
     args.bag = args.bag[0]
     figures = process_recording(args.bag, out=args.out, device=device,
-                                progress=not args.quiet, threads=args.threads, **options)
+                                progress=not args.quiet, threads=args.threads, log=note,
+                                **options)
     if 'subjects' in figures:
         from monet_ros.commands.process_subjects import print_subjects
         print_subjects(figures, args.out)

@@ -132,7 +132,9 @@ class Detector:
     quant of this checkpoint and crops key, crops (N, H, W, 3) uint8 of that mode, or a
     function detector -> crops that makes them with a float32 Detector of the same network
     (int8_calibration's tracked calibration), called only without a cached quant; needed
-    unless the checkpoint has a cached quant of these crops), or
+    unless the checkpoint has a cached quant of these crops, and checked even then:
+    models.quantize.check_calibration; `int8_note` is then the one line saying what it
+    calibrated on and which quant it wrote, or which cached quant it uses), or
     'auto' (bfloat16 with torch where native, else float32; never int8: resolve_precision;
     `precision` is then the one chosen and `precision_note` the line saying why).
     The torch backend keeps the network and its input channels-last (NHWC), the layout
@@ -170,16 +172,21 @@ class Detector:
         self.heatmap_size = tuple(model.heatmap_size)   # (h, w)
         self.backend = backend
         self.runner = None
+        self.int8_note = None    # precision int8: the line saying which quant it runs
         if backend == 'onnxruntime' and self.precision == 'int8':
             from monet_ros.models.quantize import int8_onnx_for
             cpu_model = copy.deepcopy(self.model).cpu()
             if callable(calibration):        # crops made by float32 with the run's crop rule
                 make = calibration
-                calibration = lambda: make(Detector(     # noqa: E731 - called once, if at all
-                    cpu_model, metadata, device='cpu', fuse=False, threads=threads))
-            self.runner = OnnxRunner(int8_onnx_for(cpu_model, checkpoint, calibration,
-                                                   crops=int8_crops),
-                                     self.device, threads)
+
+                def calibration():              # called once, if at all
+                    return make(Detector(cpu_model, metadata, device='cpu', fuse=False,
+                                         threads=threads))
+                # the recording it reads: checked, named in int8_note
+                calibration.recording = getattr(make, 'recording', None)
+            network, self.int8_note = int8_onnx_for(cpu_model, checkpoint, calibration,
+                                                    crops=int8_crops)
+            self.runner = OnnxRunner(network, self.device, threads)
         elif backend == 'onnxruntime':
             cpu_model = copy.deepcopy(self.model).cpu()
             self.runner = (onnx_runner_for(cpu_model, checkpoint, self.device, threads)

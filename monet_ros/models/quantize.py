@@ -219,8 +219,77 @@ def quantize_onnx(float_onnx, crops):
         return target.read_bytes()
 
 
+def check_recording(recording):
+    """`recording` (a rosbag2 folder or .mcap holding an Image or CompressedImage topic:
+    calibration data) or Int8Error, one line naming it (parameter / option calibration):
+    it does not exist, is not a recording (a file without the MCAP magic, a folder without
+    .mcap files) or has no image topic. Reads the magic, metadata.yaml and the files'
+    summaries, no message."""
+    from monet_ros.io import open_bag
+    from monet_ros.io.mcap_scan import MAGIC
+
+    path = Path(recording)
+    where = (f'calibration {recording}: neither a recording (rosbag2 folder or .mcap) nor a '
+             f'quant (*{INT8_SUFFIX})')
+    if not path.exists():
+        raise Int8Error(f'calibration {recording}: no such file or folder (a recording: '
+                        f'rosbag2 folder or .mcap, or a quant *{INT8_SUFFIX})')
+    try:
+        if path.is_file():
+            with open(path, 'rb') as stream:
+                if stream.read(len(MAGIC)) != MAGIC:
+                    raise Int8Error(f'{where}: no MCAP magic at its start')
+        topics = open_bag(path).topics_of_type('sensor_msgs/msg/Image',
+                                               'sensor_msgs/msg/CompressedImage')
+    except (OSError, ValueError) as error:
+        if isinstance(error, Int8Error):
+            raise
+        raise Int8Error(f'{where} ({error})') from None
+    if not topics:
+        raise Int8Error(f'calibration {recording}: a recording without an Image or '
+                        'CompressedImage topic (nothing to calibrate on)')
+    return recording
+
+
+def check_calibration(calibration, crops=FULL_CROPS, checkpoint=None, sha256=None):
+    """Check int8_onnx_for's `calibration` for a run with crops key `crops` before any
+    cached quant is looked up, so it is refused the same whether or not one is cached.
+    Returns the quant (Path) when it is one, else None. Raises Int8Error (one line naming
+    calibration and the file): a quant (`*.int8.onnx`) of other crops, of other weights
+    than `checkpoint` (sha256: its sha256, None = read it) or missing; a recording (str /
+    Path, or a function with a `recording` attribute: int8_calibration's) that
+    check_recording refuses; a recording given as a path for crops other than 'full'."""
+    if isinstance(calibration, (str, Path)) and str(calibration).endswith(INT8_SUFFIX):
+        given = Path(calibration)
+        if not given.name.endswith(f'.{crops}{INT8_SUFFIX}'):
+            raise Int8Error(f'calibration {given}: a quant calibrated on other crops than '
+                            f"this run's ({crops}: the quant must be named *.{crops}"
+                            f'{INT8_SUFFIX}; give the recording to calibrate on instead)')
+        if checkpoint is not None:
+            sha256 = sha256 or sha256_file(checkpoint)
+            if not given.name.endswith(f'.{sha256[:16]}.{crops}{INT8_SUFFIX}'):
+                mine = int8_path_for(checkpoint, sha256, crops)
+                raise Int8Error(f'calibration {given}: a quant of other weights (this '
+                                f'checkpoint is {Path(checkpoint).name}, sha256 '
+                                f'{sha256[:16]}: {mine.name})')
+        if not given.is_file():
+            raise Int8Error(f'calibration {given}: no such quant')
+        return given
+    if isinstance(calibration, (str, Path)) and str(calibration):
+        if crops != FULL_CROPS:
+            raise Int8Error(f'calibration {calibration}: int8 with crops {crops} calibrates '
+                            'on the crops the run makes, not on full frames of a recording '
+                            'read here (monet_ros.int8_calibration makes them)')
+        check_recording(calibration)
+    elif callable(calibration) and getattr(calibration, 'recording', None) is not None:
+        check_recording(calibration.recording)
+    return None
+
+
 def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=FULL_CROPS):
-    """The int8 network of `model` (eval mode, CPU) as a path (cached) or ONNX bytes.
+    """(the int8 network of `model` (eval mode, CPU) as a path (cached) or ONNX bytes, the
+    one line saying which quant: calibrated on what and written where, or the cached or
+    given quant used).
 
     crops: the crops key of the run (the module docstring's calibration rule): 'full' or a
     tracked key; it names the cached quant, and the calibration data must be of those
@@ -230,11 +299,12 @@ def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=F
     with crops 'full' calibration_crops; other keys need the crops of their rule,
     monet_ros.int8_calibration), a cached quant (`*.<crops>.int8.onnx`, which must
     be this checkpoint's and of these crops), crops (N, H, W, 3) uint8, or a function of no
-    argument returning such crops (called only when no cached quant exists).
-    A cached quant is used as it is (calibration is then not read). Where the folder is
-    not writable the quant is used from memory. Raises Int8Error (one line) when there is
-    no calibration data and no cached quant, or the quant given is another checkpoint's or
-    of other crops, or a recording is given for crops other than 'full'."""
+    argument returning such crops (called only when no cached quant exists; with a
+    `recording` attribute, the recording it reads, named in the note and checked).
+    `calibration` is checked first (check_calibration), cached quant or not; then a cached
+    quant is used as it is (calibration is not read). Where the folder is not writable the
+    quant is used from memory. Raises Int8Error (one line) when there is no calibration
+    data and no cached quant, or check_calibration refuses it."""
     from monet_ros.models.onnx_backend import export_onnx
 
     check_crops_key(crops)
@@ -242,41 +312,32 @@ def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=F
     if checkpoint is not None:
         sha256 = sha256 or sha256_file(checkpoint)
         path = int8_path_for(checkpoint, sha256, crops)
-        if path.is_file():
-            return path
-    if isinstance(calibration, (str, Path)) and str(calibration).endswith(INT8_SUFFIX):
-        given = Path(calibration)
-        if not given.name.endswith(f'.{crops}{INT8_SUFFIX}'):
-            raise Int8Error(f'calibration {given}: a quant calibrated on other crops than '
-                            f"this run's ({crops}: the quant must be named *.{crops}"
-                            f'{INT8_SUFFIX}; give the recording to calibrate on instead)')
-        if path is not None and not given.name.endswith(f'.{sha256[:16]}.{crops}'
-                                                        f'{INT8_SUFFIX}'):
-            raise Int8Error(f'calibration {given}: a quant of other weights (this checkpoint '
-                            f'is {Path(checkpoint).name}, sha256 {sha256[:16]}: {path.name})')
-        if not given.is_file():
-            raise Int8Error(f'calibration {given}: no such quant')
-        return given
+    given = check_calibration(calibration, crops, checkpoint, sha256)
+    if path is not None and path.is_file():
+        return path, f'precision int8: cached quant {path} (crops {crops}; not calibrating)'
+    if given is not None:
+        return given, f'precision int8: the given quant {given} (crops {crops})'
     if calibration is None or (isinstance(calibration, str) and not calibration):
         where = f' and no cached quant {path}' if path is not None else ''
         raise Int8Error(f'precision int8 needs calibration data (a recording or a cached '
                         f'quant: parameter calibration){where}')
+    source = ''
     if isinstance(calibration, (str, Path)):
-        if crops != FULL_CROPS:
-            raise Int8Error(f'calibration {calibration}: int8 with crops {crops} calibrates '
-                            'on the crops the run makes, not on full frames of a recording '
-                            'read here (monet_ros.int8_calibration makes them)')
+        source = f' of {calibration}'
         crops_data = calibration_crops(calibration, model.input_size)
     elif callable(calibration):
+        recording = getattr(calibration, 'recording', None)
+        source = f' of {recording}' if recording is not None else ''
         crops_data = np.asarray(calibration())
     else:
         crops_data = np.asarray(calibration)
     data = quantize_onnx(export_onnx(model), crops_data)
+    said = f'precision int8: calibrated on {len(crops_data)} crops ({crops}){source}'
     if path is None:
-        return data
+        return data, f'{said}; kept in memory (no checkpoint to cache it beside)'
     try:
         with atomic_write(path) as stream:
             stream.write(data)
     except OSError:
-        return data
-    return path
+        return data, f'{said}; kept in memory ({path.parent} is not writable)'
+    return path, f'{said}; wrote {path}'

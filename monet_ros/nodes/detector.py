@@ -162,8 +162,9 @@ class DetectorConfig:
                                '(track true: tracked crops made by the float32 network with '
                                "the track_* rule, which needs the recording's rig; false: "
                                "box's crops, else full-frame crops), or a cached "
-                               '<model>.<sha>.<crops>.int8.onnx quant of those crops; unused '
-                               'when the checkpoint has a cached quant of those crops')
+                               '<model>.<sha>.<crops>.int8.onnx quant of those crops; '
+                               'checked, but not read, when the checkpoint has a cached '
+                               'quant of those crops')
     subjects: int = setting(1, "most subjects cropped per view (as the fusion node's "
                             'subjects); 1 = the one-subject topics; N >= 2 publishes the '
                             'crop slots <cam>/crop<k>/heatmaps, k <= N (docs/subjects.md)',
@@ -349,11 +350,14 @@ class DetectorNode(Node):
         int8_crops, calibration = int8_calibration(
             self.config.calibration or None, track, self.tracked_rule(self.config),
             slop_ns=int(round(self.config.slop_ms * 1e6)), box=self.config.box or None)
-        return Detector.from_checkpoint(path, device=self.device,
-                                        backend=self.config.backend,
-                                        threads=self.config.threads,
-                                        precision=self.config.precision,
-                                        calibration=calibration, int8_crops=int8_crops)
+        detector = Detector.from_checkpoint(path, device=self.device,
+                                            backend=self.config.backend,
+                                            threads=self.config.threads,
+                                            precision=self.config.precision,
+                                            calibration=calibration, int8_crops=int8_crops)
+        if detector.int8_note:        # what int8 calibrated on, or the cached quant it uses
+            self.get_logger().info(f'{path}: {detector.int8_note}')
+        return detector
 
     # ------------------------------------------------------------------ input
     def bad_message(self, slot, topic, error):

@@ -27,6 +27,8 @@ def test_int8_pipeline_fuses_every_frame_of_a_jpeg_recording(ros_env, tmp_path):
             assert proc.wait(timeout=60) == 0, proc.output()
     output = proc.output()
     assert 'monet pipeline: precision int8' in output, output
+    assert f'monet pipeline: precision int8: calibrated on 12 crops (tracked-m0.3-t4-k3) ' \
+        f'of {tmp_path / "rec"}; wrote {tmp_path}/model.' in output, output
     # quantised once, on tracked crops (the detector nodes track, with the default rule)
     assert [p.name.split('.', 2)[2] for p in tmp_path.glob('model.*.int8.onnx')] == \
         ['tracked-m0.3-t4-k3.int8.onnx'], output

@@ -24,6 +24,7 @@ from monet_ros.models.quantize import cpu_int8_feature
 
 T0 = 1_000_000_000_000_000_000
 SIDE = 256          # frames 4x the 64 px network input: decoded at 1/4
+TRACKED = 'tracked-m0.3-t4-k3'   # the crops key of the tracked rule's defaults
 
 
 def jpeg_blob_recording(path, frames=8):
@@ -198,3 +199,62 @@ def test_untracked_calibration_crops_are_the_runs_full_frame_or_fixed_box(scene)
     expected = crop_images(images, boxes, (SIZE, SIZE))
     diff = np.abs(crops.astype(float) - expected).mean(axis=(1, 2, 3))
     assert crops.shape == expected.shape and diff.max() < 2.0, diff      # JPEG noise
+
+
+@needs_int8
+def test_calibration_is_checked_cached_quant_or_not_and_the_quant_used_is_said(
+        scene, tmp_path, capsys):
+    """--calibration is refused the same (one line naming it and the file, exit 2, nothing
+    written) whether or not a quant is cached; the first int8 run says what it calibrated
+    on and which quant it wrote, later runs which cached quant they use (stderr)."""
+    rec, _, source = scene
+    cached, bare = tmp_path / 'cached', tmp_path / 'bare'
+    cached.mkdir()
+    bare.mkdir()
+    model = shutil.copy(source, cached / 'blobs.pt')
+    shutil.copy(source, bare / 'blobs.pt')
+    sha = sha256_file(model)[:16]
+    full, tracked = (cached / f'blobs.{sha}.{key}.int8.onnx' for key in ('full', TRACKED))
+
+    def run(folder, flags):
+        out = tmp_path / 'out'
+        code = monet(['process', str(rec), '--model', str(folder / 'blobs.pt'), '--quiet',
+                      '--backend', 'onnxruntime', '--precision', 'int8', '--threads', '1',
+                      '--export', 'none', '--out', str(out)] + flags)
+        written = out.exists()
+        shutil.rmtree(out, ignore_errors=True)
+        captured = capsys.readouterr()
+        return code, captured.err.strip().splitlines(), written
+
+    # first runs calibrate (full frame, then tracked) and say so; then the cache is said
+    for flags, quant, crops in (([], tracked, TRACKED), (['--no-track'], full, 'full')):
+        code, err, _ = run(cached, flags)
+        said = [line for line in err if 'precision int8' in line]
+        # 8 instants x 4 views: every crop of the recording (at most 64 are taken)
+        assert code == 0 and said == [f'monet process: precision int8: calibrated on 32 '
+                                      f'crops ({crops}) of {rec}; wrote {quant}'], err
+        code, err, _ = run(cached, flags)
+        said = [line for line in err if 'precision int8' in line]
+        assert code == 0 and said == [f'monet process: precision int8: cached quant {quant} '
+                                      f'(crops {crops}; not calibrating)'], err
+    assert sorted(cached.glob('*.int8.onnx')) == [full, tracked]
+    other = cached / f'blobs.0123456789abcdef.{TRACKED}.int8.onnx'
+    other.write_bytes(tracked.read_bytes())         # named for other weights
+    refused = (
+        ([], tmp_path / 'nonexist', 'no such file or folder'),
+        ([], full, 'a quant calibrated on other crops'),
+        (['--no-track'], tracked, 'a quant calibrated on other crops'),
+        ([], other, 'a quant of other weights'),
+        ([], model, 'neither a recording (rosbag2 folder or .mcap) nor a quant'),
+        (['--no-track'], model, 'neither a recording (rosbag2 folder or .mcap) nor a quant'),
+    )
+    for flags, calibration, why in refused:
+        lines = {}
+        for folder in (cached, bare):
+            code, err, written = run(folder, flags + ['--calibration', str(calibration)])
+            assert code == 2 and len(err) == 1 and not written, (folder, calibration, err)
+            assert f'calibration {calibration}: ' in err[0] and why in err[0], err
+            lines[folder] = err[0]
+        assert lines[cached] == lines[bare]             # the same refusal, cached or not
+    assert not list(bare.glob('*.int8.onnx'))
+    assert sorted(cached.glob('*.int8.onnx')) == sorted([full, tracked, other])

@@ -104,10 +104,14 @@ def test_cache_follows_the_checkpoint_sha256(trained, calibration, tmp_path):
     assert cached.is_file() and cached.name.endswith('.int8.onnx')
     assert list(tmp_path.glob('*.int8.onnx')) == [cached]
     assert first.runner.path == cached
+    # the one line a run shows: calibrated on what, wrote which quant; then the cache used
+    assert first.int8_note == f'precision int8: calibrated on 48 crops (full); wrote {cached}'
     # cached: no calibration needed now; auto still runs float32 (int8 measured slower)
     again = Detector.from_checkpoint(path, device='cpu', backend='onnxruntime',
                                      precision='int8')
     assert again.runner.path == cached
+    assert again.int8_note == f'precision int8: cached quant {cached} (crops full; not ' \
+        'calibrating)'
     assert cached_int8(path) == cached
     assert resolve_precision('auto', 'onnxruntime', 'cpu', path)[0] == 'float32'
     # new weights under the same name: a new sha256, the old quant is not used

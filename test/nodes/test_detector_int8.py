@@ -40,6 +40,9 @@ def test_detector_node_calibrates_int8_on_the_crops_of_its_track_parameter(ros_e
         with NodeProcess('detector', ros_env, {**common, **params}) as node:
             assert wait_started(node), node.output()
             assert 'int8' in node.output(), node.output()
+            # the line saying what it calibrated on and which quant it wrote
+            assert (f'precision int8: calibrated on 12 crops ({key}) of {rec}; wrote '
+                    f'{tmp_path / f"model.{sha}.{key}.int8.onnx"}') in node.output()
             assert node.stop() == 0, node.output()
         assert (tmp_path / f'model.{sha}.{key}.int8.onnx').is_file(), node.output()
     # one quant per crop mode, none used for another
