@@ -156,7 +156,8 @@ def process(rec, model, out, subjects, threads, extra=()):
     args = ['process', Path(rec) / 'recording', '--model', model, '--out', out,
             '--threads', threads, '--export', 'csv', '--quiet']
     if subjects is not None:
-        args += ['--subjects', subjects, *extra]
+        # the --subjects-only options are refused with one subject (they would be ignored)
+        args += ['--subjects', subjects, *(extra if int(subjects) > 1 else ())]
     stdout, wall, cpu = monet(args, log=Path(str(out) + '.log'))
     loop = LOOP.search(stdout)
     ident = IDENTITIES.search(stdout)

@@ -44,3 +44,23 @@ def test_a_bad_setting_given_as_an_option_names_the_option(extra, start, capsys,
                   '--out', str(tmp_path / 'o'), *extra]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith(start) and '\n' not in err, err
+
+
+@pytest.mark.parametrize('argv', [
+    ['triangulate', 'x.csv', '--rig', 'r.yaml', '--out', 'o', '--gate-mm', '300'],
+    ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--link-mm', '500'],
+    ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--no-rival-peaks'],
+    ['pipeline', '--bag', 'rec', '--model', 'm.pt', '--link-mm', '500'],
+])
+def test_a_subjects_only_option_without_subjects_is_refused(argv, capsys, tmp_path,
+                                                            monkeypatch):
+    # it would be ignored (one subject): refused before any file is read
+    monkeypatch.chdir(tmp_path)
+    option = next(a for a in argv[5:] if a.startswith('--'))
+    option = '--rival-peaks / --no-rival-peaks' if 'rival' in option else option
+    assert monet(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f'monet {argv[0]}: error: {option} applies only with --subjects N (N >= 2);'
+                   f' monet {argv[0]} runs one subject without it')
+    assert monet([*argv, '--subjects', '2']) == 2       # accepted: fails on the missing files
+    assert 'applies only' not in capsys.readouterr().err

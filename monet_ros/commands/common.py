@@ -113,17 +113,39 @@ def add_rig_units_argument(parser):
                         "file's `units`, else camera centres >= 50 apart -> mm, else m)")
 
 
+def subject_only_option(parser, option, **kwargs):
+    """parser.add_argument for an option that applies only with --subjects N (N >= 2);
+    its default is remembered in the command's namespace (subject_only_defaults) for
+    check_subject_only_options."""
+    action = parser.add_argument(option, **kwargs)
+    defaults = dict(parser.get_default('subject_only_defaults') or {})
+    defaults[action.dest] = (action.default, ' / '.join(action.option_strings))
+    parser.set_defaults(subject_only_defaults=defaults)
+    return action
+
+
+def check_subject_only_options(args, several, command):
+    """ValueError naming the first --subjects-only option given a value other than its
+    default when `several` is false (one subject): such a value would be ignored."""
+    if several:
+        return
+    for dest, (default, names) in (getattr(args, 'subject_only_defaults', None) or {}).items():
+        if getattr(args, dest) != default:
+            raise ValueError(f'{names} applies only with --subjects N (N >= 2); {command} '
+                             'runs one subject without it')
+
+
 def add_subject_tracking_arguments(parser):
     """--association-px, --gate-mm, --max-missed-s: the association and tracker settings of
     `monet triangulate --subjects` and `monet process --subjects` (subjects.association,
     subjects.tracking)."""
-    parser.add_argument('--association-px', type=float, default=15.0,
+    subject_only_option(parser, '--association-px', type=float, default=15.0,
                         help='--subjects: largest median epipolar distance (px) between two '
                         'instances of one subject')
-    parser.add_argument('--gate-mm', type=float, default=400.0,
+    subject_only_option(parser, '--gate-mm', type=float, default=400.0,
                         help="--subjects: largest mean keypoint distance (mm) of a subject to "
                         "a track's prediction")
-    parser.add_argument('--max-missed-s', type=float, default=0.5,
+    subject_only_option(parser, '--max-missed-s', type=float, default=0.5,
                         help='--subjects: a track unseen for longer (s) ends')
 
 
@@ -140,9 +162,10 @@ def add_subjects_detection_arguments(parser):
                         'triangulate --subjects` (1 = one subject, the tracked crop)')
     for name, kind in (('candidates', int), ('link_mm', float), ('crop_peaks', int),
                        ('duplicate_mm', float), ('crop_missed', int)):
-        parser.add_argument('--' + name.replace('_', '-'), type=kind, default=d[name].default,
+        subject_only_option(parser, '--' + name.replace('_', '-'), type=kind,
+                            default=d[name].default,
                             help='--subjects: ' + d[name].metadata['description'])
-    parser.add_argument('--rival-peaks', action=argparse.BooleanOptionalAction,
+    subject_only_option(parser, '--rival-peaks', action=argparse.BooleanOptionalAction,
                         default=d['rival_peaks'].default,
                         help='--subjects: ' + d['rival_peaks'].metadata['description']
                         + ' (default: %(default)s)')

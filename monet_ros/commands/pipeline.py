@@ -51,7 +51,11 @@ def add_arguments(parser):
                         'synthetic recording generated (once) in --workdir')
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
                         '/tf_static, or the rig.yaml beside a synthetic recording)')
-    from monet_ros.commands.common import add_precision_options, add_rig_units_argument
+    from monet_ros.commands.common import (
+        add_precision_options,
+        add_rig_units_argument,
+        subject_only_option,
+    )
     add_rig_units_argument(parser)
     parser.add_argument('--model', help='detector checkpoint (default with no --bag: a small '
                         'net trained once for the synthetic recording)')
@@ -90,7 +94,7 @@ def add_arguments(parser):
     parser.add_argument('--subjects', type=int, default=1,
                         help='most subjects tracked (detector and fusion `subjects`; >= 2: '
                         'crop slots, keypoints3d with a subject field; docs/subjects.md)')
-    parser.add_argument('--link-mm', type=float, default=600.0,
+    subject_only_option(parser, '--link-mm', type=float, default=600.0,
                         help='--subjects >= 2: largest distance (mm) between two linked '
                         'keypoints of one subject (fusion link_mm)')
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
@@ -355,6 +359,8 @@ def run(args):
     heap_for_large_buffers()       # heatmap buffers reused, not mapped per message
     short_gil_switch()             # fusion's and the learner's callbacks share a GIL
     score = None
+    from monet_ros.commands.common import check_subject_only_options
+    check_subject_only_options(args, args.subjects > 1, 'monet pipeline')
     if args.subjects > 1:
         if not args.bag:
             raise ConfigError('monet pipeline', 'subjects', 'the demo is one subject; give '

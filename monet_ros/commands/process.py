@@ -347,7 +347,11 @@ def subject_configs(args):
 
 
 def run(args):
-    from monet_ros.commands.common import check_threads, print_precision
+    from monet_ros.commands.common import (
+        check_subject_only_options,
+        check_threads,
+        print_precision,
+    )
     from monet_ros.commands.filter_options import filter_config_from_args
     from monet_ros.io.export_results import parse_formats
     from monet_ros.labels import parse_name_map
@@ -374,6 +378,7 @@ def run(args):
                    camera_map=parse_name_map(args.camera_map), precision=args.precision,
                    filter_config=filter_config, rig_units=args.rig_units,
                    calibration=args.calibration)
+    check_subject_only_options(args, args.subjects != 1, 'monet process')
     if args.subjects != 1:
         subjects, association, tracker = subject_configs(args)
         options.update(subjects=subjects, association=association, tracker=tracker)

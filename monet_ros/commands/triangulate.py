@@ -269,6 +269,8 @@ def run(args):
     filt = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     exports = parse_formats(args.export)
     tracker = None
+    from monet_ros.commands.common import check_subject_only_options
+    check_subject_only_options(args, args.subjects is not None, 'monet triangulate')
     if args.subjects is not None:
         from monet_ros.subjects.tracking import TrackerConfig
         tracker = TrackerConfig(gate_mm=args.gate_mm, max_missed_s=args.max_missed_s)
