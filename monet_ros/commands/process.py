@@ -415,7 +415,8 @@ def run(args):
     summary = figures['summary']
     if summary['frames']:
         dropout = ', '.join(f'{k} {100 * v:.0f}%' for k, v in summary['dropout'].items())
-        views = ', '.join(f'{k} {v:.1f}' for k, v in summary['inlier_views'].items())
+        views = ', '.join(f'{k} {v:.1f}' if v == v else f'{k} none (never triangulated)'
+                          for k, v in summary['inlier_views'].items())
         print(f'monet process: per-joint dropout (not triangulated): {dropout}')
         print(f'monet process: mean inlier views per joint: {views}')
         print('monet process: reprojection error measures agreement between the views used, '

@@ -440,6 +440,13 @@ def readme_text(config, p, result):
                    if config.label_subjects else
                    "The ground-truth topic and\n`labels.csv` are subject 0's; ") + \
         '`ground_truth.npz` adds subjects_keypoints3d (T, S, C, 3),'
+    one = config.subjects == 1
+    body = (f"a {p['subject'].body}" if one else f"{config.subjects} {p['subject'].body}s")
+    paths = 'a curved path' if one else 'their own curved paths'
+    label_columns = ('stamp_ns,camera,keypoint,u,v' + (',subject' if config.label_subjects
+                                                        and not one else ''))
+    gt_more = ('' if one else '; subjects_keypoints3d (T, S, C, 3), subjects_keypoints2d '
+               '(T, V, S, C, 2), subjects_in_image and subjects_occluded (T, V, S, C) (below)')
     several = '' if config.subjects == 1 else f"""
 ## Several subjects
 
@@ -458,8 +465,8 @@ monet triangulate {result.out}/points2d.csv --rig {result.out}/rig.yaml \\
     return f"""# Synthetic MONET recording
 
 Rendered by `monet synth` (monet_ros): a calibrated {config.layout} rig of {len(cams)} cameras
-around a {p['subject'].body} ({p['skeleton'].name}, {p['skeleton'].num_keypoints} keypoints)
-walking on a curved path. Seed {config.seed}{motion}; the same settings give byte-identical
+around {body} ({p['skeleton'].name}, {p['skeleton'].num_keypoints} keypoints)
+walking on {paths}. Seed {config.seed}{motion}; the same settings give byte-identical
 message data.
 
 - Frames: {config.frames} instants at {config.fps:g} fps, stamps {stamps[0]} ..
@@ -477,10 +484,10 @@ message data.
   `{GROUND_TRUTH_TOPIC}` (sensor_msgs/PointCloud2, fields x y z confidence
   reprojection_error num_views keypoint; num_views = views where it is in the image).
 - `rig.yaml`: the cameras (x ~ K (R X + t), OpenCV distortion), frame `world`.
-- `labels.csv`: `stamp_ns,camera,keypoint,u,v` in original image pixels
+- `labels.csv`: `{label_columns}` in original image pixels
   (`monet_ros.labels.read_labels`).
 - `ground_truth.npz`: stamps (T,), keypoints3d (T, C, 3) m, keypoints2d (T, V, C, 2) px,
-  in_image and occluded (T, V, C), labelled (T,), camera_names, keypoint_names.
+  in_image and occluded (T, V, C), labelled (T,), camera_names, keypoint_names{gt_more}.
 
 ## Cameras
 
