@@ -50,6 +50,7 @@ def test_a_bad_setting_given_as_an_option_names_the_option(extra, start, capsys,
     ['triangulate', 'x.csv', '--rig', 'r.yaml', '--out', 'o', '--gate-mm', '300'],
     ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--link-mm', '500'],
     ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--no-rival-peaks'],
+    ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--min-score', '0.3'],
     ['pipeline', '--bag', 'rec', '--model', 'm.pt', '--link-mm', '500'],
 ])
 def test_a_subjects_only_option_without_subjects_is_refused(argv, capsys, tmp_path,

@@ -161,7 +161,8 @@ def add_subjects_detection_arguments(parser):
                         'found by full-frame candidates; per-subject outputs as `monet '
                         'triangulate --subjects` (1 = one subject, the tracked crop)')
     for name, kind in (('candidates', int), ('link_mm', float), ('crop_peaks', int),
-                       ('duplicate_mm', float), ('crop_missed', int)):
+                       ('duplicate_mm', float), ('crop_missed', int),
+                       ('min_score', float)):
         subject_only_option(parser, '--' + name.replace('_', '-'), type=kind,
                             default=d[name].default,
                             help='--subjects: ' + d[name].metadata['description'])

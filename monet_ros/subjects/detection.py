@@ -39,7 +39,12 @@ Algorithm, per synchronized frame (stamps increasing):
    hypothesis' joint of the same keypoint (projected into the view) than its own is left
    out: the joint is hidden in that view and the peak is the neighbour's.
 4. The instances of all views (slot h = hypothesis h's crop) go through associate (the
-   instance order is not trusted) and are triangulated per subject; a subject whose mean
+   instance order is not trusted) and are triangulated per subject. A subject whose
+   joints' median score (heatmap peak value, mean over the joint's inlier views) is below
+   min_score is weak: dropped, counted (the detector's peaks on a body are near 1; a
+   hypothesis discovered from secondary full-frame peaks, floor or background, gets crops
+   that decode 14 joints of scores 0.15-0.5 and 2-9 px reprojection error, a ghost that
+   would be tracked for as long as its crops keep decoding it). A subject whose mean
    joint distance to a subject seen by more cameras (association's order) is below
    duplicate_mm is the same body decoded by two hypotheses' crops: dropped, counted.
 5. N subjects: first, per hypothesis in order (tracks first), the subject holding most
@@ -102,6 +107,10 @@ class SubjectsConfig:
     crop_missed: int = setting(
         1, 'per-subject crops: a track missed in this many consecutive frames gets no crops '
         '(discovery looks for its subject again)', minimum=1)
+    min_score: float = setting(
+        0.5, "a subject whose joints' median score (heatmap peak value, mean over its inlier "
+        'views) is below this is not a subject (a ghost triangulated from weak peaks) and '
+        'is not tracked', minimum=0.0)
     rival_peaks: bool = setting(
         True, "per-subject crops: leave out a keypoint's chosen peak when it lies nearer "
         "another subject's predicted joint of that keypoint than its own (a joint hidden "
@@ -137,6 +146,21 @@ class FrameSubjects:
     tracked: int = 0
     shared: int = 0
     detached: int = 0
+    weak: int = 0
+
+
+def weak_subjects(score, min_score):
+    """Subjects not supported by the detector (module docstring step 4): score (S, C) each
+    subject's per-joint score (NaN: joint not triangulated), min_score: the least median.
+    -> (S,) bool, True where the median of the subject's finite scores is below min_score
+    (or it has none)."""
+    score = np.asarray(score, np.float64)
+    finite = np.isfinite(score)
+    some = finite.any(-1)
+    median = np.full(len(score), -np.inf)
+    if some.any():
+        median[some] = np.nanmedian(np.where(finite[some], score[some], np.nan), axis=-1)
+    return median < min_score
 
 
 def subject_keypoints(frame):
@@ -400,14 +424,15 @@ class SubjectsCore:
                             view_errors=np.zeros((0, 0, self.C)), score=np.zeros((0, self.C)),
                             cost=np.zeros(0), unmatched=0, instances=0)
         keep = []
-        for s in range(len(a.X)):
+        weak = weak_subjects(a.score, self.config.min_score)
+        for s in np.flatnonzero(~weak).tolist():
             d = np.linalg.norm(a.X[s] - a.X[keep], axis=-1)               # (kept, C)
             both = np.isfinite(d)
             with np.errstate(invalid='ignore', divide='ignore'):
                 mean = np.where(both, d, 0.0).sum(-1) / both.sum(-1)
             if not (mean < self._duplicate).any():
                 keep.append(s)
-        duplicates = len(a.X) - len(keep)
+        duplicates = len(a.X) - int(weak.sum()) - len(keep)
         extra = max(0, len(keep) - self.config.subjects)
         keep = claimed_first(a.instance, np.array(keep, np.int64), H)
         keep = keep[:self.config.subjects]
@@ -429,7 +454,7 @@ class SubjectsCore:
         return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
                              extra=extra, tracked=tracked, shared=int(shared.sum()),
-                             detached=int(detached.sum()),
+                             detached=int(detached.sum()), weak=int(weak.sum()),
                              **(counts or {}))
 
     def live_frame(self, cameras, stamp_ns, crops, full=()):

@@ -29,7 +29,7 @@ def test_no_points_no_groups():
 
 @pytest.mark.parametrize('field, value', [('subjects', 0), ('candidates', 0),
                                           ('link_mm', 0.0), ('crop_peaks', 99),
-                                          ('duplicate_mm', -1.0)])
+                                          ('duplicate_mm', -1.0), ('min_score', -0.1)])
 def test_config_names_the_bad_field(field, value):
     with pytest.raises(ConfigError, match=field):
         SubjectsConfig(**{field: value})
@@ -201,3 +201,63 @@ def test_a_subject_seen_by_fewer_cameras_keeps_its_place_among_n():
     assert claimed_first(instance, np.array([0, 2, 3]), 5).tolist() == [3, 0, 2]
     assert claimed_first(instance, np.arange(4), 0).tolist() == [0, 1, 2, 3]
     assert claimed_first(instance, np.zeros(0, np.int64), 3).tolist() == []
+
+
+def _two_view_crops(bodies, peak_values):
+    """Two cameras (64 x 48 px, heatmaps 16 x 12 over the whole image) and, per view and
+    body, a hand-made crop map (C, 12, 16) with a Gaussian of height peak_values[b] at each
+    of body b's joints projected: -> cameras, v_idx, h_idx, heat, heat_cameras."""
+    from monet_ros.geometry import Camera
+
+    K = np.array([[50.0, 0, 32], [0, 50.0, 24], [0, 0, 1]])
+    cameras = [Camera(name=n, K=K, dist=np.zeros(5), R=np.eye(3), t=np.asarray(t, float),
+                      width=64, height=48)
+               for n, t in (('a', (0.0, 0.0, 0.0)), ('b', (-0.5, -0.3, 0.0)))]
+    yy, xx = np.mgrid[0:12, 0:16]
+    v_idx, h_idx, heat, heat_cameras = [], [], [], []
+    for v, cam in enumerate(cameras):
+        for b, (joints, value) in enumerate(zip(bodies, peak_values)):
+            px = (cam.project(joints) + 0.5) / 4 - 0.5                 # heatmap px (C, 2)
+            heat.append((value * np.exp(-((xx - px[:, :1, None]) ** 2
+                                          + (yy - px[:, 1:, None]) ** 2) / 2)
+                         ).astype(np.float32))
+            heat_cameras.append(cam.crop(np.array([0.0, 0.0, 64.0, 48.0]), (16, 12)))
+            v_idx.append(v)
+            h_idx.append(b)
+    return cameras, v_idx, h_idx, heat, heat_cameras
+
+
+def test_a_subject_of_weak_peaks_is_not_tracked():
+    # issue 39: on a recording of one person, a hypothesis discovered from secondary
+    # full-frame peaks got crops that decoded 14 joints of peak values 0.15-0.5 (the
+    # person's: 0.92-0.97), tracked as a second subject. Two hypotheses here: a body whose
+    # crops peak at 0.9 and a ghost whose crops peak at 0.3, both geometrically consistent.
+    from monet_ros.subjects.detection import SubjectsCore, weak_subjects
+    from monet_ros.subjects.tracking import TrackerConfig
+
+    body = np.array([[-0.3, 0.0, 2.0], [-0.3, 0.2, 2.0], [-0.2, 0.1, 2.0]])
+    ghost = np.array([[0.3, -0.1, 2.1], [0.35, 0.1, 2.1], [0.3, 0.2, 2.1]])
+    crops = _two_view_crops([body, ghost], [0.9, 0.3])
+    cameras, crops = crops[0], crops[1:]
+    hyp = np.stack([body, ghost])
+    for min_score, kept in ((0.5, [body]), (0.2, [body, ghost])):
+        core = SubjectsCore(3, 'm', SubjectsConfig(subjects=2, min_score=min_score),
+                            tracker=TrackerConfig(min_keypoints=1))
+        r = core.resolve(cameras, 0, hyp, *crops)
+        assert r.weak == 2 - len(kept) and r.duplicates == 0
+        assert (r.ids >= 0).sum() == len(kept)
+        X = r.association.X[r.keep]
+        for joints in kept:          # each body kept is found where it is, the ghost not
+            assert np.nanmin(np.linalg.norm(X - joints, axis=-1).mean(-1)) < 0.02
+        assert len(core.tracker.ids) == len(kept)
+        # independently: the crops' map maxima (per joint, mean over the views)
+        heat, h_idx = np.array(crops[2]), np.array(crops[1])
+        expected = [np.median(heat[h_idx == b].max((2, 3)).mean(0)) for b in (0, 1)]
+        assert np.allclose(np.sort(np.nanmedian(r.association.score, -1)),
+                           np.sort(expected), atol=0.01)
+        assert expected[1] < 0.3 < 0.7 < expected[0]
+    # the rule itself: median over the triangulated joints; none triangulated: weak
+    score = np.array([[0.9, 0.2, np.nan, 0.8], [0.3, 0.6, 0.4, np.nan],
+                      [np.nan] * 4, [0.5, 0.5, 0.5, 0.5]])
+    assert weak_subjects(score, 0.5).tolist() == [False, True, True, False]
+    assert weak_subjects(np.zeros((0, 4)), 0.5).tolist() == []
