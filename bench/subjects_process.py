@@ -222,10 +222,17 @@ def main(argv=None):
                    help='pass --rival-peaks / --no-rival-peaks to monet process --subjects '
                    "(default: neither, the command's default); outputs in WORK/out-nN-rival "
                    '/ out-nN-norival')
+    p.add_argument('--min-score', type=float, default=None,
+                   help="pass --min-score to monet process --subjects (default: the command's "
+                   'default); outputs in WORK/out-nN-msX')
     p.add_argument('--out', default=str(REPO / 'bench' / 'results' / 'subjects_process.md'))
     args = p.parse_args(argv)
     extra, suffix = {None: ([], ''), True: (['--rival-peaks'], '-rival'),
                      False: (['--no-rival-peaks'], '-norival')}[args.rival_peaks]
+    if args.min_score is not None:
+        extra, suffix = extra + ['--min-score', str(args.min_score)], \
+            suffix + f'-ms{args.min_score:g}'
+
     if args.train_seed is None:
         args.train_seed = args.seed
     work = Path(args.work)

@@ -108,7 +108,7 @@ class SubjectsConfig:
         1, 'per-subject crops: a track missed in this many consecutive frames gets no crops '
         '(discovery looks for its subject again)', minimum=1)
     min_score: float = setting(
-        0.5, "a subject whose joints' median score (heatmap peak value, mean over its inlier "
+        0.4, "a subject whose joints' median score (heatmap peak value, mean over its inlier "
         'views) is below this is not a subject (a ghost triangulated from weak peaks) and '
         'is not tracked', minimum=0.0)
     rival_peaks: bool = setting(
