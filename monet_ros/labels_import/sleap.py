@@ -26,6 +26,14 @@ from monet_ros.labels import LabelError, LabelRow
 from monet_ros.labels_import import ImportResult, camera_for, join_notes, subject_note
 
 
+def open_hdf5(path):
+    """h5py.File(path, 'r'), or LabelError naming the file when it is not HDF5."""
+    import h5py
+    try:
+        return h5py.File(path, 'r')
+    except (OSError, ValueError) as error:
+        raise LabelError(f'{path}: cannot open as HDF5 ({error})') from None
+
 def _text(value):
     if isinstance(value, np.ndarray):
         value = value.item() if value.size == 1 else value.ravel()[0]
@@ -39,12 +47,7 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None, id
     the track name and its subject the name's id in `ids` ({name: id}, filled in order of
     first appearance). Raises LabelError naming the file and field."""
     ids = {} if ids is None else ids
-    import h5py
-    try:
-        handle = h5py.File(path, 'r')
-    except (OSError, ValueError) as error:
-        raise LabelError(f'{path}: cannot open as HDF5 ({error})') from None
-    with handle as f:
+    with open_hdf5(path) as f:
         for key in ('tracks', 'node_names'):
             if key not in f:
                 raise LabelError(f'{path}: field {key}: missing; not a SLEAP analysis file '
@@ -123,13 +126,8 @@ def read_slp(path, cameras=(), camera=None, min_score=0.0, camera_map=None, ids=
     track name); two instances without a track in one frame of a camera are an error (their
     identity across cameras is unknown: assign tracks in SLEAP). The frame count is not in
     the file (None). Raises LabelError naming the file and field."""
-    import h5py
     ids = {} if ids is None else ids
-    try:
-        handle = h5py.File(path, 'r')
-    except (OSError, ValueError) as error:
-        raise LabelError(f'{path}: cannot open as HDF5 ({error})') from None
-    with handle as f:
+    with open_hdf5(path) as f:
         for key in ('frames', 'instances', 'metadata'):
             if key not in f:
                 raise LabelError(f'{path}: field {key}: missing; not a SLEAP .slp file (has '
