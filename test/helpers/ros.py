@@ -81,7 +81,7 @@ class NodeProcess:
         """Wait for the process to exit on its own; returns the exit code."""
         return self.process.wait(timeout=timeout)
 
-    def stop(self, sig=signal.SIGINT, timeout=15):
+    def stop(self, sig=signal.SIGINT, timeout=60):
         """Send `sig`, wait, return the exit code (kill and fail loudly on a hang)."""
         if self.process.poll() is None:
             self.process.send_signal(sig)

@@ -5,6 +5,7 @@ import json
 import signal
 import time
 
+from helpers.detector_crops import INPUT, expected_box, expected_K, make_checkpoint
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import cv2_project, ring_rig
 import numpy as np
@@ -22,36 +23,11 @@ from monet_ros.io import (
     keypoints3d_to_cloud,
     numpy_to_image_msg,
 )
-from monet_ros.models import Detector, build_model, load_checkpoint, save_checkpoint
+from monet_ros.models import Detector, load_checkpoint
 from monet_ros.models.detector import bfloat16_native
 from monet_ros.nodes.qos import LATCHED
-from monet_ros.skeleton import load_skeleton
 
-INPUT = (96, 128)     # network input (H, W) -> heatmaps (24, 32)
 T0 = 1_650_000_000_000_000_000
-
-
-def make_checkpoint(path, seed):
-    torch.manual_seed(seed)
-    model = build_model('small', 14, input_size=INPUT)
-    save_checkpoint(path, model, {'keypoints': list(load_skeleton('human14').keypoints)})
-    return path
-
-
-def expected_box(box, aspect):
-    """A box grown about its centre to width / height = aspect (computed here by hand)."""
-    x0, y0, x1, y1 = box
-    w, h = x1 - x0, y1 - y0
-    w, h = max(w, h * aspect), max(h, w / aspect)
-    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
-    return cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2
-
-
-def expected_K(K, box, out_w, out_h):
-    x0, y0, x1, y1 = box
-    sx, sy = out_w / (x1 - x0), out_h / (y1 - y0)
-    S = np.array([[sx, 0, (0.5 - x0) * sx - 0.5], [0, sy, (0.5 - y0) * sy - 0.5], [0, 0, 1]])
-    return S @ K
 
 
 @pytest.fixture

@@ -4,11 +4,11 @@ latest /monet/keypoints3d (its `subject` field), the full frame while fewer than
 tracked, empty slots elsewhere, every crop's heatmaps those of the network on that crop."""
 import signal
 
+from helpers.detector_crops import INPUT, expected_box, expected_K, make_checkpoint
 from helpers.ros import NodeProcess, RosHarness
 from helpers.scenes import ring_rig
 import numpy as np
 from sensor_msgs.msg import CameraInfo, Image, PointCloud2
-import torch
 
 from monet_ros.crop_rule import subject_boxes
 from monet_ros.geometry import save_rig
@@ -19,35 +19,10 @@ from monet_ros.io import (
     keypoints3d_to_cloud,
     numpy_to_image_msg,
 )
-from monet_ros.models import Detector, build_model, load_checkpoint, save_checkpoint
-from monet_ros.skeleton import load_skeleton
+from monet_ros.models import Detector, load_checkpoint
 
-INPUT = (96, 128)     # network input (H, W) -> heatmaps (24, 32)
 T0 = 1_650_000_000_000_000_000
 SLOTS = 3          # subjects 2: crop0, crop1 (subjects), crop2 (full frame)
-
-
-def make_checkpoint(path, seed):
-    torch.manual_seed(seed)
-    model = build_model('small', 14, input_size=INPUT)
-    save_checkpoint(path, model, {'keypoints': list(load_skeleton('human14').keypoints)})
-    return path
-
-
-def expected_box(box, aspect):
-    """A box grown about its centre to width / height = aspect (by hand)."""
-    x0, y0, x1, y1 = box
-    w, h = x1 - x0, y1 - y0
-    w, h = max(w, h * aspect), max(h, w / aspect)
-    cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
-    return cx - w / 2, cy - h / 2, cx + w / 2, cy + h / 2
-
-
-def expected_K(K, box, out_w, out_h):
-    x0, y0, x1, y1 = box
-    sx, sy = out_w / (x1 - x0), out_h / (y1 - y0)
-    S = np.array([[sx, 0, (0.5 - x0) * sx - 0.5], [0, sy, (0.5 - y0) * sy - 0.5], [0, 0, 1]])
-    return S @ K
 
 
 def detector_boxes(checkpoint, rig, boxes):
