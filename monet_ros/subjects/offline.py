@@ -173,18 +173,21 @@ class SmoothedSubjects:
     units: str = 'm'
 
     def summary(self):
-        """One line: the filter, per identity, and the totals (points kept / bridged /
-        gated out / left empty, median and p90 change)."""
+        """One line: the filter, the identities, and the totals over them (points kept /
+        bridged / gated out / left empty, median and p90 change)."""
         raw = sum(int(np.isfinite(s.raw).all(-1).sum()) for s in self.per_subject.values())
         out = int(np.isfinite(self.rows.X).all(-1).sum())
         rejected = sum(int(s.rejected.sum()) for s in self.per_subject.values())
+        empty = sum(int((np.isfinite(s.raw).all(-1) & ~np.isfinite(s.X).all(-1)).sum())
+                    for s in self.per_subject.values())
         change = self.change_mm[np.isfinite(self.change_mm)]
         med, p90 = (np.median(change), np.percentile(change, 90)) if change.size else (0, 0)
         return (f'filter {self.method} per subject ({len(self.per_subject)} identities, '
                 f'each over the frames from its first to its last): {out} points out of '
                 f'{raw} triangulated; {int(self.bridged.sum())} bridged over gaps, '
-                f'{rejected} gated out as outliers; change filtered - raw median {med:.1f} '
-                f'mm, p90 {p90:.1f} mm; {self.seconds:.2f} s')
+                f'{rejected} gated out as outliers, {empty} left empty (gaps longer than '
+                f'the limit or isolated); change filtered - raw median {med:.1f} mm, p90 '
+                f'{p90:.1f} mm; {self.seconds:.2f} s')
 
 
 def smooth_subjects(rows, stamps_ns, cameras, edges=(), config=None, progress=False):

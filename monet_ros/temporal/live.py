@@ -52,7 +52,7 @@ class LiveFilterConfig:
     """Settings of the live filter (mirrored as fusion node parameters)."""
     filter: bool = setting(False, 'causal per-joint constant-velocity Kalman filter: '
                            'filtered keypoints on keypoints3d, the raw ones on '
-                           'keypoints3d_raw')
+                           'keypoints3d_raw (subjects >= 2: one filter per identity)')
     # defaults from the sweep of bench/live_filter.py (a walking synthetic subject at 30 Hz,
     # 20 mm noise, 3% outliers of 0.3 m): 10 m/s^2 smooths the walk best (p90 40 mm, raw
     # 53) but loses a 2 Hz 0.2 m wave (peak 32 m/s^2: 60 mm RMS, raw 20); 25 m/s^2 follows
