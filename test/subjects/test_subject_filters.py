@@ -4,8 +4,8 @@ fusion node's; subjects.offline.smooth_subjects, `monet triangulate` / `monet pr
 synth.subjects), the second born late, noise on their 3D or 2D: each identity's filtered
 points are closer to its own ground truth than the raw ones, no state is shared (an
 identity's output is what a filter fed that identity alone gives, whatever the order of
-the subjects in a frame), a dead identity's state is gone, and a rig in mm gives the m
-results scaled."""
+the subjects in a frame), a dead identity's state is gone, a rig in mm gives the m
+results scaled, and a track with missed frames is bridged for that identity only."""
 import numpy as np
 import pytest
 
@@ -168,3 +168,29 @@ def test_offline_smoothing_per_identity(truth, tracked, method):
     atol = 1e-3 if method == 'kalman' else 0.5
     np.testing.assert_allclose(smoothed_mm.rows.X, 1000.0 * out.X, rtol=0, atol=atol)
     np.testing.assert_allclose(smoothed_mm.change_mm, smoothed.change_mm, atol=atol)
+
+
+def test_offline_gap_in_a_track_is_bridged_for_that_identity_only(truth, tracked):
+    """Identity rows missing for 3 frames (missed; the tracker kept the identity): the
+    Kalman smoother bridges them for that identity (rows added, flagged bridged, near its
+    own subject), the other identity's rows are those it had."""
+    from dataclasses import replace
+    cams, _, _, _, rows = tracked
+    gap = (rows.subject == 0) & (rows.frame >= 40) & (rows.frame < 43)
+    assert gap.sum() == 3
+    keep = ~gap
+    holed = replace(rows, **{k: getattr(rows, k)[keep] for k in
+                             ('frame', 'subject', 'X', 'error', 'ncams', 'score', 'points2d',
+                              'scores2d')})
+    smoothed = smooth_subjects(holed, stamps(), cams, (), FilterConfig(method='kalman'))
+    out = smoothed.rows
+    mine = out.subject == 0
+    np.testing.assert_array_equal(out.frame[mine], np.arange(T))
+    bridged = smoothed.bridged[mine].all(-1)
+    np.testing.assert_array_equal(np.flatnonzero(bridged), [40, 41, 42])
+    s = owner_of(rows, 0, truth)
+    err = np.linalg.norm(out.X[mine][40:43] - truth[40:43, s], axis=-1)
+    assert err.max() < 0.1, err.max()
+    other = out.subject == 1
+    np.testing.assert_array_equal(out.frame[other], rows.frame[rows.subject == 1])
+    assert not smoothed.bridged[other].any()
