@@ -3,6 +3,8 @@ the fields of monet_ros.temporal.FilterConfig as command-line options."""
 from contextlib import contextmanager
 from dataclasses import fields
 
+import numpy as np
+
 from monet_ros.config import ConfigError
 from monet_ros.temporal import LOSSES, METHODS, FilterConfig
 
@@ -67,6 +69,26 @@ def _options_named():
         if option is None or error.owner != FilterConfig.__name__:
             raise
         raise ValueError(f'{option}: {error.message}') from None
+
+
+def write_filtered_subjects(writer, frame_id, smoothed, stamps_ns, units, topic=FILTER_TOPIC):
+    """The filtered rows of a subjects.offline.SmoothedSubjects (rig unit `units`) as the
+    several-subject /monet/keypoints3d messages (metres, `subject` field, one point per
+    keypoint and subject in identity order, as the live fusion publishes them) on `topic`,
+    one per instant of stamps_ns (an empty cloud where no identity has a row)."""
+    rows = smoothed.rows
+    C = rows.X.shape[1] if rows.X.ndim == 3 else 0
+    order = np.lexsort((rows.subject, rows.frame))
+    frame = rows.frame[order]
+    bounds = np.searchsorted(frame, np.arange(len(stamps_ns) + 1))
+    for t, stamp in enumerate(stamps_ns):
+        at = order[bounds[t]:bounds[t + 1]]
+        ids = rows.subject[at].astype(np.int64)
+        writer.write_keypoints3d(topic, int(stamp), frame_id, rows.X[at].reshape(-1, 3),
+                                 rows.score[at].reshape(-1), rows.error[at].reshape(-1),
+                                 rows.ncams[at].reshape(-1), units=units,
+                                 keypoint=np.tile(np.arange(C), len(ids)),
+                                 subject=np.repeat(ids, C))
 
 
 def write_filtered(writer, frame_id, smoothed, stamps_ns, units, topic=FILTER_TOPIC):

@@ -157,8 +157,9 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     calibrated on and which quant it wrote, or which cached quant it uses).
     subjects: a subjects.detection.SubjectsConfig; with subjects >= 2 several subjects
     (commands.process_subjects: figures then has 'subjects' (subjects.offline.SubjectRows)
-    and 'subject_counts'; association: subjects.AssociationConfig (None: from config's
-    fusion settings), tracker: subjects.tracking.TrackerConfig).
+    and 'subject_counts', and with a filter figures['filter'] is a subjects.offline.
+    SmoothedSubjects (one filter per identity); association: subjects.AssociationConfig
+    (None: from config's fusion settings), tracker: subjects.tracking.TrackerConfig).
     Raises ConfigError / ValueError / OSError naming the option, file or camera."""
     from tqdm import tqdm
 
@@ -179,7 +180,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     several = subjects is not None and subjects.subjects > 1
     if several:
         from monet_ros.commands.process_subjects import check_subject_options
-        check_subject_options(config, subjects, filter_config, exports)
+        check_subject_options(config, subjects, exports)
     check_new_output(out, 'monet process')
     rig_cameras, frame_id = load_node_rig(rig or bag, rig_units)
     if rig is not None and Path(rig).is_file():    # a calibration file: fit it to the images
@@ -214,7 +215,7 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     if several:
         return _several(reader, topics, cameras, detector, units, frame_id, out, config,
                         subjects, association, tracker, exports, edges, trc_axes, progress,
-                        figures)
+                        figures, filter_config)
     errors, num_views = RunningMean(), RunningMean()
     collector = ResultsCollector(cameras, detector.keypoints)
     tracker = TrackedCrops(units=units)   # the detector node's defaults (track_* parameters)
@@ -304,7 +305,8 @@ def run_calibration(config, calibration, bag, cameras=None, fusion=None):
 
 
 def _several(reader, topics, cameras, detector, units, frame_id, out, config, subjects,
-             association, tracker, exports, edges, trc_axes, progress, figures):
+             association, tracker, exports, edges, trc_axes, progress, figures,
+             filter_config=None):
     """process_recording with --subjects N >= 2 (commands.process_subjects)."""
     from monet_ros.commands.common import atomic_output_dir
     from monet_ros.commands.process_subjects import process_subjects
@@ -319,11 +321,10 @@ def _several(reader, topics, cameras, detector, units, frame_id, out, config, su
     with atomic_output_dir(out) as staging:
         written = process_subjects(reader, topics, cameras, detector, units, frame_id,
                                    staging, config, subjects, association, tracker, exports,
-                                   edges, trc_axes, progress, figures)
+                                   edges, trc_axes, progress, figures, filter_config)
     figures['exports'] = {fmt: Path(out) / Path(path).relative_to(staging)
                           for fmt, path in written.items()}
     figures['units'] = cameras[0].units
-    figures['filter'] = None
     figures['report'] = reader.report
     return figures
 
@@ -400,6 +401,11 @@ def run(args):
     if 'subjects' in figures:
         from monet_ros.commands.process_subjects import print_subjects
         print_subjects(figures, args.out)
+        if figures['filter'] is not None:
+            print(f'monet process: {figures["filter"].summary()}')
+            for ident, smoothed in figures['filter'].per_subject.items():
+                for note in smoothed.notes:
+                    print(f'monet process: filter: subject {ident}: {note}')
         for fmt, path in figures['exports'].items():
             print(f'monet process: wrote {fmt}: {path}')
         print_reading(figures, args.bag)

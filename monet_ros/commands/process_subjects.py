@@ -9,7 +9,12 @@ TRC per subject (keypoints3d_subject<id>.trc), NWB with one 3D series per subjec
 MCAP holds /monet/keypoints3d as the live fusion publishes it with several subjects
 (PointCloud2, metres, one cloud per frame, one point per keypoint and tracked subject, the
 `subject` field its identity). Views are decoded in full (no reduced JPEG decode).
-Not with --no-track, --heatmaps, --filter or --export npz (ConfigError).
+--filter kalman|optim filters each identity on its own (subjects.offline.smooth_subjects,
+the one implementation `monet triangulate --subjects` uses: over the frames from the
+identity's first to its last, with the 2D detections of its own crops): the exports hold
+the filtered rows (subject column as without it) and the MCAP adds
+/monet/keypoints3d_filtered beside /monet/keypoints3d, one cloud per frame with the
+`subject` field. Not with --no-track, --heatmaps or --export npz (ConfigError).
 """
 import sys
 import time
@@ -19,7 +24,7 @@ import numpy as np
 from monet_ros.config import ConfigError
 
 
-def check_subject_options(config, subjects, filter_config, exports):
+def check_subject_options(config, subjects, exports):
     """ConfigError (naming the option) for an option `monet process --subjects N` (N >= 2)
     does not take."""
     where = 'monet process'
@@ -28,10 +33,6 @@ def check_subject_options(config, subjects, filter_config, exports):
                           'their tracks (leave --no-track out)')
     if config.heatmaps:
         raise ConfigError(where, 'heatmaps', '--heatmaps is not written with --subjects')
-    if filter_config is not None and filter_config.method != 'none':
-        raise ConfigError(where, 'filter', f'--filter {filter_config.method} is not '
-                          'available with --subjects (per-subject filters are not written '
-                          'yet)')
     if 'npz' in exports:
         raise ConfigError(where, 'export', 'npz is not written with --subjects; use csv, '
                           'trc, nwb')
@@ -39,28 +40,32 @@ def check_subject_options(config, subjects, filter_config, exports):
 
 def process_subjects(reader, topics, cameras, detector, units, frame_id, staging, config,
                      subjects, association, tracker, exports, edges, trc_axes, progress,
-                     figures):
+                     figures, filter_config=None):
     """The frame loop of process.process_recording for several subjects: writes the MCAP
     (inside `staging`, already an open rosbag2 folder's staging path) and the exports.
     subjects: SubjectsConfig; association: AssociationConfig; tracker: TrackerConfig.
     Fills `figures` (process_recording's dict) and adds figures['subjects']: the
     subjects.offline.SubjectRows, figures['subject_counts']: per-frame counts (frames
     with k subjects, discoveries, crops, duplicates, instances, unmatched, and discovery's
-    3D points: found, explained by a track, loose)."""
+    3D points: found, explained by a track, loose), and figures['filter']: the
+    subjects.offline.SmoothedSubjects of filter_config (a temporal.FilterConfig, method
+    kalman or optim; None or 'none': no filter, figures['filter'] None)."""
     from collections import Counter
 
     from tqdm import tqdm
 
+    from monet_ros.commands.filter_options import write_filtered_subjects
     from monet_ros.commands.views import read_frame_views
     from monet_ros.io import BagWriter, iter_multiview_frames
     from monet_ros.io.export_results import write_subject_results
     from monet_ros.io.export_tables import frame_numbers
     from monet_ros.subjects.detection import SubjectsStep, subject_keypoints
-    from monet_ros.subjects.offline import RowCollector
+    from monet_ros.subjects.offline import RowCollector, smooth_subjects
 
     by_name = {cam.name: cam for cam in cameras}
     step = SubjectsStep(detector, units, subjects, association, tracker)
-    rows = RowCollector()
+    rows = RowCollector(len(cameras))
+    index = {cam.name: v for v, cam in enumerate(cameras)}
     stamps = []
     counts = dict(per_frame=Counter(), discoveries=0, discovered=0, crops=0, duplicates=0,
                   instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0,
@@ -78,7 +83,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                 continue
             r = step.step(images, present, frame.stamp_ns, layouts)
             a = r.association
-            rows.add(len(stamps), a, r.ids, r.keep)
+            rows.add(len(stamps), a, r.ids, r.keep, [index[cam.name] for cam in present])
             stamps.append(frame.stamp_ns)
             counts['per_frame'][int((r.ids >= 0).sum())] += 1
             counts['discoveries'] += r.discovered >= 0
@@ -99,11 +104,17 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                                      subject=np.repeat(ids, C))
             figures['frames'] += 1
             figures['views'] += len(present)
+        result = rows.result(step.tracker, instances=counts['instances'],
+                             unmatched=counts['unmatched'], extra=counts['extra'],
+                             seconds=time.perf_counter() - figures['start'])
+        stamps = np.array(stamps, np.int64)
+        smoothed = None
+        if filter_config is not None and filter_config.method != 'none' and len(stamps):
+            smoothed = smooth_subjects(result, stamps, cameras, edges if edges is not None
+                                       else (), filter_config, progress=progress)
+            write_filtered_subjects(writer, frame_id, smoothed, stamps, units)
     figures['seconds'] = time.perf_counter() - figures['start']
-    result = rows.result(step.tracker, instances=counts['instances'],
-                         unmatched=counts['unmatched'], extra=counts['extra'],
-                         seconds=figures['seconds'])
-    stamps = np.array(stamps, np.int64)
+    figures['filter'] = smoothed
     triangulated = np.isfinite(result.X).all(-1)
     error = result.error[triangulated & np.isfinite(result.error)]
     figures['mean_error'] = float(error.mean()) if error.size else float('nan')
@@ -113,7 +124,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     if len(stamps):
         written = write_subject_results(staging, exports, cameras, detector.keypoints,
                                         result, stamps, frame_numbers(stamps), edges=edges,
-                                        trc_axes=trc_axes)
+                                        trc_axes=trc_axes, smoothed=smoothed)
     figures['subjects'] = result
     figures['subject_counts'] = counts
     return written

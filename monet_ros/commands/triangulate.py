@@ -31,8 +31,10 @@ instances are associated across cameras by epipolar geometry and triangulated
 (subjects.association), then given identities over time (subjects.tracking); at most N
 subjects per frame are kept (those seen by the most cameras; the others are counted).
 keypoints3d.csv gains a `subject` column (one row per frame and subject), TRC is one file
-per subject (keypoints3d_subject<id>.trc), NWB one 3D series per subject. Not with
---filter or --export npz.
+per subject (keypoints3d_subject<id>.trc), NWB one 3D series per subject. --filter
+kalman|optim filters each identity on its own (subjects.offline.smooth_subjects: over the
+frames from its first to its last, with its own 2D detections); the files then hold the
+filtered rows, with the subject column. Not with --export npz.
 """
 from pathlib import Path
 import sys
@@ -96,8 +98,8 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     None), notes, units (the rig's length unit, that of arrays['X']).
     progress: optim's iterations as a tqdm bar. subjects: None (one subject) or N (several:
     the module docstring; tracker_config a subjects.TrackerConfig, association_px the
-    association's threshold), the dict then has 'subjects' (SubjectRows) and counts
-    per subject.
+    association's threshold), the dict then has 'subjects' (SubjectRows, unfiltered) and
+    filter (subjects.offline.SmoothedSubjects or None).
     Raises ValueError / LabelError / ConfigError / OSError naming the file or option."""
     from monet_ros.commands.common import atomic_output_dir, check_new_output
     from monet_ros.commands.filter_options import check_filter_units
@@ -130,7 +132,7 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
         return _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_map,
                                      fusion_config, filter_config, exports, trc_axes,
                                      pose_model, subjects, tracker_config, association_px,
-                                     notes)
+                                     notes, progress)
     pts = read_points2d(paths, names, fmt, keypoints=sk.keypoints if sk else None,
                         camera_map=camera_map, pose_model=pose_model)
     notes += pts.notes
@@ -184,7 +186,8 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
 
 def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_map,
                           fusion_config, filter_config, exports, trc_axes, pose_model,
-                          num_subjects, tracker_config, association_px, notes):
+                          num_subjects, tracker_config, association_px, notes,
+                          progress=False):
     """triangulate_points with --subjects (the module docstring)."""
     from monet_ros.commands.common import atomic_output_dir
     from monet_ros.config import ConfigError
@@ -192,14 +195,15 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
     from monet_ros.labels import LabelError
     from monet_ros.labels_import.points2d import read_points2d
     from monet_ros.subjects import AssociationConfig
-    from monet_ros.subjects.offline import instance_arrays, split_instances, track_subjects
+    from monet_ros.subjects.offline import (
+        instance_arrays,
+        smooth_subjects,
+        split_instances,
+        track_subjects,
+    )
 
     if not num_subjects >= 1:
         raise ConfigError('monet triangulate', 'subjects', f'must be >= 1, got {num_subjects}')
-    if filter_config.method != 'none':
-        raise ConfigError('monet triangulate', 'filter', f'--filter {filter_config.method} '
-                          'is not available with --subjects (per-subject filters are not '
-                          'written yet)')
     if 'npz' in exports:
         raise ConfigError('monet triangulate', 'export', 'npz is not written with '
                           '--subjects; use csv, trc, nwb')
@@ -227,15 +231,21 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
     stamps = np.round(pts.frames * (1e9 / fps)).astype(np.int64)
     rows = track_subjects(points, score, cameras, stamps, num_subjects, association,
                           tracker_config)
+    smoothed = None
+    if filter_config.method != 'none':      # one filter per identity
+        smoothed = smooth_subjects(rows, stamps, cameras, sk.bone_indices if sk else (),
+                                   filter_config, progress=progress)
     with atomic_output_dir(out) as staging:
         staging.mkdir(parents=True, exist_ok=True)
         written = write_subject_results(staging, exports, cameras, keypoints, rows, stamps,
                                         pts.frames, edges=sk.bone_indices if sk else None,
-                                        trc_axes=trc_axes, origin_ns=0, rate_hz=fps)
+                                        trc_axes=trc_axes, origin_ns=0, rate_hz=fps,
+                                        smoothed=smoothed)
     return dict(frames=len(stamps), first_frame=int(pts.frames[0]),
                 last_frame=int(pts.frames[-1]), fps=fps, cameras=[c.name for c in cameras],
                 keypoints=keypoints, instance_names=instances, rows=pts.rows,
                 nan_rows=pts.nan_rows, fmt=pts.fmt, subjects=rows, notes=notes,
+                filter=smoothed,
                 units=rig_cameras[0].units,
                 exports={f: Path(out) / Path(p).relative_to(staging)
                          for f, p in written.items()})
@@ -255,6 +265,11 @@ def _print_subjects(fig, name):
     print(f'{name}: skipped: {s.unmatched} of {s.instances} instances matched in no other '
           f'camera, {s.extra} subjects beyond --subjects, {s.untracked} with too few '
           'keypoints for a track')
+    if fig.get('filter') is not None:
+        print(f'{name}: {fig["filter"].summary()}')
+        for ident, smoothed in fig['filter'].per_subject.items():
+            for note in smoothed.notes:
+                print(f'{name}: filter: subject {ident}: {note}')
 
 
 def run(args):

@@ -36,7 +36,9 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
     (X and score then unused, NaN where a subject is absent): one
     MultiCameraPoseEstimation 'monet_pose_subject<identity>' per subject;
     filtered: None or dict(method, change_mm (T, C), bridged (T, C)) when X is a filter's
-    output. X and the cameras' t are in the cameras' length unit (Camera.units), stated as
+    output; with subjects dict(method, subjects={identity: (change_mm (T, C), bridged
+    (T, C))}), written as filter_change_mm_subject<identity> / filter_bridged_subject<id>.
+    X and the cameras' t are in the cameras' length unit (Camera.units), stated as
     the 3D series' unit; fnum: None or (T,) int source frame numbers (recorded as
     'source_frame'); origin_ns: the time origin (int ns, default the first stamp). Atomic
     (tmp + os.replace)."""
@@ -107,15 +109,20 @@ def write_nwb(path, keypoints, stamps_ns, X, score, cameras, points2d, confidenc
     if filtered is not None:
         how += f', filtered over time ({filtered["method"]})'
         order = ', '.join(keypoints)
-        behavior.add(TimeSeries(
-            name='filter_change_mm', data=np.asarray(filtered['change_mm'], float),
-            unit='mm', timestamps=times,
-            description=f'|filtered - raw| per keypoint ({order})'))
-        behavior.add(TimeSeries(
-            name='filter_bridged', data=np.asarray(filtered['bridged'], np.uint8),
-            unit='n.a.', timestamps=times,
-            description=f'1 where the raw point was missing and the filter bridged the gap '
-            f'({order})'))
+        series = filtered['subjects'] if 'subjects' in filtered else \
+            {None: (filtered['change_mm'], filtered['bridged'])}
+        for ident, (change, bridged) in series.items():
+            tail, whose = ('', '') if ident is None else (f'_subject{ident}',
+                                                          f' of subject {ident}')
+            behavior.add(TimeSeries(
+                name=f'filter_change_mm{tail}', data=np.asarray(change, float),
+                unit='mm', timestamps=times,
+                description=f'|filtered - raw| per keypoint{whose} ({order})'))
+            behavior.add(TimeSeries(
+                name=f'filter_bridged{tail}', data=np.asarray(bridged, np.uint8),
+                unit='n.a.', timestamps=times,
+                description=f'1 where the raw point{whose} was missing and the filter '
+                f'bridged the gap ({order})'))
     poses = [('monet_pose', X, score, how)] if subjects is None else [
         (f'monet_pose_subject{int(i)}', Xs, ss, f'{how}; subject {int(i)} (NaN where absent)')
         for i, Xs, ss in subjects]

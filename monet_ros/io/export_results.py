@@ -161,7 +161,8 @@ def write_results(folder, formats, cameras, keypoints, a, edges=None, trc_axes='
 
 
 def write_subject_results(folder, formats, cameras, keypoints, rows, stamps_ns, fnum,
-                          edges=None, trc_axes='xyz', origin_ns=None, rate_hz=None):
+                          edges=None, trc_axes='xyz', origin_ns=None, rate_hz=None,
+                          smoothed=None):
     """Write several subjects' points (`monet triangulate --subjects`) -> {format: path}.
 
     rows: subjects.offline.SubjectRows (frame indices into stamps_ns (T,) / fnum (T,));
@@ -170,7 +171,11 @@ def write_subject_results(folder, formats, cameras, keypoints, rows, stamps_ns, 
     subject, every frame from the first to the last (empty cells where the subject is
     absent); nwb: keypoints.nwb with one 3D series per subject (export_nwb, NaN where
     absent; the 2D instances are not written). Formats and units as write_results; npz is
-    not written for several subjects (ValueError)."""
+    not written for several subjects (ValueError). smoothed: a subjects.offline.
+    SmoothedSubjects of these rows (`--filter`): every file then holds its filtered rows
+    instead (the subject column as without it), the CSV also `<kp>_change_mm` and
+    `<kp>_bridged`, the NWB `filter_change_mm_subject<id>` / `filter_bridged_subject<id>`
+    per subject."""
     from monet_ros.geometry.units import rig_units
     from monet_ros.io.export_tables import write_anipose_csv, write_trc
     if 'npz' in formats:
@@ -180,16 +185,24 @@ def write_subject_results(folder, formats, cameras, keypoints, rows, stamps_ns, 
     units = rig_units(cameras)
     stamps_ns = np.asarray(stamps_ns, np.int64)
     fnum = np.asarray(fnum, np.int64)
+    extra = filtered = None
+    if smoothed is not None:
+        rows = smoothed.rows
     order = np.lexsort((rows.subject, rows.frame))
     frame = rows.frame[order].astype(np.int64)
+    if smoothed is not None:
+        extra = {'change_mm': smoothed.change_mm[order],
+                 'bridged': smoothed.bridged[order].astype(float)}
     out = {}
     if 'csv' in formats:
         out['csv'] = write_anipose_csv(folder / FILE_NAMES['csv'], keypoints, stamps_ns[frame],
                                        rows.X[order], rows.error[order], rows.ncams[order],
-                                       rows.score[order], units=units, fnum=fnum[frame],
-                                       subject=rows.subject[order])
+                                       rows.score[order], extra=extra, units=units,
+                                       fnum=fnum[frame], subject=rows.subject[order])
     T, C = len(stamps_ns), len(keypoints)
     per_subject = []
+    if smoothed is not None:
+        filtered = dict(method=smoothed.method, subjects={})
     for ident in np.unique(rows.subject):
         mine = rows.subject == ident
         X = np.full((T, C, 3), np.nan)
@@ -197,6 +210,12 @@ def write_subject_results(folder, formats, cameras, keypoints, rows, stamps_ns, 
         X[rows.frame[mine]] = rows.X[mine]
         score[rows.frame[mine]] = rows.score[mine]
         per_subject.append((int(ident), X, score))
+        if smoothed is not None:
+            change = np.full((T, C), np.nan)
+            bridged = np.zeros((T, C), bool)
+            change[rows.frame[mine]] = smoothed.change_mm[mine]
+            bridged[rows.frame[mine]] = smoothed.bridged[mine]
+            filtered['subjects'][int(ident)] = (change, bridged)
     if 'trc' in formats:
         for ident, X, _ in per_subject:
             out[f'trc subject {ident}'] = write_trc(
@@ -206,5 +225,5 @@ def write_subject_results(folder, formats, cameras, keypoints, rows, stamps_ns, 
         from monet_ros.io.export_nwb import write_nwb
         out['nwb'] = write_nwb(folder / FILE_NAMES['nwb'], keypoints, stamps_ns, None, None,
                                cameras, None, None, edges=edges, fnum=fnum,
-                               origin_ns=origin_ns, subjects=per_subject)
+                               origin_ns=origin_ns, subjects=per_subject, filtered=filtered)
     return out

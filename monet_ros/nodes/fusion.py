@@ -37,8 +37,12 @@ matched to the tracks, discovery on the full-frame maps, association across view
 identity tracker) and publishes keypoints3d with one more UINT32 field `subject` (the
 identity; one point per keypoint and subject, ordered by identity), skeleton markers per
 subject (namespace <skeleton>/subject<id>, colours io.markers.SUBJECT_COLOURS) and a
-/diagnostics status per tracked subject. Its source counters are per slot. Not with
-`filter` (per-subject filters are not written), keypoints3d_raw is not published.
+/diagnostics status per tracked subject. Its source counters are per slot. With
+`filter:=true` each identity has its own live filter (temporal.live.SubjectFilters: one
+LiveFilter per identity, started at its birth, dropped at its death, all dropped when the
+identities restart): the filtered points on keypoints3d, the raw ones on keypoints3d_raw,
+both with the `subject` field and the same points (the skeleton markers are the filtered
+ones).
 With N = 1 (the default) nothing of this exists: the topics and fields are the one-subject
 ones, byte for byte.
 
@@ -96,7 +100,7 @@ from monet_ros.subjects.association import AssociationConfig
 from monet_ros.subjects.detection import SubjectsConfig, SubjectsCore, subject_keypoints
 from monet_ros.subjects.tracking import TrackerConfig
 from monet_ros.sync import StampSynchronizer
-from monet_ros.temporal.live import LiveFilter, LiveFilterConfig
+from monet_ros.temporal.live import LiveFilter, LiveFilterConfig, SubjectFilters
 from monet_ros.timing import StageTimer
 
 # Parameters that may change while running (`ros2 param set`), effective next frame.
@@ -237,7 +241,7 @@ class FusionNode(Node):
         # naming the parameter, as a live change would be refused)
         self.derived = derived = derive_checked(self.get_name(), config, self.derive)
         self.core_config = derived.core
-        self.live_filter = derived.filter if config.filter else None
+        self.live_filter = self.make_filter(config, derived)
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
@@ -264,7 +268,8 @@ class FusionNode(Node):
         # callables(stamp_ns, result, filtered) (the pipeline's summary and score):
         # filtered (C, 3) the live filter's keypoints (rig unit: not the topic's m), None
         # with it off; with subjects >= 2 result holds the published points (X (K C, 3),
-        # confidence, reprojection_error, num_views, keypoint, subject), filtered None
+        # confidence, reprojection_error, num_views, keypoint, subject; X raw) and filtered
+        # (K C, 3) the per-identity filters' keypoints, in the same order (None when off)
         self.listeners = []
         self.first_heard = None   # monotonic time of the first heatmap (of any camera)
         self.sync = StampSynchronizer(self.keys, slop_ns=derived.slop_ns,
@@ -302,12 +307,19 @@ class FusionNode(Node):
                f'{self.config.heatmap_topic.format(camera=crop_slots("<camera>", 1)[0])}'
                f'..crop{config.subjects}' if self.subjects is not None else ''))
 
+    @staticmethod
+    def make_filter(config, derived):
+        """The live filter of a config (None when `filter` is off): derived.filter (a
+        LiveFilter) with one subject, a SubjectFilters of its config and unit (one per
+        identity) with subjects >= 2."""
+        if not config.filter:
+            return None
+        if config.subjects > 1:
+            return SubjectFilters(derived.filter.config, derived.filter.units)
+        return derived.filter
+
     def subjects_core(self, config):
-        """The several-subject core (subjects >= 2) of a config; ConfigError for a setting
-        it does not take."""
-        if config.filter:
-            raise ConfigError(self.get_name(), 'filter', 'is not available with subjects >= '
-                              '2 (per-subject filters are not written yet)')
+        """The several-subject core (subjects >= 2) of a config."""
         association = AssociationConfig(
             threshold_px=config.association_px, confidence_threshold=config.confidence_threshold,
             min_views=config.min_views, triangulation_px=config.threshold_px,
@@ -326,16 +338,13 @@ class FusionNode(Node):
         if config.min_views > len(self.cameras):
             raise ConfigError(self.get_name(), 'min_views',
                               f'{config.min_views} > the {len(self.cameras)} cameras fused')
-        if self.subjects is not None and config.filter:
-            raise ConfigError(self.get_name(), 'filter', 'is not available with subjects >= '
-                              '2 (per-subject filters are not written yet)')
         derived = self.derive(config)    # checked already (declare_config): cannot fail
         self.core_config = derived.core
         self.sync.min_keys = config.min_views
         if self.live_filter is None or self.live_filter.config != derived.filter.config:
             # switched on, off or retuned: a fresh state from the next frame
             self.keep_filter_counts()
-            self.live_filter = derived.filter if config.filter else None
+            self.live_filter = self.make_filter(config, derived)
         self.config, self.derived = config, derived
 
     def keep_filter_counts(self):
@@ -566,6 +575,8 @@ class FusionNode(Node):
             self.subjects = self.subjects_core(self.config)
             self.subject_counts['resets'] += 1
             self.subject_stats.clear()
+            if self.live_filter is not None:    # identity 0 is now another subject
+                self.live_filter.clear()
         start = time.perf_counter()
         try:
             result = self.subjects.live_frame(cameras, group.stamp_ns, crops, full)
@@ -606,17 +617,29 @@ class FusionNode(Node):
         alive = set(self.subjects.tracker.ids.tolist())
         for ident in [i for i in self.subject_stats if i not in alive]:
             del self.subject_stats[ident]                 # died (or the identities restarted)
+        filtered = None
+        if self.live_filter is not None:     # one filter per identity, the dead ones dropped
+            start = time.perf_counter()
+            filtered, _ = self.live_filter.update(group.stamp_ns, ids, X,
+                                                  alive=self.subjects.tracker.ids)
+            self.timer.add('filter', time.perf_counter() - start)
         start = time.perf_counter()
         C = self.skeleton.num_keypoints
+        fields = dict(units=self.units, keypoint=np.tile(np.arange(C), len(ids)),
+                      subject=np.repeat(ids, C))
+        if filtered is not None:
+            self.pub_raw.publish(keypoints3d_to_cloud(
+                group.stamp_ns, self.frame_id, X.reshape(-1, 3), score.reshape(-1),
+                error.reshape(-1), views.reshape(-1), **fields))
+        shown = X if filtered is None else filtered
         self.pub_points.publish(keypoints3d_to_cloud(
-            group.stamp_ns, self.frame_id, X.reshape(-1, 3), score.reshape(-1),
-            error.reshape(-1), views.reshape(-1), units=self.units,
-            keypoint=np.tile(np.arange(C), len(ids)), subject=np.repeat(ids, C)))
+            group.stamp_ns, self.frame_id, shown.reshape(-1, 3), score.reshape(-1),
+            error.reshape(-1), views.reshape(-1), **fields))
         if self.pub_skeleton.get_subscription_count() and len(ids):
             markers = []
             for k, ident in enumerate(ids.tolist()):
                 markers += skeleton_marker_array(
-                    group.stamp_ns, self.frame_id, X[k], self.skeleton.bone_indices,
+                    group.stamp_ns, self.frame_id, shown[k], self.skeleton.bone_indices,
                     ns=f'{self.skeleton.name}/subject{ident}',
                     lifetime_ns=self.derived.marker_lifetime_ns, scale=0.03,
                     names=self.skeleton.keypoints if self.config.marker_labels else None,
@@ -629,7 +652,8 @@ class FusionNode(Node):
                 reprojection_error=error.reshape(-1), num_views=views.reshape(-1),
                 keypoint=np.tile(np.arange(C), len(ids)), subject=np.repeat(ids, C))
             for listener in self.listeners:
-                listener(group.stamp_ns, frame, None)
+                listener(group.stamp_ns, frame,
+                         None if filtered is None else filtered.reshape(-1, 3))
 
     def skip_stale(self, group, views):
         """A frame with a view that waited too long in the input queue: not fused, each of

@@ -82,7 +82,11 @@ class Association:
     reprojection errors (NaN elsewhere); score (S, C): mean score of the inlier views
     (NaN where not triangulated); cost (S,) mean epipolar cost (px)
     of the subject's instance pairs; unmatched: instances (with >= 1 keypoint) in no
-    subject; instances: instances with >= 1 keypoint."""
+    subject; instances: instances with >= 1 keypoint; points2d (S, V, C, 2) the
+    detections (observed px) of each subject's instances, NaN where the subject has none
+    (not seen, keypoint missing or below the confidence threshold), and scores2d (S, V, C)
+    their scores (0 there): the 2D an offline filter of the subject weighs
+    (subjects.offline.smooth_subjects)."""
     X: np.ndarray
     instance: np.ndarray
     inliers: np.ndarray
@@ -91,6 +95,8 @@ class Association:
     cost: np.ndarray
     unmatched: int
     instances: int
+    points2d: np.ndarray = None
+    scores2d: np.ndarray = None
 
 
 _F_CACHE = {}
@@ -213,7 +219,8 @@ def _dissolve_pairs(label, cost, finite, view, num_views, threshold_px):
 def _empty(V, C, M):
     """An Association without subjects, M instances all unmatched."""
     return Association(np.zeros((0, C, 3)), np.zeros((0, V), int), np.zeros((0, V, C), bool),
-                       np.zeros((0, V, C)), np.zeros((0, C)), np.zeros(0), M, M)
+                       np.zeros((0, V, C)), np.zeros((0, C)), np.zeros(0), M, M,
+                       np.zeros((0, V, C, 2)), np.zeros((0, V, C)))
 
 
 def associate(points2d, cameras, scores=None, config=None):
@@ -288,4 +295,6 @@ def associate(points2d, cameras, scores=None, config=None):
     return Association(X=X.reshape(S, C, 3), instance=instance,
                        inliers=inl, view_errors=err.reshape(V, S, C).transpose(1, 0, 2),
                        score=score, cost=mean_cost,
-                       unmatched=int(M - member.sum()), instances=M)
+                       unmatched=int(M - member.sum()), instances=M,
+                       points2d=sub_pts.transpose(1, 0, 2, 3),
+                       scores2d=sub_w.transpose(1, 0, 2))

@@ -422,7 +422,9 @@ class SubjectsCore:
             a = Association(X=np.zeros((0, self.C, 3)), instance=np.zeros((0, 0), np.int64),
                             inliers=np.zeros((0, 0, self.C), bool),
                             view_errors=np.zeros((0, 0, self.C)), score=np.zeros((0, self.C)),
-                            cost=np.zeros(0), unmatched=0, instances=0)
+                            cost=np.zeros(0), unmatched=0, instances=0,
+                            points2d=np.zeros((0, 0, self.C, 2)),
+                            scores2d=np.zeros((0, 0, self.C)))
         keep = []
         weak = weak_subjects(a.score, self.config.min_score)
         for s in np.flatnonzero(~weak).tolist():
@@ -446,6 +448,8 @@ class SubjectsCore:
             a.inliers[keep[s], :, c] = False
             a.view_errors[keep[s], :, c] = np.nan
             a.score[keep[s], c] = np.nan
+            a.points2d[keep[s], :, c] = np.nan           # the neighbour's: not this subject's
+            a.scores2d[keep[s], :, c] = 0.0
         tracker = self.tracker
         before = dict(zip(tracker.ids.tolist(), self._missed.tolist()))
         ids = tracker.step(a.X[keep], stamp_ns)

@@ -52,7 +52,7 @@ class LiveFilterConfig:
     """Settings of the live filter (mirrored as fusion node parameters)."""
     filter: bool = setting(False, 'causal per-joint constant-velocity Kalman filter: '
                            'filtered keypoints on keypoints3d, the raw ones on '
-                           'keypoints3d_raw')
+                           'keypoints3d_raw (subjects >= 2: one filter per identity)')
     # defaults from the sweep of bench/live_filter.py (a walking synthetic subject at 30 Hz,
     # 20 mm noise, 3% outliers of 0.3 m): 10 m/s^2 smooths the walk best (p90 40 mm, raw
     # 53) but loses a 2 Hz 0.2 m wave (peak 32 m/s^2: 60 mm RMS, raw 20); 25 m/s^2 follows
@@ -232,3 +232,80 @@ class LiveFilter:
         out = np.where(live[:, None], self.p, np.nan)
         self.missed = ~(accept | start | pair)
         return out, accept | start | pair
+
+
+class SubjectFilters:
+    """One LiveFilter per subject identity: the live filter with several subjects (the
+    fusion node's `filter` with subjects >= 2).
+
+    update(stamp_ns, ids, X, alive=None) -> (filtered (K, C, 3), measured (K, C) bool):
+    ids (K,) distinct int identities (the identity tracker's, subjects.tracking), X
+    (K, C, 3) their keypoints in `units` (NaN = not triangulated). Each identity's joints
+    go through its own LiveFilter (same config and unit), created the first time the
+    identity is given (its birth: the state starts from that frame) and dropped once the
+    identity is not in `alive` (the identities the tracker still holds after this frame,
+    missed ones included; None = keep every filter): its death. An identity missed for
+    some frames keeps its filter, which predicts across the gap (its own filter_max_gap_s
+    and filter_reset_s apply). No state is shared or moved between identities, and the
+    order of ids in a frame does not matter. clear() drops every filter (the identities
+    restart, e.g. the tracker was replaced after time went back: identity 0 is then
+    another subject). Counters, over the filters alive and dropped: resets, restarts,
+    gated, frames (LiveFilter's, summed), births, deaths. Raises ConfigError as
+    LiveFilter (checked here, at construction), ValueError for bad shapes or repeated
+    ids."""
+
+    def __init__(self, config=LiveFilterConfig(), units='m'):
+        LiveFilter(config, units)             # the config's numbers, checked in this unit
+        self.config = config
+        self.units = units
+        self.filters = {}                     # identity -> LiveFilter
+        self.dropped = dict(resets=0, restarts=0, gated=0, frames=0)
+        self.births = self.deaths = 0
+
+    def total(self, name):
+        """Counter `name` (resets, restarts, gated, frames) over the filters alive and
+        dropped."""
+        return self.dropped[name] + sum(getattr(f, name) for f in self.filters.values())
+
+    resets = property(lambda self: self.total('resets'))
+    restarts = property(lambda self: self.total('restarts'))
+    gated = property(lambda self: self.total('gated'))
+    frames = property(lambda self: self.total('frames'))
+
+    def identities(self):
+        """The identities that hold a filter, increasing."""
+        return sorted(self.filters)
+
+    def update(self, stamp_ns, ids, X, alive=None):
+        ids = np.asarray(ids, np.int64).reshape(-1)
+        X = np.asarray(X, np.float64)
+        if X.ndim != 3 or X.shape[0] != len(ids) or X.shape[2] != 3:
+            raise ValueError(f'SubjectFilters.update: X must be (K={len(ids)}, C, 3), got '
+                             f'{X.shape}')
+        if len(np.unique(ids)) != len(ids):
+            raise ValueError(f'SubjectFilters.update: repeated identities {ids.tolist()}')
+        out = np.full(X.shape, np.nan)
+        measured = np.zeros(X.shape[:2], bool)
+        for k, ident in enumerate(ids.tolist()):
+            live = self.filters.get(ident)
+            if live is None:
+                live = self.filters[ident] = LiveFilter(self.config, self.units)
+                self.births += 1
+            out[k], measured[k] = live.update(stamp_ns, X[k])
+        if alive is not None:
+            keep = set(np.asarray(alive, np.int64).reshape(-1).tolist())
+            for ident in [i for i in self.filters if i not in keep]:
+                self.drop(ident)
+        return out, measured
+
+    def drop(self, ident):
+        """Forget identity `ident`'s filter (its counters are kept in the totals)."""
+        live = self.filters.pop(ident)
+        for key in self.dropped:
+            self.dropped[key] += getattr(live, key)
+        self.deaths += 1
+
+    def clear(self):
+        """Drop every filter (the identities start again)."""
+        for ident in list(self.filters):
+            self.drop(ident)

@@ -81,6 +81,44 @@ def test_two_subjects_are_found_and_keep_their_identity(scene, tmp_path, capsys)
             np.testing.assert_allclose(series.data[:], pred[:, slot, 0], rtol=1e-12)
 
 
+def test_two_subjects_filtered_per_identity(scene, tmp_path, capsys):
+    """--subjects 2 --filter kalman: each identity's rows go through its own Kalman
+    smoother: the CSV equals temporal.kalman_smooth run on that identity's unfiltered rows
+    alone (the same identities and frames, the subject column kept), and the MCAP adds
+    /monet/keypoints3d_filtered with the subject field, holding those points."""
+    from monet_ros.temporal import FilterConfig, kalman_smooth
+    _, X, _ = scene
+    raw_out, out = tmp_path / 'raw', tmp_path / 'filtered'
+    assert _process(scene, raw_out, '--subjects', '2', '--link-mm', '450') == 0
+    assert _process(scene, out, '--subjects', '2', '--link-mm', '450', '--filter',
+                    'kalman') == 0
+    text = capsys.readouterr().out
+    assert 'filter kalman per subject (2 identities' in text
+    raw, table = read_anipose_csv(raw_out / 'keypoints3d.csv'), \
+        read_anipose_csv(out / 'keypoints3d.csv')
+    np.testing.assert_array_equal(table['subject'], raw['subject'])
+    np.testing.assert_array_equal(table['fnum'], raw['fnum'])
+    assert sorted(table['extra']) == ['bridged', 'change_mm']
+    stamps = np.array([m.stamp_ns for m in open_bag(out).messages(['/monet/keypoints3d'])])
+    clouds = list(open_bag(out).messages(['/monet/keypoints3d_filtered']))
+    assert len(clouds) == T
+    for i in np.unique(raw['subject']):
+        mine = raw['subject'] == i
+        # independent: the smoother over this identity's rows alone (frames 0..T-1)
+        noise = 1.0 + (np.nan_to_num(raw['error'][mine]) / FilterConfig().reprojection_px) ** 2
+        alone = kalman_smooth(raw['X'][mine], stamps[raw['fnum'][mine]],
+                              FilterConfig(method='kalman'), noise, 'm')
+        np.testing.assert_allclose(table['X'][mine], alone.X, atol=1e-9)
+        assert np.abs(table['X'][mine] - raw['X'][mine]).max() > 1e-4       # it filtered
+        trc = read_trc(out / f'keypoints3d_subject{i}.trc')
+        np.testing.assert_allclose(trc['X'], table['X'][mine], rtol=1e-12)
+        for t in (0, T - 1):
+            got = cloud_to_keypoints3d(clouds[t].msg, units='m')
+            assert sorted(np.unique(got['subject'])) == sorted(np.unique(raw['subject']))
+            np.testing.assert_allclose(got['X'][got['subject'] == i],
+                                       table['X'][mine][t], atol=1e-6)
+
+
 def test_synth_recording_without_subjects_found_still_writes_and_counts(tmp_path, capsys):
     """A `monet synth --subjects 2` recording (its own rig from /tf_static + camera_info,
     human14) through an untrained net: nothing is found, every frame is counted, the
@@ -116,7 +154,6 @@ def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
     for extra, words in ((['--subjects', '0'], "'subjects'"),
                          (['--subjects', '2', '--no-track'], '--no-track'),
                          (['--subjects', '2', '--heatmaps'], '--heatmaps'),
-                         (['--subjects', '2', '--filter', 'kalman'], '--filter kalman'),
                          (['--subjects', '2', '--export', 'npz'], 'npz'),
                          (['--subjects', '2', '--link-mm', '0'], "'link_mm'"),
                          (['--subjects', '2', '--gate-mm', '-1'], "'gate_mm'")):

@@ -136,7 +136,6 @@ def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
     paths = [str(p) for p in _write_table(tmp_path / 'points.csv', points)]
     base = ['triangulate', *paths, '--rig', str(root / 'rig.yaml'), '--fps', '30']
     for extra, words in ((['--subjects', '0'], "'subjects': must be >= 1"),
-                         (['--subjects', '2', '--filter', 'kalman'], '--filter kalman'),
                          (['--subjects', '2', '--export', 'npz'], 'npz'),
                          # a table of several instances per camera without --subjects
                          ([], 'holds 2 instances per camera')):
