@@ -39,11 +39,18 @@ the detector children, not the publisher).
 --repeat N runs each case N times (off/on interleaved) and shows medians: single 10 s runs
 differ by several percent. --second-job N runs N CPU-bound processes beside the end-to-end
 runs (the loaded-machine figures); --input-size the small net at another input side;
---precision float32 bfloat16 runs every end-to-end case with each detector precision;
+--precision float32 bfloat16 int8 runs every end-to-end case with each detector precision
+(backend torch, int8 on onnxruntime: see --backend), side by side; int8 as `monet pipeline
+--precision int8 --backend onnxruntime` (commands.pipeline.prepare_int8): the network
+quantised once before the measured runs, calibrated on the tracked crops of a recording of
+the bench's own camera frames and rig, and cached beside the checkpoint; every int8 run's
+detectors then get that quant (as a user's second run finds it cached), and the output
+says which quant and crop mode (the calibration line);
 --detector-processes 1 2 each three-process and pipeline case with one detector process
 batching every camera and with two, each batching half (`monet pipeline
---detector-processes`), e.g. `--cameras 16 --extra --layouts three-process pipeline
---precision bfloat16 --detector-processes 1 2` for 16 cameras on 2 cores.
+--detector-processes`; 0: its default, two from 16 cameras on, else one), e.g.
+`--cameras 16 --extra --layouts three-process pipeline --precision bfloat16
+--detector-processes 1 2` for 16 cameras on 2 cores.
 Prints tables and the load average; never asserts.
 """
 import argparse
@@ -62,6 +69,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from monet_ros.commands.pipeline import detector_groups  # noqa: E402
 from monet_ros.cores import usable_cores  # noqa: E402
 from monet_ros.fusion import FusionConfig, fuse_heatmaps  # noqa: E402
 from monet_ros.geometry import save_rig, triangulate, undistort_views  # noqa: E402
@@ -204,9 +212,11 @@ def run_env(workdir):
 
 
 def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewable=False,
-         input_size=None, precision='float32', detector_processes=1, batch_wait_ms=None):
+         input_size=None, precision='float32', detector_processes=1, batch_wait_ms=None,
+         calibration=''):
     """One end-to-end run in a fresh process (clean DDS state); returns its figures.
-    batch_wait_ms: the detectors' parameter (None: the node's default)."""
+    batch_wait_ms: the detectors' parameter (None: the node's default); calibration: theirs
+    (precision int8: the quant prepare_int8 cached)."""
     rig = make_rig(RigConfig(num_cameras=views))
     rig_path = workdir / f'rig{views}.yaml'
     save_rig(rig_path, rig)
@@ -214,7 +224,8 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
     spec = dict(layout=layout, views=views, rate=rate, seconds=seconds, warmup=warmup,
                 threads=threads, backend=backend, rig=str(rig_path), model=str(model_path),
                 workdir=str(workdir), viewable=viewable, precision=precision,
-                detector_processes=detector_processes, batch_wait_ms=batch_wait_ms)
+                detector_processes=detector_processes, batch_wait_ms=batch_wait_ms,
+                calibration=calibration)
     proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
                           env=run_env(workdir), capture_output=True, text=True,
                           timeout=300 + seconds + warmup)
@@ -342,6 +353,62 @@ def second_job(processes):
             proc.wait()
 
 
+def feed_frames(views):
+    """The frames the camera publisher cycles through: 4 of (views, 480, 640, 3) uint8 rgb8
+    noise (fixed seed)."""
+    rng = np.random.default_rng(2)
+    return [rng.integers(0, 255, (views, HEIGHT, WIDTH, 3), np.uint8) for _ in range(4)]
+
+
+def backend_for(precision, backend=None):
+    """The detector backend of the end-to-end runs in `precision`: `backend` when given
+    (--backend), else onnxruntime for int8 (the only one that runs it: `monet pipeline
+    --precision int8 --backend onnxruntime`) and torch for the others."""
+    return backend or ('onnxruntime' if precision == 'int8' else 'torch')
+
+
+def write_feed_recording(path, rig, instants):
+    """A rosbag2 MCAP folder `path` of what the camera publisher sends on `rig`: /tf_static,
+    then `instants` instants (30 Hz stamps) of every camera's image (the feed_frames in
+    turn) and camera_info: the recording int8 calibrates on, as `monet pipeline
+    --precision int8` calibrates on the recording it plays."""
+    from monet_ros.io import BagWriter
+
+    start, period = 1_767_225_600_000_000_000, 33_333_333
+    frames = feed_frames(len(rig))
+    with BagWriter(path) as writer:
+        writer.write_tf_static(start, rig)
+        for i in range(instants):
+            stamp = start + i * period
+            for cam, image in zip(rig, frames[i % len(frames)]):
+                writer.write_image(cam.topic, stamp, image, f'{cam.name}_optical',
+                                   encoding='rgb8')
+                writer.write_camera_info(f'/{cam.name}/camera_info', stamp, cam,
+                                         f'{cam.name}_optical')
+    return path
+
+
+def prepare_int8_runs(workdir, views, threads=0, input_size=None):
+    """precision int8's one preparation before the measured runs, outside them: a
+    recording of the camera feed on the rig of `views` cameras (write_feed_recording,
+    enough instants for models.quantize's calibration set) and `monet pipeline`'s own
+    preparation on it (commands.pipeline.prepare_int8: calibrated on its tracked crops and
+    cached beside the bench's checkpoint, or the cached quant used). Returns (the
+    detectors' calibration parameter: the cached quant, the one line saying which quant
+    and crops, seconds it took). ValueError (one line) when int8 cannot run."""
+    from monet_ros.commands.pipeline import prepare_int8
+    from monet_ros.models.quantize import CALIBRATION_IMAGES
+
+    model = bench_model(workdir, 'small', input_size)
+    recording = workdir / f'int8_calibration_{views}'
+    if not recording.exists():
+        write_feed_recording(recording, make_rig(RigConfig(num_cameras=views)),
+                             -(-CALIBRATION_IMAGES // views))
+    start = time.perf_counter()
+    calibration, note = prepare_int8(model, recording, threads=threads)
+    return calibration, note, time.perf_counter() - start
+
+
 class Feeder:
     """The camera side and the stopwatch: publishes V image streams at `rate` and times
     every /monet/keypoints3d from its image stamp; keeps the nodes' latest /diagnostics."""
@@ -384,11 +451,8 @@ class Feeder:
         self.pubs = [(node.create_publisher(Image, cam.topic, IMAGE_OUT),
                       node.create_publisher(CameraInfo, f'/{cam.name}/camera_info',
                                             IMAGE_OUT)) for cam in rig]
-        rng = np.random.default_rng(2)
-        frames = [rng.integers(0, 255, (len(rig), HEIGHT, WIDTH, 3), np.uint8)
-                  for _ in range(4)]
         self.messages = [[numpy_to_image_msg(f[v], 0, cam.name) for v, cam in enumerate(rig)]
-                         for f in frames]
+                         for f in feed_frames(len(rig))]
 
     def on_diagnostics(self, msg):
         for status in msg.status:
@@ -491,23 +555,24 @@ def worker(spec):
     from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
     from rclpy.node import Node
 
-    from monet_ros.commands.pipeline import detector_groups, detector_threads, pipeline_executor
+    from monet_ros.commands.pipeline import detector_threads, pipeline_executor
     from monet_ros.geometry import load_rig
     from monet_ros.nodes import heap_for_large_buffers, short_gil_switch
     from monet_ros.nodes.runner import stop_executor
 
     rig = load_rig(spec['rig'])
+    # 0 processes: monet pipeline's default (two from TWO_DETECTORS_FROM cameras on)
+    groups = detector_groups(rig, spec.get('detector_processes', 1))
     detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
-                           threads=detector_threads(spec['threads'] or 0,
-                                                    spec.get('detector_processes', 1),
+                           threads=detector_threads(spec['threads'] or 0, len(groups),
                                                     usable_cores()),
                            backend=spec['backend'],
-                           precision=spec['precision'], debug_image=spec['viewable'])
+                           precision=spec['precision'], debug_image=spec['viewable'],
+                           calibration=spec.get('calibration', ''))
     if spec.get('batch_wait_ms') is not None:
         detector_params['batch_wait_ms'] = float(spec['batch_wait_ms'])
     fusion_params = dict(rig=spec['rig'], publish_tf=spec['viewable'],
                          camera_markers=spec['viewable'])
-    groups = detector_groups(rig, spec.get('detector_processes', 1))
     procs, nodes, children, feeder_proc = [], [], [], None
     if spec['layout'] == 'pipeline':
         from monet_ros.nodes.child import ChildNode
@@ -603,21 +668,37 @@ def run_cases(args, runs, workdir, costs):
         for layout in args.layouts:
             for precision, processes in [(p, n) for p in args.precision
                                          for n in args.detector_processes]:
-                if layout == 'in-process' and processes > 1:
+                if layout == 'in-process' and (processes > 1 or (
+                        processes == 0 and 1 in args.detector_processes)):
                     continue          # one process by definition
+                if layout == 'in-process':
+                    processes = 1
+                backend = backend_for(precision, args.backend)
                 label = layout if len(args.precision) == 1 else f'{layout}, {precision}'
-                if len(args.detector_processes) > 1:
-                    label += f', {processes} detector process{"es" * (processes > 1)}'
+                if len(args.detector_processes) > 1 or 0 in args.detector_processes:
+                    try:
+                        actual = len(detector_groups(make_rig(RigConfig(num_cameras=views)),
+                                                     processes))
+                    except ValueError:     # more processes than cameras: the row says so
+                        actual = processes
+                    label += (f', {actual} detector process{"es" * (actual > 1)}'
+                              + (' (auto)' if processes == 0 else ''))
                 settings = (False, True) if args.viewable else (False,)
                 results = {viewable: [] for viewable in settings}
                 for _ in range(args.repeat):
                     for viewable in settings:
-                        results[viewable].append(live(layout, views, rate, args.seconds,
-                                                      args.warmup, args.threads,
-                                                      args.backend, workdir, viewable,
-                                                      args.input_size, precision,
-                                                      processes, args.batch_wait_ms))
+                        results[viewable].append(live(
+                            layout, views, rate, args.seconds, args.warmup, args.threads,
+                            backend, workdir, viewable, args.input_size, precision, processes,
+                            args.batch_wait_ms,
+                            args.int8_calibration if precision == 'int8' else ''))
                 combined = {viewable: median_result(rs) for viewable, rs in results.items()}
+                ran = {(r.get('diagnostics', {}).get('detector', {}).get('backend', backend),
+                        r.get('diagnostics', {}).get('detector', {}).get('precision',
+                                                                          precision))
+                       for r in combined.values()} - {(backend, precision)}
+                if ran:           # what the detector nodes report in /diagnostics
+                    label += ' (detector ran ' + ', '.join(' '.join(x) for x in ran) + ')'
                 for viewable, r in combined.items():
                     print_live_row(views, rate, label, viewable, r)
                 if args.viewable and all('error' not in r for r in combined.values()):
@@ -701,11 +782,14 @@ def main():
                         help='network CPU threads (default: the cores; in the live runs as '
                         '`monet pipeline`: the backend default with one detector process, '
                         'the cores shared out with several)')
-    parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
-                        help='detector backend of the end-to-end runs')
-    parser.add_argument('--precision', choices=('float32', 'bfloat16'), nargs='+',
+    parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default=None,
+                        help='detector backend of the end-to-end runs (default: torch, and '
+                        'onnxruntime for int8, the only one that runs it)')
+    parser.add_argument('--precision', choices=('float32', 'bfloat16', 'int8'), nargs='+',
                         default=['float32'], help='detector precision(s) of the end-to-end '
-                        'runs (several: each case with each, side by side)')
+                        'runs (several: each case with each, side by side); int8 as `monet '
+                        'pipeline --precision int8`: quantised once before the runs, '
+                        'calibrated on the tracked crops of a recording of the camera feed')
     parser.add_argument('--fusion-views', type=int, nargs='+', default=[4, 8, 35])
     parser.add_argument('--detector-views', type=int, nargs='*', default=[4, 8],
                         help='views of the detector table (none: no detector table)')
@@ -729,7 +813,8 @@ def main():
                         help='runs of the image-receive table (0: none)')
     parser.add_argument('--detector-processes', type=int, nargs='+', default=[1],
                         help='detector processes of the three-process and pipeline layouts '
-                        '(several: each case with each; cameras split between them)')
+                        '(several: each case with each; cameras split between them; 0: '
+                        "monet pipeline's default, two from 16 cameras on, else one)")
     parser.add_argument('--batch-wait-ms', type=float, default=None,
                         help="the detectors' batch_wait_ms (default: the node's); 0 runs a "
                         'batch of the newest frame of every camera at once when no instant is '
@@ -745,6 +830,15 @@ def main():
         parser.error(f'--repeat must be >= 1, got {args.repeat}')
     if args.batch_wait_ms is not None and not args.batch_wait_ms >= 0:
         parser.error(f'--batch-wait-ms must be >= 0, got {args.batch_wait_ms}')
+    if any(n < 0 for n in args.detector_processes):
+        parser.error(f'--detector-processes must be >= 0, got {args.detector_processes}')
+    from monet_ros.models.detector import check_precision
+    for precision in args.precision:      # what cannot run here: one line, before any run
+        try:
+            check_precision(precision, backend_for(precision, args.backend), 'cpu')
+        except ValueError as error:
+            parser.error(f'--precision {precision} with --backend '
+                         f'{backend_for(precision, args.backend)}: {error}')
     if args.quick:
         args.cameras, args.extra, args.seconds, args.warmup = [2], ['2@60'], 2.0, 2.0
         args.runs, args.fusion_views, args.detector_views = 3, [4, 35], [2]
@@ -814,8 +908,21 @@ def main():
         for item in args.extra:
             cams, _, hz = item.partition('@')
             runs.append((int(cams), float(hz)))
-        print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, backend {args.backend} '
-              f'{" / ".join(args.precision)}, '
+        args.int8_calibration = ''
+        if 'int8' in args.precision:       # once, before and outside the measured runs
+            try:
+                args.int8_calibration, note, took = prepare_int8_runs(
+                    workdir, max(v for v, _ in runs), args.threads or 0, args.input_size)
+            except ValueError as error:
+                print(f'bench/pipeline.py: --precision int8: {error}', file=sys.stderr)
+                return 2
+            print(f'\n# int8 ({took:.1f} s, before the measured runs and outside them): '
+                  f'{note}; every int8 run gives its detectors calibration '
+                  f'{args.int8_calibration}, as `monet pipeline --precision int8` does',
+                  flush=True)
+        print(f'\n## End to end, {WIDTH}x{HEIGHT} rgb8, '
+              + ' / '.join(f'{p} ({backend_for(p, args.backend)})' for p in args.precision)
+              + ', '
               f'{args.seconds:.0f} s measured after {args.warmup:.0f} s warm-up'
               + (f', median of {args.repeat} runs'
                  + (' (off/on interleaved)' if args.viewable else '') if args.repeat > 1

@@ -297,6 +297,30 @@ def detector_groups(slots, processes):
     return [names[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
 
 
+def prepare_int8(model, bag, calibration=None, backend='onnxruntime', threads=0,
+                 fusion=None):
+    """precision int8 of `monet pipeline`, once, before the detector processes start: the
+    network of checkpoint `model` quantised on the tracked crops (the detector nodes track,
+    with the default rule: monet_ros.int8_calibration) of `calibration` or else of the
+    recording `bag`, and cached beside the checkpoint; a cached quant of those crops is
+    used as it is (nothing calibrated). fusion: the FusionConfig of the run (None = the
+    defaults). Returns (what the detector nodes get as their calibration parameter: the
+    cached quant's path, or `calibration` / `bag` where it could not be cached, the one
+    line saying which quant: calibrated on what crops of what, or the cached one used).
+    Raises ValueError (models.quantize.Int8Error: one line) as Detector.from_checkpoint
+    does for precision int8. bench/pipeline.py --precision int8 prepares its runs with
+    this."""
+    from monet_ros.int8_calibration import int8_calibration
+    from monet_ros.models import Detector
+    from monet_ros.models.quantize import cached_int8
+    int8_crops, given = int8_calibration(calibration or bag, True, fusion=fusion)
+    detector = Detector.from_checkpoint(model, device='cpu', backend=backend,
+                                        threads=threads, precision='int8',
+                                        calibration=given, int8_crops=int8_crops)
+    return (str(cached_int8(model, crops=int8_crops) or calibration or bag),
+            detector.int8_note)
+
+
 def detector_threads(threads, processes, cores):
     """CPU threads of each detector process's network: `threads` when given (> 0); with
     one process 0 (the backend's default: every core); with several, the cores shared out
@@ -391,20 +415,13 @@ def run(args):
     print_precision('monet pipeline', args.precision, args.backend, device, args.model)
     calibration = ''
     if args.precision == 'int8':     # quantised once here, before the detector processes
-        # calibrated on tracked crops (the detector nodes track, with the default rule)
         from monet_ros.fusion import FusionConfig
-        from monet_ros.int8_calibration import int8_calibration
-        from monet_ros.models import Detector
-        from monet_ros.models.quantize import cached_int8
         fusion = FusionConfig(threshold_px=args.threshold_px,
                               confidence_threshold=args.confidence_threshold)
-        int8_crops, given = int8_calibration(args.calibration or args.bag, True, fusion=fusion)
-        detector = Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
-                                            threads=args.threads, precision='int8',
-                                            calibration=given, int8_crops=int8_crops)
-        print(f'monet pipeline: {detector.int8_note}', file=sys.stderr, flush=True)
-        calibration = str(cached_int8(args.model, crops=int8_crops) or args.calibration or
-                          args.bag)
+        calibration, note = prepare_int8(args.model, args.bag, args.calibration,
+                                         backend=args.backend, threads=args.threads,
+                                         fusion=fusion)
+        print(f'monet pipeline: {note}', file=sys.stderr, flush=True)
     use_large_data_profile()
     import rclpy
     from rclpy.node import Node
