@@ -227,10 +227,13 @@ class TrainingData:
         T = recording.num_instants
         J = len(self.other_instants)
         # the labelled subjects other than 0 (a label in the train split), each with its own
-        # rows of unlabelled instants when the crops follow the labels (a fixed or full
-        # crop, or the ground truth's subject 0, would frame every subject alike)
+        # rows of unlabelled instants when the mode trains on unlabelled instants (L_E, L_T,
+        # L_R, tracked or bootstrapped pseudo-labels) and the crops follow the labels (a
+        # fixed or full crop, or the ground truth's subject 0, frames every subject alike)
+        spec = config.spec
         self.other_subject_ids = np.unique(recording.other_subjects[other]) \
-            if config.box_source in ('auto', 'labels', 'pseudo_labels') \
+            if (spec.unlabeled or spec.temporal or spec.bootstrap_rounds) and \
+            config.box_source in ('auto', 'labels', 'pseudo_labels') \
             else np.zeros(0, np.int64)
         U = len(self.unlabeled_instants)
         self.row_instants = np.concatenate([
