@@ -180,8 +180,20 @@ class TrainingData:
     label_points): the other subject seen in such a crop is not a positive, and neither is
     subject j in subject 0's crops. other_labels (J, V, C, 2) are those labels on the train
     split (NaN at held-out and validation instants), other_instants (J,) their instants.
-    Pseudo-labels, the crops of unlabelled instants and L_B / L_E / L_R / L_T follow subject
-    0 only; validation labels are subject 0's."""
+
+    Unlabelled instants per subject: when the mode trains on unlabelled instants (L_E, L_T,
+    L_R, tracked or bootstrapped pseudo-labels) and the crops follow the labels (box_source
+    auto, labels or pseudo_labels), each labelled subject s >= 1 (other_subject_ids: a label
+    in the train split) gets one more crop row T + J + m per unlabelled instant (m runs over
+    the subjects, then unlabeled_instants): that instant's views cropped by subject 0's crop
+    rule (crop_boxes) on subject s's own labels (subject_labels) and, for auto /
+    pseudo_labels, their tracks (subject_tracks). Subject 0's unlabelled rows are the
+    instants themselves. unlabeled_rows (U_0 + sum U_s,) are every subject's; row_instants /
+    row_subjects (num_rows,) give each crop row's instant and subject; next_row (num_rows,)
+    the same subject's unlabelled row at the next instant (-1 none: L_T's pairs).
+    initial_pseudo_labels gives each row its own subject's pseudo-labels. A labels table of
+    one subject has num_rows = T and unlabeled_rows = unlabeled_instants: it trains as
+    before. Distillation and the validation labels are subject 0's."""
 
     def __init__(self, recording, config, input_size, heatmap_size, tracked=None,
                  subject_tracked=None):
