@@ -1168,7 +1168,13 @@ class Trainer:
         trainer.epipolar_started = json.loads(state.get('epipolar_started', 'null'))
         trainer.rng.bit_generator.state = json.loads(state['numpy_rng'])
         torch.set_rng_state(state['torch_rng'])
-        trainer.pseudo = state['pseudo'].numpy().copy()
+        pseudo = state['pseudo'].numpy().copy()
+        if pseudo.shape != trainer.pseudo.shape:
+            raise ValueError(f'{path}: field pseudo holds pseudo-labels of {pseudo.shape[0]} '
+                             f'crop rows, this data has {trainer.pseudo.shape[0]} (other labels, '
+                             'subjects, or a run saved before each subject had its own '
+                             'unlabelled rows): give the same labels or a new --out')
+        trainer.pseudo = pseudo
         trainer._update_pools()
         if 'distilled' in state:
             trainer.set_distilled(state['distilled'].numpy(), state['distilled_weight'].numpy(),

@@ -301,3 +301,16 @@ def test_temporal_pairs_are_rows_of_one_subject(scene):
         np.testing.assert_array_equal(part[0::8, 1], part[4::8, 1])     # same views
         subjects |= set(data.row_subjects[row].tolist())
     assert subjects == {0, 1}
+
+
+def test_a_resume_with_other_subjects_is_refused_by_name(scene, tmp_path):
+    """A state saved with two subjects' unlabelled rows, resumed on subject 0's labels only
+    (fewer crop rows): one line naming the file and field, never a shape error."""
+    folder, cams, X, uv, root = scene
+    config = TrainConfig(mode='reprojection', steps=1, **UNLABELLED)
+    both = load_recording(folder, labels=root / 'labels.csv', skeleton=list(NAMES))
+    Trainer(config, TrainingData(both, config, (48, 48), (12, 12)), tmp_path).save()
+    one = load_recording(folder, labels=root / 'labels0.csv', skeleton=list(NAMES))
+    with pytest.raises(ValueError, match=r'trainer_state.pt: field pseudo holds pseudo-labels '
+                       r'of 42 crop rows, this data has 24'):
+        Trainer.resume(tmp_path, TrainingData(one, config, (48, 48), (12, 12)))
