@@ -173,7 +173,7 @@ def run(args):
                  f'around subjects other than 0, up to {recording.num_subjects} per '
                  'instant)' if data.num_other_labelled else '')
               + f', {len(data.unlabeled_instants)} '
-              f'unlabeled, {len(data.held_out)} held out; mode {config.mode} '
+              f'unlabeled{_rows_text(data)}, {len(data.held_out)} held out; mode {config.mode} '
               f'({trainer.objective_text()}), '
               f'{trainer.pseudo_label_count} pseudo-labels{_gate_text(data.pseudo_gate)}, '
               f'device {trainer.device}'
@@ -281,6 +281,16 @@ def _gate_text(gate):
     return (f' (of {gate["tracked"]} tracked view labels: {gate["dropped"]} beyond '
             f'--pseudo-max-frames dropped, {gate["confirmed"]} beyond it kept as confirmed by '
             'a second track)')
+
+
+def _rows_text(data):
+    """' (unlabelled (instant, subject) rows: subject 0 N, subject 1 M)' for the start-up
+    line when subjects other than 0 have their own unlabelled rows, '' otherwise."""
+    rows = data.unlabeled_rows_per_subject()
+    if len(rows) < 2:
+        return ''
+    return (' (unlabelled (instant, subject) rows: '
+            + ', '.join(f'subject {s} {n}' for s, n in rows.items()) + ')')
 
 
 if __name__ == '__main__':

@@ -228,7 +228,8 @@ class DistributedTrainer(Trainer):
 
 def shared_training_data(recording, config, input_size, heatmap_size):
     """trainer.TrainingData on every rank, its spatiotemporal pseudo-labels (optical-flow
-    tracking of the labels) computed once by rank 0 and broadcast."""
+    tracking of the labels, every labelled subject's) computed once by rank 0 and
+    broadcast."""
     from monet_ros.learning.trainer import TrainingData
 
     world = current_world()
@@ -240,13 +241,17 @@ def shared_training_data(recording, config, input_size, heatmap_size):
             data = TrainingData(recording, config, input_size, heatmap_size)
             if config.spec.temporal:
                 data.tracked_labels()
+                for s in data.other_subject_ids:       # each subject's own tracks
+                    data.subject_tracks(int(s))
         except ValueError as error:        # every rank stops with rank 0's message
             failure = str(error)
-    shared = [(data._tracked if data is not None else None, failure)]
+    shared = [(data._tracked if data is not None else None,
+               data._subject_tracked if data is not None else None, failure)]
     dist.broadcast_object_list(shared, src=0)
-    tracked, failure = shared[0]
+    tracked, subject_tracked, failure = shared[0]
     if failure is not None:
         raise ValueError(failure)
     if data is None:
-        data = TrainingData(recording, config, input_size, heatmap_size, tracked=tracked)
+        data = TrainingData(recording, config, input_size, heatmap_size, tracked=tracked,
+                            subject_tracked=subject_tracked)
     return data

@@ -180,10 +180,23 @@ class TrainingData:
     label_points): the other subject seen in such a crop is not a positive, and neither is
     subject j in subject 0's crops. other_labels (J, V, C, 2) are those labels on the train
     split (NaN at held-out and validation instants), other_instants (J,) their instants.
-    Pseudo-labels, the crops of unlabelled instants and L_B / L_E / L_R / L_T follow subject
-    0 only; validation labels are subject 0's."""
 
-    def __init__(self, recording, config, input_size, heatmap_size, tracked=None):
+    Unlabelled instants per subject: when the mode trains on unlabelled instants (L_E, L_T,
+    L_R, tracked or bootstrapped pseudo-labels) and the crops follow the labels (box_source
+    auto, labels or pseudo_labels), each labelled subject s >= 1 (other_subject_ids: a label
+    in the train split) gets one more crop row T + J + m per unlabelled instant (m runs over
+    the subjects, then unlabeled_instants): that instant's views cropped by subject 0's crop
+    rule (crop_boxes) on subject s's own labels (subject_labels) and, for auto /
+    pseudo_labels, their tracks (subject_tracks). Subject 0's unlabelled rows are the
+    instants themselves. unlabeled_rows (U_0 + sum U_s,) are every subject's; row_instants /
+    row_subjects (num_rows,) give each crop row's instant and subject; next_row (num_rows,)
+    the same subject's unlabelled row at the next instant (-1 none: L_T's pairs).
+    initial_pseudo_labels gives each row its own subject's pseudo-labels. A labels table of
+    one subject has num_rows = T and unlabeled_rows = unlabeled_instants: it trains as
+    before. Distillation and the validation labels are subject 0's."""
+
+    def __init__(self, recording, config, input_size, heatmap_size, tracked=None,
+                 subject_tracked=None):
         self.recording = recording
         self.config = config
         self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
@@ -209,11 +222,13 @@ class TrainingData:
             raise ValueError(f'{recording.name}: no labelled instant to train on')
         h_in, w_in = input_size
         self._tracked = tracked       # tracks() given (rank 0's, in a torchrun job)
+        # subject_tracks(s) given (rank 0's): {subject: PseudoLabels}
+        self._subject_tracked = dict(subject_tracked or {})
         # pseudo_max_frames' counts of view x keypoint cells (initial_pseudo_labels): tracked,
         # dropped (beyond the gate, unconfirmed), confirmed (beyond, kept by agreement)
         self.pseudo_gate = None
-        pseudo = (self.tracked_labels() if config.box_source in ('auto', 'pseudo_labels')
-                  else None)
+        tracked_boxes = config.box_source in ('auto', 'pseudo_labels')
+        pseudo = self.tracked_labels() if tracked_boxes else None
         boxed = recording
         if self.validation_instants.size:      # validation views framed without their labels
             masked = recording.labels.copy()
@@ -221,16 +236,93 @@ class TrainingData:
             boxed = replace(recording, labels=masked)
         self.boxes = crop_boxes(boxed, config.box_source, w_in / h_in, config.box_margin,
                                 pseudo)
+        T = recording.num_instants
+        J = len(self.other_instants)
+        # the labelled subjects other than 0 (a label in the train split), each with its own
+        # rows of unlabelled instants when the mode trains on unlabelled instants (L_E, L_T,
+        # L_R, tracked or bootstrapped pseudo-labels) and the crops follow the labels (a
+        # fixed or full crop, or the ground truth's subject 0, frames every subject alike)
+        spec = config.spec
+        self.other_subject_ids = np.unique(recording.other_subjects[other]) \
+            if (spec.unlabeled or spec.temporal or spec.bootstrap_rounds) and \
+            config.box_source in ('auto', 'labels', 'pseudo_labels') \
+            else np.zeros(0, np.int64)
+        U = len(self.unlabeled_instants)
+        self.row_instants = np.concatenate([
+            np.arange(T), self.other_instants,
+            np.tile(self.unlabeled_instants, len(self.other_subject_ids))]).astype(np.int64)
+        self.row_subjects = np.concatenate([
+            np.zeros(T, np.int64), recording.other_subjects,
+            np.repeat(self.other_subject_ids, U)]).astype(np.int64)
+        # subject 0's unlabelled rows are the instants; subject s's follow row T + J
+        self.unlabeled_rows = np.concatenate([
+            self.unlabeled_instants,
+            T + J + np.arange(U * len(self.other_subject_ids))]).astype(np.int64)
         boxes, rows = self.boxes, None
-        if len(self.other_instants):       # one more row of crops per other subject
+        if J:       # one more row of crops per other subject
             other_boxes = self.boxes[self.other_instants] if config.box_source in (
                 'fixed', 'full') else subject_label_boxes(
                     self.other_labels, self.other_instants, self.boxes, recording.cameras,
                     w_in / h_in, config.box_margin)
-            boxes = np.concatenate([self.boxes, other_boxes])
-            rows = np.concatenate([np.arange(recording.num_instants), self.other_instants])
+            own = [other_boxes]
+            for s in self.other_subject_ids:     # subject s's boxes: subject 0's crop rule
+                framing = self.subject_labels(s, framing=True)
+                s_boxes = crop_boxes(replace(recording, labels=framing), config.box_source,
+                                     w_in / h_in, config.box_margin,
+                                     self.subject_tracks(s).points if tracked_boxes else None)
+                own.append(s_boxes[self.unlabeled_instants])
+            boxes = np.concatenate([self.boxes, *own])
+            rows = self.row_instants
         self.cache = CropCache(recording, boxes, input_size, heatmap_size,
                                config.cache_scale, instants=rows)
+        # L_T's pairs: the unlabelled row of the same subject at the next instant, -1 none
+        key = self.row_subjects[self.unlabeled_rows] * (T + 1) + \
+            self.row_instants[self.unlabeled_rows]
+        order = np.argsort(key)
+        at = np.searchsorted(key[order], key + 1).clip(max=len(key) - 1)
+        found = (key[order][at] == key + 1) if len(key) else np.zeros(0, bool)
+        self.next_row = np.full(len(self.row_instants), -1, np.int64)
+        self.next_row[self.unlabeled_rows[found]] = self.unlabeled_rows[order[at[found]]]
+
+    def subject_labels(self, subject, framing=False):
+        """(T, V, C, 2) px labels of subject `subject` (>= 1) at their instants, NaN elsewhere:
+        the train split's (other_labels), or with `framing` the recording's less the
+        validation instants (what frames the crops, as subject 0's recording.labels)."""
+        source = self.recording.other_labels if framing else self.other_labels
+        out = np.full(self.labels.shape, np.nan)
+        mine = self.recording.other_subjects == subject
+        out[self.other_instants[mine]] = source[mine]
+        if framing:
+            out[self.validation_instants] = np.nan
+        return out
+
+    def subject_tracks(self, subject):
+        """tracks() of subject `subject`'s own labels (subject_labels; subject 0: tracks());
+        computed once per subject."""
+        if subject == 0:
+            return self.tracks()
+        if subject not in self._subject_tracked:
+            self._subject_tracked[subject] = self._track(self.subject_labels(subject))
+        return self._subject_tracked[subject]
+
+    @property
+    def num_rows(self):
+        """Rows of the crop cache: the T instants (subject 0), the J labelled (instant,
+        subject) rows of other subjects, then each other subject's unlabelled instants."""
+        return len(self.row_instants)
+
+    @property
+    def row_labels(self):
+        """(num_rows, V, C, 2) px labels of every crop row (NaN: none, e.g. unlabelled rows)."""
+        extra = len(self.row_instants) - len(self.labels) - len(self.other_labels)
+        return np.concatenate([self.labels, self.other_labels,
+                               np.full((extra,) + self.labels.shape[1:], np.nan)])
+
+    def unlabeled_rows_per_subject(self):
+        """{subject: number of its unlabelled (instant, subject) rows}, subject 0 first."""
+        subjects = self.row_subjects[self.unlabeled_rows]
+        return {0: int((subjects == 0).sum()),
+                **{int(s): int((subjects == s).sum()) for s in self.other_subject_ids}}
 
     @property
     def num_other_labelled(self):
@@ -241,12 +333,13 @@ class TrainingData:
         """(N, C, 2) px labels of crop rows x views `pairs` (N, 2): subject 0's labels for a
         row t < T (an instant), the other subject's for a row T + j (other_labels[j])."""
         pairs = np.asarray(pairs, np.int64)
-        T = self.recording.num_instants
+        T, J = self.recording.num_instants, len(self.other_labels)
         row, view = pairs[:, 0], pairs[:, 1]
         own = row < T
-        out = np.empty((len(pairs),) + self.labels.shape[2:])
+        other = ~own & (row < T + J)
+        out = np.full((len(pairs),) + self.labels.shape[2:], np.nan)   # unlabelled rows
         out[own] = self.labels[row[own], view[own]]
-        out[~own] = self.other_labels[row[~own] - T, view[~own]]
+        out[other] = self.other_labels[row[other] - T, view[other]]
         return out
 
     @property
@@ -264,55 +357,89 @@ class TrainingData:
         (T, V, C, 2) px, points3d (T, C, 3), frames_from_seed (T, C), agreement (T, V, C)
         px); computed once."""
         if self._tracked is None:
-            T, V, C, _ = self.labels.shape
-            spatial = spatial_pseudo_labels(self.labels, self.cameras)
-            seeds = np.full((len(self.train), C, 3), np.nan)
-            seeds[:] = spatial.points3d[self.train]
-            frames = _Frames(self.recording, self.train)
-            tracked = spatiotemporal_pseudo_labels(frames, self.cameras, seeds,
-                                                   self.config.tracking)
-            points = np.full((T, V, C, 2), np.nan)
-            points3d = np.full((T, C, 3), np.nan)
-            distance = np.full((T, C), np.inf)
-            agreement = np.full((T, V, C), np.nan)
-            points[self.train] = tracked.points
-            points3d[self.train] = tracked.points3d
-            distance[self.train] = tracked.frames_from_seed
-            agreement[self.train] = tracked.agreement
-            self._tracked = PseudoLabels(points, points3d, distance, agreement)
+            self._tracked = self._track(self.labels)
         return self._tracked
 
+    def _track(self, labels):
+        """The spatiotemporal tracks (PseudoLabels, NaN outside the train split) of one
+        subject's train-split labels (T, V, C, 2): triangulated, tracked
+        config.tracking.horizon frames each way, verified."""
+        T, V, C, _ = labels.shape
+        spatial = spatial_pseudo_labels(labels, self.cameras)
+        seeds = np.full((len(self.train), C, 3), np.nan)
+        seeds[:] = spatial.points3d[self.train]
+        frames = _Frames(self.recording, self.train)
+        tracked = spatiotemporal_pseudo_labels(frames, self.cameras, seeds,
+                                               self.config.tracking)
+        points = np.full((T, V, C, 2), np.nan)
+        points3d = np.full((T, C, 3), np.nan)
+        distance = np.full((T, C), np.inf)
+        agreement = np.full((T, V, C), np.nan)
+        points[self.train] = tracked.points
+        points3d[self.train] = tracked.points3d
+        distance[self.train] = tracked.frames_from_seed
+        agreement[self.train] = tracked.agreement
+        return PseudoLabels(points, points3d, distance, agreement)
+
     def initial_pseudo_labels(self, spec, tracking):
-        """Spatial (and spatiotemporal) pseudo-labels of the train split, (T, V, C, 2)."""
-        T, V, C, _ = self.labels.shape
+        """Spatial (and spatiotemporal) pseudo-labels of the train split, (num_rows, V, C, 2)
+        px by crop row: each row's from its own subject's labels (subject 0's on the
+        instants' rows; subject s's, subject_labels / subject_tracks, on its labelled and
+        unlabelled rows), by the same rule and pseudo_max_frames gate (pseudo_gate sums the
+        subjects' counts)."""
+        if spec.temporal and tracking != self.config.tracking:
+            raise ValueError('initial_pseudo_labels: tracking settings differ from the '
+                             "data's config")
+        T = self.recording.num_instants
+        points, gate = self._subject_pseudo(spec, self.labels, self.tracks)
+        if self.num_rows == T:
+            self.pseudo_gate = gate
+            return points
+        out = np.full((self.num_rows,) + points.shape[1:], np.nan)
+        out[:T] = points
+        for s in np.unique(self.row_subjects[T:]):
+            mine = self.row_subjects == s
+            mine[:T] = False
+            own, own_gate = self._subject_pseudo(spec, self.subject_labels(s),
+                                                 lambda s=s: self.subject_tracks(s))
+            out[mine] = own[self.row_instants[mine]]
+            if gate is not None:
+                gate = {k: gate[k] + own_gate[k] for k in gate}
+        self.pseudo_gate = gate
+        return out
+
+    def _subject_pseudo(self, spec, labels, tracks):
+        """(points (T, V, C, 2), gate counts or None) of one subject: its labels' spatial
+        pseudo-labels, with spec.temporal its tracks (tracks(): PseudoLabels) filling the rest,
+        past pseudo_max_frames only where verified; NaN on the held-out and validation
+        instants."""
+        T, V, C, _ = labels.shape
         points = np.full((T, V, C, 2), np.nan)
         if not spec.spatial:
-            return points
-        spatial = spatial_pseudo_labels(self.labels, self.cameras)
+            return points, None
+        spatial = spatial_pseudo_labels(labels, self.cameras)
         points = spatial.points.copy()
+        gate_counts = None
         if spec.temporal:
-            if tracking != self.config.tracking:
-                raise ValueError('initial_pseudo_labels: tracking settings differ from the '
-                                 "data's config")
-            tracks = self.tracks()
-            tracked = tracks.points
+            track = tracks()
+            tracked = track.points
             gate = self.config.pseudo_max_frames
             if gate:      # drift: keep the tracks' first frames (the boxes keep all of them)
-                far = np.broadcast_to((tracks.frames_from_seed > gate)[:, None],
+                far = np.broadcast_to((track.frames_from_seed > gate)[:, None],
                                       tracked.shape[:3])                        # (T, V, C)
                 with np.errstate(invalid='ignore'):      # NaN agreement: a single track
-                    verified = tracks.agreement <= self.config.pseudo_agreement_px
+                    verified = track.agreement <= self.config.pseudo_agreement_px
                 drop = far & ~verified & np.isfinite(tracked[..., 0])
                 has = np.isfinite(tracked[..., 0])
                 has[self.held_out] = drop[self.held_out] = False
                 has[self.validation_instants] = drop[self.validation_instants] = False
-                self.pseudo_gate = {'tracked': int(has.sum()), 'dropped': int(drop.sum()),
-                                    'confirmed': int((far & verified & has).sum())}
+                gate_counts = {'tracked': int(has.sum()), 'dropped': int(drop.sum()),
+                               'confirmed': int((far & verified & has).sum())}
                 tracked = np.where(drop[..., None], np.nan, tracked)
             points = np.where(np.isnan(points), tracked, points)
         points[self.held_out] = np.nan
         points[self.validation_instants] = np.nan
-        return points
+        return points, gate_counts
 
 
 class _Frames:
@@ -518,15 +645,13 @@ class Trainer:
 
     # ----------------------------------------------------------------- sampling
     def _update_pools(self):
-        labelled = np.isfinite(self.data.labels[..., 0])                     # (T, V, C)
+        # (N, 2) (crop row, view): the instants' (subject 0), then the other subjects' rows
+        # T + j and their unlabelled rows (TrainingData); a single-subject table gives the
+        # instants' pools alone
+        labelled = np.isfinite(self.data.row_labels[..., 0])          # (num_rows, V, C)
         pseudo = np.isfinite(self.pseudo[..., 0]) & ~labelled
         self.pseudo_only = np.where(pseudo[..., None], self.pseudo, np.nan)
-        # (N, 2) (crop row, view): the instants' (subject 0), then the other subjects' rows
-        # T + j (TrainingData); a single-subject table gives the instants' pool alone
-        other = np.isfinite(self.data.other_labels[..., 0]).any(axis=2)      # (J, V)
-        self.labelled_pool = np.concatenate([
-            np.argwhere(labelled.any(axis=2)),
-            np.argwhere(other) + [self.data.recording.num_instants, 0]]).astype(np.int64)
+        self.labelled_pool = np.argwhere(labelled.any(axis=2)).astype(np.int64)
         self.pseudo_pool = np.argwhere(pseudo.any(axis=2))
         if self.labelled_pool.size == 0:
             raise ValueError('no labelled view in the training split')
@@ -562,8 +687,9 @@ class Trainer:
 
     @property
     def pseudo_label_coverage(self):
-        """Share of the unlabeled training (view, keypoint) cells that hold a pseudo-label."""
-        cells = self.pseudo_only[self.data.unlabeled_instants, ..., 0]
+        """Share of the unlabeled training (view, keypoint) cells that hold a pseudo-label
+        (every subject's unlabelled rows)."""
+        cells = self.pseudo_only[self.data.unlabeled_rows, ..., 0]
         return float(np.isfinite(cells).mean()) if cells.size else 0.0
 
     def _sample(self, pool, n):
@@ -576,21 +702,24 @@ class Trainer:
         return V if self.config.views_per_instant == 0 else min(self.config.views_per_instant, V)
 
     def _consecutive(self):
-        """(P,) unlabeled instants t whose next instant t + 1 is unlabeled too (L_T's pairs)."""
-        u = self.data.unlabeled_instants
-        return u[np.isin(u + 1, u)]
+        """(P,) unlabeled rows whose subject's row at the next instant is unlabeled too (L_T's
+        pairs; TrainingData.next_row)."""
+        u = self.data.unlabeled_rows
+        return u[self.data.next_row[u] >= 0]
 
     def _unlabeled_part(self, n_inst, k):
-        """The part of n_inst unlabeled instants x k views: (kind, (n_inst k, 2) pairs, k);
-        kind 'E' (L_E) or 'U' (L_T / L_R). For L_T the instants come as consecutive pairs (t,
-        t + 1, same views; an odd last one alone)."""
+        """The part of n_inst unlabeled rows x k views: (kind, (n_inst k, 2) pairs, k);
+        kind 'E' (L_E) or 'U' (L_T / L_R). A row is an unlabelled (instant, subject)
+        (TrainingData.unlabeled_rows: the instant itself for subject 0), its views cropped
+        around that subject. For L_T the rows come as consecutive pairs (t, t + 1 of the same
+        subject, same views; an odd last one alone)."""
         V = self.data.recording.num_views
-        unlabeled = self.data.unlabeled_instants
+        unlabeled = self.data.unlabeled_rows
         consecutive = self._consecutive() if self.spec.temporal_difference else unlabeled[:0]
         if len(consecutive):
             first = self.rng.choice(consecutive, size=n_inst // 2,
                                     replace=len(consecutive) < n_inst // 2)
-            inst = np.stack([first, first + 1], axis=1).ravel()
+            inst = np.stack([first, self.data.next_row[first]], axis=1).ravel()
             if n_inst % 2:
                 inst = np.append(inst, self.rng.choice(unlabeled))
             views = [self.rng.choice(V, size=k, replace=False) for _ in range(len(first))]
@@ -619,7 +748,7 @@ class Trainer:
         k = self.views_per_instant()
         total = c.batch_labelled + c.batch_pseudo + c.batch_unlabeled * k
         n_inst = c.batch_unlabeled if (self.unlabeled_active and
-                                       len(self.data.unlabeled_instants)) else 0
+                                       len(self.data.unlabeled_rows)) else 0
         use_b = self.spec_uses_pseudo and c.batch_pseudo and len(self.pseudo_pool)
         n_b = (total - c.batch_labelled - n_inst * k) if use_b else 0
         parts = [('L', self._sample(self.labelled_pool, total - n_b - n_inst * k))]
@@ -833,7 +962,7 @@ class Trainer:
                     parts.append(self._unlabeled_part(n, k))
                 else:     # L_E's value for every other mode (how epipolar its maps are)
                     V = self.data.recording.num_views
-                    inst = self.rng.choice(self.data.unlabeled_instants, size=n)
+                    inst = self.rng.choice(self.data.unlabeled_rows, size=n)
                     views = np.stack([self.rng.choice(V, size=k, replace=False) for _ in inst])
                     parts.append(('E', np.stack([np.repeat(inst, k), views.ravel()], axis=1),
                                   k))
@@ -940,11 +1069,12 @@ class Trainer:
         return max(self.config.bootstrap_confidence, relative), median
 
     def bootstrap(self):
-        """One round: detect on the unlabeled train instants, keep confident views (peak at
-        least bootstrap_cutoff()), RANSAC-triangulate, reproject -> pseudo-labels (replacing
-        the previous round's); warns when the round keeps nothing."""
+        """One round: detect on the unlabeled train rows (every subject's: TrainingData.
+        unlabeled_rows), keep confident views (peak at least bootstrap_cutoff()),
+        RANSAC-triangulate, reproject -> pseudo-labels (replacing the previous round's);
+        warns when the round keeps nothing."""
         c = self.config
-        inst = self.data.unlabeled_instants
+        inst = self.data.unlabeled_rows
         det, conf = self.detect(inst)
         cutoff, median = self.bootstrap_cutoff()
         boot = bootstrap_pseudo_labels(det, conf, self.data.cameras, cutoff,
@@ -1038,7 +1168,13 @@ class Trainer:
         trainer.epipolar_started = json.loads(state.get('epipolar_started', 'null'))
         trainer.rng.bit_generator.state = json.loads(state['numpy_rng'])
         torch.set_rng_state(state['torch_rng'])
-        trainer.pseudo = state['pseudo'].numpy().copy()
+        pseudo = state['pseudo'].numpy().copy()
+        if pseudo.shape != trainer.pseudo.shape:
+            raise ValueError(f'{path}: field pseudo holds pseudo-labels of {pseudo.shape[0]} '
+                             f'crop rows, this data has {trainer.pseudo.shape[0]} (other labels, '
+                             'subjects, or a run saved before each subject had its own '
+                             'unlabelled rows): give the same labels or a new --out')
+        trainer.pseudo = pseudo
         trainer._update_pools()
         if 'distilled' in state:
             trainer.set_distilled(state['distilled'].numpy(), state['distilled_weight'].numpy(),
