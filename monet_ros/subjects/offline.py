@@ -114,7 +114,7 @@ def track_subjects(points, score, cameras, stamps_ns, num_subjects, association=
 
     from monet_ros.geometry.units import rig_units
     T, V, N, C, _ = points.shape
-    trk = SubjectTracker(C, tracker, units=rig_units(cameras))
+    trk = SubjectTracker(C, tracker, units=rig_units(cameras), max_tracks=num_subjects)
     rows = RowCollector()
     instances = unmatched = extra = 0
     start = time.perf_counter()
