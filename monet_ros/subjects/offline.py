@@ -51,7 +51,8 @@ class SubjectRows:
     the inlier views (px), ncams (R, C), score (R, C); and the counts: births, deaths,
     instances (with >= 1 keypoint), unmatched (instances in no subject), extra (subjects
     beyond num_subjects in a frame, left out), untracked (subjects with too few keypoints
-    for a track), seconds (association + tracking, wall clock)."""
+    for a track, or taken by no identity while num_subjects identities were alive),
+    seconds (association + tracking, wall clock)."""
     frame: np.ndarray
     subject: np.ndarray
     X: np.ndarray
@@ -108,8 +109,8 @@ def track_subjects(points, score, cameras, stamps_ns, num_subjects, association=
     points (T, V, N, C, 2) px (NaN = missing), score (T, V, N, C) (NaN = missing);
     cameras: V Camera; stamps_ns (T,) increasing; num_subjects: the most subjects kept in
     a frame (those seen by the most cameras, association's order; the others are counted
-    in `extra`); association: AssociationConfig; tracker: TrackerConfig (units: the
-    cameras')."""
+    in `extra`) and the most identities alive (the tracker's max_tracks); association:
+    AssociationConfig; tracker: TrackerConfig (units: the cameras')."""
     import time
 
     from monet_ros.geometry.units import rig_units
