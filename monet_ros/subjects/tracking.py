@@ -86,7 +86,7 @@ class TrackerConfig:
         50.0, "tracking: standard deviation of a subject's body position (mm; the median "
         "displacement of its joints)", minimum=0.0, exclusive_minimum=True)
     body_acceleration_m_s2: float = setting(
-        2.0, "tracking: standard deviation of a subject's body acceleration (m/s^2)",
+        5.0, "tracking: standard deviation of a subject's body acceleration (m/s^2)",
         minimum=0.0, exclusive_minimum=True)
     max_speed_m_s: float = setting(
         2.0, 'tracking: fastest body speed (m/s): a track unmatched for t s takes a subject '
