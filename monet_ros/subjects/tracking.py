@@ -14,10 +14,10 @@ or a few captured joints, and a body does not accelerate at 20 m/s^2.
 Rule, per frame (stamps increasing):
 1. predict every track's joints and body to the frame's time (cv_kalman.predict; the body
    with body_acceleration_m_s2);
-2. body measurement of subject s against track t: the track's body position at its last
-   match plus the median (per axis) over the keypoints finite in both (the track's last
-   joints, the subject's triangulated ones) of the subject's joint minus the track's
-   (rig units); distance(track, subject) = |body measurement - the track's predicted
+2. body measurement of subject s against track t: the track's body as measured at its
+   last match (step 4) plus the median (per axis) over the keypoints finite in both (the
+   track's last joints, the subject's triangulated ones) of the subject's joint minus the
+   track's (rig units); distance(track, subject) = |body measurement - the track's predicted
    body|; inf with no common keypoint or above the track's gate: gate_mm + max_speed_m_s
    x the time the track has been unmatched (0 for a track matched in the previous frame;
    mm and m/s converted into the rig's unit, so m and mm rigs gate alike): a lost
@@ -26,8 +26,9 @@ Rule, per frame (stamps increasing):
    linear_sum_assignment, Kuhn 1955 / Munkres 1957) among the gated pairs; one track per
    subject and one subject per track, so no identity is held by two subjects at once;
 4. matched tracks are updated: the joints (cv_kalman.update; a joint seen for the first
-   time is started, cv_kalman.start), the body (cv_kalman.update with body_noise_mm), and
-   the track's last joints (the measured ones; the others moved with the body);
+   time is started, cv_kalman.start), the body (cv_kalman.update of its measurement with
+   body_noise_mm), and the track's last joints and body (the measured joints, the others
+   moved with the body measurement; that measurement);
 5. birth: a subject left unmatched with >= min_keypoints triangulated keypoints starts a
    new track with a new identity (identities count up from 0 and are never reused;
    its body at the median of its joints), but with max_tracks (the N of `--subjects N`)
