@@ -143,8 +143,9 @@ def add_subject_tracking_arguments(parser):
                         help='--subjects: largest median epipolar distance (px) between two '
                         'instances of one subject')
     subject_only_option(parser, '--gate-mm', type=float, default=400.0,
-                        help="--subjects: largest mean keypoint distance (mm) of a subject to "
-                        "a track's prediction")
+                        help="--subjects: largest distance (mm) of a subject's body (the "
+                        "median displacement of its joints) to a track's predicted body (a "
+                        'track unmatched for t s: plus 2 m/s x t)')
     subject_only_option(parser, '--max-missed-s', type=float, default=0.5,
                         help='--subjects: a track unseen for longer (s) ends')
 

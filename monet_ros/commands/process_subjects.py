@@ -151,5 +151,5 @@ def print_subjects(figures, out):
           f'{n["weak"]} weak subjects (median joint score below --min-score), '
           f'{n["shared"]} joints decoded by two subjects (kept by one), {n["detached"]} '
           f'joints not linked within --link-mm to the body of their subject, '
-          f'{s.extra} subjects beyond --subjects, {s.untracked} with too few keypoints for '
-          'a track')
+          f'{s.extra} subjects beyond --subjects, {s.untracked} untracked (too few '
+          'keypoints for a track, or taken by no identity while N were alive)')

@@ -263,8 +263,8 @@ def _print_subjects(fig, name):
           f'{len(s.subject)} subject-frames, {s.births} births, {s.deaths} deaths; '
           f'association + tracking {1e3 * s.seconds / max(T, 1):.2f} ms/frame')
     print(f'{name}: skipped: {s.unmatched} of {s.instances} instances matched in no other '
-          f'camera, {s.extra} subjects beyond --subjects, {s.untracked} with too few '
-          'keypoints for a track')
+          f'camera, {s.extra} subjects beyond --subjects, {s.untracked} untracked (too '
+          'few keypoints for a track, or taken by no identity while N were alive)')
     if fig.get('filter') is not None:
         print(f'{name}: {fig["filter"].summary()}')
         for ident, smoothed in fig['filter'].per_subject.items():

@@ -719,6 +719,7 @@ class FusionNode(Node):
                 ('subjects_tracked', len(self.subject_stats)),
                 ('identities', sorted(self.subject_stats)),
                 ('births', tracker.births), ('deaths', tracker.deaths),
+                ('untracked', tracker.untracked),
                 ('identity_resets', self.subject_counts['resets']),
                 *((f'subject_{key}', value) for key, value in self.subject_counts.items()
                   if key != 'resets')]

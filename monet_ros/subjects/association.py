@@ -112,7 +112,8 @@ def pair_fundamentals(cameras):
         return hit[1]
     V = len(rig['K'])
     F = np.zeros((V, V, 3, 3))
-    a, b = np.array(list(combinations(range(V), 2))).T.reshape(2, -1)
+    # int64 also for V < 2 (no pair: an empty float array cannot index)
+    a, b = np.array(list(combinations(range(V), 2)), np.int64).reshape(-1, 2).T
     F[a, b] = fundamental_from_params(rig['K'][a], rig['R'][a], rig['t'][a],
                                       rig['K'][b], rig['R'][b], rig['t'][b])
     F[b, a] = F[a, b].swapaxes(-1, -2)

@@ -8,7 +8,8 @@ Algorithm, per synchronized frame (stamps increasing):
    at most N of them, the most recently matched first (then the oldest identity). A track
    missed longer (its crops decoded nothing it matched, or a body another crop decoded
    too) lives on in the tracker until max_missed_s, so a subject found again within the
-   gate keeps its identity, but it gets no crops: its prediction drifts by its velocity
+   gate (grown with the time it was missed: subjects.tracking step 2) keeps its identity,
+   but it gets no crops: its prediction drifts by its velocity
    and its crops would only decode a neighbour (a duplicate) or nothing. Discovery, when
    fewer than N tracks get crops (at the start, and after a track was missed):
    a. one full-frame detection per view; the `candidates` highest local maxima of every
@@ -62,8 +63,10 @@ Algorithm, per synchronized frame (stamps increasing):
    peaks of different subjects in different views) or a limb taken from the neighbour,
    whose track's prediction would keep its crops' peaks there. They go too (NaN, counted
    as `detached`).
-6. They go to the SubjectTracker: Hungarian assignment to the tracks' predictions
-   (gated), births, deaths (subjects.tracking). Its identities are the output's. A
+6. They go to the SubjectTracker (max_tracks N): Hungarian assignment to the tracks'
+   predicted bodies (gated), births (while fewer than N identities are alive; a subject
+   no track takes with N alive is left untracked), deaths (subjects.tracking). Its
+   identities are the output's. A
    joint dropped in step 5 is restarted in its track (unstarted: no prediction), so the
    next frame's crops take their highest peak for it (step 3): the crop is centred on
    the track's own body.
@@ -125,10 +128,11 @@ class FrameSubjects:
     """One frame's result. association: the subjects.association.Association of the crop
     instances (all its subjects, duplicates included); keep (K,) int: the indices of the
     subjects given to the tracker (at most N, duplicates left out); ids (K,) their
-    identities (-1: too few keypoints for a track); and the counts: hypotheses (crops per
-    view; tracked: those of tracks), discovered (new hypotheses from the full frame;
-    -1: no discovery this frame), points (discovery's 3D keypoint points), explained (of
-    those, near a cropped track's joint), loose (in groups with too few keypoints, or
+    identities (-1: untracked: too few keypoints, or N identities alive and none took it);
+    and the counts: hypotheses (crops per view; tracked: those of tracks), discovered
+    (new hypotheses from the full frame; -1: no discovery this frame), points
+    (discovery's 3D keypoint points), explained (of those, near a cropped track's joint),
+    loose (in groups with too few keypoints, or
     beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N),
     shared (joints dropped as decoded by two subjects, step 5), detached (joints dropped as
     not linked within link_mm to their subject's largest group of joints, step 5)."""
@@ -322,7 +326,8 @@ class SubjectsCore:
         self.rule = rule or TrackedRule()
         self.C = int(num_keypoints)
         self.units = units
-        self.tracker = SubjectTracker(self.C, tracker, units=units)
+        self.tracker = SubjectTracker(self.C, tracker, units=units,
+                                      max_tracks=self.config.subjects)
         self._gate = from_mm(self.tracker.config.gate_mm, units)
         self._link = from_mm(self.config.link_mm, units)
         self._duplicate = from_mm(self.config.duplicate_mm, units)

@@ -54,10 +54,10 @@ class SubjectRows:
     the inlier views (px), ncams (R, C), score (R, C); and the counts: births, deaths,
     instances (with >= 1 keypoint), unmatched (instances in no subject), extra (subjects
     beyond num_subjects in a frame, left out), untracked (subjects with too few keypoints
-    for a track), seconds (association + tracking, wall clock); points2d (R, V, C, 2) and
-    scores2d (R, V, C): each row's 2D detections in the run's V cameras (Association's,
-    NaN / 0 where the subject has none; the 2D an offline filter weighs:
-    smooth_subjects)."""
+    for a track, or taken by no identity while num_subjects identities were alive),
+    seconds (association + tracking, wall clock); points2d (R, V, C, 2) and scores2d
+    (R, V, C): each row's 2D detections in the run's V cameras (Association's, NaN / 0
+    where the subject has none; the 2D an offline filter weighs: smooth_subjects)."""
     frame: np.ndarray
     subject: np.ndarray
     X: np.ndarray
@@ -131,13 +131,13 @@ def track_subjects(points, score, cameras, stamps_ns, num_subjects, association=
     points (T, V, N, C, 2) px (NaN = missing), score (T, V, N, C) (NaN = missing);
     cameras: V Camera; stamps_ns (T,) increasing; num_subjects: the most subjects kept in
     a frame (those seen by the most cameras, association's order; the others are counted
-    in `extra`); association: AssociationConfig; tracker: TrackerConfig (units: the
-    cameras')."""
+    in `extra`) and the most identities alive (the tracker's max_tracks); association:
+    AssociationConfig; tracker: TrackerConfig (units: the cameras')."""
     import time
 
     from monet_ros.geometry.units import rig_units
     T, V, N, C, _ = points.shape
-    trk = SubjectTracker(C, tracker, units=rig_units(cameras))
+    trk = SubjectTracker(C, tracker, units=rig_units(cameras), max_tracks=num_subjects)
     rows = RowCollector(V)
     instances = unmatched = extra = 0
     start = time.perf_counter()

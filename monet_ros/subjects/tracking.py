@@ -1,25 +1,45 @@
-"""Identities of subjects over time (no ROS): each track is the project's per-joint
-constant-velocity Kalman filter (temporal.cv_kalman, the live filter's step) over its
-keypoints; each frame's subjects are assigned to the tracks' predictions.
+"""Identities of subjects over time (no ROS): each track keeps two constant-velocity
+Kalman filters (temporal.cv_kalman, the live filter's step): one per joint (its prediction
+places the next frame's crops: SubjectTracker.predicted) and one of the subject's body,
+which alone decides identity; each frame's subjects are assigned to the tracks' bodies.
+
+Why a body filter: a subject's triangulated joints are poor in some frames (two people
+passing: a crop decodes part of the neighbour, 250-450 mm off), and the per-joint filter
+(15 mm measurement noise, 20 m/s^2) takes such a jump as velocity, so its next
+prediction overshoots by about as much again; the mean joint distance to it then crossed
+the gate or preferred the neighbour (measured: bench/results/subjects_process.md, change
+6). The median displacement of a subject's joints moves with its body, not with one limb
+or a few captured joints, and a body does not accelerate at 20 m/s^2.
 
 Rule, per frame (stamps increasing):
-1. predict every track's joints to the frame's time (cv_kalman.predict);
-2. distance(track, subject) = mean over the keypoints finite in both (track joints
-   started, subject triangulated) of |predicted - triangulated| (rig units); inf with no
-   such keypoint or above gate_mm (converted into the rig's unit, so m and mm rigs gate
-   alike);
+1. predict every track's joints and body to the frame's time (cv_kalman.predict; the body
+   with body_acceleration_m_s2);
+2. body measurement of subject s against track t: the track's body as measured at its
+   last match (step 4) plus the median (per axis) over the keypoints finite in both (the
+   track's last joints, the subject's triangulated ones) of the subject's joint minus the
+   track's (rig units); distance(track, subject) = |body measurement - the track's predicted
+   body|; inf with no common keypoint or above the track's gate: gate_mm + max_speed_m_s
+   x the time the track has been unmatched (0 for a track matched in the previous frame;
+   mm and m/s converted into the rig's unit, so m and mm rigs gate alike): a lost
+   subject may have walked off its prediction;
 3. the assignment minimising the total distance (Hungarian, scipy.optimize.
    linear_sum_assignment, Kuhn 1955 / Munkres 1957) among the gated pairs; one track per
    subject and one subject per track, so no identity is held by two subjects at once;
-4. matched tracks are updated (cv_kalman.update; a joint seen for the first time is
-   started, cv_kalman.start);
+4. matched tracks are updated: the joints (cv_kalman.update; a joint seen for the first
+   time is started, cv_kalman.start), the body (cv_kalman.update of its measurement with
+   body_noise_mm), and the track's last joints and body (the measured joints, the others
+   moved with the body measurement; that measurement);
 5. birth: a subject left unmatched with >= min_keypoints triangulated keypoints starts a
-   new track with a new identity (identities count up from 0 and are never reused);
+   new track with a new identity (identities count up from 0 and are never reused;
+   its body at the median of its joints), but with max_tracks (the N of `--subjects N`)
+   tracks alive (matched or lost, not yet dead) it is left untracked (-1, counted in
+   `untracked`): N subjects are all known, so a subject no track takes is a poor
+   decode of one of them (a mixture, or one body decoded twice) and a new identity
+   would be a switch; its lost track takes it back within step 2's growing gate;
 6. death: a track not matched for longer than max_missed_s is removed; a joint of a
-   live track not measured for longer than max_missed_s is unstarted (predicted NaN, left
-   out of step 2's distance, started again from its next measurement): its prediction
-   would drift on its last velocity, and once measured again its distance could push
-   its own subject past the gate.
+   live track not measured for longer than max_missed_s is unstarted (predicted NaN,
+   started again from its next measurement): its prediction would drift on its last
+   velocity.
 """
 from dataclasses import dataclass
 
@@ -31,14 +51,27 @@ from monet_ros.geometry.units import check_units, from_m, from_mm
 from monet_ros.temporal import cv_kalman
 
 
+def masked_median(values, mask):
+    """Per-axis median of values (..., C, 3) over the entries `mask` (..., C) -> (..., 3);
+    NaN where the mask is empty (np.nanmedian's numbers, by one sort)."""
+    if not values.shape[-2]:
+        return np.full(values.shape[:-2] + (3,), np.nan)
+    v = np.sort(np.where(mask[..., None], values, np.inf), axis=-2)
+    n = mask.sum(-1)[..., None, None]
+    lo = np.take_along_axis(v, np.maximum(n - 1, 0) // 2, axis=-2)[..., 0, :]
+    hi = np.take_along_axis(v, n // 2, axis=-2)[..., 0, :]
+    with np.errstate(invalid='ignore'):
+        return np.where(n[..., 0, :] > 0, (lo + hi) / 2, np.nan)
+
+
 @dataclass(frozen=True)
 class TrackerConfig:
     """Settings of the identity tracker (physical units whatever the rig's; validated,
     errors name the field)."""
     gate_mm: float = setting(
-        400.0, "tracking: largest mean keypoint distance (mm) between a track's "
-        'prediction and a subject for them to be the same', minimum=0.0,
-        exclusive_minimum=True)
+        400.0, "tracking: largest distance (mm) between a track's predicted body and a "
+        "subject's body (the median displacement of its joints) for them to be the same",
+        minimum=0.0, exclusive_minimum=True)
     max_missed_s: float = setting(
         0.5, 'tracking: a track unmatched for longer than this (s) dies', minimum=0.0)
     min_keypoints: int = setting(
@@ -50,6 +83,15 @@ class TrackerConfig:
     acceleration_m_s2: float = setting(
         20.0, 'tracking: standard deviation of joint acceleration (m/s^2)', minimum=0.0,
         exclusive_minimum=True)
+    body_noise_mm: float = setting(
+        50.0, "tracking: standard deviation of a subject's body position (mm; the median "
+        "displacement of its joints)", minimum=0.0, exclusive_minimum=True)
+    body_acceleration_m_s2: float = setting(
+        5.0, "tracking: standard deviation of a subject's body acceleration (m/s^2)",
+        minimum=0.0, exclusive_minimum=True)
+    max_speed_m_s: float = setting(
+        2.0, 'tracking: fastest body speed (m/s): a track unmatched for t s takes a subject '
+        'within gate_mm + this x t of its predicted body', minimum=0.0)
 
     def __post_init__(self):
         validate_config(self)
@@ -59,11 +101,15 @@ class SubjectTracker:
     """Tracks of subjects with identities (the module docstring's rule).
 
     step(X (S, C, 3), stamp_ns) -> ids (S,) int: the identity of each subject, -1 for a
-    subject neither matched nor born (fewer than min_keypoints keypoints). Counters:
-    births, deaths. units: the rig's length unit of X ('m', 'cm', 'mm')."""
+    subject neither matched nor born (fewer than min_keypoints keypoints, or max_tracks
+    tracks alive). Counters: births, deaths, untracked (subjects left out by max_tracks).
+    units: the rig's length unit of X ('m', 'cm', 'mm'); max_tracks: the most tracks alive
+    (None: no limit)."""
 
-    def __init__(self, num_keypoints, config=None, units='m'):
+    def __init__(self, num_keypoints, config=None, units='m', max_tracks=None):
         self.config = config or TrackerConfig()
+        self.max_tracks = max_tracks
+        self.untracked = 0
         self.units = check_units(units)
         self.C = int(num_keypoints)
         c = self.config
@@ -71,7 +117,18 @@ class SubjectTracker:
         self._r2 = from_mm(c.measurement_noise_mm, units) ** 2
         self._q = from_m(c.acceleration_m_s2, units) ** 2
         self._v0 = from_m(cv_kalman.V0, units)
+        self._body_r2 = from_mm(c.body_noise_mm, units) ** 2
+        self._body_q = from_m(c.body_acceleration_m_s2, units) ** 2
+        self._speed = from_m(c.max_speed_m_s, units)
         self.ids = np.zeros(0, np.int64)
+        # the body model (module docstring step 2): each track's joints at its last match
+        # (ref, NaN: never measured), its body position measured then (ref_body) and the
+        # body's own constant-velocity filter (b, bv, bP)
+        self.ref = np.zeros((0, self.C, 3))
+        self.ref_body = np.zeros((0, 3))
+        self.b = np.zeros((0, 3))
+        self.bv = np.zeros((0, 3))
+        self.bP = np.zeros((3, 0))
         self.p = np.zeros((0, self.C, 3))
         self.v = np.zeros((0, self.C, 3))
         self.P = np.zeros((3, 0, self.C))
@@ -97,6 +154,30 @@ class SubjectTracker:
                                  self.P.reshape(3, -1), dt, self._q)
         return p.reshape(T, self.C, 3), P.reshape(3, T, self.C)
 
+    def _predict_body(self, stamp_ns):
+        if self.stamp is None or not len(self.ids):
+            return self.b.copy(), self.bP.copy()
+        dt = (int(stamp_ns) - self.stamp) / 1e9
+        return cv_kalman.predict(self.b, self.bv, self.bP, dt, self._body_q)
+
+    def body_distance(self, X, stamp_ns):
+        """Step 2's numbers: (z (T, S, 3) each subject's body position measured against
+        each track's joints, dist (T, S) |z - the track's predicted body| (inf without a
+        common joint), n (T, S) common joints) of subjects X (S, C, 3) (rig units) at
+        stamp_ns."""
+        return self._body_distance(np.asarray(X, np.float64).reshape(-1, self.C, 3),
+                                   self._predict_body(stamp_ns)[0])
+
+    def _body_distance(self, X, b):
+        disp = X[None] - self.ref[:, None]                               # (T, S, C, 3)
+        common = np.isfinite(disp).all(-1)
+        n = common.sum(-1)
+        some = n > 0
+        z = self.ref_body[:, None] + masked_median(disp, common)
+        with np.errstate(invalid='ignore'):
+            dist = np.where(some, np.linalg.norm(z - b[:, None], axis=-1), np.inf)
+        return z, dist, n
+
     def step(self, X, stamp_ns):
         X = np.asarray(X, np.float64).reshape(-1, self.C, 3)
         stamp_ns = int(stamp_ns)
@@ -107,15 +188,13 @@ class SubjectTracker:
         finite = np.isfinite(X).all(-1)                                  # (S, C)
         out = np.full(S, -1, np.int64)
         matched_t = np.zeros(T, bool)
+        b, bP = self._predict_body(stamp_ns)
         if S and T:
-            both = self.started[:, None] & finite[None]                 # (T, S, C)
-            diff = p[:, None] - np.where(finite[..., None], X, 0.0)[None]
-            d = np.sqrt(np.add.reduce(diff * diff, axis=-1))  # np.linalg.norm's numbers
-            n = both.sum(-1)
-            with np.errstate(invalid='ignore', divide='ignore'):
-                dist = np.where(both, d, 0.0).sum(-1) / n
-            allowed = (n > 0) & (dist <= self._gate)
-            big = 1e6 * (self._gate + 1.0)
+            z, dist, n = self._body_distance(X, b)
+            lost_s = (self.stamp - self.last_seen) / 1e9 if self.stamp is not None else 0.0
+            gate = self._gate + self._speed * np.asarray(lost_s, np.float64).reshape(-1, 1)
+            allowed = (n > 0) & (dist <= gate)
+            big = 1e6 * (float(gate.max()) + 1.0)
             rows, cols = linear_sum_assignment(np.where(allowed, dist, big))
             ok = allowed[rows, cols]
             rows, cols = rows[ok], cols[ok]
@@ -123,20 +202,27 @@ class SubjectTracker:
             matched_t[rows] = True
             self._update(p, P, rows, X[cols], finite[cols])
             self.joint_seen[rows] = np.where(finite[cols], stamp_ns, self.joint_seen[rows])
+            self._update_body(b, bP, rows, z[rows, cols], X[cols], finite[cols])
         else:
             self.p, self.P = p, P
+            self.b, self.bP = b, bP
         self.last_seen[matched_t] = stamp_ns
         born = (out < 0) & (finite.sum(-1) >= self.config.min_keypoints)
+        if born.any() and self.max_tracks is not None:
+            # at most max_tracks identities alive (step 5): a subject beyond is untracked
+            dying = (stamp_ns - self.last_seen) > self.config.max_missed_s * 1e9
+            alive = T - int(dying.sum())
+            free = max(0, self.max_tracks - alive)
+            over = np.flatnonzero(born)[free:]
+            born[over] = False
+            self.untracked += len(over)
         if born.any():
             out[born] = self._birth(X[born], finite[born], stamp_ns)
         self.started &= (stamp_ns - self.joint_seen) <= self.config.max_missed_s * 1e9
         old = (stamp_ns - self.last_seen) > self.config.max_missed_s * 1e9
         if old.any():
             self.deaths += int(old.sum())
-            keep = ~old
-            self.ids, self.p, self.v = self.ids[keep], self.p[keep], self.v[keep]
-            self.P, self.started = self.P[:, keep], self.started[keep]
-            self.last_seen, self.joint_seen = self.last_seen[keep], self.joint_seen[keep]
+            self._remove(~old)
         self.stamp = stamp_ns
         return out
 
@@ -159,19 +245,57 @@ class SubjectTracker:
         self.p, self.v, self.P = p, v, P
         self.started[rows] |= finite
 
+    # per-track state: the track axis of each array (the covariances keep theirs second)
+    _STATE = dict(ids=0, p=0, v=0, P=1, started=0, last_seen=0, joint_seen=0, ref=0,
+                  ref_body=0, b=0, bv=0, bP=1)
+
+    def _fresh(self, X, finite, stamp_ns):
+        """The state of tracks started at subjects X (k, C, 3) (finite (k, C)): every
+        measured joint started (cv_kalman.start), its body at the median of its joints."""
+        k = len(X)
+        p, v = np.zeros((k * self.C, 3)), np.zeros((k * self.C, 3))
+        P = np.zeros((3, k * self.C))
+        cv_kalman.start(p, v, P, X.reshape(-1, 3), finite.reshape(-1), self._r2, self._v0)
+        body = masked_median(X, finite)                                         # (k, 3)
+        b, bv, bP = body.copy(), np.zeros((k, 3)), np.zeros((3, k))
+        cv_kalman.start(b, bv, bP, body, np.ones(k, bool), self._body_r2, self._v0)
+        return dict(p=p.reshape(k, self.C, 3), v=v.reshape(k, self.C, 3),
+                    P=P.reshape(3, k, self.C), started=finite.copy(),
+                    last_seen=np.full(k, stamp_ns, np.int64),
+                    joint_seen=np.full((k, self.C), stamp_ns, np.int64),
+                    ref=np.where(finite[..., None], X, np.nan), ref_body=body, b=b, bv=bv,
+                    bP=bP)
+
     def _birth(self, X, finite, stamp_ns):
         k = len(X)
         ids = np.arange(self.next_id, self.next_id + k)
         self.next_id += k
         self.births += k
-        p, v = np.zeros((k * self.C, 3)), np.zeros((k * self.C, 3))
-        P = np.zeros((3, k * self.C))
-        cv_kalman.start(p, v, P, X.reshape(-1, 3), finite.reshape(-1), self._r2, self._v0)
-        self.ids = np.concatenate([self.ids, ids])
-        self.p = np.concatenate([self.p, p.reshape(k, self.C, 3)])
-        self.v = np.concatenate([self.v, v.reshape(k, self.C, 3)])
-        self.P = np.concatenate([self.P, P.reshape(3, k, self.C)], axis=1)
-        self.started = np.concatenate([self.started, finite])
-        self.last_seen = np.concatenate([self.last_seen, np.full(k, stamp_ns)])
-        self.joint_seen = np.concatenate([self.joint_seen, np.full((k, self.C), stamp_ns)])
+        fresh = self._fresh(X, finite, stamp_ns)
+        fresh['ids'] = ids
+        for name, axis in self._STATE.items():
+            setattr(self, name, np.concatenate([getattr(self, name), fresh[name]], axis=axis))
         return ids
+
+    def _remove(self, keep):
+        for name, axis in self._STATE.items():
+            value = getattr(self, name)
+            setattr(self, name, value[:, keep] if axis else value[keep])
+
+    def _update_body(self, b, bP, rows, z, X, finite):
+        """The body filter's update of the tracks `rows` with their body measurements z
+        (k, 3) and joints X (k, C, 3) (finite (k, C)); b, bP: all tracks' body prediction.
+        The reference joints: the measured ones, the others moved with the body."""
+        y, S, _, _ = cv_kalman.innovation(b[rows], bP[:, rows], z, self._body_r2)
+        br, bvr, bPr = cv_kalman.update(b[rows], self.bv[rows], bP[:, rows], y, S,
+                                        np.ones(len(rows), bool))
+        b, bP, bv = b.copy(), bP.copy(), self.bv.copy()
+        b[rows], bv[rows], bP[:, rows] = br, bvr, bPr
+        self.b, self.bv, self.bP = b, bv, bP
+        moved = self.ref[rows] + (z - self.ref_body[rows])[:, None]
+        ref = self.ref.copy()
+        ref[rows] = np.where(finite[..., None], X, moved)
+        self.ref = ref
+        ref_body = self.ref_body.copy()
+        ref_body[rows] = z
+        self.ref_body = ref_body

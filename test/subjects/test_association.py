@@ -225,3 +225,12 @@ def test_a_joint_unseen_longer_than_max_missed_is_restarted_not_extrapolated():
     assert abs(X[3, 0] - carried) > 4 * config.gate_mm / 1000
     assert tracker.step(X[None], stamp(40)).tolist() == [0]        # the same identity
     assert tracker.births == 1 and tracker.started[0].all()       # the hand started again
+
+
+def test_a_frame_of_one_camera_gives_no_subject(crossing):
+    # the live fusion can get an instant with one view (the others late): its two
+    # instances are matched in no other camera, counted, and no error is raised (an empty
+    # pair list once came out as a float index)
+    _, _, cams, points, _ = crossing
+    a = associate(points[0, 2:3], cams[2:3])
+    assert len(a.X) == 0 and a.instances == 2 and a.unmatched == 2

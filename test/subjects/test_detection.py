@@ -45,6 +45,9 @@ def test_only_recently_matched_tracks_get_crops_at_most_n():
 
     step = SubjectsStep(SimpleNamespace(keypoints=['a', 'b', 'c']), 'm',
                         SubjectsConfig(subjects=2, crop_missed=2))
+    # three tracks for two crop slots: the tracker here holds more identities than N (resolve
+    # gives it at most N subjects, and it bears at most N identities: tracking step 5)
+    step.tracker.max_tracks = None
     body = np.array([[0.0, 0.0, 1.6], [0.0, 0.0, 1.3], [0.0, 0.0, 1.0]])
     bodies = np.stack([body, body + [2.0, 0, 0], body + [0, 2.0, 0]])
 
