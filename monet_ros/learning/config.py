@@ -94,7 +94,8 @@ class TrainConfig:
                                   maximum=MAX_BATCH)
     batch_pseudo: int = setting(8, 'pseudo-labelled view crops per step', minimum=0,
                                 maximum=MAX_BATCH)
-    batch_unlabeled: int = setting(2, 'unlabeled instants per step (L_E, L_T, L_R)', minimum=0,
+    batch_unlabeled: int = setting(2, 'unlabeled instants (with several labelled subjects: '
+                                   '(instant, subject) rows) per step (L_E, L_T, L_R)', minimum=0,
                                    maximum=MAX_BATCH)
     views_per_instant: int = setting(0, 'views of each unlabeled instant (L_E: all their '
                                      'pairs; L_R: their consensus); 0 = every view of the rig',
