@@ -10,6 +10,10 @@ and frames/s for 1, 2 and 3 subjects, against the same model's one-subject figur
    seed * 1000 + k), then `monet train` on it (the default mode, the small net at input
    128: the CPU recipe of docs/train.md with --train-steps steps, one torch thread). The checkpoint
    is cached in WORK/model-<settings>/model.pt: a rerun with the same settings skips it.
+   --train-subjects K (default 1): the training recording has K subjects (`monet synth
+   --subjects K --label-subjects`, the same options otherwise: every subject labelled at
+   the labelled instants, motion seeds train_motion_seed * 1000 + k); the model is then
+   WORK/model-<settings>-kK and the outputs WORK/out-...-tK, beside the one-subject ones.
 2. For each N of --subjects-list: `monet synth --subjects N` (--cameras, --width x
    --height, --frames at 30/s, --seed; the subjects walk rings of 0.7 / 1.4 / 2.1 m and
    pass and hide each other; cached in WORK), then `monet process REC --model M --subjects
@@ -29,7 +33,7 @@ and frames/s for 1, 2 and 3 subjects, against the same model's one-subject figur
 
     nice .venv/bin/python bench/subjects_process.py --work /tmp/subjects_process
         [--subjects-list 1 2 3] [--frames 300] [--cameras 8] [--width 320 --height 240]
-        [--train-steps 1500] [--out bench/results/subjects_process.md]
+        [--train-steps 1500] [--train-subjects 1] [--out bench/results/subjects_process.md]
 """
 import argparse
 import csv
