@@ -10,6 +10,10 @@ and frames/s for 1, 2 and 3 subjects, against the same model's one-subject figur
    seed * 1000 + k), then `monet train` on it (the default mode, the small net at input
    128: the CPU recipe of docs/train.md with --train-steps steps, one torch thread). The checkpoint
    is cached in WORK/model-<settings>/model.pt: a rerun with the same settings skips it.
+   --train-subjects K (default 1): the training recording has K subjects (`monet synth
+   --subjects K --label-subjects`, the same options otherwise: every subject labelled at
+   the labelled instants, motion seeds train_motion_seed * 1000 + k); the model is then
+   WORK/model-<settings>-kK and the outputs WORK/out-...-tK, beside the one-subject ones.
 2. For each N of --subjects-list: `monet synth --subjects N` (--cameras, --width x
    --height, --frames at 30/s, --seed; the subjects walk rings of 0.7 / 1.4 / 2.1 m and
    pass and hide each other; cached in WORK), then `monet process REC --model M --subjects
@@ -29,7 +33,7 @@ and frames/s for 1, 2 and 3 subjects, against the same model's one-subject figur
 
     nice .venv/bin/python bench/subjects_process.py --work /tmp/subjects_process
         [--subjects-list 1 2 3] [--frames 300] [--cameras 8] [--width 320 --height 240]
-        [--train-steps 1500] [--out bench/results/subjects_process.md]
+        [--train-steps 1500] [--train-subjects 1] [--out bench/results/subjects_process.md]
 """
 import argparse
 import csv
@@ -199,6 +203,28 @@ def plot(path, runs, match_m):
     plt.close(fig)
 
 
+def detector_commands(args, rig):
+    """The detector's `monet synth` and `monet train` arguments for the parsed options args
+    (train_frames, label_fraction, train_seed, train_motion_seed, train_subjects, train_steps,
+    threads, cameras, width, height) and the synth's rig options -> (synth args, train args,
+    settings dict (the cache stamp), folder name). With train_subjects K > 1 the recording
+    has K subjects, every one labelled (--subjects K --label-subjects), and the name ends
+    in -kK; with K = 1 the settings and name are those of before the option (cache kept)."""
+    several = args.train_subjects > 1
+    train_synth = ['synth', '--frames', args.train_frames, '--label-fraction',
+                   args.label_fraction, '--seed', args.train_seed, '--motion-seed',
+                   args.train_motion_seed, *rig]
+    if several:
+        train_synth += ['--subjects', args.train_subjects, '--label-subjects']
+    train_args = ['--input-size', 128, '--steps', args.train_steps, '--threads', args.threads,
+                  '--checkpoint-every', args.train_steps, '--no-progress']
+    settings = dict(synth=list(map(str, train_synth)), train=list(map(str, train_args)))
+    key = f'model-f{args.train_frames}-c{args.cameras}-{args.width}x{args.height}-' \
+          f's{args.train_seed}-m{args.train_motion_seed}-steps{args.train_steps}' \
+          f'{f"-k{args.train_subjects}" if several else ""}'
+    return train_synth, train_args, settings, key
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     p.add_argument('--work', required=True, help='recordings, model and outputs (cached)')
@@ -215,6 +241,10 @@ def main(argv=None):
     p.add_argument('--train-motion-seed', type=int, default=7,
                    help='motion seed of the training recording (default %(default)s)')
     p.add_argument('--train-steps', type=int, default=1500)
+    p.add_argument('--train-subjects', type=int, default=1,
+                   help='subjects in the training recording, every one labelled (`monet synth '
+                   '--subjects K --label-subjects`; default %(default)s: one subject); with '
+                   'K > 1 the model is WORK/model-...-kK and the outputs WORK/out-...-tK')
     p.add_argument('--threads', type=int, default=1, help='torch threads of train/process')
     p.add_argument('--match-m', type=float, default=0.3,
                    help='largest mean keypoint distance (m) of a match')
@@ -227,6 +257,8 @@ def main(argv=None):
                    'default); outputs in WORK/out-nN-msX')
     p.add_argument('--out', default=str(REPO / 'bench' / 'results' / 'subjects_process.md'))
     args = p.parse_args(argv)
+    if not 1 <= args.train_subjects <= 3:
+        p.error(f'--train-subjects: must be 1, 2 or 3, got {args.train_subjects}')
     extra, suffix = {None: ([], ''), True: (['--rival-peaks'], '-rival'),
                      False: (['--no-rival-peaks'], '-norival')}[args.rival_peaks]
     if args.min_score is not None:
@@ -235,6 +267,9 @@ def main(argv=None):
 
     if args.train_seed is None:
         args.train_seed = args.seed
+    # the K = 1 names are those of before the option, so its cache and outputs stay valid
+    several = args.train_subjects > 1
+    suffix += f'-t{args.train_subjects}' if several else ''
     work = Path(args.work)
     work.mkdir(parents=True, exist_ok=True)
     start_load = load()
@@ -244,18 +279,11 @@ def main(argv=None):
            '--distinct-sides', '--quiet']
 
     # 1. the detector
-    train_synth = ['synth', '--frames', args.train_frames, '--label-fraction',
-                   args.label_fraction, '--seed', args.train_seed, '--motion-seed',
-                   args.train_motion_seed, *rig]
-    train_args = ['--input-size', 128, '--steps', args.train_steps, '--threads', args.threads,
-                  '--checkpoint-every', args.train_steps, '--no-progress']
-    settings = dict(synth=list(map(str, train_synth)), train=list(map(str, train_args)))
-    key = f'model-f{args.train_frames}-c{args.cameras}-{args.width}x{args.height}-' \
-          f's{args.train_seed}-m{args.train_motion_seed}-steps{args.train_steps}'
+    train_synth, train_args, settings, key = detector_commands(args, rig)
 
     def make_model(folder):
         folder.mkdir(parents=True)
-        say(f'{folder}: monet synth (one subject, labels) ...')
+        say(f'{folder}: monet synth ({args.train_subjects} subject(s), labels) ...')
         monet([*train_synth[:1], '--out', folder / 'data', *train_synth[1:]])
         say(f'{folder}: monet train ({args.train_steps} steps, input 128; load {load()}) ...')
         _, wall, cpu = monet(['train', folder / 'data', '--out', folder / 'train', *train_args],
@@ -284,8 +312,9 @@ def main(argv=None):
         recordings[n] = folder
 
     say(f'baseline: monet process (one subject) on {recordings[1].name}; load {load()}')
-    base_run = process(recordings[1], model, work / 'out-baseline', None, args.threads)
-    base, base_ids = score(work / 'out-baseline' / 'keypoints3d.csv', recordings[1], args.match_m)
+    base_out = work / f'out-baseline{"-t%d" % args.train_subjects if several else ""}'
+    base_run = process(recordings[1], model, base_out, None, args.threads)
+    base, base_ids = score(base_out / 'keypoints3d.csv', recordings[1], args.match_m)
     base_mm = 1000 * float(base.error[0])
     rows, plots = [], [('one subject, no --subjects', base, args.frames)]
     for n in args.subjects_list:
@@ -317,7 +346,9 @@ def main(argv=None):
         f'- Detector: `monet synth --frames {args.train_frames} --label-fraction '
         f'{args.label_fraction} --seed {args.train_seed} --motion-seed '
         f'{args.train_motion_seed} --cameras {args.cameras} --width '
-        f'{args.width} --height {args.height} --distinct-sides` (one subject), then `monet '
+        f'{args.width} --height {args.height} --distinct-sides'
+        + (f' --subjects {args.train_subjects} --label-subjects` (every subject labelled)'
+           if several else '` (one subject)') + ', then `monet '
         f'train DATA --input-size 128 --steps {args.train_steps} --threads {args.threads}` '
         f'(default mode, small net, precision auto): {train_wall["wall"]:.0f} s wall, '
         f'{train_wall["cpu"]:.0f} s CPU (cached when rerun).',
