@@ -133,15 +133,13 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
 def print_subjects(figures, out):
     """The summary lines of `monet process --subjects N` (stdout)."""
     s, n = figures['subjects'], figures['subject_counts']
-    ids = np.unique(s.subject)
     per_frame = ', '.join(f'{k}: {v}' for k, v in sorted(n['per_frame'].items()))
     name = 'monet process'
     print(f'{name}: {figures["frames"]} frames ({figures["views"]} views, '
           f'{figures["missing_views"]} missing) in {figures["seconds"]:.1f} s -> {out} (3D in '
           f'{figures["units"]}, the rig\'s unit)')
-    print(f'{name}: subjects: {len(ids)} identities ({", ".join(map(str, ids))}), '
-          f'{len(s.subject)} subject-frames, {s.births} births, {s.deaths} deaths; frames '
-          f'by subjects tracked: {per_frame or "none"}')
+    print(f'{name}: subjects: {s.identities_text()}; frames by subjects tracked: '
+          f'{per_frame or "none"}')
     print(f'{name}: detection: {n["crops"]} subject crops, {n["discoveries"]} full-frame '
           f'discovery runs finding {n["discovered"]} subjects from {n["points"]} 3D keypoint '
           f'candidates ({n["explained"]} near a live track, {n["loose"]} in no subject: '

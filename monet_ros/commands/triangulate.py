@@ -253,15 +253,13 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
 
 def _print_subjects(fig, name):
     s = fig['subjects']
-    ids = np.unique(s.subject)
     T = fig['frames']
     print(f'{name}: {T} frames (from frame {fig["first_frame"]}) x {len(fig["cameras"])} '
           f'cameras ({", ".join(fig["cameras"])}) x {len(fig["keypoints"])} keypoints, '
           f'{len(fig["instance_names"])} instance slots per camera from {fig["rows"]} '
           f'{fig["fmt"]} rows; 3D in {fig["units"]}, the rig\'s unit')
-    print(f'{name}: subjects: {len(ids)} identities ({", ".join(map(str, ids))}), '
-          f'{len(s.subject)} subject-frames, {s.births} births, {s.deaths} deaths; '
-          f'association + tracking {1e3 * s.seconds / max(T, 1):.2f} ms/frame')
+    print(f'{name}: subjects: {s.identities_text()}; association + tracking '
+          f'{1e3 * s.seconds / max(T, 1):.2f} ms/frame')
     print(f'{name}: skipped: {s.unmatched} of {s.instances} instances matched in no other '
           f'camera, {s.extra} subjects beyond --subjects, {s.untracked} untracked (too '
           'few keypoints for a track, or taken by no identity while N were alive)')

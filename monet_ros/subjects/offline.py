@@ -74,6 +74,20 @@ class SubjectRows:
     points2d: np.ndarray = None
     scores2d: np.ndarray = None
 
+    def identities_text(self):
+        """'2 identities (0, 1), 24 subject-frames, 2 births, 0 deaths': the summary's
+        identity counts (one wording for `monet process` and `monet triangulate`)."""
+        ids = np.unique(self.subject)
+        listed = f' ({", ".join(map(str, ids))})' if len(ids) else ''
+        return (f'{counted(len(ids), "identity", "identities")}{listed}, '
+                f'{counted(len(self.subject), "subject-frame")}, '
+                f'{counted(self.births, "birth")}, {counted(self.deaths, "death")}')
+
+
+def counted(n, noun, plural=None):
+    """'1 birth', '0 births', '2 births' (plural: the irregular form)."""
+    return f'{n} {noun if n == 1 else plural or noun + "s"}'
+
 
 class RowCollector:
     """SubjectRows accumulated frame by frame (one implementation of the rows of

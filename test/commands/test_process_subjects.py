@@ -133,7 +133,7 @@ def test_synth_recording_without_subjects_found_still_writes_and_counts(tmp_path
                   '2', '--skeleton', 'human14', *COMMON]) == 0
     text = capsys.readouterr().out
     assert 'monet process: 3 frames (9 views, 0 missing)' in text
-    assert '0 identities (), 0 subject-frames' in text and 'frames by subjects tracked: 0: 3' \
+    assert '0 identities, 0 subject-frames' in text and 'frames by subjects tracked: 0: 3' \
         in text and '3 full-frame discovery runs finding 0 subjects' in text
     assert read_anipose_csv(out / 'keypoints3d.csv')['X'].shape[0] == 0
     assert (out / 'keypoints.nwb').is_file()

@@ -46,3 +46,23 @@ def test_split_and_arrays_match_a_loop():
         split_instances(names, ('head',))
     # a single instance without '/' names
     assert split_instances(('head', 'tail'))[0] == ('',)
+
+
+def test_the_identity_summary_counts_in_words():
+    """One identity reads '1 identity (4)', none '0 identities' (no empty list), and every
+    count agrees in number with its noun."""
+    from monet_ros.subjects.offline import SubjectRows
+
+    def rows(subject, births, deaths):
+        subject = np.asarray(subject, int)
+        empty = np.zeros((len(subject), 1))
+        return SubjectRows(frame=np.arange(len(subject)), subject=subject, X=empty[..., None],
+                           error=empty, ncams=empty, score=empty, births=births,
+                           deaths=deaths, instances=0, unmatched=0, extra=0, untracked=0,
+                           seconds=0.0)
+    assert rows([4], 1, 0).identities_text() == \
+        '1 identity (4), 1 subject-frame, 1 birth, 0 deaths'
+    assert rows([], 0, 0).identities_text() == \
+        '0 identities, 0 subject-frames, 0 births, 0 deaths'
+    assert rows([0, 1, 1], 2, 1).identities_text() == \
+        '2 identities (0, 1), 3 subject-frames, 2 births, 1 death'
