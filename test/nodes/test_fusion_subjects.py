@@ -78,6 +78,19 @@ def frame_messages(cams, X, stamp, index, rng):
     return out
 
 
+def crop_slot_publishers(ros, cams, qos, node):
+    """{(camera, k): (heatmaps, camera_info) publishers} of the 3 crop slots of every
+    camera, once the fusion node subscribes them all."""
+    pubs = {(cam.name, k): (ros.publisher(f'/monet/{cam.name}/crop{k}/heatmaps', Image, qos),
+                            ros.publisher(f'/monet/{cam.name}/crop{k}/camera_info',
+                                          CameraInfo, qos))
+            for cam in cams for k in range(3)}
+    for heat_pub, info_pub in pubs.values():
+        ros.wait_for_subscribers(heat_pub, process=node)
+        ros.wait_for_subscribers(info_pub, process=node)
+    return pubs
+
+
 def test_fusion_publishes_two_subjects_with_stable_identities(ros_env, tmp_path):
     rig_path, cams, truth = synth(tmp_path, ros_env)
     X = truth['subjects_keypoints3d']                     # (T, 2, 14, 3) m
@@ -91,14 +104,7 @@ def test_fusion_publishes_two_subjects_with_stable_identities(ros_env, tmp_path)
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         markers = ros.collect('/monet/skeleton', MarkerArray)
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
-        pubs = {(cam.name, k): (ros.publisher(f'/monet/{cam.name}/crop{k}/heatmaps', Image,
-                                              qos),
-                                ros.publisher(f'/monet/{cam.name}/crop{k}/camera_info',
-                                              CameraInfo, qos))
-                for cam in cams for k in range(3)}
-        for heat_pub, info_pub in pubs.values():
-            ros.wait_for_subscribers(heat_pub, process=node)
-            ros.wait_for_subscribers(info_pub, process=node)
+        pubs = crop_slot_publishers(ros, cams, qos, node)
         got = {}
         for t in range(FRAMES):
             for key, (heat, info) in frame_messages(cams, X[t], int(stamps[t]), t,
@@ -188,14 +194,7 @@ def test_fusion_filters_each_subject(ros_env, tmp_path):
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         raws = ros.collect('/monet/keypoints3d_raw', PointCloud2)
-        pubs = {(cam.name, k): (ros.publisher(f'/monet/{cam.name}/crop{k}/heatmaps', Image,
-                                              qos),
-                                ros.publisher(f'/monet/{cam.name}/crop{k}/camera_info',
-                                              CameraInfo, qos))
-                for cam in cams for k in range(3)}
-        for heat_pub, info_pub in pubs.values():
-            ros.wait_for_subscribers(heat_pub, process=node)
-            ros.wait_for_subscribers(info_pub, process=node)
+        pubs = crop_slot_publishers(ros, cams, qos, node)
         got, got_raw = {}, {}
         for t in range(FRAMES):
             for key, (heat, info) in frame_messages(cams, noisy[t], int(stamps[t]), t,
