@@ -1,7 +1,6 @@
 """Shared fixtures: the real data in ../shared/data and per-test ROS isolation."""
 import os
 from pathlib import Path
-import random
 import signal
 import sys
 
@@ -10,6 +9,8 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # test/helpers is importable as `helpers` from every test module.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from helpers.domain import claim_domain_id  # noqa: E402
+
 # A shell's background job (`cmd &`, nohup) starts with SIGINT ignored, and an ignored signal
 # stays ignored across exec: the commands and nodes the tests interrupt would never see it.
 # Python's own handler here makes every child start with the default disposition, so the
@@ -39,10 +40,12 @@ def shared_data():
 
 @pytest.fixture
 def ros_env(tmp_path):
-    """Environment for node processes: a random ROS_DOMAIN_ID (1..101), logs in tmp."""
+    """Environment for node processes: a random ROS_DOMAIN_ID (1..101) held by this test
+    alone on this machine (helpers.domain), logs in tmp."""
+    domain, lock = claim_domain_id()
     env = dict(os.environ)
     env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    env['ROS_DOMAIN_ID'] = str(random.randint(1, 101))
+    env['ROS_DOMAIN_ID'] = str(domain)
     env['ROS_LOG_DIR'] = str(tmp_path / 'ros_log')
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['PYTHONUNBUFFERED'] = '1'
@@ -50,4 +53,6 @@ def ros_env(tmp_path):
     profile = REPO_ROOT / 'config' / 'fastdds_profile.xml'
     if profile.is_file():
         env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
-    return env
+    yield env
+    if lock is not None:
+        lock.close()
