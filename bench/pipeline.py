@@ -58,7 +58,6 @@ import contextlib
 import json
 import os
 from pathlib import Path
-import random
 import subprocess
 import sys
 import tempfile
@@ -68,6 +67,9 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / 'test'))
+
+from helpers.domain import held_domain_id  # noqa: E402
 
 from monet_ros.commands.pipeline import detector_groups  # noqa: E402
 from monet_ros.cores import usable_cores  # noqa: E402
@@ -201,14 +203,19 @@ def detector_micro(views, runs, threads, architecture, workdir, input_size=None)
 
 
 # ----------------------------------------------------------------------------- live
+@contextlib.contextmanager
 def run_env(workdir):
+    """`with run_env(workdir) as env:` the environment of one run's processes, on a
+    ROS_DOMAIN_ID held on this machine for the block (test/helpers/domain.py, as the tests
+    claim theirs: a test suite beside the bench never meets its nodes)."""
     env = dict(os.environ)
     env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    env.update(ROS_DOMAIN_ID=str(random.randint(1, 101)), ROS_LOG_DIR=str(workdir / 'log'),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONPATH=str(REPO),
-               FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / 'config' / 'fastdds_profile.xml'),
-               PYTHONUNBUFFERED='1')
-    return env
+    with held_domain_id() as domain:
+        env.update(ROS_DOMAIN_ID=str(domain), ROS_LOG_DIR=str(workdir / 'log'),
+                   ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', PYTHONPATH=str(REPO),
+                   FASTRTPS_DEFAULT_PROFILES_FILE=str(REPO / 'config' / 'fastdds_profile.xml'),
+                   PYTHONUNBUFFERED='1')
+        yield env
 
 
 def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewable=False,
@@ -226,9 +233,10 @@ def live(layout, views, rate, seconds, warmup, threads, backend, workdir, viewab
                 workdir=str(workdir), viewable=viewable, precision=precision,
                 detector_processes=detector_processes, batch_wait_ms=batch_wait_ms,
                 calibration=calibration)
-    proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
-                          env=run_env(workdir), capture_output=True, text=True,
-                          timeout=300 + seconds + warmup)
+    with run_env(workdir) as env:
+        proc = subprocess.run([sys.executable, __file__, '--worker', json.dumps(spec)],
+                              env=env, capture_output=True, text=True,
+                              timeout=300 + seconds + warmup)
     for line in reversed(proc.stdout.splitlines()):
         if line.startswith('{'):
             return json.loads(line)
@@ -251,17 +259,18 @@ def receive_micro(views, rate, seconds, repeat, workdir):
     out = {('message', False): [], ('message', True): [], ('serialized', True): []}
     for _ in range(repeat):
         for mode, heap in out:
-            env = run_env(workdir)
             spec = dict(views=views, rate=rate, seconds=seconds, mode=mode, heap=heap)
-            sub = subprocess.Popen([sys.executable, __file__, '--receive-worker',
-                                    json.dumps(dict(spec, role='subscriber'))], env=env,
-                                   stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-            subprocess.run([sys.executable, __file__, '--receive-worker',
-                            json.dumps(dict(spec, role='publisher'))], env=env,
-                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                           timeout=120 + seconds)
-            lines = [line for line in sub.communicate(timeout=60)[0].splitlines()
-                     if line.startswith('{')]
+            with run_env(workdir) as env:
+                sub = subprocess.Popen([sys.executable, __file__, '--receive-worker',
+                                        json.dumps(dict(spec, role='subscriber'))], env=env,
+                                       stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
+                                       text=True)
+                subprocess.run([sys.executable, __file__, '--receive-worker',
+                                json.dumps(dict(spec, role='publisher'))], env=env,
+                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                               timeout=120 + seconds)
+                lines = [line for line in sub.communicate(timeout=60)[0].splitlines()
+                         if line.startswith('{')]
             result = json.loads(lines[-1]) if lines else {}
             out[mode, heap].append(result.get('cpu_ms', float('nan')))
     return out

@@ -9,7 +9,7 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 # test/helpers is importable as `helpers` from every test module.
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from helpers.domain import claim_domain_id  # noqa: E402
+from helpers.domain import held_domain_id  # noqa: E402
 
 # A shell's background job (`cmd &`, nohup) starts with SIGINT ignored, and an ignored signal
 # stays ignored across exec: the commands and nodes the tests interrupt would never see it.
@@ -39,13 +39,20 @@ def shared_data():
 
 
 @pytest.fixture
-def ros_env(tmp_path):
-    """Environment for node processes: a random ROS_DOMAIN_ID (1..101) held by this test
-    alone on this machine (helpers.domain), logs in tmp."""
-    domain, lock = claim_domain_id()
+def ros_domain_id():
+    """A random ROS_DOMAIN_ID (int, 1..101) held by this test alone on this machine until
+    it ends (helpers.domain), for every test that starts ROS processes or nodes."""
+    with held_domain_id() as domain:
+        yield domain
+
+
+@pytest.fixture
+def ros_env(tmp_path, ros_domain_id):
+    """Environment for node processes: the test's ROS_DOMAIN_ID (ros_domain_id), logs in
+    tmp."""
     env = dict(os.environ)
     env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
-    env['ROS_DOMAIN_ID'] = str(domain)
+    env['ROS_DOMAIN_ID'] = str(ros_domain_id)
     env['ROS_LOG_DIR'] = str(tmp_path / 'ros_log')
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     env['PYTHONUNBUFFERED'] = '1'
@@ -53,6 +60,4 @@ def ros_env(tmp_path):
     profile = REPO_ROOT / 'config' / 'fastdds_profile.xml'
     if profile.is_file():
         env['FASTRTPS_DEFAULT_PROFILES_FILE'] = str(profile)
-    yield env
-    if lock is not None:
-        lock.close()
+    return env

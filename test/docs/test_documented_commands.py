@@ -8,7 +8,6 @@ from functools import lru_cache
 import io
 import os
 from pathlib import Path
-import random
 import re
 import subprocess
 import sys
@@ -31,8 +30,9 @@ def shared_root():
     return Path(os.environ.get('MONET_SHARED_DATA', REPO.parent / 'shared' / 'data'))
 
 
-def environment(tmp_path):
-    """A `monet` on PATH that runs this checkout; DDS isolated as in the node tests."""
+def environment(tmp_path, domain):
+    """A `monet` on PATH that runs this checkout; DDS isolated as in the node tests: on
+    ROS_DOMAIN_ID `domain`, the test's claimed one (the ros_domain_id fixture)."""
     bin_dir = tmp_path / 'bin'
     bin_dir.mkdir()
     shim = bin_dir / 'monet'
@@ -42,7 +42,7 @@ def environment(tmp_path):
     env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
     env['PATH'] = f'{bin_dir}{os.pathsep}{env["PATH"]}'
     env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(REPO), env.get('PYTHONPATH')]))
-    env['ROS_DOMAIN_ID'] = str(random.randint(1, 101))
+    env['ROS_DOMAIN_ID'] = str(domain)
     env['ROS_LOG_DIR'] = str(tmp_path / 'ros_log')
     env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
     return env
@@ -64,11 +64,11 @@ def sandbox(tmp_path):
 
 @pytest.mark.slow
 @pytest.mark.parametrize('page', RUN_PAGES)
-def test_runnable_blocks_run(page, tmp_path):
+def test_runnable_blocks_run(page, tmp_path, ros_domain_id):
     blocks = [b for b in BLOCKS[page] if b.kind == 'run']
     if any('../shared/data' in b.text for b in blocks) and not shared_root().is_dir():
         pytest.skip(f'{page}: real data not found at {shared_root()} (set MONET_SHARED_DATA)')
-    root, env = sandbox(tmp_path), environment(tmp_path)
+    root, env = sandbox(tmp_path), environment(tmp_path, ros_domain_id)
     for block in blocks:
         result = subprocess.run(['bash', '-e', '-o', 'pipefail', '-c', block.text], cwd=root,
                                 env=env, capture_output=True, text=True, timeout=600)

@@ -1,4 +1,7 @@
-"""A ROS_DOMAIN_ID for one test, held on this machine while the test runs."""
+"""A ROS_DOMAIN_ID for one test, held on this machine while the test runs: the one way
+every test (the `ros_domain_id` / `ros_env` fixtures of test/conftest.py) and bench script
+that starts ROS processes picks its domain."""
+from contextlib import contextmanager
 import fcntl
 import os
 from pathlib import Path
@@ -20,3 +23,15 @@ def claim_domain_id():
         except OSError:
             lock.close()
     return ids[0], None
+
+
+@contextmanager
+def held_domain_id():
+    """`with held_domain_id() as domain:` a ROS_DOMAIN_ID (int, 1..101) claimed by
+    claim_domain_id for the block, released when it ends (also on an exception)."""
+    domain, lock = claim_domain_id()
+    try:
+        yield domain
+    finally:
+        if lock is not None:
+            lock.close()

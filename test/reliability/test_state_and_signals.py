@@ -93,11 +93,10 @@ def test_topic_templates_with_unknown_fields_are_named():
 
 
 def test_pipeline_refuses_a_skeleton_that_is_not_the_models(process_inputs, monkeypatch,
-                                                            tmp_path):
+                                                            tmp_path, ros_domain_id):
     """Kind 8: the pipeline ran with every heatmap counted bad; now it stops at start naming
     the skeleton and the model."""
-    import random
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(random.randint(1, 101)))
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(ros_domain_id))
     monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path / 'ros_log'))
     monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     rec, model = process_inputs
