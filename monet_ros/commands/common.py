@@ -135,40 +135,111 @@ def check_subject_only_options(args, several, command):
                              'runs one subject without it')
 
 
+def config_options(config_cls, exclude=(), rename=None):
+    """{option: field} of the init fields of a config dataclass (monet_ros.config), in
+    field order: each as --its-name (underscores as dashes), except those in `exclude` and
+    those `rename` ({field: option}) spells otherwise (a name another option of the
+    command already has)."""
+    from dataclasses import fields
+    rename = rename or {}
+    return {rename.get(f.name, '--' + f.name.replace('_', '-')): f.name
+            for f in fields(config_cls) if f.init and f.name not in exclude}
+
+
+def add_config_options(parser, config_cls, options, add=None, help_prefix=''):
+    """One option per entry of `options` ({option: field}, config_options) with the field's
+    type (monet_ros.config.field_kind; a bool is --x / --no-x), default and description
+    (the help, after `help_prefix`, with the default): the config is the one place of
+    each. add(parser, option, **kwargs): how to add it (default parser.add_argument; e.g.
+    subject_only_option). The value is args.<option without dashes, dashes as
+    underscores>; config_from_options builds the config."""
+    from dataclasses import fields
+
+    from monet_ros.config import field_kind
+    add = add or (lambda p, option, **kwargs: p.add_argument(option, **kwargs))
+    declared = {f.name: f for f in fields(config_cls)}
+    for option, name in options.items():
+        f = declared[name]
+        kind, is_tuple = field_kind(config_cls, name)
+        if is_tuple:
+            raise TypeError(f'{config_cls.__name__}.{name}: a tuple setting has no option')
+        text = help_prefix + f.metadata['description'].replace('%', '%%') + \
+            ' (default %(default)s)'
+        if kind is bool:
+            add(parser, option, action=argparse.BooleanOptionalAction, default=f.default,
+                help=text)
+        else:
+            add(parser, option, type=kind, default=f.default, help=text)
+
+
+def option_dest(option):
+    """argparse's attribute of an option: '--gate-mm' -> 'gate_mm'."""
+    return option[2:].replace('-', '_')
+
+
+def config_from_options(args, config_cls, options, **values):
+    """config_cls of the options (add_config_options) in `args` plus `values` (fields set
+    otherwise). A ConfigError of one of those fields becomes a ValueError naming the
+    option as typed, then the setting: `--track-measurement-noise-mm: TrackerConfig:
+    parameter 'measurement_noise_mm': must be > 0.0, got -1.0` (the option's name need not
+    be the field's); others pass as they are."""
+    given = {name: getattr(args, option_dest(option)) for option, name in options.items()}
+    try:
+        return config_cls(**given, **values)
+    except ConfigError as error:
+        option = next((o for o, n in options.items() if n == error.field), None)
+        if option is None or error.owner != config_cls.__name__:
+            raise
+        raise ValueError(f'{option}: {error}') from None
+
+
+def tracker_options():
+    """{option: field} of subjects.tracking.TrackerConfig, every field, as options of
+    `monet process --subjects` and `monet triangulate --subjects`: --its-name (--gate-mm,
+    ...), but the per-joint filter's measurement_noise_mm / acceleration_m_s2 as
+    --track-measurement-noise-mm / --track-acceleration-m-s2 (the plain names are the
+    --filter's, commands.filter_options)."""
+    from monet_ros.subjects.tracking import TrackerConfig
+    return config_options(TrackerConfig, rename={
+        'measurement_noise_mm': '--track-measurement-noise-mm',
+        'acceleration_m_s2': '--track-acceleration-m-s2'})
+
+
 def add_subject_tracking_arguments(parser):
-    """--association-px, --gate-mm, --max-missed-s: the association and tracker settings of
-    `monet triangulate --subjects` and `monet process --subjects` (subjects.association,
-    subjects.tracking)."""
+    """--association-px and every tracker setting (tracker_options): the association and
+    tracker settings of `monet triangulate --subjects` and `monet process --subjects`
+    (subjects.association, subjects.tracking), all --subjects-only."""
+    from monet_ros.subjects.tracking import TrackerConfig
     subject_only_option(parser, '--association-px', type=float, default=15.0,
                         help='--subjects: largest median epipolar distance (px) between two '
-                        'instances of one subject')
-    subject_only_option(parser, '--gate-mm', type=float, default=400.0,
-                        help="--subjects: largest distance (mm) of a subject's body (the "
-                        "median displacement of its joints) to a track's predicted body (a "
-                        'track unmatched for t s: plus 2 m/s x t)')
-    subject_only_option(parser, '--max-missed-s', type=float, default=0.5,
-                        help='--subjects: a track unseen for longer (s) ends')
+                        'instances of one subject (default %(default)s)')
+    add_config_options(parser, TrackerConfig, tracker_options(), add=subject_only_option,
+                       help_prefix='--subjects: ')
+
+
+def tracker_config_from_args(args):
+    """The subjects.tracking.TrackerConfig of the tracker options (add_subject_tracking_
+    arguments); ValueError naming the option of a bad value (config_from_options)."""
+    from monet_ros.subjects.tracking import TrackerConfig
+    return config_from_options(args, TrackerConfig, tracker_options())
+
+
+def subjects_options():
+    """{option: field} of subjects.detection.SubjectsConfig but `subjects` (--subjects N):
+    the detector's several-subject options of `monet process`."""
+    from monet_ros.subjects.detection import SubjectsConfig
+    return config_options(SubjectsConfig, exclude=('subjects',))
 
 
 def add_subjects_detection_arguments(parser):
     """--subjects N and the subjects.detection.SubjectsConfig options of `monet process`
-    (help: the config's field descriptions), with add_subject_tracking_arguments."""
-    from dataclasses import fields
-
+    (subjects_options; help: the config's field descriptions), with
+    add_subject_tracking_arguments."""
     from monet_ros.subjects.detection import SubjectsConfig
-    d = {f.name: f for f in fields(SubjectsConfig)}
     parser.add_argument('--subjects', type=int, default=1, metavar='N',
                         help='several subjects (N >= 2): per-subject crops tracked over time, '
                         'found by full-frame candidates; per-subject outputs as `monet '
                         'triangulate --subjects` (1 = one subject, the tracked crop)')
-    for name, kind in (('candidates', int), ('link_mm', float), ('crop_peaks', int),
-                       ('duplicate_mm', float), ('crop_missed', int),
-                       ('min_score', float)):
-        subject_only_option(parser, '--' + name.replace('_', '-'), type=kind,
-                            default=d[name].default,
-                            help='--subjects: ' + d[name].metadata['description'])
-    subject_only_option(parser, '--rival-peaks', action=argparse.BooleanOptionalAction,
-                        default=d['rival_peaks'].default,
-                        help='--subjects: ' + d['rival_peaks'].metadata['description']
-                        + ' (default: %(default)s)')
+    add_config_options(parser, SubjectsConfig, subjects_options(), add=subject_only_option,
+                       help_prefix='--subjects: ')
     add_subject_tracking_arguments(parser)

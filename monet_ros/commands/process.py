@@ -5,9 +5,10 @@ possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 
         [--heatmaps] [--threads N] [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx]
         [--filter none|kalman|optim]
         [--subjects N [--candidates 3] [--link-mm 600] [--crop-peaks 3] [--duplicate-mm 100]
-         [--crop-missed 1] [--min-score 0.5] [--[no-]rival-peaks] [--association-px 15]
-         [--gate-mm 400]
-         [--max-missed-s 0.5]]
+         [--crop-missed 1] [--min-score 0.4] [--[no-]rival-peaks] [--association-px 15]
+         [--gate-mm 400] [--max-speed-m-s 2] [--max-missed-s 0.5] [--min-keypoints 3]
+         [--body-noise-mm 50] [--body-acceleration-m-s2 5]
+         [--track-measurement-noise-mm 15] [--track-acceleration-m-s2 20]]
 
 Beside the MCAP (inside OUT) it writes the per-frame results for analysis tools
 (monet_ros.io.export_results): keypoints3d.csv (anipose's 3D CSV layout),
@@ -25,7 +26,11 @@ analysis files then hold the filtered points and the MCAP also /monet/keypoints3
 monet_ros.subjects.detection): per-subject crops from each track's prediction, full-frame
 top-k candidates to find subjects, identities over time; the outputs of `monet
 triangulate --subjects N` (keypoints3d.csv with a `subject` column, one TRC and one NWB
-series per subject). --subjects 1 (the default) is the one-subject path below.
+series per subject). --subjects 1 (the default) is the one-subject path below. The options
+after --subjects N are the fields of subjects.detection.SubjectsConfig and subjects.tracking.
+TrackerConfig (commands.common.add_subjects_detection_arguments: defaults and help from the
+configs; the tracker's joint noise and acceleration take a track- prefix, the --filter's
+have the plain names) and apply only with N >= 2.
 
 The same functions as the live nodes: Detector.predict (one batched forward per instant),
 crop_rule.TrackedCrops (the detector node's crop rule: around the previous instant's 3D
@@ -331,21 +336,22 @@ def _several(reader, topics, cameras, detector, units, frame_id, out, config, su
 
 def subject_configs(args):
     """(SubjectsConfig, AssociationConfig or None, TrackerConfig) of the --subjects
-    options (ConfigError naming the option)."""
+    options (ValueError naming the option: commands.common.config_from_options)."""
+    from monet_ros.commands.common import (
+        config_from_options,
+        subjects_options,
+        tracker_config_from_args,
+    )
     from monet_ros.subjects import AssociationConfig
     from monet_ros.subjects.detection import SubjectsConfig
-    from monet_ros.subjects.tracking import TrackerConfig
 
-    subjects = SubjectsConfig(subjects=args.subjects, candidates=args.candidates,
-                              link_mm=args.link_mm, crop_peaks=args.crop_peaks,
-                              duplicate_mm=args.duplicate_mm, crop_missed=args.crop_missed,
-                              rival_peaks=args.rival_peaks, min_score=args.min_score)
+    subjects = config_from_options(args, SubjectsConfig, subjects_options(),
+                                   subjects=args.subjects)
     association = AssociationConfig(threshold_px=args.association_px,
                                     confidence_threshold=args.confidence_threshold,
                                     min_views=args.min_views,
                                     triangulation_px=args.threshold_px, method=args.method)
-    tracker = TrackerConfig(gate_mm=args.gate_mm, max_missed_s=args.max_missed_s)
-    return subjects, association, tracker
+    return subjects, association, tracker_config_from_args(args)
 
 
 def run(args):

@@ -6,7 +6,10 @@
         [--skeleton human14]
         [--camera-map SRC=DST] [--threshold-px 15] [--confidence-threshold 0.1]
         [--min-views 2] [--method exclusion|ransac] [--export csv,trc,nwb,npz]
-        [--subjects N [--association-px 15] [--gate-mm 400] [--max-missed-s 0.5]]
+        [--subjects N [--association-px 15] [--gate-mm 400] [--max-speed-m-s 2]
+         [--max-missed-s 0.5] [--min-keypoints 3] [--body-noise-mm 50]
+         [--body-acceleration-m-s2 5] [--track-measurement-noise-mm 15]
+         [--track-acceleration-m-s2 20]]
 
 POINTS2D: what `monet labels import` reads (DeepLabCut / Lightning Pose prediction CSV or
 H5 per camera, SLEAP analysis H5 per camera, an anipose pose-2d folder, OpenPose /
@@ -34,7 +37,9 @@ keypoints3d.csv gains a `subject` column (one row per frame and subject), TRC is
 per subject (keypoints3d_subject<id>.trc), NWB one 3D series per subject. --filter
 kalman|optim filters each identity on its own (subjects.offline.smooth_subjects: over the
 frames from its first to its last, with its own 2D detections); the files then hold the
-filtered rows, with the subject column. Not with --export npz.
+filtered rows, with the subject column. Not with --export npz. The tracker's options are
+every field of subjects.tracking.TrackerConfig (commands.common.tracker_options: defaults
+and help from the config, as the fusion node's parameters), only with --subjects.
 """
 from pathlib import Path
 import sys
@@ -282,11 +287,10 @@ def run(args):
     filt = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     exports = parse_formats(args.export)
     tracker = None
-    from monet_ros.commands.common import check_subject_only_options
+    from monet_ros.commands.common import check_subject_only_options, tracker_config_from_args
     check_subject_only_options(args, args.subjects is not None, 'monet triangulate')
     if args.subjects is not None:
-        from monet_ros.subjects.tracking import TrackerConfig
-        tracker = TrackerConfig(gate_mm=args.gate_mm, max_missed_s=args.max_missed_s)
+        tracker = tracker_config_from_args(args)
     fig = triangulate_points(args.points2d, args.rig, args.out, fmt=args.format, fps=args.fps,
                              skeleton=args.skeleton,
                              camera_map=dict(parse_name_map(args.camera_map)),

@@ -187,3 +187,19 @@ def test_a_truncated_recording_is_reported_as_with_one_subject(scene, tmp_path, 
         reports.append(lines[0])
     assert reports[0] == reports[1]
     assert 'footer' in reports[0] or 'truncated' in reports[0], reports[0]
+
+
+def test_tracker_options_reach_the_tracker(scene, tmp_path, capsys):
+    """The tracker's options reach `monet process --subjects`' core: with --min-keypoints
+    4 a subject of the blobs' 3 keypoints is neither a discovered hypothesis
+    (subjects.detection, step e) nor a track (subjects.tracking, step 5), so no identity
+    ever starts; the options themselves: test_tracker_options.py."""
+    _, X, _ = scene
+    assert X.shape[2] == 3
+    out = tmp_path / 'few'
+    assert _process(scene, out, '--subjects', '2', '--link-mm', '450',
+                    '--min-keypoints', '4') == 0
+    text = capsys.readouterr().out
+    assert '0 identities, 0 subject-frames, 0 births, 0 deaths' in text, text
+    assert f'{T} full-frame discovery runs finding 0 subjects' in text, text
+    assert len(read_anipose_csv(out / 'keypoints3d.csv')['fnum']) == 0

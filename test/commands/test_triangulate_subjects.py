@@ -143,3 +143,38 @@ def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert code == 2 and words in err and '\n' not in err, err
         assert not (tmp_path / 'x').exists()
+
+
+def test_tracker_options_decide_the_identities(scene, tmp_path, capsys):
+    """--gate-mm, --max-speed-m-s, --max-missed-s and --min-keypoints reach the tracker:
+    the outcome follows from the tracking rule (subjects.tracking) alone. A 0.001 mm gate
+    that never grows (max speed 0) takes no subject of the next frame (the median
+    displacement of a subject's joints is at least 10 mm per frame), so each identity
+    lives one frame: its track dies at the first frame k with k / fps > --max-missed-s,
+    when the subjects are born again (before, N = 2 tracks are alive and the subjects are
+    untracked)."""
+    root, X, _, points, _ = scene
+    step = np.linalg.norm(np.median(np.diff(X, axis=0), axis=2), axis=-1)   # (T - 1, 2)
+    assert step.min() > 0.01                        # m per frame, >> the gate
+    paths = [str(p) for p in _write_table(tmp_path / 'points.csv', points)]
+    base = ['triangulate', *paths, '--rig', str(root / 'rig.yaml'), '--fps', str(FPS),
+            '--skeleton', 'human14', '--subjects', '2']
+    out = tmp_path / 'gate'
+    assert monet(base + ['--out', str(out), '--gate-mm', '0.001', '--max-speed-m-s', '0',
+                         '--max-missed-s', '0.45']) == 0
+    period = next(k for k in range(1, T) if k / FPS > 0.45)           # 14 frames
+    born = np.arange(0, T, period)                                   # 0, 14, 28, 42, 56
+    n = len(born)
+    table = read_anipose_csv(out / 'keypoints3d.csv')
+    np.testing.assert_array_equal(table['fnum'], np.repeat(born, 2))
+    np.testing.assert_array_equal(table['subject'], np.arange(2 * n))   # never reused
+    text = capsys.readouterr().out
+    assert f'{2 * n} births, {2 * (n - 1)} deaths' in text
+    assert f'{2 * (T - n)} untracked' in text
+    # a subject of 14 keypoints never starts a track with --min-keypoints 15
+    out = tmp_path / 'few'
+    assert monet(base + ['--out', str(out), '--min-keypoints', str(SK.num_keypoints + 1)]) == 0
+    text = capsys.readouterr().out
+    assert '0 identities, 0 subject-frames, 0 births' in text
+    assert f'{2 * T} untracked' in text
+    assert len(read_anipose_csv(out / 'keypoints3d.csv')['fnum']) == 0
