@@ -177,15 +177,21 @@ def option_dest(option):
     return option[2:].replace('-', '_')
 
 
-def config_from_options(args, config_cls, options, **values):
+def config_from_options(args, config_cls, options, derive=None, **values):
     """config_cls of the options (add_config_options) in `args` plus `values` (fields set
-    otherwise). A ConfigError of one of those fields becomes a ValueError naming the
-    option as typed, then the setting: `--track-measurement-noise-mm: TrackerConfig:
-    parameter 'measurement_noise_mm': must be > 0.0, got -1.0` (the option's name need not
-    be the field's); others pass as they are."""
+    otherwise). derive(config): what the settings feed, refused unless usable
+    (monet_ros.config.derive_checked: a value that overflows names its field). A
+    ConfigError of one of those fields becomes a ValueError naming the option as typed,
+    then the setting: `--track-measurement-noise-mm: TrackerConfig: parameter
+    'measurement_noise_mm': must be > 0.0, got -1.0` (the option's name need not be the
+    field's); others pass as they are."""
+    from monet_ros.config import derive_checked
     given = {name: getattr(args, option_dest(option)) for option, name in options.items()}
     try:
-        return config_cls(**given, **values)
+        config = config_cls(**given, **values)
+        if derive is not None:
+            derive_checked(config_cls.__name__, config, derive)
+        return config
     except ConfigError as error:
         option = next((o for o, n in options.items() if n == error.field), None)
         if option is None or error.owner != config_cls.__name__:
@@ -219,9 +225,15 @@ def add_subject_tracking_arguments(parser):
 
 def tracker_config_from_args(args):
     """The subjects.tracking.TrackerConfig of the tracker options (add_subject_tracking_
-    arguments); ValueError naming the option of a bad value (config_from_options)."""
-    from monet_ros.subjects.tracking import TrackerConfig
-    return config_from_options(args, TrackerConfig, tracker_options())
+    arguments); ValueError naming the option of a bad value (config_from_options), also of
+    one the tracker cannot use in some rig unit (a noise whose square overflows, e.g.
+    --body-noise-mm 1e200: checked by making the tracker in m, cm and mm, before any
+    file is read)."""
+    from monet_ros.geometry.units import UNITS
+    from monet_ros.subjects.tracking import SubjectTracker, TrackerConfig
+    return config_from_options(
+        args, TrackerConfig, tracker_options(),
+        derive=lambda config: [SubjectTracker(1, config, units=u) for u in UNITS])
 
 
 def subjects_options():

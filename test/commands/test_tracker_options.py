@@ -90,6 +90,21 @@ def test_a_bad_value_is_one_line_naming_the_option(command, option, value, reaso
 
 
 @pytest.mark.parametrize('command', sorted(COMMANDS))
+@pytest.mark.parametrize('option, field', [('--body-noise-mm', 'body_noise_mm'),
+                                           ('--track-acceleration-m-s2', 'acceleration_m_s2')])
+def test_a_value_whose_square_overflows_is_one_line_naming_the_option(
+        command, option, field, capsys, tmp_path, monkeypatch):
+    # valid as a number, but the tracker squares it in the rig's unit: refused before any
+    # file is read (was an internal error, exit 1, once the tracker was made)
+    monkeypatch.chdir(tmp_path)
+    assert monet([*COMMANDS[command], '--subjects', '2', option, '1e200']) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"monet {command}: error: {option}: TrackerConfig: parameter "
+                          f"'{field}': 1e+200 cannot be used: OverflowError") and \
+        '\n' not in err, err
+
+
+@pytest.mark.parametrize('command', sorted(COMMANDS))
 def test_a_value_argparse_cannot_read_is_one_line(command, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     assert monet([*COMMANDS[command], '--subjects', '2', '--min-keypoints', '2.5']) == 2
