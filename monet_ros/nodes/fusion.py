@@ -98,7 +98,7 @@ from monet_ros.rig_select import load_node_rig, select_cameras
 from monet_ros.skeleton import load_skeleton
 from monet_ros.subjects.association import AssociationConfig
 from monet_ros.subjects.detection import SubjectsConfig, SubjectsCore, subject_keypoints
-from monet_ros.subjects.tracking import TrackerConfig
+from monet_ros.subjects.tracking import SubjectTracker, TrackerConfig
 from monet_ros.sync import StampSynchronizer
 from monet_ros.temporal.live import LiveFilter, LiveFilterConfig, SubjectFilters
 from monet_ros.timing import StageTimer
@@ -181,14 +181,19 @@ def derive(config, units='m'):
     FusionConfig, the live filter in the rig's length unit `units` ('m', 'cm', 'mm'; built
     even while it is off, so switching it on cannot fail), the camera markers' depth (m:
     the markers are published in metres), the durations in ns and the outlier score's
-    scale. units None (the rig not loaded yet: the node's first check) leaves out what
-    depends on it (filter None). Raises ConfigError naming a field (the filter's numbers in
-    `units`), ArithmeticError or ValueError (a duration beyond what a float or int64
-    holds); derive_checked turns those into an error naming the parameter."""
+    scale, and an identity tracker in `units` (subjects.tracking.SubjectTracker: its noise
+    and acceleration squared in the rig's unit must be finite; built whatever `subjects`, so
+    switching subjects on cannot fail). units None (the rig not loaded yet: the node's
+    first check) leaves out what depends on it (filter and tracker None). Raises
+    ConfigError naming a field (the filter's numbers in `units`), ArithmeticError or
+    ValueError (a duration beyond what a float or int64 holds); derive_checked
+    turns those into an error naming the parameter."""
     known = units is not None
     return SimpleNamespace(
         core=config_subset(config, FusionConfig),
         filter=LiveFilter(config_subset(config, LiveFilterConfig), units) if known else None,
+        tracker=SubjectTracker(1, config_subset(config, TrackerConfig), units=units)
+        if known else None,
         marker_depth=float(config.camera_marker_depth),      # m, as the markers are
         slop_ns=int(config.slop_ms * 1e6),
         max_queue_ns=config.max_queue_ms * 1e6,

@@ -156,6 +156,21 @@ def test_the_fusion_filter_is_checked_in_the_rig_unit_and_markers_in_metres():
     assert unknown.filter is None and unknown.marker_depth == 0.2
 
 
+def test_the_fusion_tracker_is_checked_in_the_rig_unit():
+    # the identity tracker (subjects >= 2) squares its noise in the rig's unit: a value
+    # usable in a metre rig is refused naming the parameter in a millimetre one, before
+    # any subject is tracked (was an OverflowError inside the first frame's tracker)
+    from monet_ros.config import derive_checked
+    from monet_ros.nodes.fusion import FusionNodeConfig, derive
+    noise = FusionNodeConfig(subjects=2, body_noise_mm=1e155)
+    tracker = derive_checked('fusion', noise, derive).tracker
+    assert tracker._body_r2 == pytest.approx((1e155 / 1e3) ** 2)
+    with pytest.raises(ConfigError, match=r"^fusion: parameter 'body_noise_mm': 1e\+155 "
+                       'cannot be used: '):
+        derive_checked('fusion', noise, lambda c: derive(c, 'mm'))
+    assert derive(noise, None).tracker is None
+
+
 def test_start_and_live_refusals_name_the_parameter(make_node):
     from monet_ros.nodes.fusion import LIVE, FusionNodeConfig, derive
     node = make_node('filter_noise_mm:=1e200')
