@@ -167,8 +167,9 @@ def add_subjects_detection_arguments(parser):
         subject_only_option(parser, '--' + name.replace('_', '-'), type=kind,
                             default=d[name].default,
                             help='--subjects: ' + d[name].metadata['description'])
-    subject_only_option(parser, '--rival-peaks', action=argparse.BooleanOptionalAction,
-                        default=d['rival_peaks'].default,
-                        help='--subjects: ' + d['rival_peaks'].metadata['description']
-                        + ' (default: %(default)s)')
+    for name in ('rival_peaks', 'foreign_views'):
+        subject_only_option(parser, '--' + name.replace('_', '-'),
+                            action=argparse.BooleanOptionalAction, default=d[name].default,
+                            help='--subjects: ' + d[name].metadata['description']
+                            + ' (default: %(default)s)')
     add_subject_tracking_arguments(parser)

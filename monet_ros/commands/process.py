@@ -5,7 +5,8 @@ possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 
         [--heatmaps] [--threads N] [--export csv,trc,nwb,npz] [--trc-axes xyz|yzx]
         [--filter none|kalman|optim]
         [--subjects N [--candidates 3] [--link-mm 600] [--crop-peaks 3] [--duplicate-mm 100]
-         [--crop-missed 1] [--min-score 0.5] [--[no-]rival-peaks] [--association-px 15]
+         [--crop-missed 1] [--min-score 0.5] [--[no-]rival-peaks] [--[no-]foreign-views]
+         [--association-px 15]
          [--gate-mm 400]
          [--max-missed-s 0.5]]
 
@@ -339,7 +340,8 @@ def subject_configs(args):
     subjects = SubjectsConfig(subjects=args.subjects, candidates=args.candidates,
                               link_mm=args.link_mm, crop_peaks=args.crop_peaks,
                               duplicate_mm=args.duplicate_mm, crop_missed=args.crop_missed,
-                              rival_peaks=args.rival_peaks, min_score=args.min_score)
+                              rival_peaks=args.rival_peaks, min_score=args.min_score,
+                              foreign_views=args.foreign_views)
     association = AssociationConfig(threshold_px=args.association_px,
                                     confidence_threshold=args.confidence_threshold,
                                     min_views=args.min_views,
