@@ -33,7 +33,8 @@ and frames/s for 1, 2 and 3 subjects, against the same model's one-subject figur
 
     nice .venv/bin/python bench/subjects_process.py --work /tmp/subjects_process
         [--subjects-list 1 2 3] [--frames 300] [--cameras 8] [--width 320 --height 240]
-        [--train-steps 1500] [--train-subjects 1] [--out bench/results/subjects_process.md]
+        [--train-steps 1500] [--train-subjects 1] [--[no-]rival-peaks] [--[no-]foreign-views]
+        [--min-score X] [--out bench/results/subjects_process.md]
 """
 import argparse
 import csv
@@ -252,6 +253,10 @@ def main(argv=None):
                    help='pass --rival-peaks / --no-rival-peaks to monet process --subjects '
                    "(default: neither, the command's default); outputs in WORK/out-nN-rival "
                    '/ out-nN-norival')
+    p.add_argument('--foreign-views', action=argparse.BooleanOptionalAction, default=None,
+                   help='pass --foreign-views / --no-foreign-views to monet process --subjects '
+                   "(default: neither, the command's default); outputs in WORK/out-nN-foreign "
+                   '/ out-nN-noforeign')
     p.add_argument('--min-score', type=float, default=None,
                    help="pass --min-score to monet process --subjects (default: the command's "
                    'default); outputs in WORK/out-nN-msX')
@@ -261,6 +266,9 @@ def main(argv=None):
         p.error(f'--train-subjects: must be 1, 2 or 3, got {args.train_subjects}')
     extra, suffix = {None: ([], ''), True: (['--rival-peaks'], '-rival'),
                      False: (['--no-rival-peaks'], '-norival')}[args.rival_peaks]
+    if args.foreign_views is not None:
+        extra = extra + ['--foreign-views' if args.foreign_views else '--no-foreign-views']
+        suffix += '-foreign' if args.foreign_views else '-noforeign'
     if args.min_score is not None:
         extra, suffix = extra + ['--min-score', str(args.min_score)], \
             suffix + f'-ms{args.min_score:g}'

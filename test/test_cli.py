@@ -50,6 +50,7 @@ def test_a_bad_setting_given_as_an_option_names_the_option(extra, start, capsys,
     ['triangulate', 'x.csv', '--rig', 'r.yaml', '--out', 'o', '--gate-mm', '300'],
     ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--link-mm', '500'],
     ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--no-rival-peaks'],
+    ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--no-foreign-views'],
     ['process', 'rec', '--model', 'm.pt', '--out', 'o', '--min-score', '0.3'],
     ['pipeline', '--bag', 'rec', '--model', 'm.pt', '--link-mm', '500'],
 ])
@@ -58,7 +59,8 @@ def test_a_subjects_only_option_without_subjects_is_refused(argv, capsys, tmp_pa
     # it would be ignored (one subject): refused before any file is read
     monkeypatch.chdir(tmp_path)
     option = next(a for a in argv[5:] if a.startswith('--'))
-    option = '--rival-peaks / --no-rival-peaks' if 'rival' in option else option
+    for flag in ('rival-peaks', 'foreign-views'):
+        option = f'--{flag} / --no-{flag}' if option.endswith(flag) else option
     assert monet(argv) == 2
     err = capsys.readouterr().err.strip()
     assert err == (f'monet {argv[0]}: error: {option} applies only with --subjects N (N >= 2);'

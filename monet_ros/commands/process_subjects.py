@@ -69,7 +69,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     stamps = []
     counts = dict(per_frame=Counter(), discoveries=0, discovered=0, crops=0, duplicates=0,
                   instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0,
-                  shared=0, detached=0, weak=0)
+                  shared=0, detached=0, weak=0, foreign=0)
     with BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6),
                                        decode=False)
@@ -89,7 +89,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
             counts['discoveries'] += r.discovered >= 0
             counts['discovered'] += max(r.discovered, 0)
             for key in ('crops', 'duplicates', 'extra', 'points', 'explained', 'loose',
-                        'shared', 'detached', 'weak'):
+                        'shared', 'detached', 'weak', 'foreign'):
                 counts[key] += getattr(r, key)
             counts['instances'] += a.instances
             counts['unmatched'] += a.unmatched
@@ -147,6 +147,8 @@ def print_subjects(figures, out):
     print(f'{name}: skipped: {s.unmatched} of {s.instances} crop instances matched in no '
           f'other camera, {n["duplicates"]} duplicate subjects (one body from two crops), '
           f'{n["weak"]} weak subjects (median joint score below --min-score), '
+          f'{n["foreign"]} joint detections left out of a subject\'s triangulation as '
+          f"another subject's crop's (--foreign-views), "
           f'{n["shared"]} joints decoded by two subjects (kept by one), {n["detached"]} '
           f'joints not linked within --link-mm to the body of their subject, '
           f'{s.extra} subjects beyond --subjects, {s.untracked} untracked (too few '

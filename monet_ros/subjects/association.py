@@ -299,3 +299,43 @@ def associate(points2d, cameras, scores=None, config=None):
                        unmatched=int(M - member.sum()), instances=M,
                        points2d=sub_pts.transpose(1, 0, 2, 3),
                        scores2d=sub_w.transpose(1, 0, 2))
+
+
+def leave_out_views(a, cameras, drop, config=None):
+    """Triangulate again, in place, the keypoints of an Association's subjects with the
+    views `drop` left out (subjects.detection step 4: views whose instance came from
+    another subject's crop).
+
+    a: Association (with points2d / scores2d); cameras: its V geometry.Camera; drop
+    (S, V, C) bool: the views to leave out of each subject's keypoint. For every (s, c)
+    with a view dropped, that keypoint is triangulated as associate does (the project's
+    robust triangulation, config's triangulation_px, min_views and method, one batched
+    call) from the subject's other detections (scores2d > 0): X, inliers, view_errors and
+    score are replaced (NaN where fewer than min_views detections are left); the dropped
+    views' points2d become NaN and scores2d 0 (not this subject's 2D). config:
+    AssociationConfig (None: defaults). -> int: the (subject, view, keypoint) entries
+    dropped that held a detection. Raises ValueError for a drop of another shape."""
+    config = config or _DEFAULT
+    S, V, C = a.inliers.shape
+    drop = np.asarray(drop, bool)
+    if drop.shape != (S, V, C):
+        raise ValueError(f'drop must have shape {(S, V, C)}, got {drop.shape}')
+    drop = drop & (a.scores2d > 0)
+    s, c = np.nonzero(drop.any(1))                                    # (n,) keypoints
+    if not len(s):
+        return 0
+    a.points2d[drop] = np.nan
+    a.scores2d[drop] = 0.0
+    pts = a.points2d[s, :, c].transpose(1, 0, 2)                      # (V, n, 2)
+    w = a.scores2d[s, :, c].T                                         # (V, n)
+    X, inl, err = triangulate_robust(pts, cameras, w, threshold_px=config.triangulation_px,
+                                     min_views=config.min_views, method=config.method,
+                                     errors=True)
+    n_inl = inl.sum(0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        score = np.where(inl, w, 0.0).sum(0) / n_inl
+    a.X[s, c] = X
+    a.inliers[s, :, c] = inl.T
+    a.view_errors[s, :, c] = err.T
+    a.score[s, c] = np.where(n_inl > 0, score, np.nan)
+    return int(drop.sum())

@@ -40,14 +40,32 @@ Algorithm, per synchronized frame (stamps increasing):
    hypothesis' joint of the same keypoint (projected into the view) than its own is left
    out: the joint is hidden in that view and the peak is the neighbour's.
 4. The instances of all views (slot h = hypothesis h's crop) go through associate (the
-   instance order is not trusted) and are triangulated per subject. A subject whose
-   joints' median score (heatmap peak value, mean over the joint's inlier views) is below
-   min_score is weak: dropped, counted (the detector's peaks on a body are near 1; a
-   hypothesis discovered from secondary full-frame peaks, floor or background, gets crops
-   that decode 14 joints of scores 0.15-0.5 and 2-9 px reprojection error, a ghost that
-   would be tracked for as long as its crops keep decoding it). A subject whose mean
-   joint distance to a subject seen by more cameras (association's order) is below
-   duplicate_mm is the same body decoded by two hypotheses' crops: dropped, counted.
+   instance order is not trusted) and are triangulated per subject. With foreign_views
+   (on by default), a subject's view whose instance came from the crop of another
+   hypothesis than its own (the hypothesis whose crops give most of its instances, if
+   one alone does), a hypothesis with a predicted body (a track or a discovered
+   subject; not a live crop of unknown joints), is left out of the triangulation of
+   each of its keypoints for which at least min_views of the subject's other views
+   remain (counted as `foreign`; association.leave_out_views). Why: that crop was cut
+   around the other hypothesis and took, per keypoint, the peak nearest its predicted
+   joint (with rival_peaks: nearer it than any other hypothesis' joint, this subject's
+   included; its highest peak where the joint was unknown), so its instance is that
+   subject's decode; the epipolar clustering put it here because two subjects within
+   about 1 m lie on nearly the same epipolar lines in some camera pairs (measured on 2
+   synthetic subjects passing, 84 of 300 frames within 1 m: 470 of the 822 joints' 2D
+   points that lay nearer the other subject's same joint than this subject's came from
+   such foreign instances; bench/results/subjects_process.md, change 8). The rule is
+   ours, from that measurement: it keeps the association's choice of which subject
+   each instance joins (leaving a subject only its own crops was worse: a capturing
+   crop's instance then stays) and only stops a neighbour's decode from pulling this
+   subject's 3D. A subject whose joints' median score (heatmap peak value, mean over
+   the joint's inlier views) is below min_score is weak: dropped, counted (the
+   detector's peaks on a body are near 1; a hypothesis discovered from secondary
+   full-frame peaks, floor or background, gets crops that decode 14 joints of scores
+   0.15-0.5 and 2-9 px reprojection error, a ghost that would be tracked for as long
+   as its crops keep decoding it). A subject whose mean joint distance to a subject
+   seen by more cameras (association's order) is below duplicate_mm is the same body
+   decoded by two hypotheses' crops: dropped, counted.
 5. N subjects: first, per hypothesis in order (tracks first), the subject holding most
    of that hypothesis' crop instances, if any is left (a subject seen by fewer cameras,
    e.g. one cut by the image borders, is not pushed out by a neighbour's extra or mixed
@@ -84,7 +102,12 @@ from monet_ros.crop_rule import TrackedRule, subject_boxes
 from monet_ros.fusion import MAX_PEAKS_PER_VIEW, crop_scales, heat_to_source_points
 from monet_ros.geometry import project_views, stack_cameras
 from monet_ros.geometry.units import from_mm
-from monet_ros.subjects.association import Association, AssociationConfig, associate
+from monet_ros.subjects.association import (
+    Association,
+    AssociationConfig,
+    associate,
+    leave_out_views,
+)
 from monet_ros.subjects.tracking import SubjectTracker
 
 
@@ -118,6 +141,10 @@ class SubjectsConfig:
         True, "per-subject crops: leave out a keypoint's chosen peak when it lies nearer "
         "another subject's predicted joint of that keypoint than its own (a joint hidden "
         "in the view would otherwise take the neighbour's peak)")
+    foreign_views: bool = setting(
+        True, "leave out of a subject's triangulation the views whose instance came from "
+        "another subject's crop (the peaks nearest that subject's predicted joints), where "
+        'at least min_views other views remain')
 
     def __post_init__(self):
         validate_config(self)
@@ -135,7 +162,9 @@ class FrameSubjects:
     loose (in groups with too few keypoints, or
     beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N),
     shared (joints dropped as decoded by two subjects, step 5), detached (joints dropped as
-    not linked within link_mm to their subject's largest group of joints, step 5)."""
+    not linked within link_mm to their subject's largest group of joints, step 5),
+    foreign (views left out of a subject's keypoints as another hypothesis' crop's, step
+    4)."""
     association: object
     keep: np.ndarray
     ids: np.ndarray
@@ -151,6 +180,7 @@ class FrameSubjects:
     shared: int = 0
     detached: int = 0
     weak: int = 0
+    foreign: int = 0
 
 
 def weak_subjects(score, min_score):
@@ -267,6 +297,36 @@ def detached_joints(X, link):
         reach = np.matmul(reach.astype(np.int64), reach.astype(np.int64)) > 0
     size = reach.sum(-1)                                  # (K, C): joints in its group
     return finite & (size < size.max(-1, initial=0, keepdims=True))
+
+
+def foreign_views(instance, known, present, min_views):
+    """The views of each subject to leave out as another hypothesis' crop's (module
+    docstring, step 4).
+
+    instance (S, V) int: each subject's crop slot (hypothesis) per view, -1 = none; known
+    (H,) bool: the hypotheses with a predicted body (at least one joint known: a track or
+    a discovered subject; not a live crop of unknown joints); present (S, V, C) bool: the
+    subjects' detections; min_views: the fewest views a keypoint keeps. A subject's own
+    hypothesis is the one whose crops give most of its instances (none on a tie: nothing
+    is foreign). -> (S, V, C) bool: True where the view's instance came from another
+    hypothesis with a predicted body, for each keypoint of which at least min_views of
+    the subject's other detections remain."""
+    instance = np.asarray(instance, np.int64)
+    known = np.asarray(known, bool)
+    S, V = instance.shape
+    H = len(known)
+    drop = np.zeros(present.shape, bool)
+    if not S or not H:
+        return drop
+    count = (instance[:, :, None] == np.arange(H)).sum(1)                 # (S, H)
+    home = np.argmax(count, axis=1)
+    top = count[np.arange(S), home]
+    alone = (top > 0) & ((count == top[:, None]).sum(1) == 1)            # (S,)
+    other = ((instance >= 0) & (instance != home[:, None]) & alone[:, None]
+             & known[np.maximum(instance, 0)])                             # (S, V)
+    drop = other[..., None] & present                                      # (S, V, C)
+    left = (present & ~drop).sum(1)                                         # (S, C)
+    return drop & (left >= min_views)[:, None]
 
 
 def heat_matrices(heat_cameras):
@@ -430,6 +490,11 @@ class SubjectsCore:
                             cost=np.zeros(0), unmatched=0, instances=0,
                             points2d=np.zeros((0, 0, self.C, 2)),
                             scores2d=np.zeros((0, 0, self.C)))
+        foreign = 0
+        if self.config.foreign_views and len(a.X):
+            drop = foreign_views(a.instance, np.isfinite(hyp).all(-1).any(-1),
+                                 a.scores2d > 0, self.association.min_views)
+            foreign = leave_out_views(a, cameras, drop, self.association)
         keep = []
         weak = weak_subjects(a.score, self.config.min_score)
         for s in np.flatnonzero(~weak).tolist():
@@ -464,6 +529,7 @@ class SubjectsCore:
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
                              extra=extra, tracked=tracked, shared=int(shared.sum()),
                              detached=int(detached.sum()), weak=int(weak.sum()),
+                             foreign=foreign,
                              **(counts or {}))
 
     def live_frame(self, cameras, stamp_ns, crops, full=()):

@@ -234,3 +234,37 @@ def test_a_frame_of_one_camera_gives_no_subject(crossing):
     _, _, cams, points, _ = crossing
     a = associate(points[0, 2:3], cams[2:3])
     assert len(a.X) == 0 and a.instances == 2 and a.unmatched == 2
+
+
+def test_leaving_out_views_triangulates_from_the_others(crossing):
+    """leave_out_views: a keypoint with a view left out is the triangulation of its other
+    detections (here: the association's own triangulation of the same points with that
+    view's score 0); the others are untouched; a drop of the wrong shape names it."""
+    from monet_ros.geometry import triangulate_robust
+    from monet_ros.subjects.association import leave_out_views
+
+    _, _, cams, points, _ = crossing
+    a = associate(points[0], cams)
+    before = {k: getattr(a, k).copy() for k in ('X', 'inliers', 'score', 'points2d')}
+    S, V, C = a.inliers.shape
+    drop = np.zeros((S, V, C), bool)
+    drop[0, 1, 3] = drop[0, 2, 3] = True          # subject 0's keypoint 3 loses 2 views
+    drop[1, :, 5] = True                          # subject 1's keypoint 5 loses all
+    seen = a.scores2d > 0
+    expected_count = int((drop & seen).sum())
+    p, w = a.points2d[0, :, 3].copy(), a.scores2d[0, :, 3].copy()
+    w[[1, 2]] = 0.0
+    expected, inl = triangulate_robust(np.where(w[:, None] > 0, p, np.nan)[:, None], cams,
+                                       w[:, None])
+    assert leave_out_views(a, cams, drop) == expected_count
+    assert np.allclose(a.X[0, 3], expected[0]) and not a.inliers[0, [1, 2], 3].any()
+    assert np.isnan(a.points2d[0, [1, 2], 3]).all()
+    assert np.isnan(a.X[1, 5]).all() and np.isnan(a.score[1, 5])   # no view left
+    untouched = np.ones((S, C), bool)
+    untouched[0, 3] = untouched[1, 5] = False
+    assert np.array_equal(a.X[untouched], before['X'][untouched])
+    assert np.array_equal(a.inliers.transpose(0, 2, 1)[untouched],
+                          before['inliers'].transpose(0, 2, 1)[untouched])
+    assert leave_out_views(a, cams, np.zeros((S, V, C), bool)) == 0
+    with pytest.raises(ValueError, match='drop must have shape'):
+        leave_out_views(a, cams, np.zeros((S, V)))

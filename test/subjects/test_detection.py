@@ -264,3 +264,109 @@ def test_a_subject_of_weak_peaks_is_not_tracked():
                       [np.nan] * 4, [0.5, 0.5, 0.5, 0.5]])
     assert weak_subjects(score, 0.5).tolist() == [False, True, True, False]
     assert weak_subjects(np.zeros((0, 4)), 0.5).tolist() == []
+
+
+def test_foreign_views_are_the_instances_of_another_hypothesis_crop():
+    # the rule of the module docstring, step 4, on hand-made slots: 2 subjects, 4 views,
+    # 2 keypoints, 3 hypotheses (2: a live crop of unknown joints); written out by hand
+    from monet_ros.subjects.detection import foreign_views
+
+    instance = np.array([[0, 0, 1, 2],       # home 0 (2 of 4); view 2 hypothesis 1's crop
+                         [1, 1, 0, -1]])     # home 1; view 2 is hypothesis 0's crop
+    known = np.array([True, True, False])
+    present = np.ones((2, 4, 2), bool)
+    present[1, 3] = False                             # subject 1 unseen in view 3
+    drop = foreign_views(instance, known, present, min_views=2)
+    expected = np.zeros((2, 4, 2), bool)
+    expected[0, 2] = True           # (its view 3 stays: hypothesis 2 knew no joint)
+    expected[1, 2] = True
+    assert drop.tolist() == expected.tolist()
+    # a keypoint left with fewer than min_views other views keeps its foreign view
+    assert not foreign_views(instance, known, present, min_views=3)[1].any()
+    present[1, 0, 1] = False        # subject 1's keypoint 1: views 1 and 2 only
+    drop = foreign_views(instance, known, present, min_views=2)
+    assert drop[1, 2].tolist() == [True, False]
+    # a tie between two hypotheses: no home, nothing foreign; no hypotheses, nothing
+    tie = np.array([[0, 1, 0, 1]])
+    assert not foreign_views(tie, known, np.ones((1, 4, 2), bool), 2).any()
+    assert foreign_views(np.zeros((0, 4), np.int64), known, np.zeros((0, 4, 2), bool),
+                         2).shape == (0, 4, 2)
+    assert not foreign_views(instance, np.zeros(0, bool), present, 2).any()
+
+
+def _behind_in_one_view():
+    """Three cameras (no distortion) and two bodies of 4 keypoints: B stands behind A in
+    camera 2, each of its joints on the ray of A's joint scaled 1.4 from that camera and
+    shifted 2 cm to the side, so in camera 2 B's joints project about 4 px from A's and in
+    cameras 0 and 1 far from them; B's keypoint 3 is below the image in cameras 0 and 1.
+    Per view and body, a crop map (the whole image, 320 x 240 for 640 x 480) with a
+    Gaussian at each of the body's joints projected by OpenCV; A's crop in camera 2
+    decodes A 6 px low (a poor decode). -> cameras, A, B, v_idx, h_idx, heat,
+    heat_cameras (hypothesis 0: A, 1: B)."""
+    from helpers.scenes import cv2_project, ring_rig
+
+    cams = ring_rig(3, distortion=(0.0, 0.0, 0.0, 0.0, 0.0))
+    A = np.array([[0.0, 0.0, 1.5], [0.0, 0.05, 1.2], [0.05, 0.0, 0.9], [0.0, -0.05, 0.6]])
+    ray = A.mean(0) - cams[2].center
+    side = np.cross(ray, [0.0, 0.0, 1.0])
+    B = cams[2].center + 1.4 * (A - cams[2].center) + 0.02 * side / np.linalg.norm(side)
+    grid = (320, 240)
+    yy, xx = np.mgrid[0:grid[1], 0:grid[0]]
+    v_idx, h_idx, heat, heat_cameras = [], [], [], []
+    for v, cam in enumerate(cams):
+        for h, body in enumerate((A, B)):
+            uv = cv2_project(cam, body) + ([0.0, 6.0] if (v, h) == (2, 0) else 0.0)
+            px = (uv + 0.5) / 2 - 0.5                                    # map px (C, 2)
+            heat.append((0.9 * np.exp(-((xx - px[:, :1, None]) ** 2
+                                        + (yy - px[:, 1:, None]) ** 2) / 4.5)
+                         ).astype(np.float32))
+            heat_cameras.append(cam.crop(np.array([0.0, 0.0, 640.0, 480.0]), grid))
+            v_idx.append(v)
+            h_idx.append(h)
+    return cams, A, B, v_idx, h_idx, heat, heat_cameras
+
+
+def test_a_view_from_the_neighbours_crop_is_left_out_of_the_subjects_joints():
+    # issue 39: two subjects within 1 m lie on nearly the same epipolar lines in some
+    # camera pairs, and the association can give a subject the instance that the
+    # neighbour's crop decoded in such a view: it pulls the subject's 3D. Here (camera 2,
+    # B behind A) the pairs of A's instances with B's crop in camera 2 have all 4 keypoints
+    # in common (B's instances in cameras 0 and 1 only 3) and are merged first
+    # (association step 2): A's subject takes B's crop there, B's subject A's crop. With
+    # foreign_views that view is left out of the subject's joints seen in at least 2 other
+    # views, and their 3D is the triangulation of the other views
+    import cv2
+
+    from monet_ros.subjects.detection import SubjectsCore
+    from monet_ros.subjects.tracking import TrackerConfig
+
+    cams, A, B, *crops = _behind_in_one_view()
+    hyp = np.stack([A, B])
+    runs = {}
+    for on in (False, True):
+        core = SubjectsCore(4, 'm', SubjectsConfig(subjects=2, foreign_views=on),
+                            tracker=TrackerConfig(min_keypoints=1))
+        r = core.resolve(cams, 0, hyp, *crops)
+        rows = r.keep[np.argsort(r.ids)]                 # identity 0: A, 1: B
+        assert r.association.instance[rows].tolist() == [[0, 0, 1], [1, 1, 0]]   # setup
+        runs[on] = r, rows
+    (off, (oA, oB)), (r, (sA, sB)) = runs[False], runs[True]
+    a_off, a = off.association, r.association
+    # without the rule B's decode in camera 2 pulls A's joints by millimetres
+    assert np.linalg.norm(a_off.X[oA] - A, axis=-1).min() > 0.004
+    # with it: A's 4 keypoints and B's 0, 1, 2 lose camera 2; B's keypoint 3 keeps it (no
+    # other view of it: below the image in cameras 0 and 1)
+    assert r.foreign == 7 and off.foreign == 0
+    assert not a.inliers[sA, 2].any() and np.isnan(a.points2d[sA, 2]).all()
+    assert a.scores2d[sA, 2].tolist() == [0.0] * 4
+    # independently: OpenCV's triangulation of each joint from cameras 0 and 1
+    for s, truth, joints in ((sA, A, (0, 1, 2, 3)), (sB, B, (0, 1, 2))):
+        p = a.points2d[s]
+        for c in joints:
+            Xh = cv2.triangulatePoints(cams[0].P, cams[1].P, p[0, c].reshape(2, 1),
+                                       p[1, c].reshape(2, 1))
+            assert np.allclose(a.X[s, c], Xh[:3, 0] / Xh[3, 0], atol=1e-6)
+            assert np.linalg.norm(a.X[s, c] - truth[c]) < 5e-4
+    # the joint the rule leaves alone is that of the run without it
+    assert np.array_equal(a.X[sB, 3], a_off.X[oB, 3], equal_nan=True)
+    assert a.points2d[sB, 2, 3].tolist() == a_off.points2d[oB, 2, 3].tolist()
