@@ -36,7 +36,12 @@ class NodeProcess:
     """`python -m monet_ros.nodes.<module>` (or any argv) as a subprocess with output in files.
 
     params: dict written to a params file; extra_args: more --ros-args arguments.
+    A fusion node given params fuses every frame however long it waited in its input queue
+    (max_queue_ms 0, unless the test sets it): on a loaded machine the node may fall behind
+    by more than the default 100 ms, and a test that waits for a frame's 3D would wait for
+    a frame skipped as stale (the stale skip has its own test, test_fusion_stale.py).
     """
+    DEFAULTS = {'fusion': {'max_queue_ms': 0.0}}
 
     def __init__(self, module, env, params=None, node_name=None, extra_args=(), argv=None,
                  workdir=None, cwd=None):
@@ -48,6 +53,7 @@ class NodeProcess:
         if argv is None:
             argv = [sys.executable, '-m', f'monet_ros.nodes.{module}', '--ros-args']
             if params:
+                params = {**self.DEFAULTS.get(module, {}), **params}
                 path = write_params_file(self.workdir / f'{tag}.yaml', node_name or module,
                                          params)
                 argv += ['--params-file', str(path)]
