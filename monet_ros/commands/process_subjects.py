@@ -68,7 +68,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     index = {cam.name: v for v, cam in enumerate(cameras)}
     stamps = []
     counts = dict(per_frame=Counter(), discoveries=0, discovered=0, crops=0, duplicates=0,
-                  instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0,
+                  instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0, repeated=0,
                   shared=0, detached=0, weak=0, foreign=0)
     with BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6),
@@ -88,7 +88,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
             counts['per_frame'][int((r.ids >= 0).sum())] += 1
             counts['discoveries'] += r.discovered >= 0
             counts['discovered'] += max(r.discovered, 0)
-            for key in ('crops', 'duplicates', 'extra', 'points', 'explained', 'loose',
+            for key in ('crops', 'duplicates', 'extra', 'points', 'explained', 'loose', 'repeated',
                         'shared', 'detached', 'weak', 'foreign'):
                 counts[key] += getattr(r, key)
             counts['instances'] += a.instances
@@ -143,7 +143,8 @@ def print_subjects(figures, out):
     print(f'{name}: detection: {n["crops"]} subject crops, {n["discoveries"]} full-frame '
           f'discovery runs finding {n["discovered"]} subjects from {n["points"]} 3D keypoint '
           f'candidates ({n["explained"]} near a live track, {n["loose"]} in no subject: '
-          'too few keypoints or beyond --subjects)')
+          f'too few keypoints or beyond --subjects, {n["repeated"]} in a second group of a '
+          'subject found in the same frame)')
     print(f'{name}: skipped: {s.unmatched} of {s.instances} crop instances matched in no '
           f'other camera, {n["duplicates"]} duplicate subjects (one body from two crops), '
           f'{n["weak"]} weak subjects (median joint score below --min-score), '

@@ -13,7 +13,21 @@ Algorithm, per synchronized frame (stamps increasing):
    and its crops would only decode a neighbour (a duplicate) or nothing. Discovery, when
    fewer than N tracks get crops (at the start, and after a track was missed):
    a. one full-frame detection per view; the `candidates` highest local maxima of every
-      keypoint's map (models.decode_heatmap_peaks, at least the confidence threshold);
+      keypoint's map (models.decode_heatmap_peaks, at least the confidence threshold).
+      With discovery_tiles n >= 1 (SubjectsStep, `monet process`; 2 by default) a view
+      whose whole frame would go into the network shrunk more than TILE_SHRINK (2) times
+      is detected as square tiles, n along its shorter side, neighbours overlapping by
+      half (tile_boxes), and its candidates are the `candidates` highest peaks over its
+      tiles, a peak within half the association's threshold_px of a higher one dropped
+      (the same blob in two tiles: merge_peaks). Why: the detector is trained on crops
+      around one subject; a whole 320 x 240 frame goes through a 128 px input at 0.4 of
+      the source scale (subject crops at 0.5-1.0: shrunk at most about 2 times), where a
+      detector trained on two subjects answered one of two subjects 1 m apart with a
+      median peak of 0.16 at its joints (the other 0.36) and discovery never found it in
+      30 runs (subject 1 missed in the first 35 frames, a ghost of subject 0 tracked
+      instead: 2 identity switches; tiles of 160 px: found in frame 0;
+      bench/results/subjects_process.md, change 9). The live fusion's discovery takes the
+      detector nodes' whole frames.
    b. per keypoint, each (view, peak) is a one-keypoint instance; subjects.association.
       associate clusters them across views (epipolar distance, at most one per camera,
       >= min_views) and triangulates each cluster robustly: 3D points of that keypoint;
@@ -27,7 +41,14 @@ Algorithm, per synchronized frame (stamps increasing):
       two subjects apart where they are closer than a subject's own adjacent keypoints
       (bodies in contact): such a frame can start a mixed hypothesis;
    e. groups with >= the tracker's min_keypoints points are new hypotheses, the most
-      keypoints (then the most views) first, until N hypotheses exist.
+      keypoints (then the most views) first, until N hypotheses exist; a group whose
+      keypoints lie within the tracker's gate_mm (median over the keypoints both have) of
+      a hypothesis taken before it in this frame is a second group of that body (a
+      keypoint seen twice, by two tiles or two weak peaks a few cm apart, which 1d keeps
+      in separate groups): left out, counted as `repeated` (repeated_body). Otherwise
+      both became tracks of one body, and the second kept an identity while the
+      subject it missed went untracked (measured: one subject's two groups at frame 0,
+      3 subjects, bench/results/subjects_process.md, change 9).
 2. Crops: per view, one crop per hypothesis, the single-subject crop rule's box
    (crop_rule.subject_boxes with the TrackedRule's margin, min_points and trim) around its
    joints projected into that view; a view where too few joints project has no crop for
@@ -146,6 +167,12 @@ class SubjectsConfig:
         "another subject's crop (the peaks nearest that subject's predicted joints), where "
         'at least min_views other views remain')
 
+    discovery_tiles: int = setting(
+        2, 'discovery (monet process): the full-frame detection of a view whose whole '
+        'frame the network input would shrink more than 2 times, as square tiles, this many '
+        'along the shorter image side, neighbours overlapping by half (0: always the whole '
+        'frame); the live detector nodes send whole frames', minimum=0)
+
     def __post_init__(self):
         validate_config(self)
 
@@ -160,7 +187,8 @@ class FrameSubjects:
     (new hypotheses from the full frame; -1: no discovery this frame), points
     (discovery's 3D keypoint points), explained (of those, near a cropped track's joint),
     loose (in groups with too few keypoints, or
-    beyond N: left out), crops (detector crops), duplicates, extra (subjects beyond N),
+    beyond N: left out), repeated (in a second group of a body discovered, step 1e),
+    crops (detector crops), duplicates, extra (subjects beyond N),
     shared (joints dropped as decoded by two subjects, step 5), detached (joints dropped as
     not linked within link_mm to their subject's largest group of joints, step 5),
     foreign (views left out of a subject's keypoints as another hypothesis' crop's, step
@@ -181,6 +209,7 @@ class FrameSubjects:
     detached: int = 0
     weak: int = 0
     foreign: int = 0
+    repeated: int = 0
 
 
 def weak_subjects(score, min_score):
@@ -235,6 +264,82 @@ def group_points(points, keypoint, views, link):
         masks[la] |= masks[lb]
     groups = [np.flatnonzero(label == g) for g in np.unique(label)]
     return sorted(groups, key=lambda g: (-len(g), -int(views[g].sum()), int(g[0])))
+
+
+# discovery tiles a view whose whole frame goes into the network shrunk more than this
+# (module docstring step 1a)
+TILE_SHRINK = 2.0
+
+
+def tile_boxes(width, height, tiles):
+    """Square discovery tiles of a width x height image (module docstring step 1a):
+    `tiles` along the shorter side, each of side shorter / (1 + (tiles - 1) / 2), so
+    neighbours overlap by half; along the longer side as many at the same step (the last
+    one flush with the edge). -> (T, 4) boxes (x0, y0, x1, y1, pixel edges)."""
+    side = min(width, height) / (1 + (tiles - 1) / 2)
+    step = side / 2
+
+    def starts(length):
+        n = max(1, int(np.ceil((length - side) / step - 1e-9)) + 1)
+        return np.minimum(np.arange(n) * step, length - side)
+
+    x, y = np.meshgrid(starts(width), starts(height))
+    x, y = x.ravel(), y.ravel()
+    return np.stack([x, y, x + side, y + side], axis=-1)
+
+
+def merge_peaks(pts, conf, views, num_views, k, radius):
+    """One view's peaks from its tiles' maps (module docstring step 1a): pts (M, C, k', 2)
+    source px (NaN: none) and conf (M, C, k') of M maps, views (M,) the view of each;
+    per view and keypoint, the k highest peaks over its maps, a peak within `radius` px of
+    a higher one kept already left out (the same blob seen by two overlapping tiles).
+    -> pts (num_views, C, k, 2) (NaN: none), conf (num_views, C, k) (0 there)."""
+    M, C, kk = conf.shape
+    out_p = np.full((num_views, C, k, 2), np.nan)
+    out_c = np.zeros((num_views, C, k))
+    if not M:
+        return out_p, out_c
+    order = np.argsort(views, kind='stable')
+    counts = np.bincount(views, minlength=num_views)
+    n = int(counts.max()) * kk                                    # candidates per view
+    P = np.full((num_views, C, n, 2), np.nan)
+    Q = np.full((num_views, C, n), -np.inf)
+    slot = np.arange(M) - np.searchsorted(views[order], views[order])   # map within view
+    rows = views[order]
+    for j in range(kk):                                  # k' candidates of each map
+        P[rows, :, slot * kk + j] = pts[order, :, j]
+        Q[rows, :, slot * kk + j] = np.where(np.isfinite(pts[order, :, j]).all(-1),
+                                             conf[order, :, j], -np.inf)
+    rank = np.argsort(-Q, axis=-1, kind='stable')
+    P = np.take_along_axis(P, rank[..., None], axis=2)
+    Q = np.take_along_axis(Q, rank, axis=2)
+    keep = np.zeros(Q.shape, bool)
+    for i in range(n):                        # greedy: the strongest first, in order
+        d = np.linalg.norm(P[:, :, :i] - P[:, :, i:i + 1], axis=-1)          # (V, C, i)
+        near = (keep[:, :, :i] & (d <= radius)).any(-1)
+        keep[:, :, i] = np.isfinite(Q[:, :, i]) & ~near & (keep[:, :, :i].sum(-1) < k)
+    place = np.cumsum(keep, axis=-1) - 1
+    v, c, i = np.nonzero(keep)
+    out_p[v, c, place[v, c, i]] = P[v, c, i]
+    out_c[v, c, place[v, c, i]] = Q[v, c, i]
+    return out_p, out_c
+
+
+def repeated_body(X, found, near):
+    """Whether a discovered group X (C, 3) (NaN: keypoint not in it) is a second group of
+    the body of an earlier hypothesis (module docstring, step 1e): found, the hypotheses
+    taken so far (each (C, 3)); near: the largest median distance (rig units), over the
+    keypoints both have, of a group from a hypothesis of the same body. -> bool."""
+    if not len(found):
+        return False
+    with np.errstate(invalid='ignore'):
+        d = np.linalg.norm(np.asarray(found, np.float64) - X, axis=-1)     # (H, C)
+    both = np.isfinite(d)
+    some = both.any(-1)
+    if not some.any():
+        return False
+    median = np.nanmedian(np.where(both[some], d[some], np.nan), axis=-1)
+    return bool((median <= near).any())
 
 
 def shared_joints(X, near):
@@ -402,20 +507,32 @@ class SubjectsCore:
         crops (cropped_tracks; NaN: joints not started)."""
         return self.tracker.predicted(stamp_ns)[self.cropped_tracks()]
 
-    def discover_heatmaps(self, heat, heat_cameras, cameras, predicted):
-        """(hypotheses (H, C, 3), counts dict: points, explained, loose) of full-frame
-        heatmaps (module docstring step 1a-e), none near the predicted joints (tracks, C, 3)
-        of the cropped tracks. heat: V maps (C, h, w), one per view; heat_cameras: their
-        heatmap Cameras (or (3, 3) K_heat arrays); cameras: their source Cameras."""
+    def discover_heatmaps(self, heat, heat_cameras, cameras, predicted, views=None):
+        """(hypotheses (H, C, 3), counts dict: points, explained, loose, repeated) of
+        full-frame heatmaps (module docstring step 1a-e), none near the predicted joints
+        (tracks, C, 3) of the cropped tracks. heat: M maps (C, h, w); heat_cameras: their
+        heatmap Cameras (or (3, 3) K_heat arrays); cameras: the V source Cameras; views (M,)
+        int: the view of each map (None: one map per view, in order); a view's maps (its
+        tiles) are merged by merge_peaks."""
         from monet_ros.models import decode_heatmap_peaks
 
-        rig = stack_cameras(cameras)
+        V = len(cameras)
+        views = np.arange(V) if views is None else np.asarray(views, np.int64)
+        rig = stack_cameras([cameras[v] for v in views])
         S, _ = crop_scales(heat_matrices(heat_cameras), rig['K'], rig['K_inv'])
         thr = self.association.confidence_threshold
-        peaks, conf, _ = decode_heatmap_peaks(list(heat), self.config.candidates, floor=thr)
-        pts = heat_to_source_points(peaks, S)                       # (V, C, k, 2)
+        k = self.config.candidates
+        peaks, conf, _ = decode_heatmap_peaks(list(heat), k, floor=thr)
+        pts = heat_to_source_points(peaks, S)                       # (M, C, k, 2)
+        if len(views) != V or (views != np.arange(V)).any():
+            pts, conf = merge_peaks(pts, conf, views, V, k, self.association.threshold_px / 2)
+        return self.discover_peaks(pts, conf, cameras, predicted)
+
+    def discover_peaks(self, pts, conf, cameras, predicted):
+        """Steps 1b-e of the peaks pts (V, C, k, 2) source px (NaN: none), conf (V, C, k)
+        of the V views `cameras`; as discover_heatmaps."""
         points, keypoint, views = [], [], []
-        counts = dict(points=0, explained=0, loose=0)
+        counts = dict(points=0, explained=0, loose=0, repeated=0)
         for c in range(self.C):
             a = associate(pts[:, c, :, None], cameras, conf[:, c, :, None],
                           self._point_association)
@@ -439,6 +556,9 @@ class SubjectsCore:
                 continue
             X = np.full((self.C, 3), np.nan)
             X[keypoint[group]] = points[group]
+            if repeated_body(X, found, self._gate):
+                counts['repeated'] += len(group)
+                continue
             found.append(X)
         return np.array(found).reshape(-1, self.C, 3), counts
 
@@ -652,8 +772,19 @@ class SubjectsStep(SubjectsCore):
     def discover(self, images, cameras, predicted, encodings=None):
         """discover_heatmaps of one full-frame detection of every view (module docstring
         step 1); encodings: as in step."""
-        heat, heat_cameras = self.detector.predict(images, cameras, encodings=encodings)
-        return self.discover_heatmaps(heat, heat_cameras, cameras, predicted)
+        tiles = self.config.discovery_tiles
+        full = self.detector.boxes_for(cameras)                      # (V, 4) whole frames
+        shrink = (full[:, 2] - full[:, 0]) / self.detector.input_size[1]
+        if not tiles or (shrink <= TILE_SHRINK).all():
+            heat, heat_cameras = self.detector.predict(images, cameras, encodings=encodings)
+            return self.discover_heatmaps(heat, heat_cameras, cameras, predicted)
+        boxes = [tile_boxes(c.width, c.height, tiles) if s > TILE_SHRINK else full[v:v + 1]
+                 for v, (c, s) in enumerate(zip(cameras, shrink))]
+        views = np.repeat(np.arange(len(cameras)), [len(b) for b in boxes])
+        heat, heat_cameras = self.detector.predict(
+            [images[v] for v in views], [cameras[v] for v in views], np.concatenate(boxes),
+            encodings=None if encodings is None else [encodings[v] for v in views])
+        return self.discover_heatmaps(heat, heat_cameras, cameras, predicted, views)
 
     def step(self, images, cameras, stamp_ns, encodings=None):
         """images: (H, W, 3) uint8 RGB of the present views, or each in its own layout

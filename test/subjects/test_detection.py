@@ -29,7 +29,8 @@ def test_no_points_no_groups():
 
 @pytest.mark.parametrize('field, value', [('subjects', 0), ('candidates', 0),
                                           ('link_mm', 0.0), ('crop_peaks', 99),
-                                          ('duplicate_mm', -1.0), ('min_score', -0.1)])
+                                          ('duplicate_mm', -1.0), ('min_score', -0.1),
+                                          ('discovery_tiles', -1)])
 def test_config_names_the_bad_field(field, value):
     with pytest.raises(ConfigError, match=field):
         SubjectsConfig(**{field: value})
@@ -370,3 +371,109 @@ def test_a_view_from_the_neighbours_crop_is_left_out_of_the_subjects_joints():
     # the joint the rule leaves alone is that of the run without it
     assert np.array_equal(a.X[sB, 3], a_off.X[oB, 3], equal_nan=True)
     assert a.points2d[sB, 2, 3].tolist() == a_off.points2d[oB, 2, 3].tolist()
+
+
+def test_discovery_tiles_cover_the_frame_overlapping_by_half():
+    # the rule of the module docstring, step 1a, written out by hand for a 320 x 240 frame:
+    # 2 tiles along the 240 px side -> side 240 / 1.5 = 160, step 80: x 0, 80, 160 and
+    # y 0, 80; 3 along it -> side 120, step 60, the last x flush with the edge (200)
+    from monet_ros.subjects.detection import tile_boxes
+
+    boxes = tile_boxes(320, 240, 2)
+    assert boxes.tolist() == [[x, y, x + 160, y + 160] for y in (0, 80)
+                              for x in (0, 80, 160)]
+    boxes = tile_boxes(320, 240, 3)
+    assert sorted({b[0] for b in boxes.tolist()}) == [0, 60, 120, 180, 200]
+    assert sorted({b[1] for b in boxes.tolist()}) == [0, 60, 120]
+    assert np.allclose(boxes[:, 2:] - boxes[:, :2], 120)
+    # one tile: a square of the shorter side, slid along the longer one
+    assert tile_boxes(240, 320, 1).tolist() == [[0, 0, 240, 240], [0, 80, 240, 320]]
+    # every pixel of the frame lies in some tile
+    for tiles in (1, 2, 3, 4):
+        b = tile_boxes(640, 360, tiles)
+        assert b[:, :2].min() == 0 and b[:, 2].max() == 640 and b[:, 3].max() == 360
+        xs, ys = np.meshgrid(np.arange(640) + 0.5, np.arange(360) + 0.5)
+        inside = ((xs[..., None] >= b[:, 0]) & (xs[..., None] <= b[:, 2])
+                  & (ys[..., None] >= b[:, 1]) & (ys[..., None] <= b[:, 3]))
+        assert inside.any(-1).all()
+
+
+def test_a_views_tiles_give_its_highest_peaks_one_per_blob():
+    # two views, one keypoint; view 0 has 2 tiles, view 1 one (maps in any order). View
+    # 0: tile a sees a blob at (100, 50) (0.9) and one at (30, 30) (0.4); tile b sees the
+    # first blob 3 px off (0.8: the same blob, within the radius) and another at (200, 60)
+    # (0.7). With k = 2: (100, 50) 0.9 and (200, 60) 0.7, by hand.
+    from monet_ros.subjects.detection import merge_peaks
+
+    nan = np.nan
+    pts = np.array([[[[100.0, 50.0], [30.0, 30.0]]],          # view 0, tile a
+                    [[[5.0, 5.0], [nan, nan]]],               # view 1
+                    [[[103.0, 50.0], [200.0, 60.0]]]])        # view 0, tile b
+    conf = np.array([[[0.9, 0.4]], [[0.6, 0.0]], [[0.8, 0.7]]])
+    views = np.array([0, 1, 0])
+    p, c = merge_peaks(pts, conf, views, 2, 2, radius=7.5)
+    assert p.shape == (2, 1, 2, 2) and c.shape == (2, 1, 2)
+    assert p[0, 0].tolist() == [[100.0, 50.0], [200.0, 60.0]]
+    assert c[0, 0].tolist() == [0.9, 0.7]
+    assert p[1, 0, 0].tolist() == [5.0, 5.0] and np.isnan(p[1, 0, 1]).all()
+    assert c[1, 0].tolist() == [0.6, 0.0]
+    # a smaller radius keeps the shifted blob as the second peak; k = 3 adds the weak one
+    p, c = merge_peaks(pts, conf, views, 2, 3, radius=2.0)
+    assert c[0, 0].tolist() == [0.9, 0.8, 0.7]
+    p, c = merge_peaks(pts, conf, views, 2, 3, radius=7.5)
+    assert c[0, 0].tolist() == [0.9, 0.7, 0.4]
+
+
+def test_a_second_group_of_a_discovered_body_is_not_a_new_subject():
+    # step 1e: two groups of one body (points of its keypoints seen twice, a few cm
+    # apart, that the constrained linkage cannot put in one group) -> one hypothesis;
+    # another body 0.6 m away is one
+    from monet_ros.subjects.detection import repeated_body
+
+    A = np.array([[0.0, 0, 1.6], [0.0, 0, 1.3], [0.0, 0, 1.0], [0.1, 0, 0.5]])
+    B = A + [0.6, 0.0, 0.0]
+    second = A + [0.05, 0.02, 0.0]
+    second[3] = np.nan                           # fewer keypoints: compared on the common
+    assert repeated_body(second, [A], near=0.4)
+    assert not repeated_body(B, [A], near=0.4)
+    assert repeated_body(B, [A, B + 0.1], near=0.4)
+    assert not repeated_body(A, [], near=0.4)
+    none = np.full((4, 3), np.nan)
+    none[3] = A[3] + 0.01
+    assert not repeated_body(none, [np.where(np.arange(4)[:, None] < 3, A, np.nan)], 0.4)
+    # the median: one keypoint far off (a limb of the neighbour) does not make it a body
+    # of its own
+    odd = second.copy()
+    odd[0] += [1.0, 0.0, 0.0]
+    assert repeated_body(odd, [A], near=0.4)
+
+
+def test_tiles_seeing_one_body_twice_discover_it_once():
+    # discovery (steps 1a-e) on 3 cameras, each with 2 tiles' maps showing the one body:
+    # tile a at its joints, tile b 12 px to the right (a poor decode, farther than the
+    # merge radius, so both stay among the candidates and triangulate a second body a few
+    # cm from the first). With N = 2: one hypothesis, its 4 keypoints within 5 cm of the
+    # body, the other group counted as repeated.
+    from helpers.scenes import cv2_project, ring_rig
+
+    from monet_ros.subjects.detection import SubjectsCore
+
+    cams = ring_rig(3, distortion=(0.0, 0.0, 0.0, 0.0, 0.0))
+    A = np.array([[0.0, 0.0, 1.5], [0.0, 0.05, 1.2], [0.05, 0.0, 0.9], [0.0, -0.05, 0.6]])
+    grid = (320, 240)
+    yy, xx = np.mgrid[0:grid[1], 0:grid[0]]
+    heat, heat_cameras, views = [], [], []
+    for v, cam in enumerate(cams):
+        for shift in (0.0, 12.0):
+            px = (cv2_project(cam, A) + [shift, 0.0] + 0.5) / 2 - 0.5          # map px
+            heat.append((0.9 * np.exp(-((xx - px[:, :1, None]) ** 2
+                                        + (yy - px[:, 1:, None]) ** 2) / 4.5)
+                         ).astype(np.float32))
+            heat_cameras.append(cam.crop(np.array([0.0, 0.0, 640.0, 480.0]), grid))
+            views.append(v)
+    core = SubjectsCore(4, 'm', SubjectsConfig(subjects=2))
+    hyp, counts = core.discover_heatmaps(heat, heat_cameras, cams, np.zeros((0, 4, 3)),
+                                         views)
+    assert len(hyp) == 1
+    assert (np.linalg.norm(hyp[0] - A, axis=-1) < 0.05).all()
+    assert counts['repeated'] == 4
