@@ -53,7 +53,7 @@ within `silent_after_s` is unpaired and let go.
 """
 from collections import OrderedDict
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import sys
 import time
 from types import SimpleNamespace
@@ -124,6 +124,9 @@ EMPTY = object()
 
 @dataclass(frozen=True)
 class FusionNodeConfig(LiveFilterConfig, FusionConfig, SubjectsConfig, TrackerConfig):
+    # not a parameter: discovery here has the detector nodes' whole-frame maps, no images
+    # to tile (SubjectsConfig.discovery_tiles is `monet process`'s)
+    discovery_tiles: int = field(default=0, init=False, repr=False)
     rig: str = setting('', 'rig file (any format load_rig reads) or a recording whose '
                        'camera_info + /tf_static give the rig; required')
     rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
