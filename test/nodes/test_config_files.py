@@ -39,3 +39,24 @@ def test_config_file_declares_and_documents_every_parameter(name, repo_root, ros
     finally:
         rclpy.try_shutdown(context=context)
     assert config == config_cls(**params)
+
+
+# The settings a config file sets on purpose to something other than the code's default
+# (each said in its comment): the learner's required inputs (example values) and its share
+# of a machine that also runs the live nodes.
+NOT_DEFAULT = {'learner': {'bags', 'out', 'threads', 'views_per_instant'}}
+
+
+@pytest.mark.parametrize('name', sorted(NODES))
+def test_config_file_values_are_the_defaults(name, repo_root):
+    # a file that silently differs from the code (fusion.yaml said rival_peaks: false
+    # after the default became true) gives `--params-file` users another node than the
+    # documented one
+    module, cls_name = NODES[name]
+    config_cls = getattr(importlib.import_module(module), cls_name)
+    params = yaml.safe_load((repo_root / 'config' / f'{name}.yaml').read_text())[
+        f'/**/{name}']['ros__parameters']
+    defaults = {f.name: list(f.default) if isinstance(f.default, tuple) else f.default
+                for f in fields(config_cls) if f.init}
+    differ = {k: (v, defaults[k]) for k, v in params.items() if v != defaults[k]}
+    assert set(differ) == NOT_DEFAULT.get(name, set()), differ
