@@ -279,16 +279,10 @@ def associate(points2d, cameras, scores=None, config=None):
     sub_w = np.where(keep[..., 0], w[rows, take], 0.0)                # (V, S, C)
     sub_pts = np.where(keep, pts[rows, take], np.nan)                 # (V, S, C, 2)
     sub_ideal = np.where(keep, ideal[rows, take], np.nan)
-    X, inl, err = triangulate_robust(sub_pts.reshape(V, S * C, 2), cameras,
-                                     sub_w.reshape(V, S * C),
-                                     threshold_px=config.triangulation_px,
-                                     min_views=config.min_views, method=config.method,
-                                     errors=True, ideal=sub_ideal.reshape(V, S * C, 2))
+    X, inl, err, score = _triangulate(sub_pts.reshape(V, S * C, 2), sub_w.reshape(V, S * C),
+                                      cameras, config, sub_ideal.reshape(V, S * C, 2))
     inl = inl.reshape(V, S, C).transpose(1, 0, 2)
-    n_inl = inl.sum(1)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        score = np.where(inl, sub_w.transpose(1, 0, 2), 0.0).sum(1) / n_inl
-    score[n_inl == 0] = np.nan
+    score = score.reshape(S, C)
     finite = np.isfinite(cost)
     pair = member[:, :, None] & member[:, None, :] & finite[None]     # (S, M, M)
     with np.errstate(invalid='ignore'):
@@ -299,6 +293,21 @@ def associate(points2d, cameras, scores=None, config=None):
                        unmatched=int(M - member.sum()), instances=M,
                        points2d=sub_pts.transpose(1, 0, 2, 3),
                        scores2d=sub_w.transpose(1, 0, 2))
+
+
+def _triangulate(pts, w, cameras, config, ideal=None):
+    """The robust triangulation of associate and leave_out_views: pts (V, n, 2) px, w (V,
+    n) detection scores (0 = none), ideal (V, n, 2) their undistorted points or None ->
+    (X (n, 3), inliers (V, n), view errors (V, n), score (n,): the mean score of the
+    inlier views, NaN without one)."""
+    X, inl, err = triangulate_robust(pts, cameras, w, threshold_px=config.triangulation_px,
+                                     min_views=config.min_views, method=config.method,
+                                     errors=True, ideal=ideal)
+    n_inl = inl.sum(0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        score = np.where(inl, w, 0.0).sum(0) / n_inl
+    score[n_inl == 0] = np.nan
+    return X, inl, err, score
 
 
 def leave_out_views(a, cameras, drop, config=None):
@@ -326,16 +335,10 @@ def leave_out_views(a, cameras, drop, config=None):
         return 0
     a.points2d[drop] = np.nan
     a.scores2d[drop] = 0.0
-    pts = a.points2d[s, :, c].transpose(1, 0, 2)                      # (V, n, 2)
-    w = a.scores2d[s, :, c].T                                         # (V, n)
-    X, inl, err = triangulate_robust(pts, cameras, w, threshold_px=config.triangulation_px,
-                                     min_views=config.min_views, method=config.method,
-                                     errors=True)
-    n_inl = inl.sum(0)
-    with np.errstate(invalid='ignore', divide='ignore'):
-        score = np.where(inl, w, 0.0).sum(0) / n_inl
+    X, inl, err, score = _triangulate(a.points2d[s, :, c].transpose(1, 0, 2),   # (V, n, 2)
+                                      a.scores2d[s, :, c].T, cameras, config)
     a.X[s, c] = X
     a.inliers[s, :, c] = inl.T
     a.view_errors[s, :, c] = err.T
-    a.score[s, c] = np.where(n_inl > 0, score, np.nan)
+    a.score[s, c] = score
     return int(drop.sum())
