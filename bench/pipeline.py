@@ -570,8 +570,9 @@ def worker(spec):
     from monet_ros.nodes.runner import stop_executor
 
     rig = load_rig(spec['rig'])
-    # 0 processes: monet pipeline's default (two from TWO_DETECTORS_FROM cameras on)
-    groups = detector_groups(rig, spec.get('detector_processes', 1))
+    # 0 processes: monet pipeline's default (two from TWO_DETECTORS_FROM cameras on in
+    # SPLIT_PRECISIONS)
+    groups = detector_groups(rig, spec.get('detector_processes', 1), spec['precision'])
     detector_params = dict(rig=spec['rig'], model=spec['model'], device='cpu',
                            threads=detector_threads(spec['threads'] or 0, len(groups),
                                                     usable_cores()),
@@ -687,7 +688,7 @@ def run_cases(args, runs, workdir, costs):
                 if len(args.detector_processes) > 1 or 0 in args.detector_processes:
                     try:
                         actual = len(detector_groups(make_rig(RigConfig(num_cameras=views)),
-                                                     processes))
+                                                     processes, precision))
                     except ValueError:     # more processes than cameras: the row says so
                         actual = processes
                     label += (f', {actual} detector process{"es" * (actual > 1)}'

@@ -36,12 +36,18 @@ from monet_ros.commands.pipeline_learn import add_learn_arguments, learner_node
 from monet_ros.config import ConfigError, setting, validate_config
 from monet_ros.cores import threads_each, usable_cores
 
-# --detector-processes 0 (auto): two detector processes from this many cameras on, else
-# one. bench/pipeline.py --detector-processes 1 2, 128 px bfloat16 (loaded 2-core machine,
-# load ~9): at 16 cameras @ 30 Hz two gave 20 / 24 keypoints3d/s (three-process /
-# pipeline) against 14 / 16 with one, at less CPU per frame; at 8 cameras one did as well
-# (28 / 18 against 28 / 19) with lower latency and CPU.
+# --detector-processes 0 (auto): two detector processes from this many cameras on when the
+# network runs in float32 or int8 on the CPU, else one. bench/pipeline.py
+# --detector-processes 1 2 at 16 cameras @ 30 Hz, 128 px, quiet 2-core AMX Xeon
+# (bench/results/pipeline.md, 2026-12-05 10:53 UTC): float32 two 24.5 keypoints3d/s against
+# 16.0 with one (one cannot keep up: 53 ms of work per 33 ms instant); bfloat16 one 28.8 /s,
+# p95 81 ms against two 30.2 /s, p95 119 ms: one keeps up with the instants (22 ms of work
+# each), and two, each skipping instants at its own phase, leave frames with half the views
+# that wait for the next instant (2026-12-04, one: p95 89 / 96 ms; 2026-12-05 06:11, two:
+# 121-124 ms). At 8 cameras one did as well as two (bfloat16, loaded: 28 / 18 against 28 / 19
+# keypoints3d/s, three-process / pipeline).
 TWO_DETECTORS_FROM = 16
+SPLIT_PRECISIONS = ('float32', 'int8')
 HELP = ('live all-in-one: player + detector + fusion as ROS nodes (player and detector in '
         'child processes)')
 
@@ -100,8 +106,8 @@ def add_arguments(parser):
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
     parser.add_argument('--detector-processes', type=int, default=0,
                         help='detector processes, each batching its share of the cameras '
-                        f'(default 0 = auto: 2 from {TWO_DETECTORS_FROM} cameras on, else 1; '
-                        'measured with bench/pipeline.py)')
+                        f'(default 0 = auto: 2 from {TWO_DETECTORS_FROM} cameras on in float32 '
+                        'or int8, else 1; measured with bench/pipeline.py)')
     add_learn_arguments(parser)
 
 
@@ -115,7 +121,8 @@ class PipelineOptions:
     start_delay: float = setting(0.5, 'seconds between start-up and the first frame',
                                  minimum=0.0, maximum=3600.0)
     detector_processes: int = setting(0, 'detector processes (cameras split between them; '
-                                      f'0 = 2 from {TWO_DETECTORS_FROM} cameras, else 1)',
+                                      f'0 = 2 from {TWO_DETECTORS_FROM} cameras in float32 or '
+                                      'int8, else 1)',
                                       minimum=0, maximum=64)
 
     def __post_init__(self):
@@ -283,18 +290,31 @@ def tf_topics(bag):
     return [t for t in ('/tf_static',) if t in open_bag(bag).topics]
 
 
-def detector_groups(slots, processes):
+def detector_groups(slots, processes, precision):
     """The camera names of `slots` in `processes` contiguous groups of near-equal size (one
-    detector process each; 0: auto, see TWO_DETECTORS_FROM); ConfigError naming
-    --detector-processes when there are fewer cameras than processes."""
+    detector process each). processes 0: auto, two from TWO_DETECTORS_FROM cameras on when
+    `precision` (the one that runs: 'float32', 'bfloat16' or 'int8') is in SPLIT_PRECISIONS,
+    else one. ConfigError naming --detector-processes when there are fewer cameras than
+    processes."""
     names = [slot.name for slot in slots]
-    processes = processes or (2 if len(names) >= TWO_DETECTORS_FROM else 1)
+    processes = processes or (2 if len(names) >= TWO_DETECTORS_FROM
+                              and precision in SPLIT_PRECISIONS else 1)
     if processes > len(names):
         raise ConfigError('monet pipeline', 'detector_processes',
                           f'{processes} detector processes for {len(names)} cameras; give at '
                           f'most {len(names)}')
     bounds = np.linspace(0, len(names), processes + 1).round().astype(int)
     return [names[a:b] for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def groups_line(groups, processes, precision):
+    """The line saying how many detector processes run and, for auto, why."""
+    cameras = sum(len(group) for group in groups)
+    line = f'{len(groups)} detector process{"es" * (len(groups) > 1)} for {cameras} cameras'
+    if not processes:
+        line += (f' (--detector-processes auto: 2 from {TWO_DETECTORS_FROM} cameras in '
+                 f'{" or ".join(SPLIT_PRECISIONS)}, else 1; precision {precision})')
+    return line
 
 
 def prepare_int8(model, bag, calibration=None, backend='onnxruntime', threads=0,
@@ -412,7 +432,8 @@ def run(args):
     device = check_device('monet pipeline', args.device)
     from monet_ros.commands.common import print_precision
     # from the arguments alone, before any node logs a line; auto: the choice said once
-    print_precision('monet pipeline', args.precision, args.backend, device, args.model)
+    precision = print_precision('monet pipeline', args.precision, args.backend, device,
+                                args.model)
     calibration = ''
     if args.precision == 'int8':     # quantised once here, before the detector processes
         from monet_ros.fusion import FusionConfig
@@ -467,7 +488,9 @@ def run(args):
                                        lockstep=args.lockstep, precision=args.precision,
                                        calibration=calibration, subjects=args.subjects)
                 slots = camera_slots(DetectorConfig(**detector_params))
-                groups = detector_groups(slots, options.detector_processes)
+                groups = detector_groups(slots, options.detector_processes, precision)
+                line = groups_line(groups, options.detector_processes, precision)
+                print(f'monet pipeline: {line}', flush=True)
                 check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],
                                args.skeleton, args.model)
                 player_params = dict(

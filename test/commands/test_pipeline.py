@@ -199,6 +199,7 @@ def test_player_and_two_detectors_run_in_child_processes_and_lockstep_fuses_ever
     share = max(1, len(os.sched_getaffinity(0)) // 2)
     assert all(f'threads:={share}' in cmd.split() for cmd in detectors.values()), detectors
     assert [header_stamp_ns(c) for c in clouds[:len(expected)]] == expected, proc.output()
+    assert 'monet pipeline: 2 detector processes for 4 cameras\n' in proc.output()
 
 
 def test_a_recording_that_plays_no_frame_is_an_error(ros_env, tmp_path):
