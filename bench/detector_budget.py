@@ -29,7 +29,7 @@ Threads: --threads for torch and onnxruntime alike, --view-threads for the decod
 unless set). The load average and CPU model are printed: on a shared machine every figure is
 inflated.
 Run: .venv/bin/python bench/detector_budget.py [--cameras 8 16] [--repeats 5] [--no-dds]
-     [--view-threads N]
+     [--view-threads N] [--network small|cpm|hourglass] [--input-size PX]
 """
 import argparse
 import os
@@ -99,6 +99,9 @@ def median_ms(fn, repeats):
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--cameras', nargs='+', type=int, default=[8, 16])
+    parser.add_argument('--network', choices=('small', 'cpm', 'hourglass'), default='small',
+                        help="the detector architecture (models.build_model; random weights; "
+                        "int8's speed depends on it)")
     parser.add_argument('--input-size', type=int, default=128)
     parser.add_argument('--keypoints', type=int, default=14)
     parser.add_argument('--threads', type=int, default=2)
@@ -122,11 +125,11 @@ def main(argv=None):
     views_on = ViewThreads(args.threads if args.view_threads is None else args.view_threads)
     print(f'# {cpu_model()}; {os.cpu_count()} CPUs; load average at start '
           f'{" ".join(f"{x:.2f}" for x in os.getloadavg())}; threads {args.threads}, view '
-          f'threads {views_on.threads}, OMP_WAIT_POLICY {os.environ["OMP_WAIT_POLICY"]}; small '
-          f'net {args.input_size}x{args.input_size}, {args.keypoints} keypoints; '
+          f'threads {views_on.threads}, OMP_WAIT_POLICY {os.environ["OMP_WAIT_POLICY"]}; '
+          f'{args.network} net {args.input_size}x{args.input_size}, {args.keypoints} keypoints; '
           f'{WIDTH}x{HEIGHT} JPEG q90, full-frame crops; median of {args.repeats}')
     size = args.input_size
-    model = build_model('small', args.keypoints, input_size=(size, size)).eval()
+    model = build_model(args.network, args.keypoints, input_size=(size, size)).eval()
     meta = {'keypoints': [f'k{i}' for i in range(args.keypoints)]}
     K = np.array([[500.0, 0, WIDTH / 2 - 0.5], [0, 500.0, HEIGHT / 2 - 0.5], [0, 0, 1]])
     publisher = sink = None
