@@ -187,11 +187,21 @@ def config_from_options(args, config_cls, options, derive=None, **values):
     field's); others pass as they are."""
     from monet_ros.config import derive_checked
     given = {name: getattr(args, option_dest(option)) for option, name in options.items()}
-    try:
+    with options_named(config_cls, options):
         config = config_cls(**given, **values)
         if derive is not None:
             derive_checked(config_cls.__name__, config, derive)
         return config
+
+
+@contextmanager
+def options_named(config_cls, options):
+    """A ConfigError of a config_cls field in `options` ({option: field}) raised inside
+    becomes a ValueError naming the option as typed, then the setting (config_from_options'
+    format); others pass as they are. For checks made after construction too (e.g.
+    FilterConfig.in_units once the rig's unit is known)."""
+    try:
+        yield
     except ConfigError as error:
         option = next((o for o, n in options.items() if n == error.field), None)
         if option is None or error.owner != config_cls.__name__:

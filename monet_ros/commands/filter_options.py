@@ -1,20 +1,26 @@
 """The --filter options of `monet process` and `monet triangulate` (one spelling for both):
 the fields of monet_ros.temporal.FilterConfig as command-line options."""
-from contextlib import contextmanager
 from dataclasses import fields
 
 import numpy as np
 
-from monet_ros.config import ConfigError
+from monet_ros.commands.common import (
+    add_config_options,
+    config_from_options,
+    config_options,
+    options_named,
+)
 from monet_ros.temporal import LOSSES, METHODS, FilterConfig
 
 FILTER_TOPIC = '/monet/keypoints3d_filtered'
 
-# option -> FilterConfig field (and its help from the field's description)
-_OPTIONS = {'--max-gap-s': 'max_gap_s', '--measurement-noise-mm': 'measurement_noise_mm',
-            '--acceleration-m-s2': 'acceleration_m_s2', '--gate-sigma': 'gate_sigma',
-            '--reprojection-px': 'reprojection_px', '--bone-mm': 'bone_mm',
-            '--max-iterations': 'max_iterations'}
+
+def filter_options():
+    """{option: field} of the FilterConfig settings typed as --its-name (--max-gap-s,
+    --measurement-noise-mm, ...): every field but the method and loss (--filter, --loss:
+    choices) and the thresholds that come from the fusion's options."""
+    return config_options(FilterConfig, exclude=('method', 'loss', 'confidence_threshold',
+                                                 'threshold_px'))
 
 
 def add_filter_arguments(parser):
@@ -25,10 +31,7 @@ def add_filter_arguments(parser):
                         'kalman (constant-velocity Kalman + RTS smoother with outlier gating; '
                         'fast) or optim (least squares over the recording: robust '
                         'reprojection + smoothness + bone lengths of --skeleton)')
-    for option, name in _OPTIONS.items():
-        f = meta[name]
-        parser.add_argument(option, type=type(f.default), default=f.default,
-                            help=f'{f.metadata["description"]} (default {f.default})')
+    add_config_options(parser, FilterConfig, filter_options())
     parser.add_argument('--loss', choices=LOSSES, default=meta['loss'].default,
                         help=f'{meta["loss"].metadata["description"]} (default '
                         f'{meta["loss"].default})')
@@ -37,14 +40,11 @@ def add_filter_arguments(parser):
 def filter_config_from_args(args, confidence_threshold, threshold_px):
     """FilterConfig of the options above; the fusion's thresholds decide which views count.
     Its Kalman numbers depend on the rig's unit: check_filter_units checks them once the
-    rig is loaded. Raises ValueError naming the option (ConfigError naming the field for
-    the others)."""
-    values = {name: getattr(args, option[2:].replace('-', '_'))
-              for option, name in _OPTIONS.items()}
-    with _options_named():
-        return FilterConfig(method=args.filter, loss=args.loss,
-                            confidence_threshold=confidence_threshold,
-                            threshold_px=threshold_px, **values)
+    rig is loaded. Raises ValueError naming the option (commands.common.config_from_options;
+    ConfigError naming the field for the others)."""
+    return config_from_options(args, FilterConfig, filter_options(), method=args.filter,
+                               loss=args.loss, confidence_threshold=confidence_threshold,
+                               threshold_px=threshold_px)
 
 
 def check_filter_units(filter_config, units):
@@ -54,21 +54,8 @@ def check_filter_units(filter_config, units):
     naming the option, e.g. --measurement-noise-mm 1e200, whose square overflows (1e155
     only with a rig in mm)."""
     if filter_config is not None and filter_config.method != 'none':
-        with _options_named():
+        with options_named(FilterConfig, filter_options()):
             filter_config.in_units(units)
-
-
-@contextmanager
-def _options_named():
-    """A ConfigError of a FilterConfig field raised inside becomes a ValueError naming the
-    option the user typed (others pass as they are)."""
-    try:
-        yield
-    except ConfigError as error:
-        option = next((o for o, n in _OPTIONS.items() if n == error.field), None)
-        if option is None or error.owner != FilterConfig.__name__:
-            raise
-        raise ValueError(f'{option}: {error.message}') from None
 
 
 def write_filtered_subjects(writer, frame_id, smoothed, stamps_ns, units, topic=FILTER_TOPIC):

@@ -223,7 +223,8 @@ def test_the_filter_options_name_the_option(tmp_path, capsys, units, value):
                  '--measurement-noise-mm', value])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1, err
-    assert err[0] == (f'monet triangulate: error: --measurement-noise-mm: {float(value)!r} '
+    assert err[0] == ("monet triangulate: error: --measurement-noise-mm: FilterConfig: "
+                      f"parameter 'measurement_noise_mm': {float(value)!r} "
                       f'gives a measurement variance of inf {units}^2 (must be finite and '
                       '> 0)'), err
     assert not (tmp_path / 'out').exists()
