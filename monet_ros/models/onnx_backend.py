@@ -8,6 +8,7 @@ input as the torch network, (N, 3, H, W) float32 RGB in [0, 1] (normalisation is
 and gives the last stage's heatmaps (N, C, h, w) float32.
 """
 import io
+import os
 from pathlib import Path
 import warnings
 
@@ -70,6 +71,15 @@ def _onnxruntime():
     return onnxruntime
 
 
+def spinning():
+    """Whether ONNX Runtime's intra-op threads spin while they wait (its default): not
+    where OpenMP waits passively (OMP_WAIT_POLICY=PASSIVE, which the nodes and `monet
+    pipeline` set unless the user did: threads spinning on shared cores starve the
+    publisher, fusion and decode threads, as torch's did), so both backends follow the
+    one policy."""
+    return os.environ.get('OMP_WAIT_POLICY', '').strip().upper() != 'PASSIVE'
+
+
 class OnnxRunner:
     """An ONNX Runtime session of an exported detector network.
 
@@ -85,6 +95,8 @@ class OnnxRunner:
         if threads:
             options.intra_op_num_threads = int(threads)
             options.inter_op_num_threads = 1
+        if not spinning():
+            options.add_session_config_entry('session.intra_op.allow_spinning', '0')
         device = torch.device(device)
         if device.type == 'cuda':
             if 'CUDAExecutionProvider' not in ort.get_available_providers():

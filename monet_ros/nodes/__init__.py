@@ -10,7 +10,9 @@ A node executable's OpenMP (torch) threads wait passively (passive_openmp; `mone
 does the same): by default a process with as many torch threads as cores spins them between
 operations, and once another process wants a core the spinning stalls every forward pass
 (the detector's batch on 2 cores beside busy processes: 530 ms spinning, 25 ms passive,
-23 ms with one thread). Live nodes always share the machine with other processes.
+23 ms with one thread). Live nodes always share the machine with other processes. ONNX
+Runtime's threads (backend onnxruntime, precision int8) follow the same policy
+(models.onnx_backend.spinning).
 Large message buffers come from the heap (heap_for_large_buffers; `monet pipeline` too): by
 default glibc maps an allocation over 128 KB (one 640x480 rgb8 frame is 900 KB, one
 heatmap message 230 KB) fresh from the kernel or gives freed heap back to it (its

@@ -123,3 +123,25 @@ def test_unwritable_export_path_runs_from_memory(scene, tmp_path):
     expected = Detector.from_checkpoint(path, device='cpu').predict(images, cameras)[0]
     np.testing.assert_allclose(detector.predict(images, cameras)[0], expected, atol=1e-4,
                                rtol=0)
+
+
+@pytest.mark.parametrize('policy, spins', [('PASSIVE', False), ('passive', False),
+                                           ('ACTIVE', True), (None, True)])
+def test_intra_op_threads_wait_as_openmp_does(monkeypatch, policy, spins):
+    """Where OpenMP waits passively (the nodes set OMP_WAIT_POLICY=PASSIVE), ONNX Runtime's
+    threads do not spin either; elsewhere its default (spinning) stays."""
+    from monet_ros.models.onnx_backend import export_onnx
+    if policy is None:
+        monkeypatch.delenv('OMP_WAIT_POLICY', raising=False)
+    else:
+        monkeypatch.setenv('OMP_WAIT_POLICY', policy)
+    runner = OnnxRunner(export_onnx(build_model('small', 2, input_size=(32, 32)).eval()),
+                        threads=1)
+    options = runner.session.get_session_options()
+    if spins:
+        with pytest.raises(RuntimeError, match='allow_spinning'):   # ONNX Runtime's default
+            options.get_session_config_entry('session.intra_op.allow_spinning')
+    else:
+        assert options.get_session_config_entry('session.intra_op.allow_spinning') == '0'
+    x = np.random.default_rng(0).random((1, 3, 32, 32), dtype=np.float32)
+    assert runner(x).shape == (1, 2, 8, 8)
