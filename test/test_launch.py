@@ -1,6 +1,7 @@
 """launch/pipeline.launch.py with the real `launch` / `launch_ros` (not in the pip wheels:
-installed from their jazzy sources by hand, see README); skipped without them. The run of
-the launch file on the installed package is in test_package_build.py."""
+tools/install_launch.sh installs them from their jazzy sources, docs/install.md); skipped
+without them. The runs of the launch file on the installed package (one subject, two) are in
+test_package_build.py."""
 from pathlib import Path
 
 import pytest
