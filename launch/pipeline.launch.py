@@ -5,23 +5,36 @@ and a player when `bag` is given, all in one namespace (default `monet`).
     ros2 launch monet_ros pipeline.launch.py model:=CKPT bag:=REC        # rig = the recording
     ros2 launch monet_ros pipeline.launch.py model:=CKPT bag:=REC namespace:=rig1 \\
         transport:=compressed debug_image:=true use_sim_time:=true slop_ms:=5.0 rate:=0.5
+    ros2 launch monet_ros pipeline.launch.py model:=CKPT bag:=REC subjects:=2 \\
+        skeleton:=mouse6.yaml link_mm:=450.0                         # docs/subjects.md
 
-Parameters come from config/{detector,fusion,player}.yaml, then these arguments. The player
-waits until the detector subscribes to its image topics and the fusion node to the
-heatmaps (player.yaml wait_for_subscribers / wait_for_subscribers_s, wait_for_topics) before
-it plays. The Fast DDS profile
+Parameters come from config/{detector,fusion,player}.yaml, then these arguments (the
+defaults of skeleton and link_mm are fusion.yaml's). The player waits until the detector
+subscribes to its image topics and the fusion node to the heatmaps of every camera
+(player.yaml wait_for_subscribers / wait_for_subscribers_s; wait_for_topics: `<cam>/heatmaps`,
+with subjects N >= 2 the crop slots' `<cam>/crop<k>/heatmaps`, k <= N, named by
+monet_ros.nodes.names as the nodes name them) before it plays. The Fast DDS profile
 (config/fastdds_profile.xml, 64 MB shared memory) carries full-size images.
 """
+import json
 import os
+from typing import List
 
 from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument, SetEnvironmentVariable
 from launch.conditions import IfCondition
+from launch.substitution import Substitution
 from launch.substitutions import LaunchConfiguration, PythonExpression
+from launch.substitutions.substitution_failure import SubstitutionFailure
+from launch.utilities import normalize_to_list_of_substitutions, perform_substitutions
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
+import yaml
 
 from launch import LaunchDescription
+from monet_ros.nodes.names import HEATMAPS, heatmap_sources
+
+FUSION_YAML = object()    # default: the value in config/fusion.yaml
 
 # name -> (default, description) of the launch arguments
 ARGUMENTS = {
@@ -40,18 +53,51 @@ ARGUMENTS = {
     'backend': ('torch', 'detector: inference backend, torch or onnxruntime'),
     'device': ('', "detector: torch device ('' = CUDA when available, else CPU)"),
     'subjects': ('1', 'detector and fusion: most subjects tracked (>= 2: crop slots and the '
-                 'keypoints3d subject field, docs/subjects.md; the player then waits '
-                 'wait_for_subscribers_s for {camera}/heatmaps, which no node subscribes)'),
+                 'keypoints3d subject field, docs/subjects.md; the player waits for the crop '
+                 "slots' heatmap topics)"),
+    'skeleton': (FUSION_YAML, 'fusion: skeleton preset or YAML path (heatmap channel order '
+                 'and bones; default: config/fusion.yaml)'),
+    'link_mm': (FUSION_YAML, 'fusion, subjects >= 2: largest distance (mm) between two linked '
+                'keypoints of one subject (default: config/fusion.yaml)'),
 }
+
+
+class HeatmapTopics(Substitution):
+    """The heatmap topics the fusion node subscribes for each camera, `{camera}` left for the
+    player to fill (its wait_for_topics), as a YAML list: names.HEATMAPS of
+    names.heatmap_sources for `subjects` (`{camera}/heatmaps` for 1, the crop slots'
+    `{camera}/crop<k>/heatmaps`, k <= N, for N >= 2). Raises SubstitutionFailure when
+    `subjects` is not an integer."""
+
+    def __init__(self, subjects):
+        super().__init__()
+        self.subjects = normalize_to_list_of_substitutions(subjects)
+
+    def describe(self):
+        return f'HeatmapTopics(subjects={self.subjects})'
+
+    def perform(self, context):
+        text = perform_substitutions(context, self.subjects)
+        try:
+            subjects = int(text)
+        except ValueError:
+            raise SubstitutionFailure(f'launch argument subjects: {text!r} is not an '
+                                      'integer') from None
+        return json.dumps([HEATMAPS.format(camera=source)
+                           for source in heatmap_sources('{camera}', subjects)])
 
 
 def generate_launch_description():
     config = os.path.join(get_package_share_directory('monet_ros'), 'config')
+    with open(os.path.join(config, 'fusion.yaml')) as f:
+        fusion = yaml.safe_load(f)['/**/fusion']['ros__parameters']
     arg = {name: LaunchConfiguration(name) for name in ARGUMENTS}
     sim_time = ParameterValue(arg['use_sim_time'], value_type=bool)
-    declared = [DeclareLaunchArgument(name, description=text,
-                                      **({} if default is None else {'default_value': default}))
-                for name, (default, text) in ARGUMENTS.items()]
+    defaults = {name: str(fusion[name]) if default is FUSION_YAML else default
+                for name, (default, _) in ARGUMENTS.items()}
+    declared = [DeclareLaunchArgument(name, description=text, **(
+                    {} if defaults[name] is None else {'default_value': defaults[name]}))
+                for name, (_, text) in ARGUMENTS.items()]
     common = dict(package='monet_ros', namespace=arg['namespace'], output='screen',
                   emulate_tty=True)
     return LaunchDescription(declared + [
@@ -61,7 +107,9 @@ def generate_launch_description():
                  PythonExpression(["'", arg['bag'], "' != ''"])),
              parameters=[os.path.join(config, 'player.yaml'), {
                  'bag': ParameterValue(arg['bag'], value_type=str),
-                 'wait_for_topics': ['{camera}/heatmaps'],      # the fusion node listens
+                 # the fusion node listens (with subjects >= 2 to the crop slots)
+                 'wait_for_topics': ParameterValue(HeatmapTopics(arg['subjects']),
+                                                   value_type=List[str]),
                  'rate': ParameterValue(arg['rate'], value_type=float)}], **common),
         Node(executable='detector', name='detector',
              parameters=[os.path.join(config, 'detector.yaml'), {
@@ -80,5 +128,7 @@ def generate_launch_description():
                  'rig': ParameterValue(arg['rig'], value_type=str),
                  'slop_ms': ParameterValue(arg['slop_ms'], value_type=float),
                  'subjects': ParameterValue(arg['subjects'], value_type=int),
+                 'skeleton': ParameterValue(arg['skeleton'], value_type=str),
+                 'link_mm': ParameterValue(arg['link_mm'], value_type=float),
                  'use_sim_time': sim_time}], **common),
     ])

@@ -2,14 +2,20 @@
 and runs from there: data files (skeleton presets, Fast DDS profile) come from the installed
 share directory, not from the source tree."""
 import ast
+import importlib
+import os
 from pathlib import Path
 import subprocess
 import sys
 
+from helpers.blob_net import NAMES, train_blob_net
 from helpers.recordings import noise_recording, small_checkpoint
 from helpers.ros import NodeProcess, RosHarness
+from helpers.subject_blobs import blob_checkpoint, write_two_subjects
+import numpy as np
 import pytest
 from sensor_msgs.msg import Image, PointCloud2
+import yaml
 
 from monet_ros.io import cloud_to_keypoints3d, header_stamp_ns
 
@@ -138,6 +144,25 @@ sys.exit(service.run())
 """
 
 
+def stopped_cleanly(output, nodes=3):
+    """Every node of the launch reported by launch as exited with code 0."""
+    return output.count('process has finished cleanly') == nodes
+
+
+def launch_env(ros_env, prefix):
+    """installed_env plus the folders this process imports launch, launch_ros and their
+    imports from (the environment's site-packages, or a private install on PYTHONPATH: see
+    docs/install.md), after the prefix: the launch process runs the installed monet_ros."""
+    env = installed_env(ros_env, prefix)
+    folders = [env['PYTHONPATH']]
+    for name in ('launch', 'launch_ros', 'osrf_pycommon', 'composition_interfaces'):
+        folder = str(Path(importlib.import_module(name).__file__).parent.parent)
+        if folder not in folders:
+            folders.append(folder)
+    env['PYTHONPATH'] = os.pathsep.join(folders)
+    return env
+
+
 def test_installed_launch_file_runs_the_pipeline(ros_env, prefix, tmp_path):
     """What `ros2 launch monet_ros pipeline.launch.py model:=M bag:=REC namespace:=rig7
     debug_image:=true` does (ros2launch runs a LaunchService the same way), on the
@@ -146,7 +171,7 @@ def test_installed_launch_file_runs_the_pipeline(ros_env, prefix, tmp_path):
     pytest.importorskip('launch_ros.actions', reason='launch / launch_ros not installed')
     _, stamps = noise_recording(tmp_path / 'rec', cameras=2, frames=6)
     model = small_checkpoint(tmp_path / 'model.pt')
-    env = installed_env(ros_env, prefix)
+    env = launch_env(ros_env, prefix)
     launch_file = prefix / 'share/monet_ros/launch/pipeline.launch.py'
     argv = [sys.executable, '-c', LAUNCH, str(launch_file),
             f'model:={model}', f'bag:={tmp_path / "rec"}', 'namespace:=rig7',
@@ -154,15 +179,67 @@ def test_installed_launch_file_runs_the_pipeline(ros_env, prefix, tmp_path):
     with RosHarness(ros_env) as ros:
         clouds = ros.collect('/rig7/keypoints3d', PointCloud2, 100)
         debug = ros.collect('/rig7/cam0/debug_image', Image, 100)
-        with NodeProcess('launch', env, argv=argv, cwd=tmp_path) as proc:
+        with NodeProcess('launch', env, argv=argv, cwd=tmp_path,
+                         terminal=True) as proc:
             ok = ros.spin_until(lambda: clouds and debug and 'played' in proc.output(),
                                 timeout=180, process=proc)
             ros.spin_for(2.0)
             assert ok, proc.output()
             assert proc.stop(timeout=30) == 0, proc.output()
+            assert stopped_cleanly(proc.output()), proc.output()
     # the player started only once the detector listened: frames of the recording fused
     # (a live detector may drop a frame it is too slow for; none is fused twice)
     fused = [header_stamp_ns(c) for c in clouds]
     assert set(fused) <= set(stamps) and len(set(fused)) == len(fused), proc.output()
     assert debug[0].encoding == 'bgr8'
+    assert 'Traceback' not in proc.output()
+
+
+def test_installed_launch_file_tracks_two_subjects(ros_env, prefix, tmp_path):
+    """`ros2 launch monet_ros pipeline.launch.py model:=M rig:=RIG bag:=REC subjects:=2
+    skeleton:=S link_mm:=450.0` on the installed package, over the blob scene
+    (helpers.subject_blobs: two subjects of three coloured blobs walking past each other,
+    4 cameras, 12 frames of 96x96, and the trained blob net): the player plays once the
+    detector subscribes its images and the fusion node every crop slot's heatmaps (4 image +
+    4 camera_info topics + 4 cameras x 3 slots, within player.yaml's wait_for_subscribers_s,
+    not after it), and /monet/keypoints3d carries a `subject` field with both identities,
+    each on one body of the ground truth."""
+    pytest.importorskip('launch_ros.actions', reason='launch / launch_ros not installed')
+    T = 12
+    folder, _, X = write_two_subjects(tmp_path / 'rec', T=T, camera_info=True)
+    stamps = np.load(folder / 'ground_truth.npz')['stamps'].tolist()
+    model = blob_checkpoint(train_blob_net(steps=400, sigma=(1.2, 4.0)), tmp_path / 'b.pt')
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text(yaml.safe_dump({'name': 'blobs', 'keypoints': list(NAMES),
+                                        'bones': [[NAMES[0], NAMES[1]]]}))
+    launch_file = prefix / 'share/monet_ros/launch/pipeline.launch.py'
+    argv = [sys.executable, '-c', LAUNCH, str(launch_file), f'model:={model}',
+            f'rig:={folder / "rig.yaml"}', f'bag:={folder / "recording"}', 'subjects:=2',
+            f'skeleton:={skeleton}', 'link_mm:=450.0', 'precision:=float32', 'rate:=0.1']
+
+    def both(cloud):
+        return len(np.unique(cloud_to_keypoints3d(cloud, units='m')['subject'])) == 2
+
+    with RosHarness(ros_env) as ros:
+        clouds = ros.collect('/monet/keypoints3d', PointCloud2, 100)
+        with NodeProcess('launch', launch_env(ros_env, prefix), argv=argv, cwd=tmp_path,
+                         terminal=True) as proc:
+            ok = ros.spin_until(lambda: 'played' in proc.output() and any(map(both, clouds)),
+                                timeout=240, process=proc)
+            ros.spin_for(2.0)
+            assert ok, proc.output()
+            assert proc.stop(timeout=30) == 0, proc.output()
+            assert stopped_cleanly(proc.output()), proc.output()
+    assert '20 topics have 1 subscriber(s) after' in proc.output(), proc.output()
+    identity_of = {}
+    for cloud in filter(both, clouds):
+        t = stamps.index(header_stamp_ns(cloud))
+        k = cloud_to_keypoints3d(cloud, units='m')
+        for ident in np.unique(k['subject']):
+            mine = k['X'][k['subject'] == ident]                       # (3, 3) m
+            d = np.linalg.norm(mine[None] - X[t], axis=-1).mean(-1)    # to each body
+            body = int(np.argmin(d))
+            assert d[body] < 0.030, (t, d)
+            assert identity_of.setdefault(body, int(ident)) == int(ident), f'frame {t}'
+    assert sorted(identity_of) == [0, 1] and len(set(identity_of.values())) == 2
     assert 'Traceback' not in proc.output()

@@ -88,6 +88,7 @@ from monet_ros.nodes.names import (
     SKELETON,
     TF_STATIC,
     crop_slots,
+    heatmap_sources,
     node_namespace,
 )
 from monet_ros.nodes.params import declare_config, duration_msg_ns
@@ -258,11 +259,9 @@ class FusionNode(Node):
         self.frame_id = config.frame_id or rig_frame
         self.subjects = self.subjects_core(config) if config.subjects > 1 else None
         # the message sources: the cameras, or with subjects >= 2 their crop slots
-        self.keys = self.names if self.subjects is None else [
-            key for name in self.names for key in crop_slots(name, config.subjects)]
         self.key_camera = {key: i for i, name in enumerate(self.names)
-                           for key in ([name] if self.subjects is None
-                                       else crop_slots(name, config.subjects))}
+                           for key in heatmap_sources(name, config.subjects)}
+        self.keys = list(self.key_camera)
         self.subject_counts = dict(resets=0, duplicates=0, discoveries=0, shared=0, detached=0,
                                    extra=0, weak=0, foreign=0)
         self.subject_stats = {}   # identity -> {frames, keypoints, error, last_stamp_ns}

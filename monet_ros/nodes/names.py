@@ -31,6 +31,13 @@ def crop_slots(camera, subjects):
     return [CROP_SLOT.format(camera=camera, slot=k) for k in range(subjects + 1)]
 
 
+def heatmap_sources(camera, subjects):
+    """What takes the place of {camera} in the heatmap and camera_info topics (HEATMAPS,
+    HEATMAP_CAMERA_INFO) of one camera: [camera] with `subjects` 1, its N + 1 crop slots
+    (crop_slots) with N >= 2. `camera` may itself be a template ('{camera}')."""
+    return [camera] if subjects <= 1 else crop_slots(camera, subjects)
+
+
 def node_namespace(kwargs):
     """`kwargs` of a Node constructor with the default namespace filled in (an explicit
     namespace=..., or `__ns` on the command line, still wins)."""

@@ -36,6 +36,9 @@ class NodeProcess:
     """`python -m monet_ros.nodes.<module>` (or any argv) as a subprocess with output in files.
 
     params: dict written to a params file; extra_args: more --ros-args arguments.
+    terminal: the process leads its own process group and stop() signals the whole group,
+    as a terminal's Ctrl-C does (what `ros2 launch` relies on: it leaves its nodes to the
+    SIGINT they get from the terminal, and sends SIGTERM only 5 s later).
     A fusion node given params fuses every frame however long it waited in its input queue
     (max_queue_ms 0, unless the test sets it): on a loaded machine the node may fall behind
     by more than the default 100 ms, and a test that waits for a frame's 3D would wait for
@@ -44,9 +47,10 @@ class NodeProcess:
     DEFAULTS = {'fusion': {'max_queue_ms': 0.0}}
 
     def __init__(self, module, env, params=None, node_name=None, extra_args=(), argv=None,
-                 workdir=None, cwd=None):
+                 workdir=None, cwd=None, terminal=False):
         self.env = dict(env)
         self.cwd = cwd
+        self.terminal = terminal
         self.workdir = Path(workdir or self.env.get('ROS_LOG_DIR', '/tmp')).parent
         self.workdir.mkdir(parents=True, exist_ok=True)
         tag = f'{module}_{time.monotonic_ns()}'
@@ -68,7 +72,7 @@ class NodeProcess:
         self._err = open(self.stderr_path, 'wb')
         self.process = subprocess.Popen(self.argv, env=self.env, stdout=self._out,
                                         stderr=self._err, stdin=subprocess.DEVNULL,
-                                        cwd=self.cwd)
+                                        cwd=self.cwd, process_group=0 if self.terminal else None)
         return self
 
     def __enter__(self):
@@ -90,7 +94,10 @@ class NodeProcess:
     def stop(self, sig=signal.SIGINT, timeout=60):
         """Send `sig`, wait, return the exit code (kill and fail loudly on a hang)."""
         if self.process.poll() is None:
-            self.process.send_signal(sig)
+            if self.terminal:
+                os.killpg(self.process.pid, sig)
+            else:
+                self.process.send_signal(sig)
             try:
                 self.process.wait(timeout=timeout)
             except subprocess.TimeoutExpired as error:
