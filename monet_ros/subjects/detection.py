@@ -90,16 +90,19 @@ Algorithm, per synchronized frame (stamps increasing):
    4b. Settling (settle_frames >= 1): for a subject of a hypothesis discovered in this
    frame or of a track born at most settle_frames frames ago, a joint whose mean
    reprojection error (px, over its inlier views) exceeds both settle_px and
-   settle_ratio times the median of its subject's joints' errors is solved again from
+   settle_ratio times the median of its subject's joints' errors, or that has only
+   min_views (2) inlier views where the subject's median joint has more than twice as
+   many (two rays that agree epipolarly meet with no residual), is solved again from
    all the candidate peaks (step 3's crop_peaks) of the subject's crops, by
    geometry.select_candidates (the pair of peaks of two views whose 3D point most of
    the views' peaks support within that tolerance, the stronger peaks first; the same
    rule as the one-subject fusion's), a peak that another subject took for that keypoint
    in that view (within half the association's threshold_px) left out; the joint
-   triangulated from the supporting peaks replaces the old one where its mean
-   reprojection error is smaller with at least min_views inlier views (counted as
-   `settled`). Why: discovery associates each keypoint's full-frame peaks across views by
-   epipolar distance alone (step 1b), and where the subjects stand near the plane of the
+   triangulated from the supporting peaks replaces the old one where it has at least
+   min_views inlier views and a smaller mean reprojection error, or more inlier views
+   with the error within the tolerance (counted as `settled`). Why: discovery associates
+   each keypoint's full-frame peaks across views by epipolar distance alone (step 1b),
+   and where the subjects stand near the plane of the
    camera centres every epipolar line is nearly the same image line, so a joint can be
    triangulated from two subjects' peaks (a ghost: the start of bench/subjects_live.py
    with 2 subjects, a right shoulder 633 mm off from peaks of the two subjects in two
@@ -108,7 +111,7 @@ Algorithm, per synchronized frame (stamps increasing):
    1 px. Only a young track's joints: applied to every track (`monet process` on a real
    detector, where a joint that fits the body worse is often a passing neighbour's limb
    or a weak map), the re-solve took the neighbour's joint as often as its own and
-   cost identity switches (bench/results/subjects_live.md, 2026-12-05 11:10 UTC).
+   cost identity switches (bench/results/subjects_live.md, 2026-12-05 11:05-12:00 UTC).
 5. N subjects: first, per hypothesis in order (tracks first), the subject holding most
    of that hypothesis' crop instances, if any is left (a subject seen by fewer cameras,
    e.g. one cut by the image borders, is not pushed out by a neighbour's extra or mixed
@@ -515,9 +518,10 @@ def settle_joints(a, cameras, cand_pts, cand_conf, subjects, ratio, floor_px, co
     are solved again by geometry.select_candidates from the candidate peaks of the
     subject's crops, the peaks another subject took for that keypoint in that view
     (points2d within half config.threshold_px) left out, and triangulated as associate
-    does (config: AssociationConfig); the new joint replaces the old one where its mean
-    reprojection error is smaller with at least min_views inlier views (X, inliers,
-    view_errors, score, points2d, scores2d). cameras: the V Cameras; cand_pts (V, H, C, k, 2)
+    does (config: AssociationConfig); the new joint replaces the old one where it has at
+    least min_views inlier views and a smaller mean reprojection error, or more inlier
+    views with the error within the subject's tolerance (X, inliers, view_errors, score,
+    points2d, scores2d). cameras: the V Cameras; cand_pts (V, H, C, k, 2)
     source px / cand_conf (V, H, C, k): the peaks of the crop of each view and hypothesis
     (crop slot; NaN / 0: none). -> int: joints replaced."""
     from monet_ros.geometry import select_candidates
