@@ -6,7 +6,7 @@ possible, writing /monet/keypoints3d (and optionally the heatmaps) to a rosbag2 
         [--filter none|kalman|optim]
         [--subjects N [--candidates 3] [--link-mm 600] [--crop-peaks 3] [--duplicate-mm 100]
          [--crop-missed 1] [--min-score 0.4] [--[no-]rival-peaks] [--[no-]foreign-views]
-         [--association-px 15]
+         [--settle-frames 3] [--settle-ratio 5] [--settle-px 5] [--association-px 15]
          [--gate-mm 400] [--max-speed-m-s 2] [--max-missed-s 0.5] [--min-keypoints 3]
          [--body-noise-mm 50] [--body-acceleration-m-s2 5]
          [--track-measurement-noise-mm 15] [--track-acceleration-m-s2 20]]

@@ -69,7 +69,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     stamps = []
     counts = dict(per_frame=Counter(), discoveries=0, discovered=0, crops=0, duplicates=0,
                   instances=0, unmatched=0, extra=0, points=0, explained=0, loose=0, repeated=0,
-                  shared=0, detached=0, weak=0, foreign=0)
+                  shared=0, detached=0, weak=0, foreign=0, settled=0)
     with BagWriter(staging) as writer:
         frames = iter_multiview_frames(reader, topics, slop_ns=int(config.slop_ms * 1e6),
                                        decode=False)
@@ -89,7 +89,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
             counts['discoveries'] += r.discovered >= 0
             counts['discovered'] += max(r.discovered, 0)
             for key in ('crops', 'duplicates', 'extra', 'points', 'explained', 'loose', 'repeated',
-                        'shared', 'detached', 'weak', 'foreign'):
+                        'shared', 'detached', 'weak', 'foreign', 'settled'):
                 counts[key] += getattr(r, key)
             counts['instances'] += a.instances
             counts['unmatched'] += a.unmatched
@@ -152,5 +152,7 @@ def print_subjects(figures, out):
           f"another subject's crop's (--foreign-views), "
           f'{n["shared"]} joints decoded by two subjects (kept by one), {n["detached"]} '
           f'joints not linked within --link-mm to the body of their subject, '
+          f'{n["settled"]} joints of a settling track solved again by consistency '
+          f'(--settle-frames), '
           f'{s.extra} subjects beyond --subjects, {s.untracked} untracked (too few '
           'keypoints for a track, or taken by no identity while N were alive)')

@@ -263,7 +263,7 @@ class FusionNode(Node):
                            for key in heatmap_sources(name, config.subjects)}
         self.keys = list(self.key_camera)
         self.subject_counts = dict(resets=0, duplicates=0, discoveries=0, shared=0, detached=0,
-                                   extra=0, weak=0, foreign=0)
+                                   extra=0, weak=0, foreign=0, settled=0)
         self.subject_stats = {}   # identity -> {frames, keypoints, error, last_stamp_ns}
         self.stats = {name: CameraStats() for name in self.keys}
         self.frames = 0
@@ -597,7 +597,7 @@ class FusionNode(Node):
         self.frames += 1
         self.partial_frames += bool(group.missing)
         self.fusion_seconds = (self.fusion_seconds + [time.perf_counter() - start])[-100:]
-        for key in ('duplicates', 'shared', 'detached', 'extra', 'weak', 'foreign'):
+        for key in ('duplicates', 'shared', 'detached', 'extra', 'weak', 'foreign', 'settled'):
             self.subject_counts[key] += getattr(result, key)
         self.subject_counts['discoveries'] += result.discovered >= 0
         a = result.association

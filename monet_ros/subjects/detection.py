@@ -87,6 +87,31 @@ Algorithm, per synchronized frame (stamps increasing):
    as its crops keep decoding it). A subject whose mean joint distance to a subject
    seen by more cameras (association's order) is below duplicate_mm is the same body
    decoded by two hypotheses' crops: dropped, counted.
+   4b. Settling (settle_frames >= 1): for a subject of a hypothesis discovered in this
+   frame or of a track born at most settle_frames frames ago, a joint whose mean
+   reprojection error (px, over its inlier views) exceeds both settle_px and
+   settle_ratio times the median of its subject's joints' errors, or that has only
+   min_views (2) inlier views where the subject's median joint has more than twice as
+   many (two rays that agree epipolarly meet with no residual), is solved again from
+   all the candidate peaks (step 3's crop_peaks) of the subject's crops, by
+   geometry.select_candidates (the pair of peaks of two views whose 3D point most of
+   the views' peaks support within that tolerance, the stronger peaks first; the same
+   rule as the one-subject fusion's), a peak that another subject took for that keypoint
+   in that view (within half the association's threshold_px) left out; the joint
+   triangulated from the supporting peaks replaces the old one where it has at least
+   min_views inlier views and a smaller mean reprojection error, or more inlier views
+   with the error within the tolerance (counted as `settled`). Why: discovery associates
+   each keypoint's full-frame peaks across views by epipolar distance alone (step 1b),
+   and where the subjects stand near the plane of the
+   camera centres every epipolar line is nearly the same image line, so a joint can be
+   triangulated from two subjects' peaks (a ghost: the start of bench/subjects_live.py
+   with 2 subjects, a right shoulder 633 mm off from peaks of the two subjects in two
+   views), and the crops then keep it (each takes the peak nearest the ghost, step 3):
+   it re-triangulated at 5-14 px for 7 frames while the other joints were at about
+   1 px. Only a young track's joints: applied to every track (`monet process` on a real
+   detector, where a joint that fits the body worse is often a passing neighbour's limb
+   or a weak map), the re-solve took the neighbour's joint as often as its own and
+   cost identity switches (bench/results/subjects_live.md, 2026-12-05 11:05-12:00 UTC).
 5. N subjects: first, per hypothesis in order (tracks first), the subject holding most
    of that hypothesis' crop instances, if any is left (a subject seen by fewer cameras,
    e.g. one cut by the image borders, is not pushed out by a neighbour's extra or mixed
@@ -167,6 +192,18 @@ class SubjectsConfig:
         "another subject's crop (the peaks nearest that subject's predicted joints), where "
         'at least min_views other views remain')
 
+    settle_frames: int = setting(
+        3, "a track's first frames after its birth (and a subject discovered this frame) "
+        'in which a joint that fits its subject much worse than its other joints is solved '
+        "again from its crops' peaks by consistency (0: never)", minimum=0)
+    settle_ratio: float = setting(
+        5.0, 'settling: a joint is solved again when its mean reprojection error exceeds this '
+        "times the median of its subject's joints' errors (and settle_px)", minimum=1.0)
+    settle_px: float = setting(
+        5.0, 'settling: a joint is solved again only when its mean reprojection error (px) '
+        'exceeds this (and settle_ratio times the median)', minimum=0.0,
+        exclusive_minimum=True)
+
     discovery_tiles: int = setting(
         2, 'discovery (monet process): the full-frame detection of a view whose whole '
         'frame the network input would shrink more than 2 times, as square tiles, this many '
@@ -192,7 +229,7 @@ class FrameSubjects:
     shared (joints dropped as decoded by two subjects, step 5), detached (joints dropped as
     not linked within link_mm to their subject's largest group of joints, step 5),
     foreign (views left out of a subject's keypoints as another hypothesis' crop's, step
-    4)."""
+    4), settled (joints solved again while their track settles, step 4b)."""
     association: object
     keep: np.ndarray
     ids: np.ndarray
@@ -210,6 +247,7 @@ class FrameSubjects:
     weak: int = 0
     foreign: int = 0
     repeated: int = 0
+    settled: int = 0
 
 
 def weak_subjects(score, min_score):
@@ -434,13 +472,115 @@ def foreign_views(instance, known, present, min_views):
     return drop & (left >= min_views)[:, None]
 
 
+def home_hypotheses(instance, H):
+    """Each subject's own hypothesis (module docstring step 4): the one whose crops give most
+    of its instances. instance (S, V) int crop slots (-1: none), H hypotheses. -> (S,) int,
+    -1 where none or a tie."""
+    instance = np.asarray(instance, np.int64)
+    S = len(instance)
+    if not S or not H:
+        return np.full(S, -1, np.int64)
+    count = (instance[:, :, None] == np.arange(H)).sum(1)                 # (S, H)
+    home = np.argmax(count, axis=1)
+    top = count[np.arange(S), home]
+    alone = (top > 0) & ((count == top[:, None]).sum(1) == 1)
+    return np.where(alone, home, -1)
+
+
+def unsettled_joints(view_errors, inliers, ratio, floor_px, min_views=2):
+    """The joints to solve again (module docstring step 4b): view_errors / inliers (S, V, C)
+    of an Association. A joint's error is the mean reprojection error (px) of its inlier
+    views; it is flagged where that exceeds the subject's tolerance, the larger of floor_px
+    and ratio x the median of the subject's joints' errors, or where it has only min_views
+    inlier views (nothing to check the pair against) and the median of the subject's
+    triangulated joints more than twice as many. -> (flag (S, C) bool, tolerance (S,)
+    px)."""
+    n = inliers.sum(1)                                                     # (S, C)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        err = np.where(inliers, view_errors, 0.0).sum(1) / n
+    err[n == 0] = np.nan
+    median = np.zeros(len(err))
+    some = np.isfinite(err).any(-1)
+    if some.any():
+        median[some] = np.nanmedian(err[some], axis=-1)
+    tol = np.maximum(floor_px, ratio * median)
+    with np.errstate(invalid='ignore'):
+        flag = err > tol[:, None]                                          # NaN: False
+    views = np.zeros(len(err))
+    if some.any():
+        views[some] = np.nanmedian(np.where(n[some] > 0, n[some], np.nan), axis=-1)
+    return flag | ((n == min_views) & (2 * n < views[:, None])), tol
+
+
+def settle_joints(a, cameras, cand_pts, cand_conf, subjects, ratio, floor_px, config):
+    """Step 4b of the module docstring, in place on the Association a (with points2d /
+    scores2d): the flagged joints (unsettled_joints) of the subjects `subjects` (S,) bool
+    are solved again by geometry.select_candidates from the candidate peaks of the
+    subject's crops, the peaks another subject took for that keypoint in that view
+    (points2d within half config.threshold_px) left out, and triangulated as associate
+    does (config: AssociationConfig); the new joint replaces the old one where it has at
+    least min_views inlier views and a smaller mean reprojection error, or more inlier
+    views with the error within the subject's tolerance (X, inliers, view_errors, score,
+    points2d, scores2d). cameras: the V Cameras; cand_pts (V, H, C, k, 2)
+    source px / cand_conf (V, H, C, k): the peaks of the crop of each view and hypothesis
+    (crop slot; NaN / 0: none). -> int: joints replaced."""
+    from monet_ros.geometry import select_candidates
+    from monet_ros.subjects.association import _triangulate
+
+    S, V, C = a.inliers.shape
+    flag, tol = unsettled_joints(a.view_errors, a.inliers, ratio, floor_px, config.min_views)
+    flag &= np.asarray(subjects, bool)[:, None]
+    s_all, c_all = np.nonzero(flag)
+    if not len(s_all):
+        return 0
+    n = len(s_all)
+    slot = a.instance[s_all]                                               # (n, V)
+    seen = slot >= 0
+    rows = np.arange(V)[None]
+    pts = cand_pts[rows, np.maximum(slot, 0), c_all[:, None]]              # (n, V, k, 2)
+    w = np.where(seen[..., None], cand_conf[rows, np.maximum(slot, 0), c_all[:, None]], 0.0)
+    # a peak another subject took for this keypoint in this view is that subject's
+    others = a.points2d[:, :, c_all].transpose(2, 0, 1, 3).copy()         # (n, S, V, 2)
+    others[np.arange(n), s_all] = np.nan
+    with np.errstate(invalid='ignore'):
+        d = np.linalg.norm(pts[:, None] - others[..., None, :], axis=-1)    # (n, S, V, k)
+    w = np.where((d <= config.threshold_px / 2).any(1), 0.0, w)
+    pts = np.where((w > 0)[..., None], pts, np.nan)
+    new_pts = np.full((n, V, 2), np.nan)
+    new_w = np.zeros((n, V))
+    for s in np.unique(s_all).tolist():         # a few subjects: one tolerance each
+        j = np.flatnonzero(s_all == s)
+        choice, support = select_candidates(pts[j].transpose(1, 0, 2, 3), cameras,
+                                            w[j].transpose(1, 0, 2), threshold_px=tol[s])
+        pick = np.take_along_axis(pts[j], choice.T[..., None, None], axis=2)[:, :, 0]
+        pick_w = np.take_along_axis(w[j], choice.T[..., None], axis=2)[..., 0]
+        ok = support.T & (pick_w > 0)
+        new_pts[j] = np.where(ok[..., None], pick, np.nan)
+        new_w[j] = np.where(ok, pick_w, 0.0)
+    X, inl, err, score = _triangulate(new_pts.transpose(1, 0, 2), new_w.T, cameras, config)
+    old_inl = a.inliers[s_all, :, c_all]                                   # (n, V)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        new = np.where(inl, err, 0.0).sum(0) / inl.sum(0)
+        old = np.where(old_inl, a.view_errors[s_all, :, c_all], 0.0).sum(-1) / old_inl.sum(-1)
+    more = (inl.sum(0) > old_inl.sum(-1)) & (new <= tol[s_all])
+    better = (inl.sum(0) >= config.min_views) & np.isfinite(X).all(-1) & ((new < old) | more)
+    s, c, i = s_all[better], c_all[better], np.flatnonzero(better)
+    a.X[s, c] = X[i]
+    a.inliers[s, :, c] = inl[:, i].T
+    a.view_errors[s, :, c] = err[:, i].T
+    a.score[s, c] = score[i]
+    a.points2d[s, :, c] = new_pts[i]
+    a.scores2d[s, :, c] = new_w[i]
+    return int(better.sum())
+
+
 def heat_matrices(heat_cameras):
     """(N, 3, 3) K_heat of heatmap Cameras or of (3, 3) matrices."""
     return np.stack([np.asarray(getattr(c, 'K', c), np.float64) for c in heat_cameras])
 
 
 def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_threshold,
-                   rivals=None):
+                   rivals=None, candidates=False):
     """One instance per crop (module docstring, step 3).
 
     heat: N heatmaps (C, h, w); heat_cameras / cameras: their heatmap (or (3, 3) K_heat)
@@ -448,7 +588,9 @@ def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_thre
     targets (N, C, 2) source px of the hypothesis' joints in each crop's view (NaN:
     unknown); rivals (N, R, C, 2) or None: the other hypotheses' joints in that view (NaN:
     none): a chosen peak nearer a rival's joint than its target is left out
-    (config.rival_peaks). -> points (N, C, 2) source px (NaN: no peak), score (N, C)."""
+    (config.rival_peaks). -> points (N, C, 2) source px (NaN: no peak), score (N, C); with
+    candidates, also every usable peak: (N, C, k, 2) source px (NaN: none) and (N, C, k)
+    values (0 there), k = config.crop_peaks."""
     from monet_ros.models import decode_heatmap_peaks
 
     rig = stack_cameras(cameras)
@@ -469,7 +611,10 @@ def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_thre
         rival = np.linalg.norm(chosen[:, None] - rivals, axis=-1)             # (N, R, C)
         with np.errstate(invalid='ignore'):
             found &= ~(rival < own[:, None]).any(1)                # NaN compares False
-    return np.where(found[..., None], chosen, np.nan), np.where(found, score, 0.0)
+    out = np.where(found[..., None], chosen, np.nan), np.where(found, score, 0.0)
+    if candidates:
+        return out + (np.where(usable[..., None], pts, np.nan), np.where(usable, conf, 0.0))
+    return out
 
 
 class SubjectsCore:
@@ -497,6 +642,9 @@ class SubjectsCore:
         self._link = from_mm(self.config.link_mm, units)
         self._duplicate = from_mm(self.config.duplicate_mm, units)
         self._missed = np.zeros(0, np.int64)      # per tracker track: frames since matched
+        self._frame = 0                           # frames resolved so far
+        self._born = {}                           # identity -> the frame it was born in
+        self._cropped = np.zeros(0, np.int64)     # identities of this frame's track hypotheses
         self._point_association = AssociationConfig(**{
             **{f: getattr(self.association, f) for f in (
                 'threshold_px', 'confidence_threshold', 'min_views', 'triangulation_px',
@@ -505,7 +653,9 @@ class SubjectsCore:
     def hypotheses(self, stamp_ns):
         """Step 1: the predicted joints (cropped, C, 3) at stamp_ns of the tracks that get
         crops (cropped_tracks; NaN: joints not started)."""
-        return self.tracker.predicted(stamp_ns)[self.cropped_tracks()]
+        cropped = self.cropped_tracks()
+        self._cropped = self.tracker.ids[cropped]
+        return self.tracker.predicted(stamp_ns)[cropped]
 
     def discover_heatmaps(self, heat, heat_cameras, cameras, predicted, views=None):
         """(hypotheses (H, C, 3), counts dict: points, explained, loose, repeated) of
@@ -586,6 +736,9 @@ class SubjectsCore:
         v_idx, h_idx = np.asarray(v_idx, np.int64), np.asarray(h_idx, np.int64)
         points = np.full((V, H, self.C, 2), np.nan)
         score = np.zeros((V, H, self.C))
+        k = self.config.crop_peaks
+        cand_pts = np.full((V, H, self.C, k, 2), np.nan)                # step 4b's candidates
+        cand_conf = np.zeros((V, H, self.C, k))
         if len(v_idx):
             crop_cams = [cameras[v] for v in v_idx]
             known = np.isfinite(hyp).all(-1)                          # (H, C)
@@ -598,9 +751,11 @@ class SubjectsCore:
             if self.config.rival_peaks:      # (crops, H - 1, C, 2): the other hypotheses
                 others = np.arange(H)[None] != h_idx[:, None]                 # (N, H)
                 rivals = projected[v_idx][others].reshape(len(v_idx), H - 1, self.C, 2)
-            p, s = crop_instances(heat, heat_cameras, crop_cams, targets, self.config,
-                                  self.association.confidence_threshold, rivals)
+            p, s, cp, cc = crop_instances(heat, heat_cameras, crop_cams, targets, self.config,
+                                          self.association.confidence_threshold, rivals,
+                                          candidates=True)
             points[v_idx, h_idx], score[v_idx, h_idx] = p, s
+            cand_pts[v_idx, h_idx], cand_conf[v_idx, h_idx] = cp, cc
         if V:
             a = associate(points, cameras, score, self.association)
         else:                     # no view at all (live: every slot of the instant empty)
@@ -615,6 +770,11 @@ class SubjectsCore:
             drop = foreign_views(a.instance, np.isfinite(hyp).all(-1).any(-1),
                                  a.scores2d > 0, self.association.min_views)
             foreign = leave_out_views(a, cameras, drop, self.association)
+        settled = 0
+        if self.config.settle_frames and len(a.X):
+            settled = settle_joints(a, cameras, cand_pts, cand_conf,
+                                    self.young(a.instance, H, tracked), self.config.settle_ratio,
+                                    self.config.settle_px, self.association)
         keep = []
         weak = weak_subjects(a.score, self.config.min_score)
         for s in np.flatnonzero(~weak).tolist():
@@ -643,14 +803,30 @@ class SubjectsCore:
         tracker = self.tracker
         before = dict(zip(tracker.ids.tolist(), self._missed.tolist()))
         ids = tracker.step(a.X[keep], stamp_ns)
+        for i in ids[ids >= 0].tolist():
+            self._born.setdefault(i, self._frame)
+        self._frame += 1
         self.count_misses(before, ids)
         self.restart(ids, drop)
         return FrameSubjects(association=a, keep=keep, ids=ids, hypotheses=H,
                              discovered=discovered, crops=len(v_idx), duplicates=duplicates,
                              extra=extra, tracked=tracked, shared=int(shared.sum()),
                              detached=int(detached.sum()), weak=int(weak.sum()),
-                             foreign=foreign,
+                             foreign=foreign, settled=settled,
                              **(counts or {}))
+
+    def young(self, instance, H, tracked):
+        """Which subjects settle (module docstring step 4b): instance (S, V) their crop slots
+        (hypotheses, the first `tracked` of them this frame's tracks, in hypotheses()'
+        order), H hypotheses. -> (S,) bool: True where the subject's own hypothesis
+        (home_hypotheses) is not a track (discovered this frame, or a live crop of unknown
+        joints) or is a track born at most settle_frames frames ago."""
+        home = home_hypotheses(instance, H)
+        young = np.ones(H, bool)
+        born = np.array([self._born.get(i, self._frame) for i in self._cropped[:tracked]
+                         .tolist()], np.int64)
+        young[:len(born)] = self._frame - born <= self.config.settle_frames
+        return (home >= 0) & young[np.maximum(home, 0)]
 
     def live_frame(self, cameras, stamp_ns, crops, full=()):
         """One frame of the live fusion node (`subjects` >= 2): the crops were cut by the
