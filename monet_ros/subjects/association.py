@@ -279,7 +279,7 @@ def associate(points2d, cameras, scores=None, config=None):
     sub_w = np.where(keep[..., 0], w[rows, take], 0.0)                # (V, S, C)
     sub_pts = np.where(keep, pts[rows, take], np.nan)                 # (V, S, C, 2)
     sub_ideal = np.where(keep, ideal[rows, take], np.nan)
-    X, inl, err, score = _triangulate(sub_pts.reshape(V, S * C, 2), sub_w.reshape(V, S * C),
+    X, inl, err, score = triangulate_scored(sub_pts.reshape(V, S * C, 2), sub_w.reshape(V, S * C),
                                       cameras, config, sub_ideal.reshape(V, S * C, 2))
     inl = inl.reshape(V, S, C).transpose(1, 0, 2)
     score = score.reshape(S, C)
@@ -295,9 +295,11 @@ def associate(points2d, cameras, scores=None, config=None):
                        scores2d=sub_w.transpose(1, 0, 2))
 
 
-def _triangulate(pts, w, cameras, config, ideal=None):
-    """The robust triangulation of associate and leave_out_views: pts (V, n, 2) px, w (V,
-    n) detection scores (0 = none), ideal (V, n, 2) their undistorted points or None ->
+def triangulate_scored(pts, w, cameras, config, ideal=None):
+    """The robust triangulation of associate, leave_out_views and detection's settling (one
+    rule, geometry.triangulate_robust with the AssociationConfig's triangulation_px,
+    min_views and method): pts (V, n, 2) px, w (V, n) detection scores (0 = none), ideal
+    (V, n, 2) their undistorted points or None ->
     (X (n, 3), inliers (V, n), view errors (V, n), score (n,): the mean score of the
     inlier views, NaN without one)."""
     X, inl, err = triangulate_robust(pts, cameras, w, threshold_px=config.triangulation_px,
@@ -335,7 +337,7 @@ def leave_out_views(a, cameras, drop, config=None):
         return 0
     a.points2d[drop] = np.nan
     a.scores2d[drop] = 0.0
-    X, inl, err, score = _triangulate(a.points2d[s, :, c].transpose(1, 0, 2),   # (V, n, 2)
+    X, inl, err, score = triangulate_scored(a.points2d[s, :, c].transpose(1, 0, 2),   # (V, n, 2)
                                       a.scores2d[s, :, c].T, cameras, config)
     a.X[s, c] = X
     a.inliers[s, :, c] = inl.T

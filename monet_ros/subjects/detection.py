@@ -525,7 +525,7 @@ def settle_joints(a, cameras, cand_pts, cand_conf, subjects, ratio, floor_px, co
     source px / cand_conf (V, H, C, k): the peaks of the crop of each view and hypothesis
     (crop slot; NaN / 0: none). -> int: joints replaced."""
     from monet_ros.geometry import select_candidates
-    from monet_ros.subjects.association import _triangulate
+    from monet_ros.subjects.association import triangulate_scored
 
     S, V, C = a.inliers.shape
     flag, tol = unsettled_joints(a.view_errors, a.inliers, ratio, floor_px, config.min_views)
@@ -557,7 +557,7 @@ def settle_joints(a, cameras, cand_pts, cand_conf, subjects, ratio, floor_px, co
         ok = support.T & (pick_w > 0)
         new_pts[j] = np.where(ok[..., None], pick, np.nan)
         new_w[j] = np.where(ok, pick_w, 0.0)
-    X, inl, err, score = _triangulate(new_pts.transpose(1, 0, 2), new_w.T, cameras, config)
+    X, inl, err, score = triangulate_scored(new_pts.transpose(1, 0, 2), new_w.T, cameras, config)
     old_inl = a.inliers[s_all, :, c_all]                                   # (n, V)
     with np.errstate(invalid='ignore', divide='ignore'):
         new = np.where(inl, err, 0.0).sum(0) / inl.sum(0)
