@@ -1,5 +1,11 @@
 """monet's argument errors: one line, exit 2, named by the command, the typo before what
-it hides."""
+it hides; and its exit code when a signal lands after the work."""
+import os
+import signal
+import subprocess
+import sys
+import time
+
 import pytest
 
 from monet_ros.cli import main as monet
@@ -67,3 +73,33 @@ def test_a_subjects_only_option_without_subjects_is_refused(argv, capsys, tmp_pa
                    f' monet {argv[0]} runs one subject without it')
     assert monet([*argv, '--subjects', '2']) == 2       # accepted: fails on the missing files
     assert 'applies only' not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_after_the_work_still_exits_0_quietly(repo_root, tmp_path, signum):
+    """SIGINT / SIGTERM "at any moment" includes the end: once the command has written its
+    output, while main returns and Python shuts down (torch's exit hooks take up to a
+    second), a signal killed the process by the signal (exit -2 / -15) or printed a
+    KeyboardInterrupt traceback from an exit hook. The signal is sent again and again from
+    the last line until the process has gone, so it lands in every phase of the exit."""
+    env = dict(os.environ, PYTHONPATH=str(repo_root))
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'monet_ros.cli', 'synth', '--out', str(tmp_path / 'rec'),
+         '--cameras', '2', '--frames', '3', '--width', '64', '--height', '48'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path)
+    lines = []
+    for line in proc.stdout:                      # until the command has written its output
+        lines.append(line)
+        if line.startswith('monet synth: wrote'):
+            break
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:
+        proc.send_signal(signum)
+        time.sleep(0.01)
+    rest, _ = proc.communicate(timeout=120)
+    output = ''.join(lines) + rest
+    assert any(line.startswith('monet synth: wrote') for line in lines), output
+    assert proc.returncode == 0, output
+    assert 'Traceback' not in output and 'KeyboardInterrupt' not in output, output
+    assert (tmp_path / 'rec' / 'rig.yaml').is_file()     # the work stands
