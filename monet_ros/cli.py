@@ -158,7 +158,8 @@ def main(argv=None):
             except bad_input_errors() as error:
                 if os.environ.get('MONET_TRACEBACK'):
                     raise
-                print(f'{name}: error: {given_option(error, argv)}{error_line(error, name)}',
+                line = error_line(error, name, output=getattr(args, 'out', None))
+                print(f'{name}: error: {given_option(error, argv)}{line}',
                       file=sys.stderr, flush=True)
                 return EXIT_BAD_INPUT
     except KeyboardInterrupt:

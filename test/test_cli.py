@@ -1,6 +1,8 @@
 """monet's argument errors: one line, exit 2, named by the command, the typo before what
 it hides; and its exit code when a signal lands after the work."""
 import os
+import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -103,3 +105,32 @@ def test_a_signal_after_the_work_still_exits_0_quietly(repo_root, tmp_path, sign
     assert proc.returncode == 0, output
     assert 'Traceback' not in output and 'KeyboardInterrupt' not in output, output
     assert (tmp_path / 'rec' / 'rig.yaml').is_file()     # the work stands
+
+
+def test_a_full_disk_names_the_output(repo_root, shared_data, tmp_path):
+    """`monet triangulate --out` on a full file system (a real 16 KiB tmpfs in a private
+    mount namespace, as test/test_disk_full.py): exit 2 and one line that names the output
+    and says the disk is full (the line named no file: the OS gives none for a write into
+    an open file)."""
+    if shutil.which('unshare') is None:
+        pytest.skip('no unshare(1)')
+    mouse = shared_data / 'sleap_anipose_minimal_session'
+    mount = tmp_path / 'full'
+    mount.mkdir()
+    out = mount / 'tri'
+    tables = sorted(str(p) for p in mouse.glob('*/minimal_*_proofread.analysis.h5'))
+    argv = ['triangulate', *tables, '--rig', str(mouse / 'calibration.toml'), '--fps', '30',
+            '--out', str(out)]
+    shell = (f'mount -t tmpfs -o size=16k tmpfs {mount} || exit 77; '
+             f'exec {shlex.join([sys.executable, "-m", "monet_ros.cli", *argv])}')
+    env = dict(os.environ, PYTHONPATH=str(repo_root))
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    done = subprocess.run(['unshare', '-m', 'sh', '-c', shell], capture_output=True,
+                          text=True, timeout=300, env=env, cwd=tmp_path)
+    if done.returncode == 77 or 'Operation not permitted' in done.stderr:
+        pytest.skip('cannot mount a small tmpfs here')
+    assert done.returncode == 2, done.stderr
+    errors = [line for line in done.stderr.splitlines() if ': error: ' in line]
+    assert len(errors) == 1 and 'Traceback' not in done.stderr, done.stderr
+    assert errors[0].startswith(f'monet triangulate: error: {out}'), errors[0]
+    assert errors[0].endswith('no space left on device (disk full)'), errors[0]
