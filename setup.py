@@ -8,7 +8,7 @@ PACKAGE = 'monet_ros'
 
 # Executables run as `ros2 run monet_ros <name>`; setup.cfg puts them in lib/monet_ros.
 EXECUTABLES = {
-    'monet': 'monet_ros.cli:main',
+    'monet': 'monet_ros.cli:console_main',
     'detector': 'monet_ros.nodes.detector:main',
     'fusion': 'monet_ros.nodes.fusion:main',
     'player': 'monet_ros.nodes.player:main',

@@ -158,7 +158,8 @@ def main(argv=None):
             except bad_input_errors() as error:
                 if os.environ.get('MONET_TRACEBACK'):
                     raise
-                print(f'{name}: error: {given_option(error, argv)}{error_line(error, name)}',
+                line = error_line(error, name, output=getattr(args, 'out', None))
+                print(f'{name}: error: {given_option(error, argv)}{line}',
                       file=sys.stderr, flush=True)
                 return EXIT_BAD_INPUT
     except KeyboardInterrupt:
@@ -174,5 +175,40 @@ def main(argv=None):
         return EXIT_INTERNAL
 
 
+def ignore_stop_signals():
+    """SIGINT and SIGTERM ignored from now on (main thread only; elsewhere a no-op). A
+    signal that lands while this runs raises KeyboardInterrupt at most once per signal
+    received; it is swallowed and the handlers are set again."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    while True:
+        try:
+            for sig in (signal.SIGINT, signal.SIGTERM):
+                signal.signal(sig, signal.SIG_IGN)
+            return
+        except KeyboardInterrupt:
+            continue
+
+
+def console_main():
+    """The `monet` executable (and `python -m monet_ros.cli`): main(), then exit with its
+    code. SIGTERM raises KeyboardInterrupt from the first moment main() can see it, and once
+    the command has returned both signals are ignored, so a SIGINT / SIGTERM that lands
+    after the work (while main returns or Python shuts down: torch's exit hooks take up to a
+    second) exits 0 and quietly instead of killing the process by the signal (-2 / -15) or
+    printing a KeyboardInterrupt traceback from an exit hook. A stop before main() has
+    returned exits 0 (`monet ...: stopped`)."""
+    code = EXIT_OK
+    try:
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGTERM, _stop_on_sigterm)
+        code = main()
+    except KeyboardInterrupt:         # landed between main's own handling and its return
+        code = EXIT_OK
+    finally:
+        ignore_stop_signals()
+    sys.exit(code)
+
+
 if __name__ == '__main__':
-    sys.exit(main())
+    console_main()

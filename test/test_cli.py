@@ -1,5 +1,13 @@
 """monet's argument errors: one line, exit 2, named by the command, the typo before what
-it hides."""
+it hides; and its exit code when a signal lands after the work."""
+import os
+import shlex
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
 import pytest
 
 from monet_ros.cli import main as monet
@@ -67,3 +75,62 @@ def test_a_subjects_only_option_without_subjects_is_refused(argv, capsys, tmp_pa
                    f' monet {argv[0]} runs one subject without it')
     assert monet([*argv, '--subjects', '2']) == 2       # accepted: fails on the missing files
     assert 'applies only' not in capsys.readouterr().err
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_a_signal_after_the_work_still_exits_0_quietly(repo_root, tmp_path, signum):
+    """SIGINT / SIGTERM "at any moment" includes the end: once the command has written its
+    output, while main returns and Python shuts down (torch's exit hooks take up to a
+    second), a signal killed the process by the signal (exit -2 / -15) or printed a
+    KeyboardInterrupt traceback from an exit hook. The signal is sent again and again from
+    the last line until the process has gone, so it lands in every phase of the exit."""
+    env = dict(os.environ, PYTHONPATH=str(repo_root))
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'monet_ros.cli', 'synth', '--out', str(tmp_path / 'rec'),
+         '--cameras', '2', '--frames', '3', '--width', '64', '--height', '48'],
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env, cwd=tmp_path)
+    lines = []
+    for line in proc.stdout:                      # until the command has written its output
+        lines.append(line)
+        if line.startswith('monet synth: wrote'):
+            break
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline:
+        proc.send_signal(signum)
+        time.sleep(0.01)
+    rest, _ = proc.communicate(timeout=120)
+    output = ''.join(lines) + rest
+    assert any(line.startswith('monet synth: wrote') for line in lines), output
+    assert proc.returncode == 0, output
+    assert 'Traceback' not in output and 'KeyboardInterrupt' not in output, output
+    assert (tmp_path / 'rec' / 'rig.yaml').is_file()     # the work stands
+
+
+def test_a_full_disk_names_the_output(repo_root, shared_data, tmp_path):
+    """`monet triangulate --out` on a full file system (a real 16 KiB tmpfs in a private
+    mount namespace, as test/test_disk_full.py): exit 2 and one line that names the output
+    and says the disk is full (the line named no file: the OS gives none for a write into
+    an open file)."""
+    if shutil.which('unshare') is None:
+        pytest.skip('no unshare(1)')
+    mouse = shared_data / 'sleap_anipose_minimal_session'
+    mount = tmp_path / 'full'
+    mount.mkdir()
+    out = mount / 'tri'
+    tables = sorted(str(p) for p in mouse.glob('*/minimal_*_proofread.analysis.h5'))
+    argv = ['triangulate', *tables, '--rig', str(mouse / 'calibration.toml'), '--fps', '30',
+            '--out', str(out)]
+    shell = (f'mount -t tmpfs -o size=16k tmpfs {mount} || exit 77; '
+             f'exec {shlex.join([sys.executable, "-m", "monet_ros.cli", *argv])}')
+    env = dict(os.environ, PYTHONPATH=str(repo_root))
+    env.pop('_ROS_WHEELS_BOOTSTRAP_COMPLETE', None)
+    done = subprocess.run(['unshare', '-m', 'sh', '-c', shell], capture_output=True,
+                          text=True, timeout=300, env=env, cwd=tmp_path)
+    if done.returncode == 77 or 'Operation not permitted' in done.stderr:
+        pytest.skip('cannot mount a small tmpfs here')
+    assert done.returncode == 2, done.stderr
+    errors = [line for line in done.stderr.splitlines() if ': error: ' in line]
+    assert len(errors) == 1 and 'Traceback' not in done.stderr, done.stderr
+    assert errors[0].startswith(f'monet triangulate: error: {out}'), errors[0]
+    assert errors[0].endswith('no space left on device (disk full)'), errors[0]

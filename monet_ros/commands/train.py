@@ -84,6 +84,22 @@ def config_from_args(args):
     return TrainConfig(**values)
 
 
+RUN_FILES = ('model.pt', 'trainer_state.pt')
+
+
+def check_not_a_run(out, resume):
+    """Without --resume, `out` must not hold a training run already (RUN_FILES): training
+    into it replaced that run's model and state and mixed its checkpoints/ with the new
+    run's. ConfigError naming --out and what it holds."""
+    from monet_ros.config import ConfigError
+
+    held = [name for name in RUN_FILES if (Path(out) / name).exists()]
+    if held and not resume:
+        raise ConfigError('monet train', 'out', f'{out}: holds a training run '
+                          f'({", ".join(held)}); not overwriting: --resume continues it, or '
+                          'choose a new folder')
+
+
 def run(args):
     from monet_ros.commands.common import check_threads
     from monet_ros.commands.labels import label_options_from_args
@@ -124,6 +140,7 @@ def run(args):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
+    check_not_a_run(out, args.resume)
     skeleton = load_skeleton(args.skeleton)
     said = skeleton_line(skeleton, args.skeleton)
     if args.resume and (out / 'trainer_state.pt').exists():    # before any network is built

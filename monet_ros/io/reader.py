@@ -136,6 +136,31 @@ class ReadReport:
         return None if self.ok else f'reading {what}: {self.summary()}'
 
 
+def _scan_channels(path):
+    """(topic, message type, offered QoS) of every channel record of an MCAP file read
+    from start to end: the topics of a file without a usable summary (a recording cut
+    short by a crash or a kill has no footer and, from rosbag2, no metadata.yaml either).
+    Reads the whole file; damage is left to the read that follows (its report)."""
+    scan = McapScan(path, ReadReport([path]), False)
+    schemas, found = {}, {}
+    for event in scan.events(lambda offset: False):
+        if event[0] in ('schema', 'channel'):
+            defs = [event]
+        elif event[0] == 'message':
+            continue
+        else:
+            defs = event[2]
+        for kind, record in defs:
+            if kind == 'schema':
+                schemas[record.id] = record
+            else:
+                found.setdefault(record.id, record)
+    for ch in found.values():
+        schema = schemas.get(ch.schema_id)
+        yield (ch.topic, schema.name if schema else '',
+               ch.metadata.get('offered_qos_profiles', ''))
+
+
 def _natural_key(path):
     return [int(s) if s.isdigit() else s for s in re.split(r'(\d+)', path.name)]
 
@@ -321,6 +346,10 @@ class BagReader:
                 summary = None
             if summary is None:
                 summary_ok = False
+                if self.metadata is None:        # nothing else lists this file's topics
+                    for name, msgtype, profiles in _scan_channels(f):
+                        types.setdefault(name, msgtype)
+                        qos.setdefault(name, profiles)
                 continue
             for cid, ch in summary.channels.items():
                 schema = summary.schemas.get(ch.schema_id)
@@ -328,8 +357,9 @@ class BagReader:
                 qos.setdefault(ch.topic, ch.metadata.get('offered_qos_profiles', ''))
                 if summary.statistics is not None:
                     counts[ch.topic] += summary.statistics.channel_message_counts.get(cid, 0)
-        # the listing is complete when metadata.yaml or every file's summary gave it
-        self.topics_complete = self.metadata is not None or summary_ok
+        # the listing is complete when metadata.yaml, every file's summary or a scan of
+        # the files without one gave it
+        self.topics_complete = True
         for topic, msgtype in types.items():
             if topic not in topics:
                 topics[topic] = TopicInfo(topic, msgtype, counts[topic] if summary_ok else None,

@@ -77,6 +77,15 @@ def _rig_file_sized_by(path, rig_file, units=None):
         return load_rig(rig_file, image_size=size, units=units)
 
 
+def _why_unread(report, topics):
+    """' (why: ...)' from a read's report: the first skip reason of `topics`, then the
+    first file-level damage (a truncated file, a bad record), so that a damaged bag is
+    named as damaged and not only as lacking messages; '' when the report holds neither."""
+    reasons = [f'{t}: {report.skip_reasons[t]}' for t in topics if t in report.skip_reasons]
+    reasons = reasons[:1] + report.errors[:1]
+    return f' (why: {"; ".join(reasons)})' if reasons else ''
+
+
 def rig_from_bag(path, rig_file=None, world_frame=None, camera_info_topics=None, units=None):
     """list[Camera] of a bag, sorted by name (see rig_and_frame_from_bag)."""
     return rig_and_frame_from_bag(path, rig_file, world_frame, camera_info_topics, units)[0]
@@ -138,7 +147,7 @@ def rig_and_frame_from_bag(path, rig_file=None, world_frame=None, camera_info_to
     missing = [t for t in info_topics if t not in infos]
     if missing:
         raise RigFromBagError(f'bag {reader.path}: no readable CameraInfo message on '
-                              f'{", ".join(missing)}')
+                              f'{", ".join(missing)}{_why_unread(reader.report, missing)}')
     cameras, roots = [], {}
     for topic in info_topics:
         msg = infos[topic]

@@ -7,6 +7,7 @@ monet_ros.labels_import and checked by the ONE validator resolve_labels; every c
 written at once with write_labels (a temporary file renamed over the table: atomic).
 """
 from dataclasses import dataclass
+import os
 from pathlib import Path
 import secrets
 import threading
@@ -117,6 +118,7 @@ class LabelSession:
         if self.labels_path.is_dir():
             raise ConfigError('monet label', 'labels', f'{self.labels_path}: is a folder, '
                               'expected a labels CSV file')
+        self._check_savable()
         self.skeleton = load_skeleton(skeleton)
         self.keypoints = tuple(self.skeleton.keypoints)
         index = recording_index(rec, rig=rig, camera_map=self.options.camera_map,
@@ -394,6 +396,25 @@ class LabelSession:
                             rows.append((stamp, cam, self.keypoints[c], u, v, subject))
         self.labels_path.parent.mkdir(parents=True, exist_ok=True)
         return write_labels(self.labels_path, rows)
+
+    def _check_savable(self):
+        """Every change is saved at once to labels_path (atomically: a new file in its
+        folder, renamed over it), so that folder must take a new file: checked before the
+        server starts (ConfigError naming --labels), not at the first click of a session."""
+        import tempfile
+
+        from monet_ros.error_text import os_error_text
+
+        folder = self.labels_path.parent
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            handle, probe = tempfile.mkstemp(prefix=f'.{self.labels_path.name}.',
+                                             suffix='.probe', dir=folder)
+            os.close(handle)
+            os.unlink(probe)
+        except OSError as error:
+            raise ConfigError('monet label', 'labels', f'{self.labels_path}: cannot be saved '
+                              f'({os_error_text(error)})') from None
 
     def labelled_instants(self):
         """Indices of instants with at least one label (of any subject)."""

@@ -144,3 +144,19 @@ def test_no_labels_error_says_what_is_missing(trained, repo_root, tmp_path):
         'no labelled instant to train on; 1 labelled instants (indices [20]) of 24, 1 of them '
         'in the last 25% of the instants, held out by --eval-fraction 0.25 (the default 0 '
         'trains on every instant)')
+
+
+def test_training_into_a_run_without_resume_is_refused(trained, repo_root):
+    """`monet train --out RUN` again without --resume replaced RUN's model.pt and
+    trainer_state.pt by a new run's and mixed the two runs' checkpoints/: now exit 2, one
+    line naming --out and what it holds, and the run left as it was; --resume continues."""
+    data, mouse3, out, _ = trained
+    before = {p.name: p.read_bytes() for p in out.rglob('*.pt')}
+    again = monet(repo_root, 'train', data, '--out', out, '--skeleton', mouse3, '--steps', 1,
+                  *TRAIN)
+    assert again.returncode == 2, again.stderr
+    line, = again.stderr.splitlines()
+    assert line == (f"monet train: error: --out: parameter 'out': {out}: holds a training run "
+                    '(model.pt, trainer_state.pt); not overwriting: --resume continues it, or '
+                    'choose a new folder')
+    assert {p.name: p.read_bytes() for p in out.rglob('*.pt')} == before

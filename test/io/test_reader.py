@@ -176,3 +176,36 @@ def test_unknown_schemas_encodings_and_bad_messages_are_reported(tmp_path):
     # a missing topic is reported, the others still come
     got = list(reader.messages(topics=['/img', '/nothere']))
     assert len(got) == 2 and reader.report.missing_topics == ['/nothere']
+
+
+def test_a_recording_cut_short_without_metadata_lists_its_topics(tmp_path):
+    """rosbag2 writes metadata.yaml and the MCAP footer (summary) when a recording ends: a
+    recorder killed or a power cut leaves neither. Its messages are readable from the
+    start, but the topic listing came from those two only, so the recording read as having
+    no topics ('no CameraInfo topic'); the topics now come from the channel records."""
+    from monet_ros.io import rig_from_bag
+
+    cams = [make_camera(f'cam{i}', seed=i) for i in range(2)]
+    with BagWriter(tmp_path / 'b', chunk_size=4000) as bag:
+        bag.write_tf_static(T0, cams)
+        for k in range(4):
+            for cam in cams:
+                bag.write_camera_info(f'/{cam.name}/camera_info', T0 + k, cam,
+                                      f'{cam.name}_optical')
+                bag.write_image(f'/{cam.name}/image_raw', T0 + k,
+                                np.zeros((cam.height, cam.width, 3), np.uint8),
+                                f'{cam.name}_optical')
+    whole = open_bag(tmp_path / 'b')
+    want = {t: (info.msgtype, info.count) for t, info in whole.topics.items()}
+    total = len(list(whole.messages(decode=False)))
+    (tmp_path / 'b' / 'metadata.yaml').unlink()
+    mcap = next((tmp_path / 'b').glob('*.mcap'))
+    mcap.write_bytes(mcap.read_bytes()[:-100])          # the footer and the summary's end
+    for path in (tmp_path / 'b', mcap):                 # the folder, and the bare file
+        reader = open_bag(path)
+        assert {t: info.msgtype for t, info in reader.topics.items()} == \
+            {t: msgtype for t, (msgtype, _) in want.items()}
+        assert all(info.count is None for info in reader.topics.values())   # not known
+        assert len(list(reader.messages(decode=False))) == total
+        assert not reader.report.ok and 'no usable summary' in reader.report.summary()
+        assert [c.name for c in rig_from_bag(path)] == ['cam0', 'cam1']

@@ -97,3 +97,30 @@ def test_rig_file_overrides_the_bag(tmp_path):
     assert [c.name for c in rig] == ['cam0', 'cam1']
     for got, cam in zip(rig, cams):
         assert_same_camera(got, cam)
+
+
+def test_a_truncated_bag_is_named_as_truncated(tmp_path):
+    """A recording cut short (a crashed recorder, a partial copy) whose one chunk runs past
+    the end of the file was refused as 'no readable CameraInfo message' only, as if the
+    topics were empty: the line now carries the reader's own finding (truncated)."""
+    cams = [make_camera(f'cam{i}', seed=i) for i in range(2)]
+    with BagWriter(tmp_path / 'b') as bag:
+        bag.write_tf_static(T0, cams)
+        for k in range(3):
+            for cam in cams:
+                bag.write_camera_info(f'/{cam.name}/camera_info', T0 + k, cam,
+                                      f'{cam.name}_optical')
+                bag.write_image(f'/{cam.name}/image_raw', T0 + k,
+                                np.zeros((cam.height, cam.width, 3), np.uint8),
+                                f'{cam.name}_optical')
+    mcap = next((tmp_path / 'b').glob('*.mcap'))
+    data = mcap.read_bytes()
+    mcap.write_bytes(data[:len(data) // 2])
+    reader = open_bag(tmp_path / 'b')
+    with pytest.raises(RigFromBagError) as error:
+        rig_from_bag(reader)
+    line = str(error.value)
+    assert '\n' not in line
+    assert 'no readable CameraInfo message on /cam0/camera_info, /cam1/camera_info' in line
+    assert str(mcap) in line and 'truncated' in line
+    assert reader.report.errors[0] in line      # the reader's finding, word for word

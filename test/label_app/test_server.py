@@ -135,7 +135,7 @@ def test_a_port_in_use_is_one_line(raw_rec, tmp_path):
 
 @pytest.mark.parametrize('case', ['no_recording', 'bad_import', 'labels_folder', 'bad_port',
                                   'bad_labels', 'bad_model', 'model_skeleton',
-                                  'bad_allow_host'])
+                                  'bad_allow_host', 'labels_unsavable'])
 def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
     bag, model, rig, stamps = raw_rec
     labels = tmp_path / 'labels.csv'
@@ -150,7 +150,13 @@ def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
                             tmp_path / 'sk.yaml'], ['skeleton']),
         'bad_allow_host': ([bag, '--labels', labels, '--allow-host', 'http://studio:80/'],
                            ['allow_host']),
+        # a labels file that cannot be saved (its folder would be under a file): the
+        # server started and every click's autosave failed
+        'labels_unsavable': ([bag, '--labels', tmp_path / 'blocker' / 'labels.csv'],
+                             [f"'labels': {tmp_path / 'blocker' / 'labels.csv'}: cannot be "
+                              'saved']),
     }[case]
+    (tmp_path / 'blocker').write_text('a file, not a folder')
     (tmp_path / 'sk.yaml').write_text('keypoints: [a, b]\n')
     if case == 'bad_labels':
         labels.write_text(f'stamp_ns,camera,keypoint,u,v\n{stamps[0]},cam_9,head,1,2\n')
