@@ -1,6 +1,7 @@
 """The CPU cores this process may use, shared out between workers running at once: one
 rule for `monet process --jobs` (threads per job) and `monet pipeline`'s detector
-processes (threads per process); and the CPU's name, which every benchmark figure states."""
+processes (threads per process); the CPU's name, which every benchmark figure states; and
+the memory available, which a command checks before an allocation it can size."""
 import os
 import platform
 
@@ -22,6 +23,20 @@ def cpu_model(cpuinfo='/proc/cpuinfo'):
     except OSError:
         pass
     return platform.processor() or platform.machine() or 'unknown CPU'
+
+
+def available_memory(meminfo='/proc/meminfo'):
+    """Bytes of memory available to start new work without swapping (MemAvailable of
+    /proc/meminfo: free memory plus what the kernel can reclaim), or None where it is not
+    known (not Linux)."""
+    try:
+        with open(meminfo) as f:
+            for line in f:
+                if line.startswith('MemAvailable:'):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
 
 
 def threads_each(workers, cores=None):

@@ -56,3 +56,14 @@ def test_cpu_model_reads_the_model_name_line(tmp_path):
     assert cpu_model(info) == 'Intel(R) Xeon(R) Gold 6338 CPU @ 2.00GHz'
     missing = cpu_model(tmp_path / 'absent')          # not Linux: still a name, never raises
     assert isinstance(missing, str) and missing
+
+
+def test_available_memory_reads_memavailable(tmp_path):
+    from monet_ros.cores import available_memory
+    info = tmp_path / 'meminfo'
+    info.write_text('MemTotal:       24576000 kB\nMemFree:          512000 kB\n'
+                    'MemAvailable:   16384000 kB\nBuffers:           1000 kB\n')
+    assert available_memory(info) == 16384000 * 1024
+    assert available_memory(tmp_path / 'absent') is None        # not Linux: unknown
+    here = available_memory()
+    assert here is None or here > 0

@@ -17,10 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
+from monet_ros.cores import available_memory
 from monet_ros.labels import LabelError, read_label_rows
 from monet_ros.labels_import import ImportResult, import_labels
 
 FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'openpose', 'frames')
+# `monet triangulate --subjects 2` peaked at ~125 bytes of memory per (frame, camera,
+# keypoint) of the frame span (2.4 GB for 200 001 frames x 4 cameras x 24 keypoints, 4.6 GB
+# for 400 001), every frame of the span held whether detected or not
+BYTES_PER_ENTRY = 128
 READ = ('DeepLabCut / Lightning Pose prediction .csv or .h5 per camera, SLEAP analysis .h5 '
         'or .slp per camera, an anipose pose-2d folder, OpenPose / Pose2Sim JSON folders (one per '
         'camera), or a frame,camera,keypoint,u,v[,score] .csv')
@@ -144,6 +149,7 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
     frame = np.array([r.frame for r in rows], np.int64)
     first, last = int(frame.min()), int(frame.max())
     T, V, C = last - first + 1, len(cameras), len(names)
+    _check_span(rows, frame, T, V, C)
     cindex = {c: i for i, c in enumerate(cameras)}
     t = frame - first
     v = np.array([cindex[r.camera] for r in rows])
@@ -173,6 +179,25 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
     return Points2D(frames=np.arange(first, last + 1), cameras=cameras, keypoints=names,
                     points=points, score=score, fmt=fmt, rows=len(rows), nan_rows=nan_rows,
                     unscored=int(unscored.sum()), notes=tuple(notes))
+
+
+def _check_span(rows, frame, T, V, C, available=None):
+    """The arrays cover every frame of the span (T frames): refuse a span whose
+    triangulation would not fit in the memory available (BYTES_PER_ENTRY per frame, camera
+    and keypoint; cores.available_memory, or `available` bytes), e.g. one mistyped frame
+    number far beyond the others. LabelError naming the row whose frame lies farthest from
+    the median frame, the span, how many frames have detections, and the sizes."""
+    available = available_memory() if available is None else available
+    need = T * V * C * BYTES_PER_ENTRY
+    if available is None or need <= available:
+        return
+    far = int(np.argmax(np.abs(frame - np.median(frame))))
+    r = rows[far]
+    raise LabelError(f'{r.place}: field frame: {r.frame} makes the frames span '
+                     f'{int(frame.min())}..{int(frame.max())} ({T} frames, '
+                     f'{len(np.unique(frame))} with detections), about {need / 1e9:.3g} GB to '
+                     f'triangulate, more than the {available / 1e9:.3g} GB of memory '
+                     'available: fix the frame number, or split the table')
 
 
 def _check_lengths(rows, frame_counts=None):

@@ -47,3 +47,32 @@ def test_duplicates_and_formats_are_named(tmp_path):
         detect_format([other])
     with pytest.raises(LabelError, match='no such file'):
         read_points2d(tmp_path / 'missing.csv', ['a'])
+
+
+def test_a_frame_span_too_large_for_memory_is_refused_naming_the_row(tmp_path):
+    """One mistyped frame number far beyond the others would make the arrays span every
+    frame between: refused before any allocation, naming the row (not an out-of-memory
+    kill); a span that fits is read."""
+    far = tmp_path / 'far.csv'
+    far.write_text('frame,camera,keypoint,u,v\n0,a,head,1,2\n1,a,head,1,2\n'
+                   '1000000000000,b,head,3,4\n2,b,head,3,4\n')
+    with pytest.raises(LabelError, match=r'far\.csv:4: field frame: 1000000000000 makes the '
+                       r'frames span 0\.\.1000000000000 \(1000000000001 frames, 4 with '
+                       r'detections\), about 2\.56e\+05 GB to triangulate, more than the'):
+        read_points2d(far, ['a', 'b'])
+    near = tmp_path / 'near.csv'
+    near.write_text('frame,camera,keypoint,u,v\n0,a,head,1,2\n99,b,head,3,4\n')
+    assert read_points2d(near, ['a', 'b']).points.shape == (100, 2, 1, 2)
+
+
+def test_the_span_check_compares_the_arrays_with_the_memory_available(tmp_path):
+    from monet_ros.labels_import.points2d import BYTES_PER_ENTRY, _check_span
+    table = tmp_path / 'rows.csv'
+    table.write_text('frame,camera,keypoint,u,v\n0,a,head,1,2\n1,a,head,1,2\n9,a,head,1,2\n')
+    rows = read_label_rows(table, points=True)
+    frame = np.array([0, 1, 9])
+    need = 10 * 3 * 5 * BYTES_PER_ENTRY          # T x V x C x bytes per entry
+    _check_span(rows, frame, 10, 3, 5, available=need)      # fits exactly
+    with pytest.raises(LabelError, match=r'rows\.csv:4: field frame: 9 makes the frames span '
+                       r'0\.\.9'):
+        _check_span(rows, frame, 10, 3, 5, available=need - 1)
