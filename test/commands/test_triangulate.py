@@ -104,6 +104,8 @@ def test_dlc_csv_and_points_table_give_the_triangulation_of_the_same_points(
     code, text, _ = run([table, '--rig', rig, *MAP, '--out', tmp_path / 'b',
                          '--confidence-threshold', '0.3', '--fps', 60], capsys)
     assert code == 0, text
+    # the summary counts the table's rows and names its format (not 'N frames rows')
+    assert f'keypoints from {det[..., 0].size} rows of the frames format;' in text, text
     b = read_anipose_csv(tmp_path / 'b' / 'keypoints3d.csv')
     np.testing.assert_array_equal(b['X'], a['X'])
     np.testing.assert_array_equal(b['score'], a['score'])
