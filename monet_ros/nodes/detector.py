@@ -687,8 +687,8 @@ class DetectorNode(Node):
         the other transport has one). Warned once per topic when it never had a publisher
         (3 s after start) or lost it while another image topic of this node still has one
         (a camera gone); when every image topic lost its publishers together (the recording
-        ended: the player finished, or the whole source stopped) it is said once at info
-        level, not warned. A lost publisher is judged 2 s after it went (the graph settled:
+        ended: the player finished, or the whole source stopped) that is said in one line at
+        info level, not warned. A lost publisher is judged 2 s after it went (the graph settled:
         a player's topics go one by one). /diagnostics carry the reason either way."""
         topic = self.resolve_topic_name(slot.image_topic)
         now = time.monotonic()
@@ -707,14 +707,16 @@ class DetectorNode(Node):
             reason += (f' (but {other} has one: transport:='
                        f'{"raw" if topic.endswith("/compressed") else "compressed"})')
         if topic not in self.unpublished:
-            self.unpublished.add(topic)
-            ended = topic in self.published and not any(
-                self.count_publishers(self.resolve_topic_name(s.image_topic))
-                for s in self.slots)
-            if ended:
-                self.get_logger().info(f'{reason} any more, as on every image topic of this '
-                                       'node: the recording ended or the source stopped')
+            topics = [self.resolve_topic_name(s.image_topic) for s in self.slots]
+            if topic in self.published and not any(map(self.count_publishers, topics)):
+                # one line for them all (those not said yet)
+                self.get_logger().info(
+                    f'no publisher on {", ".join(t for t in topics if t not in self.unpublished)}'
+                    ' any more, nor on any image topic of this node: the recording ended or '
+                    'the source stopped')
+                self.unpublished.update(topics)
             else:
+                self.unpublished.add(topic)
                 self.get_logger().warning(reason)
         return reason
 
