@@ -130,7 +130,7 @@ def test_sleap_analysis_files_give_the_same_3d(pose2sim, tmp_path, capsys):
     code, text, _ = run([*paths, '--rig', rig, *MAP, '--out', tmp_path / 's', '--fps', 60],
                         capsys)
     assert code == 0, text
-    assert 'sleap rows' in text
+    assert 'rows of the sleap format' in text
     s = read_anipose_csv(tmp_path / 's' / 'keypoints3d.csv')
     ref = read_anipose_csv(tmp_path / 'ref' / 'keypoints3d.csv')
     np.testing.assert_array_equal(s['X'], ref['X'])
@@ -152,7 +152,7 @@ def test_anipose_pose_2d_folder_gives_the_same_3d(pose2sim, tmp_path, capsys):
     code, text, _ = run([pose, '--rig', rig, *MAP, '--out', tmp_path / 'a', '--fps', 60],
                         capsys)
     assert code == 0, text
-    assert 'anipose rows' in text
+    assert 'rows of the anipose format' in text
     np.testing.assert_array_equal(read_anipose_csv(tmp_path / 'a' / 'keypoints3d.csv')['X'],
                                   read_anipose_csv(tmp_path / 'ref' / 'keypoints3d.csv')['X'])
 
