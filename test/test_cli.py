@@ -42,8 +42,10 @@ def test_abbreviations_still_parse(capsys, tmp_path):
 
 
 @pytest.mark.parametrize('extra, start', [
-    (['--fps', '-1'], "monet triangulate: error: --fps: parameter 'fps': must be > 0"),
-    (['--fps=-1'], "monet triangulate: error: --fps: parameter 'fps': must be > 0"),
+    (['--fps', '-1'], "monet triangulate: error: --fps: parameter 'fps': must be a finite "
+     "number > 0"),
+    (['--fps=-1'], "monet triangulate: error: --fps: parameter 'fps': must be a finite "
+     "number > 0"),
     # the setting is named, but its value was not typed as --fps: no option is named
     (['--filter', 'kalman'], "monet triangulate: error: parameter 'fps': --filter kalman"),
 ])

@@ -32,6 +32,7 @@ ChArUco or checkerboard images / videos.
   per camera and pair, the board's geometry triangulated back, loud warnings, and a PNG
   report (default: OUT's name + _report.png).
 """
+import os
 from pathlib import Path
 import sys
 
@@ -235,8 +236,13 @@ def _check_args(args):
     out = Path(args.out)
     if out.is_dir():
         raise ValueError(f'--out {out}: is a folder (give a file name)')
-    if not out.parent.is_dir():
-        raise ValueError(f'--out {out}: folder {out.parent} does not exist')
+    # its folder is made when the outputs are written (as other commands make their --out);
+    # here: the nearest existing folder above it is a folder this user can write in
+    above = next(p for p in (out.parent, *out.parent.parents) if p.exists() or p.is_symlink())
+    if not above.is_dir():
+        raise ValueError(f'--out {out}: {above} is not a folder')
+    if not os.access(above, os.W_OK | os.X_OK):
+        raise ValueError(f'--out {out}: folder {above} is not writable')
 
 
 def run(args):
@@ -303,6 +309,7 @@ def run(args):
                 'error_px': float(result.errors.mean()),
                 'board_square_triangulated': geometry['median']}
     written = []
+    out.parent.mkdir(parents=True, exist_ok=True)
     if args.format in ('anipose', 'both'):
         save_anipose_toml(out, cameras, metadata)
         written.append(out)

@@ -83,6 +83,30 @@ def check_new_output(path, owner, field='out'):
 
 
 @contextmanager
+def made_output_dir(path):
+    """Make the output folder `path` (and its missing parents) for a command that writes
+    into it as it goes; yields it. When the command fails or is stopped (any exception,
+    Ctrl-C / SIGTERM as KeyboardInterrupt) the folders made here that are still empty are
+    removed (deepest first), so a stopped run leaves no empty folder behind; a folder that
+    existed before is kept. OSError naming the path when it cannot be made."""
+    path = Path(path)
+    made, folder = [], path
+    while not (folder.exists() or folder.is_symlink()) and folder != folder.parent:
+        made.append(folder)
+        folder = folder.parent
+    path.mkdir(parents=True, exist_ok=True)
+    try:
+        yield path
+    except BaseException:
+        for folder in made:
+            try:
+                folder.rmdir()                 # only when empty
+            except OSError:
+                break
+        raise
+
+
+@contextmanager
 def atomic_output_dir(path):
     """Yield a staging folder to write an output folder into; on success it is renamed to
     `path` (which must not exist, or be an empty folder), on any failure (or Ctrl-C) it is

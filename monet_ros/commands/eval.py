@@ -70,14 +70,7 @@ def load_results_json(path):
 
 
 def run(args):
-    import numpy as np
-
-    from monet_ros.commands.common import check_threads
-    from monet_ros.evaluation import markdown_table, write_report
-    from monet_ros.evaluation.evaluate import evaluate_detector
-    from monet_ros.learning.recording import load_recording
-    from monet_ros.learning.trainer import crop_boxes
-    from monet_ros.models.detector import Detector
+    from monet_ros.commands.common import check_threads, made_output_dir
     from monet_ros.models.device import check_device
 
     check_threads('monet eval', args.threads)
@@ -85,7 +78,21 @@ def run(args):
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(20, 'output is a file, not a folder', str(out))
-    out.mkdir(parents=True, exist_ok=True)        # an unwritable place is named at once
+    # made now (an unwritable place is named at once); removed again when the run fails or
+    # is stopped before writing into it
+    with made_output_dir(out):
+        return _run(args, out, device)
+
+
+def _run(args, out, device):
+    import numpy as np
+
+    from monet_ros.evaluation import markdown_table, write_report
+    from monet_ros.evaluation.evaluate import evaluate_detector
+    from monet_ros.learning.recording import load_recording
+    from monet_ros.learning.trainer import crop_boxes
+    from monet_ros.models.detector import Detector
+
     if args.reference:
         from monet_ros.commands.eval_reference import run_reference
         return run_reference(args)

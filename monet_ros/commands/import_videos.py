@@ -121,7 +121,7 @@ def _check_options(fps, resize, quality, start_ns, max_frames, timing):
     if not 0 < resize <= 1:
         raise ImportVideoError(f'--resize must be in (0, 1], got {resize}')
     if fps is not None and not (np.isfinite(fps) and fps > 0):
-        raise ImportVideoError(f'--fps must be positive, got {fps}')
+        raise ImportVideoError(f'--fps must be a finite number > 0 (frames/s), got {fps}')
     if not 1 <= int(quality) <= 100:
         raise ImportVideoError(f'--quality must be in 1..100, got {quality}')
     if int(start_ns) < 0:

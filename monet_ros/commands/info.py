@@ -27,6 +27,24 @@ def _ranges(indices):
     return ', '.join(out)
 
 
+def _training_note(keypoints, skeleton):
+    """Without --skeleton (the labels' keypoints are the file's): which of them `monet
+    train`'s default skeleton lacks, whose rows it refuses (a line for the report), or ''
+    when it has them all. With --skeleton the labels were checked against it already."""
+    if skeleton:
+        return ''
+    from monet_ros.commands.train import DEFAULT_SKELETON
+    from monet_ros.skeleton import load_skeleton
+    known = set(load_skeleton(DEFAULT_SKELETON).keypoints)
+    outside = [k for k in keypoints if k not in known]
+    if not outside:
+        return f"every keypoint of the file is in {DEFAULT_SKELETON}, monet train's default"
+    return (f"{len(outside)} of the file's {len(keypoints)} keypoints are not in "
+            f"{DEFAULT_SKELETON}, monet train's default skeleton, which refuses their rows: "
+            f'{", ".join(outside)} (give monet train --skeleton with them, or --keypoint-map '
+            'SRC=DST)')
+
+
 def add_arguments(parser):
     from monet_ros.commands.labels import add_label_arguments
     parser.add_argument('rec', help='recording: rosbag2 folder, .mcap or `monet synth` folder')
@@ -62,6 +80,7 @@ def run(args):
                                                   for r in rows)))
             labels, report = resolve_labels(rows, index.stamps, index.cameras, keypoints,
                                             options, valid=index.complete)
+            training = _training_note(keypoints, args.skeleton)
     except (LabelError, RecordingError, SkeletonError, ValueError, OSError) as error:
         print(f'monet info: {error}', file=sys.stderr)
         return 2
@@ -93,6 +112,8 @@ def run(args):
         frames = sorted(where[s] for s in labels.stamps)
         print(f'labels: {args.labels}: {report.summary()}', file=out)
         print(f'labelled instants ({len(frames)}): {_ranges(frames) or "none"}', file=out)
+        if training:
+            print(f'skeleton: {training}', file=out)
         if labels.subjects not in ([], [0]):
             print(f'subjects: {", ".join(map(str, labels.subjects))} (the labels\' subject '
                   'column; ids within an instant)', file=out)

@@ -78,6 +78,21 @@ def _imports(items):
     return out
 
 
+def _bind_blame(error):
+    """The option a failed bind is the fault of: 'host' when the address is not one of this
+    machine or not a name that resolves (EADDRNOTAVAIL, a resolver error), else 'port' (in
+    use, privileged)."""
+    import errno
+    import socket
+    # socket.create_server re-raises getaddrinfo's errors as OSError with their (negative)
+    # EAI_* code
+    resolver = isinstance(error, socket.gaierror) or (isinstance(error.errno, int)
+                                                      and error.errno < 0)
+    if resolver or error.errno in (errno.EADDRNOTAVAIL, errno.EAFNOSUPPORT):
+        return 'host'
+    return 'port'
+
+
 def run(args):
     from monet_ros.commands.labels import label_options_from_args
     from monet_ros.config import ConfigError
@@ -115,7 +130,8 @@ def run(args):
     try:     # our own socket: its error names the address (werkzeug's would exit 1)
         listener = socket.create_server((args.host, args.port))
     except OSError as error:
-        raise ConfigError('monet label', 'port', f'cannot listen on {args.host}:{args.port} '
+        raise ConfigError('monet label', _bind_blame(error),
+                          f'cannot listen on {args.host}:{args.port} '
                           f'({error.strerror or error})') from None
     port = listener.getsockname()[1]                   # --port 0: the one given
     app = create_app(session, allowed_hosts(args.host, port, args.allow_host), predictor)

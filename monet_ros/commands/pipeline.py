@@ -405,6 +405,12 @@ def run(args):
     score = None
     from monet_ros.commands.common import check_subject_only_options
     check_subject_only_options(args, args.subjects > 1, 'monet pipeline')
+    from monet_ros.commands.common import options_named
+    from monet_ros.fusion import FusionConfig
+    with options_named(FusionConfig, {'--threshold-px': 'threshold_px',
+                                      '--confidence-threshold': 'confidence_threshold'}):
+        FusionConfig(threshold_px=args.threshold_px,   # the option named, before any node
+                     confidence_threshold=args.confidence_threshold)
     if args.subjects > 1:
         if not args.bag:
             raise ConfigError('monet pipeline', 'subjects', 'the demo is one subject; give '

@@ -128,9 +128,9 @@ def run_many(args, options, work):
     """Process args.bag (several recordings) with args.jobs workers. work:
     process.process_recording; options: its keyword arguments shared by every recording
     (model, rig, config, ...).
-    Returns the exit code: 0, or 2 if any recording failed."""
-    from tqdm import tqdm
-
+    Returns the exit code: 0, or 2 if any recording failed. --out (the parent of one
+    folder per recording) is made; removed again when the run is stopped (Ctrl-C /
+    SIGTERM) or fails before a folder was kept in it."""
     if args.jobs < 1 or args.jobs > 256:
         raise ConfigError('monet process', 'jobs', f'must be in 1..256, got {args.jobs}')
     out = Path(args.out)
@@ -144,7 +144,15 @@ def run_many(args, options, work):
     device = None if args.device in (None, '', 'auto') else args.device
     jobs = plan_jobs(args.bag, out, args.jobs, device, args.threads, cuda_devices,
                      usable_cores())
-    out.mkdir(parents=True, exist_ok=True)
+    from monet_ros.commands.common import made_output_dir
+    with made_output_dir(out):         # removed again when stopped before anything was kept
+        return _run_jobs(args, options, work, jobs, out)
+
+
+def _run_jobs(args, options, work, jobs, out):
+    """run_many's workers: the jobs run, the summary printed; the exit code."""
+    from tqdm import tqdm
+
     results = {}
     context = multiprocessing.get_context('spawn')
     pool = ProcessPoolExecutor(max_workers=min(args.jobs, len(jobs)), mp_context=context,

@@ -28,6 +28,11 @@ class TrainRunOptions:
         validate_config(self)
 
 
+# the skeleton of `monet train` without --skeleton (`monet info --labels` names the label
+# keypoints it lacks)
+DEFAULT_SKELETON = 'human14'
+
+
 def add_arguments(parser):
     from monet_ros.commands.common import add_rig_units_argument
     parser.add_argument('data', help='recording: `monet synth` output folder, rosbag2 folder '
@@ -40,7 +45,8 @@ def add_arguments(parser):
                         "data folder's labels.csv); checked against the recording, see "
                         '--camera-map / --skip-bad-labels')
     parser.add_argument('--ground-truth', help='ground_truth.npz (for ground-truth crop boxes)')
-    parser.add_argument('--skeleton', default='human14', help='skeleton preset or YAML file')
+    parser.add_argument('--skeleton', default=DEFAULT_SKELETON,
+                        help='skeleton preset or YAML file')
     parser.add_argument('--max-instants', type=int, default=0,
                         help='read at most this many instants (0 = all)')
     parser.add_argument('--resume', action='store_true',

@@ -121,7 +121,8 @@ def triangulate_points(paths, rig, out, fmt='auto', fps=None, skeleton=None, cam
     filter_config = filter_config or FilterConfig()
     notes = []
     if fps is not None and not (np.isfinite(fps) and fps > 0):
-        raise ConfigError('monet triangulate', 'fps', f'must be > 0, got {fps}')
+        raise ConfigError('monet triangulate', 'fps', f'must be a finite number > 0 (frames/s), '
+                          f'got {fps}')
     if fps is None:
         if filter_config.method != 'none':
             raise ConfigError('monet triangulate', 'fps', f'--filter {filter_config.method} '
@@ -256,13 +257,19 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
                          for f, p in written.items()})
 
 
+def _rows_text(fig):
+    """'8359 rows of the frames format' (the format's name is not an adjective of rows:
+    'frames rows' read as a typo)."""
+    return f'{fig["rows"]} rows of the {fig["fmt"]} format'
+
+
 def _print_subjects(fig, name):
     s = fig['subjects']
     T = fig['frames']
     print(f'{name}: {T} frames (from frame {fig["first_frame"]}) x {len(fig["cameras"])} '
           f'cameras ({", ".join(fig["cameras"])}) x {len(fig["keypoints"])} keypoints, '
-          f'{len(fig["instance_names"])} instance slots per camera from {fig["rows"]} '
-          f'{fig["fmt"]} rows; 3D in {fig["units"]}, the rig\'s unit')
+          f'{len(fig["instance_names"])} instance slots per camera from {_rows_text(fig)}; '
+          f'3D in {fig["units"]}, the rig\'s unit')
     print(f'{name}: subjects: {s.identities_text()}; association + tracking '
           f'{1e3 * s.seconds / max(T, 1):.2f} ms/frame')
     print(f'{name}: skipped: {s.unmatched} of {s.instances} instances matched in no other '
@@ -310,7 +317,7 @@ def run(args):
     n = fig['counts']
     print(f'{name}: {fig["frames"]} frames (from frame {fig["first_frame"]}) x '
           f'{len(fig["cameras"])} cameras ({", ".join(fig["cameras"])}) x '
-          f'{len(fig["keypoints"])} keypoints from {fig["rows"]} {fig["fmt"]} rows; '
+          f'{len(fig["keypoints"])} keypoints from {_rows_text(fig)}; '
           f'{n["triangulated"]} of {n["points"]} points triangulated (3D in '
           f'{fig["units"]}, the rig\'s unit)')
     print(f'{name}: source frames {fig["first_frame"]}..{fig["last_frame"]} kept in the '

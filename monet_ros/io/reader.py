@@ -20,7 +20,7 @@ import re
 import yaml
 
 from .fast_cdr import fast_decoder
-from .mcap_scan import McapScan
+from .mcap_scan import MAGIC, McapScan
 
 
 class BagError(ValueError):
@@ -255,6 +255,14 @@ def _compare_with_summary(summary, read_per_channel, want, path, report):
                                'lists could not be read (damaged records; see the errors)', lost)
 
 
+def _starts_like_mcap(path):
+    """Whether the file's first bytes are the MCAP magic (or its start, for a file cut
+    shorter than it)."""
+    with open(path, 'rb') as f:
+        head = f.read(len(MAGIC))
+    return MAGIC.startswith(head)
+
+
 class BagReader:
     """Reader of one bag (see open_bag). Re-iterable; `report` describes the last read."""
 
@@ -284,6 +292,10 @@ class BagReader:
                 raise BagError(f'bag file {p} is not readable: {exc}') from None
             if size == 0:
                 raise BagError(f'bag file {p} is empty')
+            if p.suffix.lower() != '.mcap' and not _starts_like_mcap(p):
+                raise BagError(f'{p} is not an MCAP file (it does not start with the MCAP '
+                               'magic): give a rosbag2 folder, a .mcap file or a `monet '
+                               'synth` folder')
             return [p]
         if not p.is_dir():
             raise BagError(f'bag path {p} is neither a file nor a folder')

@@ -300,6 +300,8 @@ class DetectorNode(Node):
         self.create_subscription(String, MODEL, self.on_model, LATCHED)
         self.pub_diag = self.create_publisher(DiagnosticArray, DIAGNOSTICS, STREAM_OUT)
         self.unpublished = set()      # image topics already reported as without publisher
+        self.published = set()        # image topics that had a publisher once
+        self.lost_since = {}          # image topic -> when it lost its publisher (monotonic)
         self.started = time.monotonic()
         self.flush_timer = self.create_timer(self.derived.flush_period_ns / 1e9, self.flush)
         self.create_timer(1.0, self.publish_diagnostics)
@@ -681,11 +683,22 @@ class DetectorNode(Node):
 
     # ------------------------------------------------------------------ diagnostics
     def no_publisher(self, slot):
-        """'' when the slot's image topic has a publisher, else the reason (logged once per
-        topic, with a hint when the other transport has one)."""
+        """'' when the slot's image topic has a publisher, else the reason (with a hint when
+        the other transport has one). Warned once per topic when it never had a publisher
+        (3 s after start) or lost it while another image topic of this node still has one
+        (a camera gone); when every image topic lost its publishers together (the recording
+        ended: the player finished, or the whole source stopped) that is said in one line at
+        info level, not warned. A lost publisher is judged 2 s after it went (the graph settled:
+        a player's topics go one by one). /diagnostics carry the reason either way."""
         topic = self.resolve_topic_name(slot.image_topic)
-        if self.count_publishers(topic) or time.monotonic() - self.started < 3.0:
+        now = time.monotonic()
+        if self.count_publishers(topic):
+            self.published.add(topic)
+            self.lost_since.pop(topic, None)
             self.unpublished.discard(topic)
+            return ''
+        if now - self.started < 3.0 or (topic in self.published and
+                                         now - self.lost_since.setdefault(topic, now) < 2.0):
             return ''
         other = topic[:-len('/compressed')] if topic.endswith('/compressed') \
             else topic + '/compressed'
@@ -694,8 +707,17 @@ class DetectorNode(Node):
             reason += (f' (but {other} has one: transport:='
                        f'{"raw" if topic.endswith("/compressed") else "compressed"})')
         if topic not in self.unpublished:
-            self.unpublished.add(topic)
-            self.get_logger().warning(reason)
+            topics = [self.resolve_topic_name(s.image_topic) for s in self.slots]
+            if topic in self.published and not any(map(self.count_publishers, topics)):
+                # one line for them all (those not said yet)
+                self.get_logger().info(
+                    f'no publisher on {", ".join(t for t in topics if t not in self.unpublished)}'
+                    ' any more, nor on any image topic of this node: the recording ended or '
+                    'the source stopped')
+                self.unpublished.update(topics)
+            else:
+                self.unpublished.add(topic)
+                self.get_logger().warning(reason)
         return reason
 
     def publish_diagnostics(self):

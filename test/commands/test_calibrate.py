@@ -79,11 +79,13 @@ def test_image_folders(image_run, session):
 
 
 def test_summary_printed(session, tmp_path, capsys):
+    # --out in a folder that does not exist yet: made, as other commands make their --out
     code, out, err = run([session / 'back' / 'calibration_images',
                           session / 'mid' / 'calibration_images', '--board',
-                          session / 'board.toml', '--out', tmp_path / 'c.toml',
+                          session / 'board.toml', '--out', tmp_path / 'new' / 'c.toml',
                           '--no-report', '--distortion', 'k1k2'], capsys)
-    assert code == 0
+    assert code == 0, err
+    assert load_rig(tmp_path / 'new' / 'c.toml')
     assert 'back: 21 frames, board in 21, no board in 0' in err
     lines = out.splitlines()
     back = next(line for line in lines if line.startswith('back '))
@@ -93,7 +95,7 @@ def test_summary_printed(session, tmp_path, capsys):
     geometry = next(line for line in lines if line.startswith('board geometry'))
     median = float(geometry.split('triangulated ')[1].split()[0])
     assert abs(median - 24.0) <= 0.5
-    assert not (tmp_path / 'c_report.png').exists()
+    assert not (tmp_path / 'new' / 'c_report.png').exists()
 
 
 def test_video_input(session, tmp_path, capsys):
@@ -175,6 +177,7 @@ def impossible_board(tmp_path):
     ('empty folder', "(camera 'empty'): no image"),
     ('missing input', 'no such file or folder'),
     ('bad tolerance', '--tolerance must be positive'),
+    ('out under a file', 'is not a folder'),
 ])
 def test_bad_input_is_one_line_exit_2(session, tmp_path, capsys, case, expected):
     back = session / 'back' / 'calibration_images'
@@ -188,8 +191,12 @@ def test_bad_input_is_one_line_exit_2(session, tmp_path, capsys, case, expected)
             'no board': [back],
             'empty folder': [back, empty] + board,
             'missing input': [back, tmp_path / 'absent'] + board,
-            'bad tolerance': [back, '--tolerance', '-1'] + board}[case]
-    code, out, err = run(args + ['--out', tmp_path / 'c.toml'], capsys)
+            'bad tolerance': [back, '--tolerance', '-1'] + board,
+            'out under a file': [back, back.parent.parent / 'mid' / 'calibration_images']
+            + board}[case]
+    (tmp_path / 'file').write_text('a file, not a folder')
+    out_path = tmp_path / ('file/c.toml' if case == 'out under a file' else 'c.toml')
+    code, out, err = run(args + ['--out', out_path], capsys)
     assert code == 2
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('monet calibrate: error: '), err

@@ -344,7 +344,8 @@ def test_default_is_compressed_jpeg_and_format_png_alone_works(session, tmp_path
 @pytest.mark.parametrize('option, value, message', [
     ('--max-frames', '-1', '--max-frames must be >= 0 (0 = every instant), got -1'),
     ('--start-ns', '-5', '--start-ns must be >= 0 ns, got -5'),
-    ('--fps', '0', '--fps must be positive, got 0.0'),
+    ('--fps', '0', '--fps must be a finite number > 0 (frames/s), got 0.0'),
+    ('--fps', '1e400', '--fps must be a finite number > 0 (frames/s), got inf'),
     ('--quality', '0', '--quality must be in 1..100, got 0'),
     ('--resize', '2', '--resize must be in (0, 1], got 2.0'),
 ])

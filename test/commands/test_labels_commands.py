@@ -120,6 +120,30 @@ def test_info_lists_instants_stamps_and_labelled_frames(folder, repo_root):
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
 
 
+def test_info_without_skeleton_names_the_keypoints_train_would_refuse(folder, repo_root,
+                                                                      tmp_path):
+    """`monet info --labels` takes the file's keypoints; `monet train` (default skeleton
+    human14) refuses those it lacks: info says which, and train refuses the first of them."""
+    data, rec, skeleton = folder
+    proc = monet(repo_root, 'info', data, '--labels', data / 'labels.csv')
+    assert proc.returncode == 0, proc.stderr
+    lines = [line for line in proc.stdout.splitlines() if line.startswith('skeleton: ')]
+    assert lines == ["skeleton: 3 of the file's 3 keypoints are not in human14, monet "
+                     "train's default skeleton, which refuses their rows: k0, k1, k2 (give "
+                     'monet train --skeleton with them, or --keypoint-map SRC=DST)'], lines
+    proc = monet(repo_root, 'train', data, '--labels', data / 'labels.csv', '--out',
+                 tmp_path / 'o', *TRAIN)
+    assert proc.returncode == 2 and 'Traceback' not in proc.stderr
+    assert "'k0' is not a keypoint of the skeleton" in proc.stderr, proc.stderr
+    # with the keypoints mapped onto human14's names: nothing to refuse
+    mapped = ['--keypoint-map', 'k0=head', '--keypoint-map', 'k1=neck', '--keypoint-map',
+              'k2=r_hip']
+    proc = monet(repo_root, 'info', data, '--labels', data / 'labels.csv', *mapped)
+    assert proc.returncode == 0, proc.stderr
+    assert ("skeleton: every keypoint of the file is in human14, monet train's default"
+            in proc.stdout), proc.stdout
+
+
 def test_labels_import_dlc_project_round_trips_to_the_recordings_labels(folder, tmp_path,
                                                                         capsys):
     import pandas as pd

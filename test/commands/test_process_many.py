@@ -102,6 +102,27 @@ def test_bad_jobs_is_a_clear_error(tmp_path, capsys):
     assert "'jobs': must be in 1..256, got 0" in capsys.readouterr().err
 
 
+def children(pid):
+    """The process ids of `pid`'s children (Linux /proc)."""
+    from pathlib import Path
+    found = []
+    for task in Path(f'/proc/{pid}/task').glob('*'):
+        try:
+            found += [int(c) for c in (task / 'children').read_text().split()]
+        except OSError:
+            pass
+    return found
+
+
+def running(pid):
+    """Whether process `pid` exists and is not a zombie (Linux /proc)."""
+    from pathlib import Path
+    try:
+        return Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0] != 'Z'
+    except OSError:
+        return False
+
+
 @pytest.mark.slow
 def test_sigterm_stops_every_worker_and_leaves_no_partial_output(tmp_path, repo_root):
     import os
@@ -127,12 +148,19 @@ def test_sigterm_stops_every_worker_and_leaves_no_partial_output(tmp_path, repo_
                 time.monotonic() < deadline:
             time.sleep(0.1)
         assert proc.poll() is None and len(list(out.glob('.*.partial'))) == 2
+        # the two workers (multiprocessing's resource tracker, also a child, ends when the
+        # command's end closes its pipe)
+        workers = [p for p in children(proc.pid)
+                   if 'resource_tracker' not in open(f'/proc/{p}/cmdline').read()]
+        assert len(workers) == 2, workers
         proc.send_signal(signal.SIGTERM)
         _, stderr = proc.communicate(timeout=120)
+        # no worker outlives the command (gone, not left running or unreaped)
+        assert [pid for pid in workers if running(pid)] == []
     finally:
         if proc.poll() is None:
             proc.kill()
             proc.communicate()
     assert proc.returncode == 0, stderr
     assert 'monet process: stopped' in stderr and 'Traceback' not in stderr
-    assert list(out.iterdir()) == []                # nothing half-written is left
+    assert not out.exists()     # nothing half-written is left, nor the folder it made

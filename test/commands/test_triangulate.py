@@ -104,6 +104,8 @@ def test_dlc_csv_and_points_table_give_the_triangulation_of_the_same_points(
     code, text, _ = run([table, '--rig', rig, *MAP, '--out', tmp_path / 'b',
                          '--confidence-threshold', '0.3', '--fps', 60], capsys)
     assert code == 0, text
+    # the summary counts the table's rows and names its format (not 'N frames rows')
+    assert f'keypoints from {det[..., 0].size} rows of the frames format;' in text, text
     b = read_anipose_csv(tmp_path / 'b' / 'keypoints3d.csv')
     np.testing.assert_array_equal(b['X'], a['X'])
     np.testing.assert_array_equal(b['score'], a['score'])
@@ -128,7 +130,7 @@ def test_sleap_analysis_files_give_the_same_3d(pose2sim, tmp_path, capsys):
     code, text, _ = run([*paths, '--rig', rig, *MAP, '--out', tmp_path / 's', '--fps', 60],
                         capsys)
     assert code == 0, text
-    assert 'sleap rows' in text
+    assert 'rows of the sleap format' in text
     s = read_anipose_csv(tmp_path / 's' / 'keypoints3d.csv')
     ref = read_anipose_csv(tmp_path / 'ref' / 'keypoints3d.csv')
     np.testing.assert_array_equal(s['X'], ref['X'])
@@ -150,7 +152,7 @@ def test_anipose_pose_2d_folder_gives_the_same_3d(pose2sim, tmp_path, capsys):
     code, text, _ = run([pose, '--rig', rig, *MAP, '--out', tmp_path / 'a', '--fps', 60],
                         capsys)
     assert code == 0, text
-    assert 'anipose rows' in text
+    assert 'rows of the anipose format' in text
     np.testing.assert_array_equal(read_anipose_csv(tmp_path / 'a' / 'keypoints3d.csv')['X'],
                                   read_anipose_csv(tmp_path / 'ref' / 'keypoints3d.csv')['X'])
 

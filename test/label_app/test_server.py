@@ -133,6 +133,18 @@ def test_a_port_in_use_is_one_line(raw_rec, tmp_path):
     assert f'127.0.0.1:{port}' in result.stderr and 'port' in result.stderr
 
 
+@pytest.mark.parametrize('host', ['8.8.8.8', 'no-such-host.invalid'])
+def test_a_host_not_of_this_machine_names_host_not_port(raw_rec, tmp_path, host):
+    """An address this machine does not have (or a name that does not resolve) is the
+    --host's fault: the one line names host, not port."""
+    result = run_label(raw_rec[0], '--labels', tmp_path / 'l.csv', '--host', host,
+                       '--port', 0)
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "parameter 'host'" in lines[0] and host in lines[0], lines
+    assert "'port'" not in lines[0]
+
+
 @pytest.mark.parametrize('case', ['no_recording', 'bad_import', 'labels_folder', 'bad_port',
                                   'bad_labels', 'bad_model', 'model_skeleton',
                                   'bad_allow_host', 'labels_unsavable'])
