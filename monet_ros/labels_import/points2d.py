@@ -84,9 +84,14 @@ def detect_format(paths):
     if suffix == '.csv':
         try:
             with open(first, encoding='utf-8-sig') as f:
-                head = f.readline().split(',')[0].strip()
+                line = f.readline()
         except (OSError, UnicodeDecodeError) as error:
             raise LabelError(f'{first}: cannot read ({error})') from None
+        if not line:
+            raise LabelError(f'{first}: the file is empty (no header line)')
+        if not line.strip():
+            raise LabelError(f'{first}:1: the header line is blank')
+        head = line.split(',')[0].strip()
         if head == 'scorer':
             return 'dlc'
         if head == 'frame':

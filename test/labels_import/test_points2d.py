@@ -47,6 +47,14 @@ def test_duplicates_and_formats_are_named(tmp_path):
         detect_format([other])
     with pytest.raises(LabelError, match='no such file'):
         read_points2d(tmp_path / 'missing.csv', ['a'])
+    empty = tmp_path / 'empty.csv'
+    empty.write_text('')
+    with pytest.raises(LabelError, match=r'empty\.csv: the file is empty \(no header line\)'):
+        read_points2d(empty, ['a'])
+    blank = tmp_path / 'blank.csv'
+    blank.write_text('\nframe,camera,keypoint,u,v\n')
+    with pytest.raises(LabelError, match=r'blank\.csv:1: the header line is blank'):
+        read_points2d(blank, ['a'])
 
 
 def test_a_frame_span_too_large_for_memory_is_refused_naming_the_row(tmp_path):
