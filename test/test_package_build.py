@@ -8,14 +8,12 @@ from pathlib import Path
 import subprocess
 import sys
 
-from helpers.blob_net import NAMES, train_blob_net
 from helpers.recordings import noise_recording, small_checkpoint
 from helpers.ros import NodeProcess, RosHarness
-from helpers.subject_blobs import blob_checkpoint, write_two_subjects
+from helpers.subject_blobs import two_subject_scene
 import numpy as np
 import pytest
 from sensor_msgs.msg import Image, PointCloud2
-import yaml
 
 from monet_ros.io import cloud_to_keypoints3d, header_stamp_ns
 
@@ -206,12 +204,7 @@ def test_installed_launch_file_tracks_two_subjects(ros_env, prefix, tmp_path):
     each on one body of the ground truth."""
     pytest.importorskip('launch_ros.actions', reason='launch / launch_ros not installed')
     T = 12
-    folder, _, X = write_two_subjects(tmp_path / 'rec', T=T, camera_info=True)
-    stamps = np.load(folder / 'ground_truth.npz')['stamps'].tolist()
-    model = blob_checkpoint(train_blob_net(steps=400, sigma=(1.2, 4.0)), tmp_path / 'b.pt')
-    skeleton = tmp_path / 'blobs.yaml'
-    skeleton.write_text(yaml.safe_dump({'name': 'blobs', 'keypoints': list(NAMES),
-                                        'bones': [[NAMES[0], NAMES[1]]]}))
+    folder, stamps, X, model, skeleton = two_subject_scene(tmp_path, T=T)
     launch_file = prefix / 'share/monet_ros/launch/pipeline.launch.py'
     argv = [sys.executable, '-c', LAUNCH, str(launch_file), f'model:={model}',
             f'rig:={folder / "rig.yaml"}', f'bag:={folder / "recording"}', 'subjects:=2',

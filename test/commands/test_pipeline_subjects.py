@@ -4,12 +4,10 @@ detector child process and fusion with several subjects, lockstep: keypoints3d o
 subjects for every frame, each body one identity, the summary says so."""
 import sys
 
-from helpers.blob_net import NAMES, train_blob_net
 from helpers.ros import NodeProcess, RosHarness
-from helpers.subject_blobs import blob_checkpoint, write_two_subjects
+from helpers.subject_blobs import two_subject_scene
 import numpy as np
 from sensor_msgs.msg import PointCloud2
-import yaml
 
 from monet_ros.io import cloud_to_keypoints3d, header_stamp_ns
 
@@ -17,12 +15,7 @@ T = 12
 
 
 def test_pipeline_tracks_two_subjects(ros_env, tmp_path):
-    folder, _, X = write_two_subjects(tmp_path / 'rec', T=T, camera_info=True)
-    stamps = np.load(folder / 'ground_truth.npz')['stamps'].tolist()
-    model = blob_checkpoint(train_blob_net(steps=400, sigma=(1.2, 4.0)), tmp_path / 'b.pt')
-    skeleton = tmp_path / 'blobs.yaml'
-    skeleton.write_text(yaml.safe_dump({'name': 'blobs', 'keypoints': list(NAMES),
-                                        'bones': [[NAMES[0], NAMES[1]]]}))
+    folder, stamps, X, model, skeleton = two_subject_scene(tmp_path, T=T)
     argv = [sys.executable, '-m', 'monet_ros.cli', 'pipeline', '--bag',
             str(folder / 'recording'), '--rig', str(folder / 'rig.yaml'), '--model',
             str(model), '--skeleton', str(skeleton), '--subjects', '2', '--lockstep',

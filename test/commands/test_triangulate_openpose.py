@@ -31,7 +31,8 @@ def test_pose2sim_json_folders_give_pose2sims_markers_and_keep_late_frames(
     code, text, err = run([assoc, '--rig', rig, *MAP, *PARAMS, '--out', tmp_path / 'all'],
                           capsys)
     assert code == 0, err
-    assert '100 frames (from frame 0) x 4 cameras' in text and 'rows of the openpose format' in text
+    assert '100 frames (from frame 0) x 4 cameras' in text
+    assert 'rows of the openpose format' in text
     assert 'keypoint names of BODY_25B' in err
     ours = read_anipose_csv(tmp_path / 'all' / 'keypoints3d.csv')
     trc_path = next((shared_data / TRIAL / 'pose-3d').glob('*.trc'))

@@ -23,3 +23,19 @@ def smooth_images(rng, n, h, w):
         small = rng.integers(0, 256, (max(h // 16, 2), max(w // 16, 2), 3)).astype(np.uint8)
         out[i] = cv2.resize(small, (w, h), interpolation=cv2.INTER_CUBIC)
     return out
+
+
+def write_rig_bag(path, cams, t0, instants, chunk_size=None):
+    """A rosbag2 folder at `path`: /tf_static of `cams` at t0, then per instant k (t0 + k
+    ns) each camera's camera_info and a black rgb8 image_raw (frames <name>_optical)."""
+    from monet_ros.io import BagWriter
+    options = {} if chunk_size is None else {'chunk_size': chunk_size}
+    with BagWriter(path, **options) as bag:
+        bag.write_tf_static(t0, cams)
+        for k in range(instants):
+            for cam in cams:
+                bag.write_camera_info(f'/{cam.name}/camera_info', t0 + k, cam,
+                                      f'{cam.name}_optical')
+                bag.write_image(f'/{cam.name}/image_raw', t0 + k,
+                                np.zeros((cam.height, cam.width, 3), np.uint8),
+                                f'{cam.name}_optical')

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from helpers.blob_net import COLOURS, NAMES
+from helpers.blob_net import COLOURS, NAMES, train_blob_net
 from helpers.ring import ring_rig
 from monet_ros.geometry import save_rig
 from monet_ros.io import BagWriter
@@ -79,3 +79,18 @@ def blob_checkpoint(model, path):
     """The blob net as a checkpoint of keypoints a, b, c."""
     save_checkpoint(path, model, {'keypoints': list(NAMES)})
     return path
+
+
+def two_subject_scene(tmp_path, T=12):
+    """What a live two-subject run needs: write_two_subjects' recording (camera_info) in
+    tmp_path / 'rec', its ground-truth stamps, X (T, 2, 3, 3), a trained blob detector
+    checkpoint and a blobs skeleton YAML (keypoints a, b, c; one bone) ->
+    (folder, stamps, X, model, skeleton)."""
+    import yaml
+    folder, _, X = write_two_subjects(tmp_path / 'rec', T=T, camera_info=True)
+    stamps = np.load(folder / 'ground_truth.npz')['stamps'].tolist()
+    model = blob_checkpoint(train_blob_net(steps=400, sigma=(1.2, 4.0)), tmp_path / 'b.pt')
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text(yaml.safe_dump({'name': 'blobs', 'keypoints': list(NAMES),
+                                        'bones': [[NAMES[0], NAMES[1]]]}))
+    return folder, stamps, X, model, skeleton

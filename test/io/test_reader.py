@@ -1,6 +1,6 @@
 """open_bag on written bags: round trip of every typed helper, bare .mcap, compression,
 ordering, and the named errors/reports for bad input."""
-from helpers.io_bags import make_camera, smooth_images
+from helpers.io_bags import make_camera, smooth_images, write_rig_bag
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 import numpy as np
@@ -186,15 +186,7 @@ def test_a_recording_cut_short_without_metadata_lists_its_topics(tmp_path):
     from monet_ros.io import rig_from_bag
 
     cams = [make_camera(f'cam{i}', seed=i) for i in range(2)]
-    with BagWriter(tmp_path / 'b', chunk_size=4000) as bag:
-        bag.write_tf_static(T0, cams)
-        for k in range(4):
-            for cam in cams:
-                bag.write_camera_info(f'/{cam.name}/camera_info', T0 + k, cam,
-                                      f'{cam.name}_optical')
-                bag.write_image(f'/{cam.name}/image_raw', T0 + k,
-                                np.zeros((cam.height, cam.width, 3), np.uint8),
-                                f'{cam.name}_optical')
+    write_rig_bag(tmp_path / 'b', cams, T0, 4, chunk_size=4000)
     whole = open_bag(tmp_path / 'b')
     want = {t: (info.msgtype, info.count) for t, info in whole.topics.items()}
     total = len(list(whole.messages(decode=False)))

@@ -1,5 +1,5 @@
 """rig_from_bag on written bags: direct world -> camera frames, chained TF, missing TF."""
-from helpers.io_bags import make_camera
+from helpers.io_bags import make_camera, write_rig_bag
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -19,15 +19,7 @@ def assert_same_camera(got, cam):
 
 def test_rig_round_trip_with_images(tmp_path):
     cams = [make_camera(f'cam{i}', seed=i) for i in range(3)]
-    with BagWriter(tmp_path / 'b') as bag:
-        bag.write_tf_static(T0, cams)
-        for k in range(2):
-            for cam in cams:
-                bag.write_camera_info(f'/{cam.name}/camera_info', T0 + k, cam,
-                                      f'{cam.name}_optical')
-                bag.write_image(f'/{cam.name}/image_raw', T0 + k,
-                                np.zeros((cam.height, cam.width, 3), np.uint8),
-                                f'{cam.name}_optical')
+    write_rig_bag(tmp_path / 'b', cams, T0, 2)
     rig = rig_from_bag(tmp_path / 'b')
     assert [c.name for c in rig] == ['cam0', 'cam1', 'cam2']
     assert [c.topic for c in rig] == ['/cam0/image_raw', '/cam1/image_raw', '/cam2/image_raw']
@@ -104,15 +96,7 @@ def test_a_truncated_bag_is_named_as_truncated(tmp_path):
     the end of the file was refused as 'no readable CameraInfo message' only, as if the
     topics were empty: the line now carries the reader's own finding (truncated)."""
     cams = [make_camera(f'cam{i}', seed=i) for i in range(2)]
-    with BagWriter(tmp_path / 'b') as bag:
-        bag.write_tf_static(T0, cams)
-        for k in range(3):
-            for cam in cams:
-                bag.write_camera_info(f'/{cam.name}/camera_info', T0 + k, cam,
-                                      f'{cam.name}_optical')
-                bag.write_image(f'/{cam.name}/image_raw', T0 + k,
-                                np.zeros((cam.height, cam.width, 3), np.uint8),
-                                f'{cam.name}_optical')
+    write_rig_bag(tmp_path / 'b', cams, T0, 3)
     mcap = next((tmp_path / 'b').glob('*.mcap'))
     data = mcap.read_bytes()
     mcap.write_bytes(data[:len(data) // 2])
