@@ -224,6 +224,10 @@ def test_installed_launch_file_tracks_two_subjects(ros_env, prefix, tmp_path):
             assert proc.stop(timeout=30) == 0, proc.output()
             assert stopped_cleanly(proc.output()), proc.output()
     assert '20 topics have 1 subscriber(s) after' in proc.output(), proc.output()
+    # each identity on one body, the same body in every frame. Not the 3D error: without
+    # lockstep the crops follow the latest 3D that arrived, so the error depends on the
+    # machine's load (64 mm in a last frame at load 5, under 30 quiet); test_pipeline_subjects
+    # holds it to 30 mm with --lockstep
     identity_of = {}
     for cloud in filter(both, clouds):
         t = stamps.index(header_stamp_ns(cloud))
@@ -232,7 +236,7 @@ def test_installed_launch_file_tracks_two_subjects(ros_env, prefix, tmp_path):
             mine = k['X'][k['subject'] == ident]                       # (3, 3) m
             d = np.linalg.norm(mine[None] - X[t], axis=-1).mean(-1)    # to each body
             body = int(np.argmin(d))
-            assert d[body] < 0.030, (t, d)
+            assert d[body] < 0.5 * d[1 - body], (t, d)                 # clearly that body
             assert identity_of.setdefault(body, int(ident)) == int(ident), f'frame {t}'
     assert sorted(identity_of) == [0, 1] and len(set(identity_of.values())) == 2
     assert 'Traceback' not in proc.output()
