@@ -40,9 +40,9 @@ def test_lockstep_publishes_keypoints3d_for_every_frame(ros_env, tmp_path):
     # the final summary line, and a quiet exit (no callback failing under a destroyed node)
     assert f'frames {len(stamps)} fused of {len(stamps)} played' in proc.output()
     assert 'never retrieved' not in proc.output()
-    # the recording ended (the player finished): no camera is warned as without publisher
-    assert not [line for line in proc.output().splitlines()
-                if '[WARN]' in line and 'no publisher' in line], proc.output()
+    # (no check of 'no publisher' warnings here: a detector that starts long before the
+    # player, under load, rightly warns; the recording's end is not warned:
+    # test/nodes/test_detector_no_publisher.py, deterministic)
 
 
 def test_sigterm_and_sigint_exit_zero(ros_env, tmp_path):
