@@ -8,7 +8,7 @@ PACKAGE = 'monet_ros'
 
 # Executables run as `ros2 run monet_ros <name>`; setup.cfg puts them in lib/monet_ros.
 EXECUTABLES = {
-    'monet': 'monet_ros.cli:console_main',
+    'monet': 'monet_ros.entry:monet',   # exit-0 signal handlers before monet_ros.cli loads
     'detector': 'monet_ros.nodes.detector:main',
     'fusion': 'monet_ros.nodes.fusion:main',
     'player': 'monet_ros.nodes.player:main',

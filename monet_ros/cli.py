@@ -19,6 +19,7 @@ import sys
 import threading
 
 from monet_ros.error_text import error_line
+from monet_ros.stop_signals import ignore_stop_signals, interrupt_on_stop, raise_interrupt
 
 EXIT_OK = 0
 EXIT_INTERNAL = 1
@@ -96,17 +97,13 @@ def build_parser():
     return parser
 
 
-def _stop_on_sigterm(signum, frame):
-    raise KeyboardInterrupt
-
-
 @contextmanager
 def sigterm_as_interrupt():
     """SIGTERM raises KeyboardInterrupt (a clean stop, exit 0) while the command runs."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    previous = signal.signal(signal.SIGTERM, _stop_on_sigterm)
+    previous = signal.signal(signal.SIGTERM, raise_interrupt)
     try:
         yield
     finally:
@@ -175,33 +172,19 @@ def main(argv=None):
         return EXIT_INTERNAL
 
 
-def ignore_stop_signals():
-    """SIGINT and SIGTERM ignored from now on (main thread only; elsewhere a no-op). A
-    signal that lands while this runs raises KeyboardInterrupt at most once per signal
-    received; it is swallowed and the handlers are set again."""
-    if threading.current_thread() is not threading.main_thread():
-        return
-    while True:
-        try:
-            for sig in (signal.SIGINT, signal.SIGTERM):
-                signal.signal(sig, signal.SIG_IGN)
-            return
-        except KeyboardInterrupt:
-            continue
-
-
 def console_main():
-    """The `monet` executable (and `python -m monet_ros.cli`): main(), then exit with its
-    code. SIGTERM raises KeyboardInterrupt from the first moment main() can see it, and once
-    the command has returned both signals are ignored, so a SIGINT / SIGTERM that lands
-    after the work (while main returns or Python shuts down: torch's exit hooks take up to a
-    second) exits 0 and quietly instead of killing the process by the signal (-2 / -15) or
-    printing a KeyboardInterrupt traceback from an exit hook. A stop before main() has
-    returned exits 0 (`monet ...: stopped`)."""
+    """Run main(), then exit with its code: the `monet` executable (through
+    monet_ros.entry.monet, which makes a signal during the imports before this exit 0) and
+    `python -m monet_ros.cli` (there a signal while this module is still being imported has
+    Python's defaults). SIGINT and SIGTERM raise KeyboardInterrupt from the first moment
+    main() can see it (main: `monet ...: stopped`, exit 0), and once the command has
+    returned both signals are ignored, so a SIGINT / SIGTERM that lands after the work
+    (while main returns or Python shuts down: torch's exit hooks take up to a second) exits
+    0 and quietly instead of killing the process by the signal (-2 / -15) or printing a
+    KeyboardInterrupt traceback from an exit hook (monet_ros.stop_signals)."""
     code = EXIT_OK
     try:
-        if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGTERM, _stop_on_sigterm)
+        interrupt_on_stop()
         code = main()
     except KeyboardInterrupt:         # landed between main's own handling and its return
         code = EXIT_OK

@@ -1,13 +1,13 @@
 """The package installs into a prefix the way colcon's ament_python build does (no symlinks)
 and runs from there: data files (skeleton presets, Fast DDS profile) come from the installed
 share directory, not from the source tree."""
-import ast
 import importlib
 import os
 from pathlib import Path
 import subprocess
 import sys
 
+from helpers.commands import setup_executables
 from helpers.recordings import noise_recording, small_checkpoint
 from helpers.ros import NodeProcess, RosHarness
 from helpers.subject_blobs import two_subject_scene
@@ -16,15 +16,6 @@ import pytest
 from sensor_msgs.msg import Image, PointCloud2
 
 from monet_ros.io import cloud_to_keypoints3d, header_stamp_ns
-
-
-def declared_executables(repo_root):
-    """Names in setup.py's EXECUTABLES dict, read from the source (no import side effects)."""
-    tree = ast.parse((repo_root / 'setup.py').read_text())
-    for node in tree.body:
-        if isinstance(node, ast.Assign) and node.targets[0].id == 'EXECUTABLES':
-            return list(ast.literal_eval(node.value))
-    raise AssertionError('setup.py declares no EXECUTABLES')
 
 
 @pytest.fixture(scope='module')
@@ -58,7 +49,7 @@ def test_install_into_prefix_has_ament_layout(repo_root, prefix):
                 installed = prefix / 'share/monet_ros' / source.relative_to(repo_root)
                 assert installed.is_file(), f'{installed} not installed'
                 assert not installed.is_symlink()
-    executables = declared_executables(repo_root)
+    executables = list(setup_executables(repo_root))
     assert 'monet' in executables
     for name in executables:
         script = prefix / 'lib/monet_ros' / name

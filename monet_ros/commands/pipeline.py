@@ -390,7 +390,6 @@ def run(args):
     from monet_ros.nodes import heap_for_large_buffers, passive_openmp, short_gil_switch
     from monet_ros.nodes.runner import (
         CallbackGuard,
-        ignore_signals,
         init_rclpy,
         say_goodbye,
         start_error,
@@ -399,6 +398,7 @@ def run(args):
         until_shutdown,
         use_large_data_profile,
     )
+    from monet_ros.stop_signals import ignore_stop_signals
     passive_openmp()               # before torch loads (the fusion's and learner's threads)
     heap_for_large_buffers()       # heatmap buffers reused, not mapped per message
     short_gil_switch()             # fusion's and the learner's callbacks share a GIL
@@ -577,7 +577,7 @@ def run(args):
                     if now - max(ended, summary.last_fused or ended) > 2.0:
                         break
     finally:
-        ignore_signals()
+        ignore_stop_signals()
         if player is not None:
             player.stop()                     # no frames into a closing pipeline
         say_goodbye(nodes)

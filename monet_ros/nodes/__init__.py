@@ -4,8 +4,10 @@ When this package is imported because a node executable is starting
 (`python -m monet_ros.nodes.<node>` or the `detector` / `fusion` / `learner` / `player`
 console scripts), SIGINT and SIGTERM are made to exit 0 at once: a node stopped while it
 still imports torch or rclpy has nothing to clean up, and must not print a
-KeyboardInterrupt traceback or die with -15. run_node replaces these handlers with the
-clean-shutdown ones before rclpy starts (see monet_ros.nodes.runner).
+KeyboardInterrupt traceback or die with -15 (monet_ros.stop_signals.exit_0_on_stop, the
+same as the `monet` executable's, monet_ros.entry). run_node replaces these handlers with the
+clean-shutdown ones before rclpy starts (see monet_ros.nodes.runner). Left open: the
+interpreter's start-up before this package runs (see monet_ros.entry).
 A node executable's OpenMP (torch) threads wait passively (passive_openmp; `monet pipeline`
 does the same): by default a process with as many torch threads as cores spins them between
 operations, and once another process wants a core the spinning stalls every forward pass
@@ -35,6 +37,8 @@ import os
 import signal
 import sys
 
+from monet_ros.stop_signals import exit_0_on_stop
+
 NODE_EXECUTABLES = ('detector', 'fusion', 'learner', 'player')
 
 
@@ -45,16 +49,6 @@ def launched_as_node(argv=None):
         module = argv[argv.index('-m') + 1]
         return module in {f'monet_ros.nodes.{name}' for name in NODE_EXECUTABLES}
     return bool(sys.argv) and os.path.basename(sys.argv[0]) in NODE_EXECUTABLES
-
-
-def _exit_now(signum, frame):
-    os._exit(0)
-
-
-def install_early_stop():
-    """SIGINT / SIGTERM -> exit 0 immediately (only while nothing needs cleaning up)."""
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, _exit_now)
 
 
 def passive_openmp():
@@ -117,7 +111,7 @@ def die_with_parent(environ=None):
 
 
 if launched_as_node():
-    install_early_stop()
+    exit_0_on_stop()
     passive_openmp()
     heap_for_large_buffers()
     die_with_parent()

@@ -25,6 +25,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from monet_ros.error_text import error_line
 from monet_ros.share import share_path
+from monet_ros.stop_signals import ignore_stop_signals, interrupt_on_stop
 
 EXIT_OK = 0
 EXIT_BAD_START = 2
@@ -68,15 +69,6 @@ def until_shutdown():
     except Exception:
         if not stopped_by_shutdown():
             raise
-
-
-def ignore_signals():
-    """After the first SIGINT / SIGTERM: ignore further ones while the nodes are destroyed
-    (a second Ctrl-C, or a launch file's SIGINT after the terminal's, must not raise
-    KeyboardInterrupt inside destroy_node). Only possible in the main thread."""
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, signal.SIG_IGN)
 
 
 def stop_executor(executor, timeout_sec=2.0):
@@ -176,15 +168,10 @@ def log_bad_once(node, source, error, count):
     return True
 
 
-def _raise_interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
 def clean_stop_handlers():
     """SIGINT and SIGTERM raise KeyboardInterrupt (a clean stop in until_shutdown) until
     rclpy's own handlers take over (they chain to these)."""
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    signal.signal(signal.SIGTERM, _raise_interrupt)
+    interrupt_on_stop()
 
 
 _STOP = threading.Event()
@@ -260,7 +247,8 @@ def run_node(factory, name, args=None, large_data=False):
             while rclpy.ok() and not stop_requested():   # wakes up to see a signal
                 executor.spin_once(timeout_sec=0.1)
     finally:
-        ignore_signals()
+        ignore_stop_signals()     # no KeyboardInterrupt inside destroy_node (a second
+                                  # Ctrl-C, or a launch file's SIGINT after the terminal's)
         try:
             if node is not None:
                 say_goodbye([node])

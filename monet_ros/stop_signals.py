@@ -1,0 +1,67 @@
+"""The one rule for SIGINT and SIGTERM, for the `monet` command and every node executable:
+exit 0 at any moment, quietly (never a KeyboardInterrupt traceback, never killed by the
+signal with -2 / -15). Three phases, each with its handlers here:
+
+- start-up, nothing to clean up yet (imports of numpy, torch, cv2, rclpy ...):
+  exit_0_on_stop() - the process ends at once with 0 (os._exit, nothing printed);
+  installed by the executables' first line of our code (monet_ros.entry,
+  monet_ros.nodes);
+- the work: interrupt_on_stop() - both signals raise KeyboardInterrupt, which the command
+  (cli.main) or node (nodes.runner) catches to stop cleanly and return 0;
+- the end: ignore_stop_signals() - once the work has returned, a further signal (while
+  nodes are destroyed, or Python's exit hooks run) is ignored.
+
+Standard library only: imported before any heavy module.
+"""
+import os
+import signal
+import threading
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+def _in_main_thread():
+    return threading.current_thread() is threading.main_thread()
+
+
+def exit_0(signum, frame):
+    """Signal handler: end the process now with exit code 0 (no clean-up, nothing
+    printed)."""
+    os._exit(0)
+
+
+def exit_0_on_stop():
+    """SIGINT / SIGTERM -> exit_0 (only while nothing needs cleaning up: start-up). Main
+    thread only; elsewhere a no-op."""
+    if _in_main_thread():
+        for sig in STOP_SIGNALS:
+            signal.signal(sig, exit_0)
+
+
+def raise_interrupt(signum, frame):
+    """Signal handler: raise KeyboardInterrupt (the clean stop the command or node
+    catches)."""
+    raise KeyboardInterrupt
+
+
+def interrupt_on_stop():
+    """SIGINT and SIGTERM raise KeyboardInterrupt from now on (main thread only; elsewhere a
+    no-op)."""
+    if _in_main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, raise_interrupt)
+
+
+def ignore_stop_signals():
+    """SIGINT and SIGTERM ignored from now on (main thread only; elsewhere a no-op). A
+    signal that lands while this runs raises KeyboardInterrupt at most once per signal
+    received; it is swallowed and the handlers are set again."""
+    if not _in_main_thread():
+        return
+    while True:
+        try:
+            for sig in STOP_SIGNALS:
+                signal.signal(sig, signal.SIG_IGN)
+            return
+        except KeyboardInterrupt:
+            continue
