@@ -41,3 +41,13 @@ def small_checkpoint(path, seed=0, input_size=(128, 96)):
     model = build_model('small', 14, input_size=input_size)
     save_checkpoint(path, model, {'keypoints': list(load_skeleton('human14').keypoints)})
     return path
+
+
+def detector_recording(folder, compressed=False):
+    """What a detector node test starts from: a 2-camera 320 x 240 one-frame noise_recording
+    at folder/rec (compressed: JPEG on /<cam>/image_raw/compressed only), a small_checkpoint
+    at folder/model.pt, and the detector's parameters that use them (rig read from the
+    recording, device cpu). Returns (rig, params)."""
+    rig, _ = noise_recording(folder / 'rec', cameras=2, frames=1, compressed=compressed)
+    model = small_checkpoint(folder / 'model.pt')
+    return rig, dict(rig=str(folder / 'rec'), model=str(model), device='cpu')

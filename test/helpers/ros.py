@@ -32,6 +32,16 @@ def write_params_file(path, node_name, params):
     return Path(path)
 
 
+def newest_status(diagnostics, name):
+    """The newest DiagnosticStatus called `name` in a list of received DiagnosticArray
+    messages (None if none yet)."""
+    for msg in reversed(diagnostics):
+        for status in msg.status:
+            if status.name == name:
+                return status
+    return None
+
+
 class NodeProcess:
     """`python -m monet_ros.nodes.<module>` (or any argv) as a subprocess with output in files.
 

@@ -3,41 +3,19 @@ that loses its publisher while another still publishes is warned; when every ima
 loses its publishers together (a recording that ended: `monet pipeline`'s player finished)
 it is said at info level, not warned. /diagnostics name the silent topic either way."""
 from diagnostic_msgs.msg import DiagnosticArray
-from helpers.recordings import small_checkpoint
-from helpers.ros import NodeProcess, RosHarness
-from helpers.scenes import ring_rig
-import numpy as np
+from helpers.recordings import detector_recording
+from helpers.ros import NodeProcess, RosHarness, newest_status
 from sensor_msgs.msg import Image
-
-from monet_ros.io import BagWriter
-
-T0 = 1_600_000_000_000_000_000
-
-
-def raw_recording(path, rig):
-    image = np.zeros((240, 320, 3), np.uint8)
-    with BagWriter(path) as writer:
-        writer.write_tf_static(T0, rig)
-        for cam in rig:
-            writer.write_image(f'/{cam.name}/image_raw', T0, image, f'{cam.name}_optical')
-            writer.write_camera_info(f'/{cam.name}/camera_info', T0, cam, f'{cam.name}_optical')
 
 
 def silent(diagnostics, name):
     """Whether the last /diagnostics status of camera `name` says it has no publisher."""
-    for msg in reversed(diagnostics):
-        for status in msg.status:
-            if status.name == f'monet detector: {name}':
-                return f'no publisher on /{name}/image_raw' in status.message
-    return False
+    status = newest_status(diagnostics, f'monet detector: {name}')
+    return status is not None and f'no publisher on /{name}/image_raw' in status.message
 
 
 def test_a_lost_camera_is_warned_an_ended_recording_is_not(ros_env, tmp_path):
-    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
-    rig = [c.replace(width=320, height=240, K=K) for c in ring_rig(2)]
-    raw_recording(tmp_path / 'rec', rig)
-    model = small_checkpoint(tmp_path / 'model.pt')
-    params = dict(rig=str(tmp_path / 'rec'), model=str(model), device='cpu')
+    _, params = detector_recording(tmp_path)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
         pubs = {name: ros.publisher(f'/{name}/image_raw', Image) for name in ('cam0', 'cam1')}

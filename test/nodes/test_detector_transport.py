@@ -1,16 +1,14 @@
 """The detector takes its image transport from the recording, says when its image topics
 have no publisher (log and /diagnostics), and takes tracking settings live."""
 from diagnostic_msgs.msg import DiagnosticArray
-from helpers.recordings import small_checkpoint
-from helpers.ros import NodeProcess, RosHarness
-from helpers.scenes import ring_rig
+from helpers.recordings import detector_recording
+from helpers.ros import NodeProcess, RosHarness, newest_status
 import numpy as np
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 
 from monet_ros.io import (
-    BagWriter,
     camera_info_from_camera,
     compressed_image_msg,
     image_msg_to_heatmaps,
@@ -21,34 +19,16 @@ from monet_ros.models import Detector
 T0 = 1_600_000_000_000_000_000
 
 
-def compressed_recording(path, rig):
-    """A recording whose cameras have only CompressedImage topics (like the real Pose2Sim
-    recording)."""
-    images = np.random.default_rng(1).integers(0, 255, (len(rig), 240, 320, 3), np.uint8)
-    with BagWriter(path) as writer:
-        writer.write_tf_static(T0, rig)
-        for cam, image in zip(rig, images):
-            writer.write_compressed_image(f'/{cam.name}/image_raw/compressed', T0, image,
-                                          f'{cam.name}_optical')
-            writer.write_camera_info(f'/{cam.name}/camera_info', T0, cam, f'{cam.name}_optical')
-    return images
-
-
 def detector_status(diagnostics, name):
-    for msg in reversed(diagnostics):
-        for status in msg.status:
-            if status.name == f'monet detector: {name}':
-                return status
-    return None
+    return newest_status(diagnostics, f'monet detector: {name}')
 
 
 def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(ros_env,
                                                                                 tmp_path):
-    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
-    rig = [c.replace(width=320, height=240, K=K) for c in ring_rig(2)]
-    images = compressed_recording(tmp_path / 'rec', rig)
-    model = small_checkpoint(tmp_path / 'model.pt')
-    params = dict(rig=str(tmp_path / 'rec'), model=str(model), device='cpu')
+    # JPEG topics only, like the real Pose2Sim recording
+    rig, params = detector_recording(tmp_path, compressed=True)
+    model = params['model']
+    frame = np.random.default_rng(1).integers(0, 255, (240, 320, 3), np.uint8)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         diagnostics = ros.collect('/diagnostics', DiagnosticArray)
         heat = ros.collect('/monet/cam0/heatmaps', Image)
@@ -72,7 +52,7 @@ def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(
         ros.wait_for_subscribers(pub, process=node)
         for _ in range(60):
             info.publish(camera_info_from_camera(rig[0], T0, 'cam0_optical'))
-            pub.publish(compressed_image_msg(images[0], T0, 'cam0_optical'))
+            pub.publish(compressed_image_msg(frame, T0, 'cam0_optical'))
             if ros.spin_until(lambda: heat, timeout=1.0, process=node):
                 break
         assert heat, node.output()
@@ -84,7 +64,7 @@ def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(
     # the heatmaps are the core's on that decode and their camera the full frame's crop
     detector = Detector.from_checkpoint(model, device='cpu', precision='auto')  # the node's
     box = detector.boxes_for(rig[:1])[0]
-    data = compressed_image_msg(images[0], T0, 'cam0_optical').data
+    data = compressed_image_msg(frame, T0, 'cam0_optical').data
     image, layout, small, small_box, s = decode_for_crop(data, rig[0], box, (128, 96))
     assert s == 2
     expected, _ = detector.predict([image], [small], small_box[None], keep_aspect=False,
@@ -97,11 +77,7 @@ def test_compressed_only_recording_selects_compressed_and_reports_silent_topics(
 
 
 def test_tracking_parameters_are_live_the_rest_read_only(ros_env, tmp_path):
-    K = np.array([[300.0, 0, 159.5], [0, 300.0, 119.5], [0, 0, 1]])
-    rig = [c.replace(width=320, height=240, K=K) for c in ring_rig(2)]
-    compressed_recording(tmp_path / 'rec', rig)
-    model = small_checkpoint(tmp_path / 'model.pt')
-    params = dict(rig=str(tmp_path / 'rec'), model=str(model), device='cpu')
+    _, params = detector_recording(tmp_path, compressed=True)
 
     def double(name, value):
         return Parameter(name=name, value=ParameterValue(
