@@ -249,7 +249,8 @@ def run_job(job):
     from monet_ros.models import build_model, save_checkpoint
 
     torch.set_num_threads(1)
-    count, arm, budget_s, fixed_steps, overrides, seed = job
+    count, arm, budget_s, fixed_steps, overrides, seed = job[:6]
+    filter_method = job[6] if len(job) > 6 else 'none'
     mode, arm_overrides = parse_arm(arm)
     overrides = {**overrides, **arm_overrides}
     recording, reference, reference2d = _STATE['recording'], _STATE['reference'], \
@@ -298,7 +299,16 @@ def run_job(job):
         save_checkpoint(checkpoint, trainer.model, trainer.metadata())
         X, points, unmatched = process_path(_STATE['bag'], checkpoint, Path(tmp) / 'process',
                                             rec.stamps, rec.cameras)
+        if filter_method != 'none':     # the same model through `monet process --filter M`
+            from monet_ros.temporal import FilterConfig
+            X_f, points_f, _ = process_path(
+                _STATE['bag'], checkpoint, Path(tmp) / 'filtered', rec.stamps, rec.cameras,
+                filter_config=FilterConfig(method=filter_method))
     result = score(X, points, reference, reference2d, unlabelled)
+    if filter_method != 'none':
+        filtered = score(X_f, points_f, reference, reference2d, unlabelled)
+        result['filter'] = filter_method
+        result.update({f'filter_{k}': filtered[k] for k in ('median_mm', 'mean_mm', 'p90_mm')})
     result['process_unmatched_frames'] = unmatched
     X_gt, points_gt = ground_truth_crop_path(trainer.model, trainer.metadata(), rec,
                                              reference2d)
@@ -353,9 +363,12 @@ def arm_label(arm):
 
 def job_key(job):
     """What identifies a finished run in the journal (OUT.runs.jsonl)."""
-    count, arm, budget_s, fixed_steps, overrides, seed = job
-    return json.dumps([count, arm_label(arm), seed, fixed_steps or f'{budget_s:g} s',
-                       sorted(overrides.items())])
+    count, arm, budget_s, fixed_steps, overrides, seed = job[:6]
+    key = [count, arm_label(arm), seed, fixed_steps or f'{budget_s:g} s',
+           sorted(overrides.items())]
+    if len(job) > 6 and job[6] != 'none':      # also scored with `monet process --filter`
+        key.append(f'filter {job[6]}')
+    return json.dumps(key)
 
 
 def read_journal(path):
@@ -376,6 +389,10 @@ def curve(rows, counts, seeds, arms):
     by = {(r['labels'], r['seed'], r['mode']): r for r in rows}
     stats = (('median_mm', '3D median', '.0f', 1), ('mean_mm', '3D mean', '.0f', 1),
              ('p90_mm', '3D p90', '.0f', 1), ('pck10', 'PCK@10 px', '.1f', 100))
+    method = next((r['filter'] for r in rows if r.get('filter')), None)
+    if method:
+        stats += tuple((f'filter_{key}', f'--filter {method}: {name}', '.0f', 1)
+                       for key, name in (('mean_mm', '3D mean'), ('p90_mm', '3D p90')))
     lines = ['| labelled instants | model | label sets | ' + ' | '.join(
         f'{name} (mean over sets{", mm" if key != "pck10" else ", %"})'
         for key, name, _, _ in stats) + ' |', '|---|---|---|' + '---|' * len(stats)]
@@ -392,9 +409,11 @@ def curve(rows, counts, seeds, arms):
     pairs = [(a, 'supervised') for a in labels if a != 'supervised' and ' (' not in a]
     pairs += [(a.split(' (')[0], a) for a in labels if ' (' in a]
     if pairs:
+        filtered = (f' --filter {method}: 3D mean (mm), per set | better on | --filter {method}:'
+                    ' 3D p90 (mm), per set | better on |') if method else ''
         lines += ['', '| labelled instants | paired difference | label sets | 3D mean (mm), '
-                  'per set | better on | 3D p90 (mm), per set | better on |',
-                  '|---|---|---|---|---|---|---|']
+                  'per set | better on | 3D p90 (mm), per set | better on |' + filtered,
+                  '|---|---|---|---|---|---|---|' + '---|---|---|---|' * bool(method)]
     for n in counts:
         for a, b in pairs:
             both = [(by[(n, s, a)], by[(n, s, b)]) for s in seeds
@@ -402,7 +421,8 @@ def curve(rows, counts, seeds, arms):
             if not both:
                 continue
             cells = []
-            for key in ('mean_mm', 'p90_mm'):
+            for key in ('mean_mm', 'p90_mm', *(('filter_mean_mm', 'filter_p90_mm')
+                                               if method else ())):
                 d = [x[key] - y[key] for x, y in both
                      if x.get(key) is not None and y.get(key) is not None]
                 cells += [' / '.join(f'{v:+.0f}' for v in d), f'{sum(v < 0 for v in d)}/{len(d)}']
@@ -474,6 +494,10 @@ def table(rows):
              'p90 (mm) | triangulated | PCK@5 / 10 / 20 px | GT crops: 3D median / mean / '
              'p90 (mm), PCK@10 | fit on labels (px) | warnings |',
              '|---|---|---|---|---|---|---|---|---|---|---|']
+    method = next((r['filter'] for r in rows if r.get('filter')), None)
+    if method:
+        lines[0] += f' `monet process --filter {method}`: 3D median / mean / p90 (mm) |'
+        lines[1] += '---|'
     for r in rows:
         g = r.get('gt_crop')
         gt = '–' if g is None else (f'{fmt(g["median_mm"], ".0f")} / {fmt(g["mean_mm"], ".0f")}'
@@ -486,7 +510,9 @@ def table(rows):
             f'{fmt(r["mean_mm"], ".0f")} / {fmt(r["p90_mm"], ".0f")} | '
             f'{r["triangulated"]:.0%} | {fmt(r.get("pck5"), ".1%")} / '
             f'{fmt(r.get("pck10"), ".1%")} / {fmt(r.get("pck20"), ".1%")} | {gt} | '
-            f'{fmt(r.get("fit_px"), ".1f")} | {len(r.get("warnings", []))} |')
+            f'{fmt(r.get("fit_px"), ".1f")} | {len(r.get("warnings", []))} |'
+            + (f' {fmt(r.get("filter_median_mm"), ".0f")} / {fmt(r.get("filter_mean_mm"), ".0f")}'
+               f' / {fmt(r.get("filter_p90_mm"), ".0f")} |' if method else ''))
     return '\n'.join(lines)
 
 
@@ -555,6 +581,9 @@ def main(argv=None):
     parser.add_argument('--peer', nargs='*', type=Path, default=[], metavar='PEER_JSON',
                         help='OUT.json of bench/peer.py runs: their sleap-nn rows join the '
                              'table where labels and seed match those of this run')
+    parser.add_argument('--filter', choices=('none', 'kalman', 'optim'), default='none',
+                        help='also score each model through `monet process --filter METHOD` '
+                        '(the 3D filter a user can add: columns beside the unfiltered ones)')
     parser.add_argument('--quick', action='store_true',
                         help='smoke run: 3 labelled instants, 45 s per run')
     args = parser.parse_args(argv)
@@ -590,7 +619,7 @@ def main(argv=None):
                   reference2d=project_reference(reference, recording.cameras))
     print(f'loaded {recording.num_instants} instants x {recording.num_views} views in '
           f'{time.monotonic() - start:.0f} s', file=sys.stderr)
-    jobs = [(n, m, args.budget_s, args.steps, overrides, seed)
+    jobs = [(n, m, args.budget_s, args.steps, overrides, seed, args.filter)
             for seed in args.seeds for n in args.labels for m in args.modes]
     journal = stem.with_suffix('.runs.jsonl')
     done = read_journal(journal)

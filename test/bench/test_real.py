@@ -8,6 +8,7 @@ import torch
 
 from monet_ros.cli import main as monet
 from monet_ros.io import cloud_to_keypoints3d, open_bag
+from monet_ros.io.export_tables import read_anipose_csv
 from monet_ros.learning.config import TrainConfig
 from monet_ros.learning.recording import load_recording
 from monet_ros.learning.trainer import Trainer, TrainingData
@@ -55,6 +56,23 @@ def test_the_benchs_real_data_path_equals_monet_process(tmp_path, repo_root):
     np.testing.assert_array_equal(np.isfinite(X), finite)
     np.testing.assert_allclose(X[finite], expected[finite], atol=1e-6, rtol=0)
 
+    # --filter optim: the bench's filtered scores are those of `monet process --filter optim`
+    from monet_ros.temporal import FilterConfig
+    X_f, _, _ = real.process_path(data / 'recording', checkpoint, tmp_path / 'c',
+                                  recording.stamps, recording.cameras,
+                                  filter_config=FilterConfig(method='optim'))
+    assert monet(['process', str(data / 'recording'), '--model', str(checkpoint), '--out',
+                  str(tmp_path / 'd'), '--filter', 'optim', '--export', 'csv', '--quiet']) == 0
+    table = read_anipose_csv(tmp_path / 'd' / 'keypoints3d.csv')
+    index = {int(s): n for n, s in enumerate(recording.stamps)}
+    expected_f = np.full_like(X_f, np.nan)
+    for row, stamp in enumerate(table['stamps_ns']):
+        expected_f[index[int(stamp)]] = table['X'][row]
+    finite = np.isfinite(expected_f)
+    assert finite.any()
+    np.testing.assert_array_equal(np.isfinite(X_f), finite)
+    np.testing.assert_allclose(X_f[finite], expected_f[finite], atol=1e-6, rtol=0)
+
 
 def test_modes_take_exact_controls_and_the_curve_pairs_them(repo_root, tmp_path):
     real = bench_real(repo_root)
@@ -91,3 +109,6 @@ def test_modes_take_exact_controls_and_the_curve_pairs_them(repo_root, tmp_path)
     assert real.read_journal(journal) == {real.job_key(job): rows[0]}
     assert real.job_key(job) != real.job_key((3, 'reprojection', 300.0, 2000,
                                               {'input_size': 128}, 1))
+    # also scored with `monet process --filter optim`: another run; 'none' is the plain one
+    assert real.job_key(job + ('none',)) == real.job_key(job)
+    assert real.job_key(job + ('optim',)) != real.job_key(job)
