@@ -361,6 +361,30 @@ def arm_label(arm):
     return f'{mode} ({rest.replace(",", ", ")})' if rest else mode
 
 
+def paired_arms(arms):
+    """(arm, reference) label pairs of the curve's paired differences: every arm that is not
+    an exact control against supervised, and every exact control against its arm. An exact
+    control sets one or more weights to 0 (`reprojection:lambda_r=0`,
+    `reprojection_epipolar:lambda_e=0`, `reprojection:distill_rounds=1,lambda_d=0`); its
+    arm is the one of the same mode whose overrides are the control's without those zeros,
+    none of them 0 (`reprojection`, `reprojection_epipolar:lambda_e=5`,
+    `reprojection:distill_rounds=1`)."""
+    parsed = [(arm, *parse_arm(arm)) for arm in arms]
+    pairs = []
+    for arm, mode, over in parsed:
+        zeros = {k for k, v in over.items() if v == 0}
+        if not zeros:
+            if mode != 'supervised' or over:
+                pairs.append((arm_label(arm), 'supervised'))
+            continue
+        kept = {k: v for k, v in over.items() if k not in zeros}
+        for other, other_mode, other_over in parsed:
+            if other_mode == mode and all(other_over.get(k, 1) != 0 for k in zeros) and \
+                    {k: v for k, v in other_over.items() if k not in zeros} == kept:
+                pairs.append((arm_label(other), arm_label(arm)))
+    return pairs
+
+
 def job_key(job):
     """What identifies a finished run in the journal (OUT.runs.jsonl)."""
     count, arm, budget_s, fixed_steps, overrides, seed = job[:6]
@@ -406,8 +430,7 @@ def curve(rows, counts, seeds, arms):
                 vals = [r[key] * scale for r in got if r.get(key) is not None]
                 cells.append(format(np.mean(vals), spec) if vals else '–')
             lines.append(f'| {n} | {label} | {len(got)} | ' + ' | '.join(cells) + ' |')
-    pairs = [(a, 'supervised') for a in labels if a != 'supervised' and ' (' not in a]
-    pairs += [(a.split(' (')[0], a) for a in labels if ' (' in a]
+    pairs = paired_arms(arms)
     if pairs:
         filtered = (f' --filter {method}: 3D mean (mm), per set | better on | --filter {method}:'
                     ' 3D p90 (mm), per set | better on |') if method else ''

@@ -102,6 +102,22 @@ def test_modes_take_exact_controls_and_the_curve_pairs_them(repo_root, tmp_path)
     assert line.startswith('| 3 | ')
     mean_sup = np.mean([by[(s, 'supervised')] for s in (0, 1, 2)])
     assert '| 3 | supervised | 3 | ' in text and f'{mean_sup:.0f}' in text
+    # every exact control is paired with its own arm, also where that arm has overrides
+    arms = ['supervised', 'reprojection', 'reprojection:lambda_r=0',
+            'reprojection_epipolar:lambda_e=5', 'reprojection_epipolar:lambda_e=0',
+            'reprojection:distill_rounds=1', 'reprojection:distill_rounds=1,lambda_d=0']
+    assert real.paired_arms(arms) == [
+        ('reprojection', 'supervised'),
+        ('reprojection', 'reprojection (lambda_r=0)'),
+        ('reprojection_epipolar (lambda_e=5)', 'supervised'),
+        ('reprojection_epipolar (lambda_e=5)', 'reprojection_epipolar (lambda_e=0)'),
+        ('reprojection (distill_rounds=1)', 'supervised'),
+        ('reprojection (distill_rounds=1)', 'reprojection (distill_rounds=1, lambda_d=0)')]
+    rows = [{'labels': 3, 'seed': 0, 'mode': real.arm_label(arm), 'median_mm': 40.0,
+             'mean_mm': 60.0 + k, 'p90_mm': 120.0, 'pck10': 0.5} for k, arm in enumerate(arms)]
+    line = next(x for x in real.curve(rows, [3], [0], arms).splitlines()
+                if 'reprojection_epipolar (lambda_e=5) - reprojection_epipolar (lambda_e=0)' in x)
+    assert '| -1 | 1/1 |' in line                                   # 63 - 64 mm
     # the journal: a run written is a run skipped on the rerun
     job = (3, 'reprojection:lambda_r=0', 300.0, 2000, {'input_size': 128}, 1)
     journal = tmp_path / 'curve.runs.jsonl'
