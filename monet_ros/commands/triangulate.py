@@ -234,6 +234,8 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
         notes.append(f'rig cameras without 2D detections, left out: {", ".join(unused)}')
     cameras = [rig_cameras[v] for v in used]
     points, score = instance_arrays(pts.points[:, used], pts.score[:, used], index)
+    present = np.isfinite(points).all(-1)
+    low = present & ~(np.nan_to_num(score, nan=-1.0) >= fusion_config.confidence_threshold)
     stamps = np.round(pts.frames * (1e9 / fps)).astype(np.int64)
     rows = track_subjects(points, score, cameras, stamps, num_subjects, association,
                           tracker_config)
@@ -251,6 +253,9 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
                 last_frame=int(pts.frames[-1]), fps=fps, cameras=[c.name for c in cameras],
                 keypoints=keypoints, instance_names=instances, rows=pts.rows,
                 nan_rows=pts.nan_rows, fmt=pts.fmt, subjects=rows, notes=notes,
+                low_score=int(low.sum()),
+                not_triangulated=dict(zip(keypoints, (~np.isfinite(rows.X).all(-1))
+                                          .sum(axis=0).tolist())),
                 filter=smoothed,
                 units=rig_cameras[0].units,
                 exports={f: Path(out) / Path(p).relative_to(staging)
@@ -263,7 +268,7 @@ def _rows_text(fig):
     return f'{fig["rows"]} rows of the {fig["fmt"]} format'
 
 
-def _print_subjects(fig, name):
+def _print_subjects(fig, name, args):
     s = fig['subjects']
     T = fig['frames']
     print(f'{name}: {T} frames (from frame {fig["first_frame"]}) x {len(fig["cameras"])} '
@@ -275,6 +280,12 @@ def _print_subjects(fig, name):
     print(f'{name}: skipped: {s.unmatched} of {s.instances} instances matched in no other '
           f'camera, {s.extra} subjects beyond --subjects, {s.untracked} untracked (too '
           'few keypoints for a track, or taken by no identity while N were alive)')
+    print(f'{name}: skipped 2D: {fig["nan_rows"]} rows NaN (no detection), '
+          f'{fig["low_score"]} below --confidence-threshold {args.confidence_threshold}')
+    lost = ', '.join(f'{k} {v}' for k, v in fig['not_triangulated'].items() if v)
+    print(f'{name}: keypoints not triangulated per keypoint over {len(s.subject)} '
+          f'subject-frames (fewer than {max(2, args.min_views)} consistent views): '
+          f'{lost or "none"}')
     if fig.get('filter') is not None:
         print(f'{name}: {fig["filter"].summary()}')
         for ident, smoothed in fig['filter'].per_subject.items():
@@ -308,7 +319,7 @@ def run(args):
                              tracker_config=tracker)
     name = 'monet triangulate'
     if args.subjects is not None:
-        _print_subjects(fig, name)
+        _print_subjects(fig, name, args)
         for note in fig['notes']:
             print(f'{name}: note: {note}', file=sys.stderr)
         for fmt, path in fig['exports'].items():
