@@ -147,6 +147,13 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
     names = tuple(keypoints) if keypoints is not None else result.keypoints
     kindex = {k: i for i, k in enumerate(names)}
     for r in rows:
+        if r.keypoint not in kindex and '/' in r.keypoint and keypoints is not None:
+            # '<instance>/<keypoint>' (module docstring of labels): the one-subject read
+            instances = {k.split('/', 1)[0] for k in result.keypoints if '/' in k}
+            raise LabelError(f'{r.place}: holds {len(instances)} instances per camera (a '
+                             'subject column, SLEAP tracks or DeepLabCut individuals: '
+                             f'{r.keypoint.split("/", 1)[0]!r}, ...): give --subjects N '
+                             '(the most subjects in a frame)')
         if r.keypoint not in kindex:
             raise LabelError(f'{r.place}: field keypoint: {r.keypoint!r} is not a keypoint '
                              f'of the skeleton ({", ".join(names)})')
