@@ -374,7 +374,8 @@ def run(args):
     filter_config = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)
-    print_precision('monet process', args.precision, args.backend, device, args.model)
+    print_precision('monet process', args.precision, args.backend, device, args.model,
+                    calibration=args.calibration)
 
     def note(line):            # the notes of the run (int8's quant), as the other notes
         print(f'monet process: {line}', file=sys.stderr, flush=True)
