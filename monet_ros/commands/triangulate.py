@@ -254,8 +254,6 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
                 keypoints=keypoints, instance_names=instances, rows=pts.rows,
                 nan_rows=pts.nan_rows, fmt=pts.fmt, subjects=rows, notes=notes,
                 low_score=int(low.sum()),
-                not_triangulated=dict(zip(keypoints, (~np.isfinite(rows.X).all(-1))
-                                          .sum(axis=0).tolist())),
                 filter=smoothed,
                 units=rig_cameras[0].units,
                 exports={f: Path(out) / Path(p).relative_to(staging)
@@ -282,10 +280,7 @@ def _print_subjects(fig, name, args):
           'few keypoints for a track, or taken by no identity while N were alive)')
     print(f'{name}: skipped 2D: {fig["nan_rows"]} rows NaN (no detection), '
           f'{fig["low_score"]} below --confidence-threshold {args.confidence_threshold}')
-    lost = ', '.join(f'{k} {v}' for k, v in fig['not_triangulated'].items() if v)
-    print(f'{name}: keypoints not triangulated per keypoint over {len(s.subject)} '
-          f'subject-frames (fewer than {max(2, args.min_views)} consistent views): '
-          f'{lost or "none"}')
+    print(f'{name}: {s.untriangulated_text(fig["keypoints"])}')
     if fig.get('filter') is not None:
         print(f'{name}: {fig["filter"].summary()}')
         for ident, smoothed in fig['filter'].per_subject.items():

@@ -44,6 +44,11 @@ def test_two_subjects_are_found_and_keep_their_identity(scene, tmp_path, capsys)
     assert 'frames by subjects tracked: 2: 12' in text
     assert '1 full-frame discovery runs finding 2 subjects from 6 3D keypoint' in text
     table = read_anipose_csv(out / 'keypoints3d.csv')
+    # every keypoint a subject-frame lacks is counted (none went unsaid before)
+    lost = np.isnan(table['X']).any(-1).sum(0)
+    lost = ', '.join(f'{k} {n}' for k, n in zip(table['keypoints'], lost) if n) or 'none'
+    assert f'keypoints not triangulated per keypoint over 24 subject-frames: {lost}' \
+        in text, text
     ids = np.unique(table['subject'])
     pred = np.full((T, 2, 3, 3), np.nan)
     pred_ids = np.full((T, 2), -1)
