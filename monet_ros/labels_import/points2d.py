@@ -28,7 +28,7 @@ FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'openpose', 'fra
 BYTES_PER_ENTRY = 128
 READ = ('DeepLabCut / Lightning Pose prediction .csv or .h5 per camera, SLEAP analysis .h5 '
         'or .slp per camera, an anipose pose-2d folder, OpenPose / Pose2Sim JSON folders (one per '
-        'camera), or a frame,camera,keypoint,u,v[,score] .csv')
+        'camera), or a frame,camera,keypoint,u,v[,score][,subject] .csv')
 
 
 @dataclass
@@ -97,7 +97,8 @@ def detect_format(paths):
         if head == 'frame':
             return 'frames'
         raise LabelError(f'{first}:1: first field {head!r}: neither a DeepLabCut table '
-                         "('scorer') nor a points table ('frame,camera,keypoint,u,v[,score]')")
+                         "('scorer') nor a points table "
+                         "('frame,camera,keypoint,u,v[,score][,subject]')")
     raise LabelError(f'{first}: not a 2D table; read: {READ}')
 
 
