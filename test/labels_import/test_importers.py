@@ -212,3 +212,24 @@ def test_multi_animal_unique_bodyparts_are_no_subject(tmp_path):
     assert result.keypoints == ('snout', 'tail', 'corner')
     assert [(r.keypoint, r.subject, r.instance, r.u) for r in result.rows][-1] == \
         ('corner', 0, '', 8.0)
+
+
+@pytest.mark.parametrize('field', ['tracks', 'point_scores', 'track_occupancy',
+                                   'track_names'])
+def test_sleap_analysis_field_of_the_wrong_kind_names_file_and_field(tmp_path, field):
+    """A SLEAP analysis file whose field holds the wrong kind of data (strings for
+    numbers; more track names than tracks) is one LabelError naming the file and field:
+    it was numpy's own text naming neither ('could not convert string to float'), and
+    track names of another count were replaced by track_0, track_1, ... without a word
+    (the ids of a labelled animal then follow another name)."""
+    import h5py
+    rng = np.random.default_rng(3)
+    path = tmp_path / 'cam2.analysis.h5'
+    write_sleap(path, rng.uniform(0, 300, (6, 2, 2, 2)), ['head', 'thorax'],
+                '/data/cam2.mp4', np.full((6, 2, 2), 0.9))
+    with h5py.File(path, 'r+') as f:
+        shape = f[field].shape
+        del f[field]
+        f[field] = np.full((3,) if field == 'track_names' else shape, b'x')
+    with pytest.raises(LabelError, match=f'cam2.analysis.h5: field {field}: '):
+        import_labels('sleap', path, cameras=CAMERAS)
