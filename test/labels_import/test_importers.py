@@ -233,3 +233,21 @@ def test_sleap_analysis_field_of_the_wrong_kind_names_file_and_field(tmp_path, f
         f[field] = np.full((3,) if field == 'track_names' else shape, b'x')
     with pytest.raises(LabelError, match=f'cam2.analysis.h5: field {field}: '):
         import_labels('sleap', path, cameras=CAMERAS)
+
+
+@pytest.mark.parametrize('suffix', ['csv'])    # pandas writes no .h5 of repeated columns
+def test_deeplabcut_bodypart_given_twice_names_file_and_field(tmp_path, suffix):
+    """A DeepLabCut table holding one (bodypart, coord) column twice (e.g. a multi-animal
+    table whose `individuals` header row was lost: head, neck, ... repeated per animal) is
+    one LabelError naming the file and field: the later column silently replaced the
+    earlier one (one animal's points dropped without a word)."""
+    cols = pd.MultiIndex.from_tuples(
+        [('DLC', part, c) for _ in range(2) for part in BODYPARTS for c in ('x', 'y')],
+        names=['scorer', 'bodyparts', 'coords'])
+    frame = pd.DataFrame(np.arange(3 * len(cols), dtype=float).reshape(3, -1),
+                         index=pd.RangeIndex(3), columns=cols)
+    path = tmp_path / f'cam1DLC_resnet50.{suffix}'
+    frame.to_csv(path)
+    with pytest.raises(LabelError, match=f'cam1DLC_resnet50.{suffix}: field '
+                       f'{BODYPARTS[0]}/x: given twice'):
+        import_labels('dlc', path, cameras=CAMERAS)
