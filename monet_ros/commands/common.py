@@ -277,6 +277,9 @@ def tracker_config_from_args(args):
         derive=lambda config: [SubjectTracker(1, config, units=u) for u in UNITS])
 
 
+ASSOCIATION_OPTIONS = {'--association-px': 'threshold_px'}   # subjects.AssociationConfig
+
+
 def subjects_options():
     """{option: field} of subjects.detection.SubjectsConfig but `subjects` (--subjects N):
     the detector's several-subject options of `monet process`."""

@@ -195,7 +195,7 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
                           num_subjects, tracker_config, association_px, notes,
                           progress=False):
     """triangulate_points with --subjects (the module docstring)."""
-    from monet_ros.commands.common import atomic_output_dir
+    from monet_ros.commands.common import ASSOCIATION_OPTIONS, atomic_output_dir, options_named
     from monet_ros.config import ConfigError
     from monet_ros.io.export_results import write_subject_results
     from monet_ros.labels import LabelError
@@ -213,11 +213,11 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
     if 'npz' in exports:
         raise ConfigError('monet triangulate', 'export', 'npz is not written with '
                           '--subjects; use csv, trc, nwb')
-    association = AssociationConfig(threshold_px=association_px,
-                                    confidence_threshold=fusion_config.confidence_threshold,
-                                    min_views=max(2, fusion_config.min_views),
-                                    triangulation_px=fusion_config.threshold_px,
-                                    method=fusion_config.method)
+    with options_named(AssociationConfig, ASSOCIATION_OPTIONS):     # as typed, not the field
+        association = AssociationConfig(
+            threshold_px=association_px, confidence_threshold=fusion_config.confidence_threshold,
+            min_views=max(2, fusion_config.min_views), triangulation_px=fusion_config.threshold_px,
+            method=fusion_config.method)
     pts = read_points2d(paths, names, fmt, camera_map=camera_map, pose_model=pose_model)
     notes += pts.notes
     try:

@@ -161,7 +161,11 @@ def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
                          (['--subjects', '2', '--heatmaps'], '--heatmaps'),
                          (['--subjects', '2', '--export', 'npz'], 'npz'),
                          (['--subjects', '2', '--link-mm', '0'], "'link_mm'"),
-                         (['--subjects', '2', '--gate-mm', '-1'], "'gate_mm'")):
+                         (['--subjects', '2', '--gate-mm', '-1'], "'gate_mm'"),
+                         # named as typed (it said 'threshold_px', the field of the
+                         # association: a newcomer looked at --threshold-px)
+                         (['--subjects', '2', '--association-px', '0'],
+                          '--association-px: ')):
         code = _process(scene, tmp_path / 'x', *extra)
         err = capsys.readouterr().err.strip().splitlines()
         err = [line for line in err if 'precision' not in line]

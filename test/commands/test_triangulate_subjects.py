@@ -137,6 +137,9 @@ def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
     base = ['triangulate', *paths, '--rig', str(root / 'rig.yaml'), '--fps', '30']
     for extra, words in ((['--subjects', '0'], "'subjects': must be >= 1"),
                          (['--subjects', '2', '--export', 'npz'], 'npz'),
+                         # named as typed (it said the association's field 'threshold_px')
+                         (['--subjects', '2', '--association-px', 'nan'],
+                          '--association-px: '),
                          # a table of several instances per camera without --subjects
                          ([], 'holds 2 instances per camera')):
         code = monet(base + ['--out', str(tmp_path / 'x'), *extra])
