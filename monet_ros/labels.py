@@ -247,9 +247,11 @@ def read_label_rows(path, points=False):
                 allowed = SUBJECT_HEADERS
             if not points and header in LABEL_SUBJECT_HEADERS:
                 allowed = LABEL_SUBJECT_HEADERS
-            if header not in allowed:
+            if header not in allowed:      # every header that reads, subject ones too
+                known = [','.join(h) for h in dict.fromkeys(
+                    allowed + (SUBJECT_HEADERS if points else LABEL_SUBJECT_HEADERS))]
                 raise LabelError(f'{path}:1: header is {",".join(header)!r}, expected '
-                                 f'{",".join(allowed[0])!r} or {",".join(allowed[1])!r}')
+                                 f'{", ".join(map(repr, known[:-1]))} or {known[-1]!r}')
             for row in reader:
                 if not row or all(not cell.strip() for cell in row):
                     continue

@@ -98,3 +98,21 @@ def test_the_validator_checks_subjects_and_duplicates_per_subject():
     assert report.skipped == {'subject': 1} and table.subjects == [0]
     with pytest.raises(ValueError, match='subject -1'):
         write_labels('/nonexistent/x.csv', [(1000, 'cam0', 'head', 1.0, 2.0, -1)])
+
+
+@pytest.mark.parametrize('points', [False, True])
+def test_a_wrong_header_names_the_subject_headers_too(tmp_path, points):
+    """A header with a misnamed column lists every header that reads, the `subject` ones
+    included (it named the two without a subject column only, so a newcomer's
+    `...,score,subj` or `...,subject,score` was told the column does not exist)."""
+    path = tmp_path / 'bad.csv'
+    path.write_text('frame,camera,keypoint,u,v,score,subj\n0,cam0,head,1.0,2.0,0.9,a\n')
+    with pytest.raises(LabelError) as error:
+        read_label_rows(path, points=points)
+    text = str(error.value)
+    assert '\n' not in text and text.startswith(f'{path}:1: header is ')
+    expected = ('frame,camera,keypoint,u,v,score,subject', 'frame,camera,keypoint,u,v,subject') \
+        if points else ('stamp_ns,camera,keypoint,u,v,subject',
+                        'frame,camera,keypoint,u,v,subject')
+    for header in expected + ('frame,camera,keypoint,u,v',):
+        assert f"'{header}'" in text, text

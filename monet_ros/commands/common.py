@@ -44,13 +44,16 @@ def add_precision_options(parser, calibration_default):
                         '/tf_static) or a cached *.<crops>.int8.onnx quant of the same crop '
                         f'mode to calibrate on (default: {calibration_default})')
 
-def print_precision(owner, precision, backend='torch', device=None, checkpoint=None):
+def print_precision(owner, precision, backend='torch', device=None, checkpoint=None,
+                    calibration=None):
     """Resolve --precision (auto: bfloat16 with torch where native, else float32; int8 only
     when asked for: models.detector.resolve_precision) for `device` (None = CUDA when
     present, else CPU) and print the one line saying which runs and why (stdout, `owner:
     precision auto: ...`: stderr keeps one line for a bad input); returns the precision
     run. ConfigError names precision for a value that cannot run (bfloat16 on a CPU that
-    would emulate it, int8 without onnxruntime or without VNNI / AMX-INT8)."""
+    would emulate it, int8 without onnxruntime or without VNNI / AMX-INT8); ConfigError
+    names calibration when one (--calibration, int8's data) is given for another precision
+    (nothing would use it)."""
     import torch
 
     from monet_ros.models.detector import resolve_precision
@@ -60,6 +63,10 @@ def print_precision(owner, precision, backend='torch', device=None, checkpoint=N
         chosen, note = resolve_precision(precision, backend, device, checkpoint)
     except ValueError as error:
         raise ConfigError(owner, 'precision', str(error)) from None
+    if calibration is not None and chosen != 'int8':
+        raise ConfigError(owner, 'calibration', f'{calibration}: calibration data of '
+                          f'--precision int8 only; this run is {chosen} (give --precision '
+                          'int8 --backend onnxruntime, or leave --calibration out)')
     print(f'{owner}: {note}', flush=True)
     return chosen
 
@@ -268,6 +275,9 @@ def tracker_config_from_args(args):
     return config_from_options(
         args, TrackerConfig, tracker_options(),
         derive=lambda config: [SubjectTracker(1, config, units=u) for u in UNITS])
+
+
+ASSOCIATION_OPTIONS = {'--association-px': 'threshold_px'}   # subjects.AssociationConfig
 
 
 def subjects_options():

@@ -439,7 +439,7 @@ def run(args):
     from monet_ros.commands.common import print_precision
     # from the arguments alone, before any node logs a line; auto: the choice said once
     precision = print_precision('monet pipeline', args.precision, args.backend, device,
-                                args.model)
+                                args.model, calibration=args.calibration)
     calibration = ''
     if args.precision == 'int8':     # quantised once here, before the detector processes
         from monet_ros.fusion import FusionConfig

@@ -339,6 +339,7 @@ def subject_configs(args):
     """(SubjectsConfig, AssociationConfig or None, TrackerConfig) of the --subjects
     options (ValueError naming the option: commands.common.config_from_options)."""
     from monet_ros.commands.common import (
+        ASSOCIATION_OPTIONS,
         config_from_options,
         subjects_options,
         tracker_config_from_args,
@@ -348,10 +349,10 @@ def subject_configs(args):
 
     subjects = config_from_options(args, SubjectsConfig, subjects_options(),
                                    subjects=args.subjects)
-    association = AssociationConfig(threshold_px=args.association_px,
-                                    confidence_threshold=args.confidence_threshold,
-                                    min_views=args.min_views,
-                                    triangulation_px=args.threshold_px, method=args.method)
+    association = config_from_options(args, AssociationConfig, ASSOCIATION_OPTIONS,
+                                      confidence_threshold=args.confidence_threshold,
+                                      min_views=args.min_views,
+                                      triangulation_px=args.threshold_px, method=args.method)
     return subjects, association, tracker_config_from_args(args)
 
 
@@ -374,7 +375,8 @@ def run(args):
     filter_config = filter_config_from_args(args, args.confidence_threshold, args.threshold_px)
     device = check_device('monet process', args.device)
     check_threads('monet process', args.threads)
-    print_precision('monet process', args.precision, args.backend, device, args.model)
+    print_precision('monet process', args.precision, args.backend, device, args.model,
+                    calibration=args.calibration)
 
     def note(line):            # the notes of the run (int8's quant), as the other notes
         print(f'monet process: {line}', file=sys.stderr, flush=True)

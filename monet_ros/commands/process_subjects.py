@@ -45,7 +45,8 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     (inside `staging`, already an open rosbag2 folder's staging path) and the exports.
     subjects: SubjectsConfig; association: AssociationConfig; tracker: TrackerConfig.
     Fills `figures` (process_recording's dict) and adds figures['subjects']: the
-    subjects.offline.SubjectRows, figures['subject_counts']: per-frame counts (frames
+    subjects.offline.SubjectRows, figures['subject_keypoints'] its C keypoint names,
+    figures['subject_counts']: per-frame counts (frames
     with k subjects, discoveries, crops, duplicates, instances, unmatched, and discovery's
     3D points: found, explained by a track, loose), and figures['filter']: the
     subjects.offline.SmoothedSubjects of filter_config (a temporal.FilterConfig, method
@@ -126,6 +127,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                                         result, stamps, frame_numbers(stamps), edges=edges,
                                         trc_axes=trc_axes, smoothed=smoothed)
     figures['subjects'] = result
+    figures['subject_keypoints'] = list(detector.keypoints)
     figures['subject_counts'] = counts
     return written
 
@@ -140,6 +142,7 @@ def print_subjects(figures, out):
           f'{figures["units"]}, the rig\'s unit)')
     print(f'{name}: subjects: {s.identities_text()}; frames by subjects tracked: '
           f'{per_frame or "none"}')
+    print(f'{name}: {s.untriangulated_text(figures["subject_keypoints"])}')
     print(f'{name}: detection: {n["crops"]} subject crops, {n["discoveries"]} full-frame '
           f'discovery runs finding {n["discovered"]} subjects from {n["points"]} 3D keypoint '
           f'candidates ({n["explained"]} near a live track, {n["loose"]} in no subject: '

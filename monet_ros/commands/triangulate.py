@@ -195,7 +195,7 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
                           num_subjects, tracker_config, association_px, notes,
                           progress=False):
     """triangulate_points with --subjects (the module docstring)."""
-    from monet_ros.commands.common import atomic_output_dir
+    from monet_ros.commands.common import ASSOCIATION_OPTIONS, atomic_output_dir, options_named
     from monet_ros.config import ConfigError
     from monet_ros.io.export_results import write_subject_results
     from monet_ros.labels import LabelError
@@ -213,11 +213,11 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
     if 'npz' in exports:
         raise ConfigError('monet triangulate', 'export', 'npz is not written with '
                           '--subjects; use csv, trc, nwb')
-    association = AssociationConfig(threshold_px=association_px,
-                                    confidence_threshold=fusion_config.confidence_threshold,
-                                    min_views=max(2, fusion_config.min_views),
-                                    triangulation_px=fusion_config.threshold_px,
-                                    method=fusion_config.method)
+    with options_named(AssociationConfig, ASSOCIATION_OPTIONS):     # as typed, not the field
+        association = AssociationConfig(
+            threshold_px=association_px, confidence_threshold=fusion_config.confidence_threshold,
+            min_views=max(2, fusion_config.min_views), triangulation_px=fusion_config.threshold_px,
+            method=fusion_config.method)
     pts = read_points2d(paths, names, fmt, camera_map=camera_map, pose_model=pose_model)
     notes += pts.notes
     try:
@@ -234,6 +234,8 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
         notes.append(f'rig cameras without 2D detections, left out: {", ".join(unused)}')
     cameras = [rig_cameras[v] for v in used]
     points, score = instance_arrays(pts.points[:, used], pts.score[:, used], index)
+    present = np.isfinite(points).all(-1)
+    low = present & ~(np.nan_to_num(score, nan=-1.0) >= fusion_config.confidence_threshold)
     stamps = np.round(pts.frames * (1e9 / fps)).astype(np.int64)
     rows = track_subjects(points, score, cameras, stamps, num_subjects, association,
                           tracker_config)
@@ -251,6 +253,7 @@ def _triangulate_subjects(paths, rig_cameras, names, out, fmt, fps, sk, camera_m
                 last_frame=int(pts.frames[-1]), fps=fps, cameras=[c.name for c in cameras],
                 keypoints=keypoints, instance_names=instances, rows=pts.rows,
                 nan_rows=pts.nan_rows, fmt=pts.fmt, subjects=rows, notes=notes,
+                low_score=int(low.sum()),
                 filter=smoothed,
                 units=rig_cameras[0].units,
                 exports={f: Path(out) / Path(p).relative_to(staging)
@@ -263,7 +266,7 @@ def _rows_text(fig):
     return f'{fig["rows"]} rows of the {fig["fmt"]} format'
 
 
-def _print_subjects(fig, name):
+def _print_subjects(fig, name, args):
     s = fig['subjects']
     T = fig['frames']
     print(f'{name}: {T} frames (from frame {fig["first_frame"]}) x {len(fig["cameras"])} '
@@ -275,6 +278,9 @@ def _print_subjects(fig, name):
     print(f'{name}: skipped: {s.unmatched} of {s.instances} instances matched in no other '
           f'camera, {s.extra} subjects beyond --subjects, {s.untracked} untracked (too '
           'few keypoints for a track, or taken by no identity while N were alive)')
+    print(f'{name}: skipped 2D: {fig["nan_rows"]} rows NaN (no detection), '
+          f'{fig["low_score"]} below --confidence-threshold {args.confidence_threshold}')
+    print(f'{name}: {s.untriangulated_text(fig["keypoints"])}')
     if fig.get('filter') is not None:
         print(f'{name}: {fig["filter"].summary()}')
         for ident, smoothed in fig['filter'].per_subject.items():
@@ -308,7 +314,7 @@ def run(args):
                              tracker_config=tracker)
     name = 'monet triangulate'
     if args.subjects is not None:
-        _print_subjects(fig, name)
+        _print_subjects(fig, name, args)
         for note in fig['notes']:
             print(f'{name}: note: {note}', file=sys.stderr)
         for fmt, path in fig['exports'].items():

@@ -44,7 +44,13 @@ from werkzeug.exceptions import HTTPException, RequestEntityTooLarge
 
 from monet_ros.label_app import guard
 from monet_ros.label_app.assist import assist_instant, assist_to_json, epipolar_polyline
-from monet_ros.label_app.session import NAME_CHARS, VersionConflict, check_subject, short
+from monet_ros.label_app.session import (
+    MAX_SUBJECT,
+    NAME_CHARS,
+    VersionConflict,
+    check_subject,
+    short,
+)
 
 # The page's placeholder for the run's token (static/index.html).
 TOKEN_MARK = '__MONET_TOKEN__'
@@ -215,7 +221,8 @@ def create_app(session, hosts, predictor=None, token=None):
     def query_subject():
         text = request.args.get('subject', '0')
         if not (text.isascii() and text.isdigit() and len(text) <= 3):
-            raise ValueError(f'subject: expected an integer, got {short(text)}')
+            raise ValueError(f'subject: expected an integer 0..{MAX_SUBJECT}, got '
+                             f'{short(text)}')
         return check_subject(int(text))
 
     @app.get('/api/labels/<int:t>')

@@ -259,6 +259,11 @@ class LabelSession:
         notes = []
         for name, rows in sources:
             labels, report = self._resolve(rows)
+            beyond = [s for s in labels.subjects if s > MAX_SUBJECT]
+            if beyond:       # the page could list it but never show or save it
+                raise ConfigError('monet label', 'labels', f'{name}: subject {beyond[0]}: '
+                                  f'the page addresses subjects 0..{MAX_SUBJECT}; number '
+                                  'the subjects of an instant from 0')
             notes.append(f'{name}: {report.summary()}')
             for stamp in labels.stamps:
                 for subject in labels.instant_subjects(stamp):

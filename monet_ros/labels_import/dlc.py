@@ -80,7 +80,11 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
             raise LabelError(f'{source}: column {col} has no (scorer, bodyparts, coords) '
                              'levels')
         name = col[-2] if len(col) == 3 or col[-3] == UNIQUE else f'{col[-3]}/{col[-2]}'
-        groups.setdefault(name, {})[str(col[-1])] = k
+        coords = groups.setdefault(name, {})
+        if str(col[-1]) in coords:      # the later column would replace it without a word
+            raise LabelError(f'{source}: field {name}/{col[-1]}: given twice (columns '
+                             f'{coords[str(col[-1])] + 1} and {k + 1} of the data)')
+        coords[str(col[-1])] = k
     individuals = {c[-3] for c in levels if len(c) == 4 and c[-3] != UNIQUE}
     if len(individuals) == 1:
         groups = {k.split('/', 1)[1]: v for k, v in groups.items()}

@@ -28,7 +28,7 @@ FORMATS = ('auto', 'dlc', 'lightning-pose', 'sleap', 'anipose', 'openpose', 'fra
 BYTES_PER_ENTRY = 128
 READ = ('DeepLabCut / Lightning Pose prediction .csv or .h5 per camera, SLEAP analysis .h5 '
         'or .slp per camera, an anipose pose-2d folder, OpenPose / Pose2Sim JSON folders (one per '
-        'camera), or a frame,camera,keypoint,u,v[,score] .csv')
+        'camera), or a frame,camera,keypoint,u,v[,score][,subject] .csv')
 
 
 @dataclass
@@ -97,7 +97,8 @@ def detect_format(paths):
         if head == 'frame':
             return 'frames'
         raise LabelError(f'{first}:1: first field {head!r}: neither a DeepLabCut table '
-                         "('scorer') nor a points table ('frame,camera,keypoint,u,v[,score]')")
+                         "('scorer') nor a points table "
+                         "('frame,camera,keypoint,u,v[,score][,subject]')")
     raise LabelError(f'{first}: not a 2D table; read: {READ}')
 
 
@@ -147,6 +148,13 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
     names = tuple(keypoints) if keypoints is not None else result.keypoints
     kindex = {k: i for i, k in enumerate(names)}
     for r in rows:
+        if r.keypoint not in kindex and '/' in r.keypoint and keypoints is not None:
+            # '<instance>/<keypoint>' (module docstring of labels): the one-subject read
+            instances = {k.split('/', 1)[0] for k in result.keypoints if '/' in k}
+            raise LabelError(f'{r.place}: holds {len(instances)} instances per camera (a '
+                             'subject column, SLEAP tracks or DeepLabCut individuals: '
+                             f'{r.keypoint.split("/", 1)[0]!r}, ...): give --subjects N '
+                             '(the most subjects in a frame)')
         if r.keypoint not in kindex:
             raise LabelError(f'{r.place}: field keypoint: {r.keypoint!r} is not a keypoint '
                              f'of the skeleton ({", ".join(names)})')

@@ -40,6 +40,15 @@ def _text(value):
     return value.decode('utf-8', 'replace') if isinstance(value, bytes) else str(value)
 
 
+def _numbers(f, key, path):
+    """Field `key` of an open analysis file as float64; LabelError naming the file and
+    field when it holds no numbers (strings, objects)."""
+    try:
+        return np.asarray(f[key][()], dtype=np.float64)
+    except (ValueError, TypeError) as error:
+        raise LabelError(f'{path}: field {key}: not numbers ({error})') from None
+
+
 def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None, ids=None):
     """(rows, keypoints, dropped, frames) of one SLEAP analysis HDF5 file: LabelRow list,
     keypoint names ('<track>/<node>' with several tracks), points below min_score left out,
@@ -52,7 +61,7 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None, id
             if key not in f:
                 raise LabelError(f'{path}: field {key}: missing; not a SLEAP analysis file '
                                  f'(has {", ".join(sorted(f.keys()))})')
-        tracks = np.asarray(f['tracks'][()], dtype=np.float64)
+        tracks = _numbers(f, 'tracks', path)
         nodes = [_text(n) for n in f['node_names'][()]]
         if tracks.ndim != 4 or tracks.shape[1] != 2 or tracks.shape[2] != len(nodes):
             raise LabelError(f'{path}: field tracks: shape {tracks.shape}, expected (tracks, 2,'
@@ -60,19 +69,22 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None, id
         n_tracks, _, _, n_frames = tracks.shape
         occupancy = np.ones((n_frames, n_tracks), bool)
         if 'track_occupancy' in f:
-            occupancy = np.asarray(f['track_occupancy'][()]).astype(bool)
+            occupancy = _numbers(f, 'track_occupancy', path).astype(bool)
             if occupancy.shape != (n_frames, n_tracks):
                 raise LabelError(f'{path}: field track_occupancy: shape {occupancy.shape}, '
                                  f'expected ({n_frames}, {n_tracks})')
         scores = None
         if 'point_scores' in f:
-            scores = np.asarray(f['point_scores'][()], dtype=np.float64)
+            scores = _numbers(f, 'point_scores', path)
             if scores.shape != (n_tracks, len(nodes), n_frames):
                 raise LabelError(f'{path}: field point_scores: shape {scores.shape}, '
                                  f'expected ({n_tracks}, {len(nodes)}, {n_frames})')
         names = [_text(n) for n in f['track_names'][()]] if 'track_names' in f else []
         video = _text(f['video_path'][()]) if 'video_path' in f else ''
-    names = names if len(names) == n_tracks else [f'track_{i}' for i in range(n_tracks)]
+    if names and len(names) != n_tracks:    # ids follow names: never a silent renaming
+        raise LabelError(f'{path}: field track_names: {len(names)} names for the {n_tracks} '
+                         'tracks of field tracks')
+    names = names or [f'track_{i}' for i in range(n_tracks)]
     cam = camera_for(Path(video).stem if video else Path(path).stem, cameras, camera,
                      camera_map)
     if cam not in cameras and video:

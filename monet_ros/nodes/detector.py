@@ -348,6 +348,11 @@ class DetectorNode(Node):
         load: changing track live keeps the loaded quant."""
         if not Path(path).is_file():
             raise CheckpointError(f'{path}: checkpoint file not found (parameter model)')
+        if self.config.calibration and self.config.precision != 'int8':   # nothing uses it
+            raise ConfigError(self.get_name(), 'calibration', f'{self.config.calibration}: '
+                              'calibration data of precision int8 only; this node runs '
+                              f'precision {self.config.precision} (set precision int8, or '
+                              'leave calibration empty)')
         track = self.config.track and all(s.rig_camera is not None for s in self.slots)
         int8_crops, calibration = int8_calibration(
             self.config.calibration or None, track, self.tracked_rule(self.config),

@@ -83,6 +83,16 @@ class SubjectRows:
                 f'{counted(len(self.subject), "subject-frame")}, '
                 f'{counted(self.births, "birth")}, {counted(self.deaths, "death")}')
 
+    def untriangulated_text(self, keypoints):
+        """'keypoints not triangulated per keypoint over 24 subject-frames: head 3, neck 1'
+        ('none' when every row has every keypoint; keypoints: the C names of X's order):
+        the summary's count of the joints the rows lack (one wording for `monet process`
+        and `monet triangulate`)."""
+        lost = (~np.isfinite(self.X).all(-1)).sum(axis=0)
+        listed = ', '.join(f'{k} {int(n)}' for k, n in zip(keypoints, lost) if n)
+        return (f'keypoints not triangulated per keypoint over '
+                f'{counted(len(self.subject), "subject-frame")}: {listed or "none"}')
+
 
 def counted(n, noun, plural=None):
     """'1 birth', '0 births', '2 births' (plural: the irregular form)."""

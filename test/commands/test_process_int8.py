@@ -258,3 +258,19 @@ def test_calibration_is_checked_cached_quant_or_not_and_the_quant_used_is_said(
         assert lines[cached] == lines[bare]             # the same refusal, cached or not
     assert not list(bare.glob('*.int8.onnx'))
     assert sorted(cached.glob('*.int8.onnx')) == sorted([full, tracked, other])
+
+
+@pytest.mark.parametrize('precision', ['float32', 'auto'])
+def test_calibration_without_int8_is_one_line_exit_2(scene, tmp_path, capsys, precision):
+    """--calibration is int8's calibration data: with another precision it was ignored
+    without a word (nothing calibrated on it, nothing said); now refused in one line naming
+    the option, before any output, by `monet process` and `monet pipeline` alike."""
+    rec, _, model = scene
+    for argv in (['process', str(rec), '--model', str(model), '--quiet',
+                  '--out', str(tmp_path / 'out')],
+                 ['pipeline', '--bag', str(rec), '--model', str(model), '--quiet',
+                  '--lockstep']):
+        assert monet(argv + ['--precision', precision, '--calibration', str(rec)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and '--calibration' in err[0] and 'int8' in err[0], err
+        assert not (tmp_path / 'out').exists()

@@ -44,6 +44,11 @@ def test_two_subjects_are_found_and_keep_their_identity(scene, tmp_path, capsys)
     assert 'frames by subjects tracked: 2: 12' in text
     assert '1 full-frame discovery runs finding 2 subjects from 6 3D keypoint' in text
     table = read_anipose_csv(out / 'keypoints3d.csv')
+    # every keypoint a subject-frame lacks is counted (none went unsaid before)
+    lost = np.isnan(table['X']).any(-1).sum(0)
+    lost = ', '.join(f'{k} {n}' for k, n in zip(table['keypoints'], lost) if n) or 'none'
+    assert f'keypoints not triangulated per keypoint over 24 subject-frames: {lost}' \
+        in text, text
     ids = np.unique(table['subject'])
     pred = np.full((T, 2, 3, 3), np.nan)
     pred_ids = np.full((T, 2), -1)
@@ -156,7 +161,11 @@ def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
                          (['--subjects', '2', '--heatmaps'], '--heatmaps'),
                          (['--subjects', '2', '--export', 'npz'], 'npz'),
                          (['--subjects', '2', '--link-mm', '0'], "'link_mm'"),
-                         (['--subjects', '2', '--gate-mm', '-1'], "'gate_mm'")):
+                         (['--subjects', '2', '--gate-mm', '-1'], "'gate_mm'"),
+                         # named as typed (it said 'threshold_px', the field of the
+                         # association: a newcomer looked at --threshold-px)
+                         (['--subjects', '2', '--association-px', '0'],
+                          '--association-px: ')):
         code = _process(scene, tmp_path / 'x', *extra)
         err = capsys.readouterr().err.strip().splitlines()
         err = [line for line in err if 'precision' not in line]

@@ -137,6 +137,9 @@ def test_bad_subject_options_are_one_line(scene, tmp_path, capsys):
     base = ['triangulate', *paths, '--rig', str(root / 'rig.yaml'), '--fps', '30']
     for extra, words in ((['--subjects', '0'], "'subjects': must be >= 1"),
                          (['--subjects', '2', '--export', 'npz'], 'npz'),
+                         # named as typed (it said the association's field 'threshold_px')
+                         (['--subjects', '2', '--association-px', 'nan'],
+                          '--association-px: '),
                          # a table of several instances per camera without --subjects
                          ([], 'holds 2 instances per camera')):
         code = monet(base + ['--out', str(tmp_path / 'x'), *extra])
@@ -178,3 +181,49 @@ def test_tracker_options_decide_the_identities(scene, tmp_path, capsys):
     assert '0 identities, 0 subject-frames, 0 births' in text
     assert f'{2 * T} untracked' in text
     assert len(read_anipose_csv(out / 'keypoints3d.csv')['fnum']) == 0
+
+
+def test_missing_and_low_score_detections_are_counted(scene, tmp_path, capsys):
+    """Nothing dropped silently with --subjects either: NaN rows, detections below
+    --confidence-threshold and the keypoints a subject-frame could not triangulate are
+    counted in the summary, as without --subjects (a keypoint missing everywhere, here
+    the head, is named with every subject-frame)."""
+    root, _, _, points, _ = scene
+    points = points.copy()
+    points[:, :, :, 0] = np.nan                        # head: never detected
+    path = _write_table(tmp_path / 'points.csv', points)[0]
+    lines = path.read_text().splitlines()
+    low = [i for i in range(1, len(lines)) if ',neck,' in lines[i]][:7]
+    for i in low:                                      # 7 neck detections scored 0.05
+        lines[i] = lines[i].replace(',0.9,', ',0.05,')
+    path.write_text('\n'.join(lines) + '\n')
+    nan_rows = sum(',nan,' in line for line in lines)
+    assert nan_rows == T * 4 * 2
+    code = monet(['triangulate', str(path), '--rig', str(root / 'rig.yaml'), '--out',
+                  str(tmp_path / 'out'), '--subjects', '2', '--fps', str(FPS),
+                  '--skeleton', 'human14'])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert f'{nan_rows} rows NaN (no detection)' in text, text
+    assert '7 below --confidence-threshold 0.1' in text, text
+    assert f'keypoints not triangulated per keypoint over {2 * T} subject-frames: ' \
+        f'head {2 * T}' in text, text
+
+
+def test_instances_without_subjects_name_the_option_with_a_skeleton(scene, tmp_path,
+                                                                      capsys):
+    """A table of several instances per camera without --subjects says to give
+    --subjects also when --skeleton is given (it said that 'ind1/head' is not a keypoint
+    of the skeleton)."""
+    root, _, _, points, _ = scene
+    for kind in ('dlc', 'frames'):
+        if kind == 'dlc':
+            paths = _write_dlc(tmp_path / 'dlc', points)
+        else:
+            paths = _write_table(tmp_path / 'points.csv', points)
+        code = monet(['triangulate', *map(str, paths), '--rig', str(root / 'rig.yaml'),
+                      '--out', str(tmp_path / 'x'), '--fps', '30', '--skeleton', 'human14'])
+        err = capsys.readouterr().err.strip()
+        assert code == 2 and '\n' not in err, err
+        assert 'instances per camera' in err and 'give --subjects N' in err, err
+        assert not (tmp_path / 'x').exists()

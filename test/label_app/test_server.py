@@ -147,7 +147,7 @@ def test_a_host_not_of_this_machine_names_host_not_port(raw_rec, tmp_path, host)
 
 @pytest.mark.parametrize('case', ['no_recording', 'bad_import', 'labels_folder', 'bad_port',
                                   'bad_labels', 'bad_model', 'model_skeleton',
-                                  'bad_allow_host', 'labels_unsavable'])
+                                  'bad_allow_host', 'labels_unsavable', 'subject_beyond_page'])
 def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
     bag, model, rig, stamps = raw_rec
     labels = tmp_path / 'labels.csv'
@@ -167,11 +167,17 @@ def test_bad_input_exits_2_with_one_line(raw_rec, tmp_path, case):
         'labels_unsavable': ([bag, '--labels', tmp_path / 'blocker' / 'labels.csv'],
                              [f"'labels': {tmp_path / 'blocker' / 'labels.csv'}: cannot be "
                               'saved']),
+        # a valid labels file (ids up to 2**31 - 1) with an id the page cannot address
+        # (0..99): listed in the subject buttons and never shown before
+        'subject_beyond_page': ([bag, '--labels', labels], ['labels.csv', 'subject 150']),
     }[case]
     (tmp_path / 'blocker').write_text('a file, not a folder')
     (tmp_path / 'sk.yaml').write_text('keypoints: [a, b]\n')
     if case == 'bad_labels':
         labels.write_text(f'stamp_ns,camera,keypoint,u,v\n{stamps[0]},cam_9,head,1,2\n')
+    if case == 'subject_beyond_page':
+        labels.write_text(f'stamp_ns,camera,keypoint,u,v,subject\n'
+                          f'{stamps[0]},{rig[0].name},head,1,2,150\n')
     if case == 'bad_model':
         (tmp_path / 'm.pt').write_bytes(b'not a checkpoint')
     result = run_label(*args)

@@ -212,3 +212,42 @@ def test_multi_animal_unique_bodyparts_are_no_subject(tmp_path):
     assert result.keypoints == ('snout', 'tail', 'corner')
     assert [(r.keypoint, r.subject, r.instance, r.u) for r in result.rows][-1] == \
         ('corner', 0, '', 8.0)
+
+
+@pytest.mark.parametrize('field', ['tracks', 'point_scores', 'track_occupancy',
+                                   'track_names'])
+def test_sleap_analysis_field_of_the_wrong_kind_names_file_and_field(tmp_path, field):
+    """A SLEAP analysis file whose field holds the wrong kind of data (strings for
+    numbers; more track names than tracks) is one LabelError naming the file and field:
+    it was numpy's own text naming neither ('could not convert string to float'), and
+    track names of another count were replaced by track_0, track_1, ... without a word
+    (the ids of a labelled animal then follow another name)."""
+    import h5py
+    rng = np.random.default_rng(3)
+    path = tmp_path / 'cam2.analysis.h5'
+    write_sleap(path, rng.uniform(0, 300, (6, 2, 2, 2)), ['head', 'thorax'],
+                '/data/cam2.mp4', np.full((6, 2, 2), 0.9))
+    with h5py.File(path, 'r+') as f:
+        shape = f[field].shape
+        del f[field]
+        f[field] = np.full((3,) if field == 'track_names' else shape, b'x')
+    with pytest.raises(LabelError, match=f'cam2.analysis.h5: field {field}: '):
+        import_labels('sleap', path, cameras=CAMERAS)
+
+
+@pytest.mark.parametrize('suffix', ['csv'])    # pandas writes no .h5 of repeated columns
+def test_deeplabcut_bodypart_given_twice_names_file_and_field(tmp_path, suffix):
+    """A DeepLabCut table holding one (bodypart, coord) column twice (e.g. a multi-animal
+    table whose `individuals` header row was lost: head, neck, ... repeated per animal) is
+    one LabelError naming the file and field: the later column silently replaced the
+    earlier one (one animal's points dropped without a word)."""
+    cols = pd.MultiIndex.from_tuples(
+        [('DLC', part, c) for _ in range(2) for part in BODYPARTS for c in ('x', 'y')],
+        names=['scorer', 'bodyparts', 'coords'])
+    frame = pd.DataFrame(np.arange(3 * len(cols), dtype=float).reshape(3, -1),
+                         index=pd.RangeIndex(3), columns=cols)
+    path = tmp_path / f'cam1DLC_resnet50.{suffix}'
+    frame.to_csv(path)
+    with pytest.raises(LabelError, match=f'cam1DLC_resnet50.{suffix}: field '
+                       f'{BODYPARTS[0]}/x: given twice'):
+        import_labels('dlc', path, cameras=CAMERAS)

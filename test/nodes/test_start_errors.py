@@ -68,3 +68,19 @@ def test_detector_int8_without_calibration_names_the_parameter(ros_env, tmp_path
         assert 'precision int8 needs calibration data' in lines[0], lines
         assert 'parameter calibration' in lines[0] and 'model.' in lines[0], lines
     assert 'Traceback' not in node.output()
+
+
+def test_detector_calibration_without_int8_names_the_parameter(ros_env, tmp_path):
+    """`calibration` is int8's calibration data: with another precision nothing uses it,
+    and the node started without a word; refused like `monet process --calibration`."""
+    from helpers.recordings import small_checkpoint
+    save_rig(tmp_path / 'rig.yaml', ring_rig(2))
+    model = small_checkpoint(tmp_path / 'model.pt')
+    params = dict(rig=str(tmp_path / 'rig.yaml'), model=str(model), device='cpu',
+                  precision='float32', calibration=str(tmp_path / 'rig.yaml'))
+    with NodeProcess('detector', ros_env, params) as node:
+        assert node.wait(timeout=120) == 2, node.output()
+    lines = [line for line in node.stderr_path.read_text().splitlines() if line.strip()]
+    assert len(lines) == 1, node.output()
+    assert "parameter 'calibration'" in lines[0] and 'int8' in lines[0], lines
+    assert 'Traceback' not in node.output()
