@@ -21,8 +21,14 @@ cached beside the checkpoint as `<checkpoint stem>.<sha256[:16]>.<crops key>.int
 (int8_path_for), written atomically; the name is keyed by the checkpoint's sha256 and the
 crops key, so new weights need a new calibration, a quant never belongs to other weights,
 and a tracked and a full-frame quant of one checkpoint sit side by side, neither used for
-the other. Quants cached before the crops key (`<stem>.<sha256[:16]>.int8.onnx`, full-frame
-calibrated) are no longer read.
+the other. The name alone proves nothing (a file copied or renamed onto it would be used
+for weights it was not made from): every quant written records, in its ONNX metadata_props,
+the full sha256 of its checkpoint and its crops key (RECORD_KEYS), and a cached or given
+quant is used only when its record says it is this checkpoint's, of these crops
+(check_record); one that says otherwise, or records nothing (made before the record, or not
+here), is calibrated again where calibration data is given, else refused in one line. Quants
+cached before the crops key (`<stem>.<sha256[:16]>.int8.onnx`, full-frame calibrated) are
+no longer read.
 
 CPU rule (cpu_int8_feature): int8 is refused, not only warned about, on a CPU without
 AVX512-VNNI, AVX-VNNI or AMX-INT8. Without them ONNX Runtime's uint8 x int8 convolutions run
@@ -49,6 +55,10 @@ FULL_CROPS = 'full'          # the crops key of full-frame calibration
 _NUMBER = r'-?[0-9.]+(?:e[+-][0-9]+)?'
 CROPS_KEY = re.compile(rf'full|tracked-m{_NUMBER}-t{_NUMBER}-k[0-9]+|'
                        rf'box-{_NUMBER}_{_NUMBER}_{_NUMBER}_{_NUMBER}')
+
+
+# the metadata_props keys of a quant's record: the checkpoint's full sha256, the crops key
+RECORD_KEYS = ('monet_ros.checkpoint_sha256', 'monet_ros.int8_crops')
 
 
 class Int8Error(ValueError):
@@ -102,6 +112,42 @@ def int8_path_for(checkpoint, sha256, crops=FULL_CROPS):
     checkpoint = Path(checkpoint)
     return checkpoint.with_name(f'{checkpoint.stem}.{sha256[:16]}.{check_crops_key(crops)}'
                                 f'{INT8_SUFFIX}')
+
+
+def with_record(data, sha256, crops):
+    """The quant's ONNX bytes `data` with its record (RECORD_KEYS in metadata_props): the
+    full sha256 of the checkpoint it was made from and the crops key it was calibrated on."""
+    import onnx
+
+    model = onnx.load_from_string(data)
+    for key, value in zip(RECORD_KEYS, (sha256, crops)):
+        entry = model.metadata_props.add()
+        entry.key, entry.value = key, value
+    return model.SerializeToString()
+
+
+def check_record(path, sha256, crops, what='calibration'):
+    """Int8Error (one line naming `what` and the file) unless the quant at `path` records
+    (with_record) the checkpoint sha256 `sha256` (full) and the crops key `crops`: a file
+    that is not ONNX, one without a record, or one of other weights or crops."""
+    import onnx
+
+    try:
+        model = onnx.load(str(path), load_external_data=False)
+    except Exception as error:  # noqa: BLE001 - protobuf / onnx raise many kinds
+        raise Int8Error(f'{what} {path}: not a readable ONNX quant ({type(error).__name__})'
+                        ) from None
+    record = {p.key: p.value for p in model.metadata_props}
+    made, on = record.get(RECORD_KEYS[0]), record.get(RECORD_KEYS[1])
+    if made is None or on is None:
+        raise Int8Error(f'{what} {path}: the quant records no checkpoint (made before quants '
+                        'recorded theirs, or not by monet_ros): give calibration data to '
+                        'calibrate again, or delete it')
+    if made != sha256 or on != crops:
+        raise Int8Error(f'{what} {path}: the quant was made from a checkpoint of sha256 '
+                        f'{made[:16]} on crops {on}, not this one ({sha256[:16]}, crops '
+                        f'{crops}), whatever its name: give calibration data to calibrate '
+                        'again, or delete it')
 
 
 def cached_int8(checkpoint, sha256=None, crops=FULL_CROPS):
@@ -274,6 +320,8 @@ def check_calibration(calibration, crops=FULL_CROPS, checkpoint=None, sha256=Non
                                 f'{sha256[:16]}: {mine.name})')
         if not given.is_file():
             raise Int8Error(f'calibration {given}: no such quant')
+        if checkpoint is not None:
+            check_record(given, sha256, crops)
         return given
     if isinstance(calibration, (str, Path)) and str(calibration):
         if crops != FULL_CROPS:
@@ -313,11 +361,20 @@ def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=F
         sha256 = sha256 or sha256_file(checkpoint)
         path = int8_path_for(checkpoint, sha256, crops)
     given = check_calibration(calibration, crops, checkpoint, sha256)
+    no_data = calibration is None or (isinstance(calibration, str) and not calibration)
+    stale = ''
     if path is not None and path.is_file():
-        return path, f'precision int8: cached quant {path} (crops {crops}; not calibrating)'
+        try:
+            check_record(path, sha256, crops, what='cached quant')
+            return path, (f'precision int8: cached quant {path} (crops {crops}; not '
+                          'calibrating)')
+        except Int8Error:
+            if no_data and given is None:
+                raise
+            stale = f'; the cached {path.name} was not made from this checkpoint'
     if given is not None:
         return given, f'precision int8: the given quant {given} (crops {crops})'
-    if calibration is None or (isinstance(calibration, str) and not calibration):
+    if no_data:
         where = f' and no cached quant {path}' if path is not None else ''
         raise Int8Error(f'precision int8 needs calibration data (a recording or a cached '
                         f'quant: parameter calibration){where}')
@@ -332,9 +389,10 @@ def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=F
     else:
         crops_data = np.asarray(calibration)
     data = quantize_onnx(export_onnx(model), crops_data)
-    said = f'precision int8: calibrated on {len(crops_data)} crops ({crops}){source}'
+    said = f'precision int8: calibrated on {len(crops_data)} crops ({crops}){source}{stale}'
     if path is None:
         return data, f'{said}; kept in memory (no checkpoint to cache it beside)'
+    data = with_record(data, sha256, crops)
     try:
         with atomic_write(path) as stream:
             stream.write(data)

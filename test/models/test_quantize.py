@@ -129,6 +129,52 @@ def test_cache_follows_the_checkpoint_sha256(trained, calibration, tmp_path):
     assert sorted(tmp_path.glob('*.int8.onnx')) == sorted([cached, new])
 
 
+
+@needs_int8
+def test_a_quant_renamed_onto_the_cache_name_is_not_used(trained, calibration, tmp_path):
+    # the name alone proves nothing: each quant records its checkpoint's sha256 and crops
+    import onnx
+
+    first, second = tmp_path / 'a.pt', tmp_path / 'b.pt'
+    save_checkpoint(first, trained, {'keypoints': NAMES})
+    save_checkpoint(second, train_blob_net(steps=1, seed=3), {'keypoints': NAMES})
+    made = Detector.from_checkpoint(first, device='cpu', backend='onnxruntime',
+                                    precision='int8', calibration=calibration).runner.path
+    record = {p.key: p.value for p in onnx.load(str(made)).metadata_props}
+    assert record['monet_ros.checkpoint_sha256'] == sha256_file(first)
+    assert record['monet_ros.int8_crops'] == 'full'
+    # a's quant copied onto b's cache name: refused in one line without calibration data,
+    # given as b's quant likewise, and calibrated again (replaced) with it
+    fake = int8_path_for(second, sha256_file(second))
+    fake.write_bytes(made.read_bytes())
+    for calibration_of_b in (None, str(fake)):
+        with pytest.raises(Int8Error, match='was made from a checkpoint of sha256 '
+                           f'{sha256_file(first)[:16]}') as caught:
+            Detector.from_checkpoint(second, device='cpu', backend='onnxruntime',
+                                     precision='int8', calibration=calibration_of_b)
+        assert '\n' not in str(caught.value) and str(fake) in str(caught.value)
+    renewed = Detector.from_checkpoint(second, device='cpu', backend='onnxruntime',
+                                       precision='int8', calibration=calibration)
+    assert renewed.runner.path == fake and 'was not made from this checkpoint' in \
+        renewed.int8_note
+    assert {p.key: p.value for p in onnx.load(str(fake)).metadata_props}[
+        'monet_ros.checkpoint_sha256'] == sha256_file(second)
+    # a quant without a record (made before quants recorded theirs): not used either
+    bare = onnx.load(str(fake))
+    kept = [p for p in bare.metadata_props if not p.key.startswith('monet_ros.')]
+    del bare.metadata_props[:]
+    bare.metadata_props.extend(kept)
+    fake.write_bytes(bare.SerializeToString())
+    with pytest.raises(Int8Error, match='records no checkpoint'):
+        Detector.from_checkpoint(second, device='cpu', backend='onnxruntime',
+                                 precision='int8')
+    # and a file that is not ONNX at all
+    fake.write_bytes(b'not onnx')
+    with pytest.raises(Int8Error, match='not a readable ONNX quant'):
+        Detector.from_checkpoint(second, device='cpu', backend='onnxruntime',
+                                 precision='int8')
+
+
 TRACKED = 'tracked-m0.3-t4-k3'
 
 
