@@ -46,14 +46,23 @@ def add_precision_options(parser, calibration_default):
 
 def print_precision(owner, precision, backend='torch', device=None, checkpoint=None,
                     calibration=None):
+    """precision_note(...) with its line printed (stdout, `owner: precision auto: ...`:
+    stderr keeps one line for a bad input); returns the precision run."""
+    chosen, note = precision_note(owner, precision, backend, device, checkpoint, calibration)
+    print(f'{owner}: {note}', flush=True)
+    return chosen
+
+
+def precision_note(owner, precision, backend='torch', device=None, checkpoint=None,
+                   calibration=None):
     """Resolve --precision (auto: bfloat16 with torch where native, else float32; int8 only
     when asked for: models.detector.resolve_precision) for `device` (None = CUDA when
-    present, else CPU) and print the one line saying which runs and why (stdout, `owner:
-    precision auto: ...`: stderr keeps one line for a bad input); returns the precision
-    run. ConfigError names precision for a value that cannot run (bfloat16 on a CPU that
-    would emulate it, int8 without onnxruntime or without VNNI / AMX-INT8); ConfigError
-    names calibration when one (--calibration, int8's data) is given for another precision
-    (nothing would use it)."""
+    present, else CPU): (the precision run, the note saying which and why), nothing
+    printed (`monet pipeline` prints it once every start check passed). ConfigError names
+    precision for a value that cannot run (bfloat16 on a CPU that would emulate it, int8
+    without onnxruntime or without VNNI / AMX-INT8); ConfigError names calibration when
+    one (--calibration, int8's data) is given for another precision (nothing would use
+    it)."""
     import torch
 
     from monet_ros.models.detector import resolve_precision
@@ -67,8 +76,7 @@ def print_precision(owner, precision, backend='torch', device=None, checkpoint=N
         raise ConfigError(owner, 'calibration', f'{calibration}: calibration data of '
                           f'--precision int8 only; this run is {chosen} (give --precision '
                           'int8 --backend onnxruntime, or leave --calibration out)')
-    print(f'{owner}: {note}', flush=True)
-    return chosen
+    return chosen, note
 
 
 def check_new_output(path, owner, field='out'):

@@ -436,19 +436,11 @@ def run(args):
                               start_delay=args.start_delay,
                               detector_processes=args.detector_processes)
     device = check_device('monet pipeline', args.device)
-    from monet_ros.commands.common import print_precision
-    # from the arguments alone, before any node logs a line; auto: the choice said once
-    precision = print_precision('monet pipeline', args.precision, args.backend, device,
-                                args.model, calibration=args.calibration)
-    calibration = ''
-    if args.precision == 'int8':     # quantised once here, before the detector processes
-        from monet_ros.fusion import FusionConfig
-        fusion = FusionConfig(threshold_px=args.threshold_px,
-                              confidence_threshold=args.confidence_threshold)
-        calibration, note = prepare_int8(args.model, args.bag, args.calibration,
-                                         backend=args.backend, threads=args.threads,
-                                         fusion=fusion)
-        print(f'monet pipeline: {note}', file=sys.stderr, flush=True)
+    from monet_ros.commands.common import precision_note
+    # from the arguments alone; auto: the choice said once, when every start check passed
+    precision, precision_line = precision_note('monet pipeline', args.precision, args.backend,
+                                               device, args.model,
+                                               calibration=args.calibration)
     use_large_data_profile()
     import rclpy
     from rclpy.node import Node
@@ -468,6 +460,10 @@ def run(args):
     nodes = []
     detectors, player, executor = [], None, None
     failed = False
+    # Start errors (bad options, files, parameters) print one line and exit 2: every check
+    # below runs before anything is said (the precision, the detector processes, the
+    # fusion node's start-up line) or done (int8 quantised, child processes started), and
+    # the nodes say goodbye (fusion's per-camera summary) only when the player started.
     try:
         with until_shutdown():
             try:
@@ -480,7 +476,8 @@ def run(args):
                                                    threshold_px=args.threshold_px,
                                                    confidence_threshold=args.confidence_threshold,
                                                    subjects=args.subjects,
-                                                   link_mm=args.link_mm))
+                                                   link_mm=args.link_mm),
+                                    announce=False)   # said once every check below passed
                 nodes.append(fusion)
                 # the detectors' and the player's parameters, checked here (one line, exit
                 # 2) before their processes start; with lockstep the detector waits for the
@@ -492,11 +489,9 @@ def run(args):
                                        device=args.device, backend=args.backend,
                                        threads=args.threads, debug_image=args.debug_image,
                                        lockstep=args.lockstep, precision=args.precision,
-                                       calibration=calibration, subjects=args.subjects)
+                                       calibration='', subjects=args.subjects)
                 slots = camera_slots(DetectorConfig(**detector_params))
                 groups = detector_groups(slots, options.detector_processes, precision)
-                line = groups_line(groups, options.detector_processes, precision)
-                print(f'monet pipeline: {line}', flush=True)
                 check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],
                                args.skeleton, args.model)
                 player_params = dict(
@@ -509,6 +504,18 @@ def run(args):
                 PlayerConfig(**player_params)         # its errors name the parameter
                 if args.learn:
                     nodes.append(learner_node(args, rig, summary))
+                # every start check passed: what runs said, once
+                print(f'monet pipeline: {precision_line}', flush=True)
+                if args.precision == 'int8':  # quantised once here, before the detectors
+                    detector_params['calibration'], note = prepare_int8(
+                        args.model, args.bag, args.calibration, backend=args.backend,
+                        threads=args.threads, fusion=FusionConfig(
+                            threshold_px=args.threshold_px,
+                            confidence_threshold=args.confidence_threshold))
+                    print(f'monet pipeline: {note}', file=sys.stderr, flush=True)
+                line = groups_line(groups, options.detector_processes, precision)
+                print(f'monet pipeline: {line}', flush=True)
+                fusion.announce()
             except (ValueError, OSError) as error:
                 start_error('monet pipeline', error)
                 return 2
@@ -580,7 +587,7 @@ def run(args):
         ignore_stop_signals()
         if player is not None:
             player.stop()                     # no frames into a closing pipeline
-        say_goodbye(nodes)
+            say_goodbye(nodes)    # not before: nothing was received, nothing to sum up
         for child in detectors:
             child.stop()
         if executor is not None:

@@ -231,7 +231,9 @@ class CameraStats:
 
 
 class FusionNode(Node):
-    def __init__(self, overrides=None, node_name='fusion', **kwargs):
+    def __init__(self, overrides=None, node_name='fusion', announce=True, **kwargs):
+        """announce: log the start-up line (announce()) once built; False leaves it to
+        the caller (monet pipeline: said once all its other start checks passed)."""
         super().__init__(node_name, **node_namespace(kwargs))
         self.units = None    # the rig's length unit, known once the rig is loaded
         self.config = config = declare_config(self, FusionNodeConfig, overrides, live=LIVE,
@@ -306,6 +308,12 @@ class FusionNode(Node):
                 frustum_marker_specs(self.cameras, derived.marker_depth, scale=0.005)))
         self.create_timer(0.02, self.on_poll)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
+        if announce:
+            self.announce()
+
+    def announce(self):
+        """Log the start-up line: the cameras, skeleton, frame and units fused."""
+        config = self.config
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
             f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}, '

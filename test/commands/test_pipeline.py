@@ -60,29 +60,35 @@ def test_sigterm_and_sigint_exit_zero(ros_env, tmp_path):
 
 
 def test_bad_arguments_fail_at_start(ros_env, tmp_path):
+    """A bad option, file or parameter: exit 2 with one line naming it, and nothing else (no
+    start-up line of a node or of the command before it, no summary of a run that never
+    started after it), whichever check finds it (the arguments, a node's parameters, the
+    model against the skeleton)."""
     rig, _ = noise_recording(tmp_path / 'rec', cameras=2, frames=1)
     model = small_checkpoint(tmp_path / 'model.pt')
     save_rig(tmp_path / 'one.yaml', rig[:1])
+    run = ('--bag', tmp_path / 'rec', '--model', model, '--lockstep')
     cases = [
         (('--bag', tmp_path / 'rec', '--model', tmp_path / 'missing.pt'),
          'missing.pt: checkpoint file not found'),
-        (('--bag', tmp_path / 'rec', '--model', model, '--rig', tmp_path / 'one.yaml'),
+        ((*run, '--rig', tmp_path / 'one.yaml'),
          "parameter 'cameras': needs at least 2 cameras"),
-        (('--bag', tmp_path / 'rec', '--model', model, '--cameras', 'cam0', 'cam5'),
-         "unknown camera 'cam5'"),
-        (('--bag', tmp_path / 'rec', '--model', model, '--backend', 'onnxruntime',
-          '--precision', 'bfloat16'), 'precision bfloat16 needs backend torch'),
-        (('--bag', tmp_path / 'rec', '--model', model, '--detector-processes', 3),
-         '3 detector processes for 2 cameras; give at most 2'),
+        ((*run, '--cameras', 'cam0', 'cam5'), "unknown camera 'cam5'"),
+        ((*run, '--backend', 'onnxruntime', '--precision', 'bfloat16'),
+         'precision bfloat16 needs backend torch'),
+        ((*run, '--detector-processes', 3),
+         "parameter 'detector_processes': 3 detector processes for 2 cameras; give at most 2"),
+        ((*run, '--subjects', 0), "parameter 'subjects': must be >= 1, got 0"),
+        ((*run, '--skeleton', 'quadruped13'),
+         "parameter 'skeleton': quadruped13 has keypoints ['nose', "),
     ]
     for args, message in cases:
         with pipeline(ros_env, *args) as proc:
             assert proc.wait(timeout=90) == 2, proc.output()
-            assert message in proc.output()
-            if '--precision' in args:   # checked from the arguments: no node said a word
-                out, err = proc.output().split('--- stderr')
-                assert out.strip() == '--- stdout' and len(err.strip().splitlines()) == 1, \
-                    proc.output()
+        out, err = proc.output().split('--- stderr\n')
+        lines = out.removeprefix('--- stdout\n').splitlines() + err.splitlines()
+        assert len(lines) == 1 and message in lines[0], proc.output()
+        assert lines[0].startswith('monet pipeline: error: '), proc.output()
 
 
 def test_ros_args_move_the_rig_with_debug_images_and_tf(ros_env, tmp_path):
