@@ -365,7 +365,8 @@ def int8_onnx_for(model, checkpoint=None, calibration=None, sha256=None, crops=F
     stale = ''
     if path is not None and path.is_file():
         try:
-            check_record(path, sha256, crops, what='cached quant')
+            if given is None or given.resolve() != path.resolve():   # else checked above
+                check_record(path, sha256, crops, what='cached quant')
             return path, (f'precision int8: cached quant {path} (crops {crops}; not '
                           'calibrating)')
         except Int8Error:
