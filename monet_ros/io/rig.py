@@ -156,7 +156,8 @@ def rig_and_frame_from_bag(path, rig_file=None, world_frame=None, camera_info_to
         if frame not in tree:
             raise RigFromBagError(
                 f'bag {reader.path}: camera {name} (frame {frame!r}, {topic}) has no '
-                f'transform in {static_topics or "/tf_static (absent)"}; pass a rig file')
+                f'transform in {static_topics or "/tf_static (absent)"}'
+                f'{_why_unread(reader.report, static_topics)}; pass a rig file')
         Rwc, twc, root = _pose_in_root(frame, tree, world_frame)
         if world_frame is not None and root != world_frame:
             raise RigFromBagError(f'bag {reader.path}: frame {frame!r} of camera {name} does '

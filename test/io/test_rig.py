@@ -1,5 +1,6 @@
 """rig_from_bag on written bags: direct world -> camera frames, chained TF, missing TF."""
 from helpers.io_bags import make_camera, write_rig_bag
+from helpers.mcap_layout import opcode_offsets
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -108,3 +109,35 @@ def test_a_truncated_bag_is_named_as_truncated(tmp_path):
     assert 'no readable CameraInfo message on /cam0/camera_info, /cam1/camera_info' in line
     assert str(mcap) in line and 'truncated' in line
     assert reader.report.errors[0] in line      # the reader's finding, word for word
+
+
+def test_a_damaged_tf_static_is_named_not_only_missing(tmp_path):
+    """../shared/cases' bag_message_opcode_flip kind: one flipped bit in the /tf_static
+    message's record header; the reader skips and counts it, and the rig's error said only
+    'no transform in /tf_static; pass a rig file': it now carries the reader's finding."""
+    cams = [make_camera(f'cam{i}', seed=i) for i in range(2)]
+    folder = tmp_path / 'b'
+    with BagWriter(folder, compression='none', chunk_size=1500) as bag:
+        bag.write_tf_static(T0, cams)
+        for k in range(3):
+            for cam in cams:
+                bag.write_camera_info(f'/{cam.name}/camera_info', T0 + k, cam,
+                                      f'{cam.name}_optical')
+    mcap = next(folder.glob('*.mcap'))
+    data = mcap.read_bytes()
+    for offset in opcode_offsets(data):          # the message record that holds /tf_static
+        if data[offset] != 0x05:
+            continue
+        damaged = bytearray(data)
+        damaged[offset] ^= 0x10
+        mcap.write_bytes(bytes(damaged))
+        if '/tf_static' not in {m.topic for m in open_bag(folder).messages(decode=False)}:
+            break
+    else:
+        raise AssertionError('no message record of /tf_static found')
+    reader = open_bag(folder)
+    with pytest.raises(RigFromBagError) as error:
+        rig_from_bag(reader)
+    line = str(error.value)
+    assert '\n' not in line and 'has no transform' in line
+    assert 'opcode 0x15' in line and reader.report.errors[0] in line
