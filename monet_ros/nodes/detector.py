@@ -307,6 +307,7 @@ class DetectorNode(Node):
         self.create_timer(1.0, self.publish_diagnostics)
         self.batches = self.incomplete_batches = 0
         self.awaiting_keypoints = None    # lockstep: stamp of the frame whose 3D is awaited
+        self.awaiting_since = 0.0         # lockstep: when that frame was processed (monotonic)
         self.lockstep_timeouts = 0
         self.forward_seconds = []
         self.timer = StageTimer()  # convert, publish (crop, forward: self.detector.timer)
@@ -451,13 +452,20 @@ class DetectorNode(Node):
         return batch
 
     def waiting_for_keypoints(self):
-        """Lockstep: True while the 3D of the last processed frame has not arrived and the
-        oldest pending frame waited less than lockstep_timeout_s (a longer wait is counted
-        in /diagnostics as lockstep_timeouts, and the frame goes on without it)."""
+        """Lockstep: True while the 3D of the last processed frame has not arrived and less
+        than lockstep_timeout_s passed since that frame was processed (a longer wait is
+        counted in /diagnostics as lockstep_timeouts, and the next frame goes on without
+        it). The wait counts from the processed frame, not from a pending one: under a
+        steady stream the pending frames are replaced faster than any timeout, and a lost
+        keypoints3d would stall the detector for good."""
         if not self.config.lockstep or self.awaiting_keypoints is None:
             return False
-        oldest = self.oldest_arrival()
-        if oldest is not None and time.monotonic() - oldest > self.config.lockstep_timeout_s:
+        if time.monotonic() - self.awaiting_since > self.config.lockstep_timeout_s:
+            if not self.lockstep_timeouts:
+                self.get_logger().warning(
+                    f'lockstep: no {self.resolve_topic_name(KEYPOINTS3D)} for stamp '
+                    f'{self.awaiting_keypoints} within {self.config.lockstep_timeout_s} s: '
+                    'going on without it (counted in /diagnostics as lockstep_timeouts)')
             self.awaiting_keypoints = None
             self.lockstep_timeouts += 1
             return False
@@ -545,7 +553,7 @@ class DetectorNode(Node):
         cameras = [w[4] for w in work]
         stamp = max(header_stamp_ns(w[1]) for w in work)
         if self.config.lockstep:
-            self.awaiting_keypoints = stamp
+            self.awaiting_keypoints, self.awaiting_since = stamp, time.monotonic()
         if self.config.subjects > 1:
             self.process_subjects(work, stamp)
             return
