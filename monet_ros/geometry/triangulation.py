@@ -152,6 +152,10 @@ def _mean_used_error(err, used):
     return mean
 
 
+# mean reprojection errors (px) of two view subsets closer than this are a tie (_exclusion)
+TIE_PX = 1e-6
+
+
 @lru_cache(maxsize=64)
 def _left_out(V, k):
     """(C(V, k), V) bool, read-only: every subset of k of V views, as the views left out."""
@@ -195,7 +199,10 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         if len(used) == 1:  # one candidate subset: it is the best
             best_mean, best_X, best_used, best_err = mean[0], Xs[0], used[0], err[0]
         else:
-            best = np.argmin(mean, axis=0)
+            # subsets within TIE_PX of each other are a tie, taken in subset order: an exact
+            # tie (every view pair of a degenerate geometry meets with zero residual) is
+            # otherwise broken by the SVD's rounding, which differs between CPUs
+            best = np.argmin(np.round(mean / TIE_PX), axis=0)
             n = np.arange(todo.size)
             best_mean, best_X = mean[best, n], Xs[best, n]
             best_used, best_err = used[best, :, n].T, err[best, :, n].T  # (V, n)

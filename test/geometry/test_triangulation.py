@@ -248,3 +248,35 @@ def test_robust_with_the_callers_undistorted_points_is_the_same():
         np.testing.assert_array_equal(x, y)
     with pytest.raises(ValueError, match='ideal must have the shape'):
         triangulate_robust(obs, cams, ideal=obs[:, :3])
+
+
+def test_exclusion_breaks_an_exact_tie_by_subset_order_not_by_rounding():
+    """Three cameras with their centres in one plane and each view's peak in that plane: any
+    two rays meet (zero residual), all three do not. The three view pairs tie exactly; the
+    one kept is the first in subset order (view 0 left out: views 1 and 2) whatever the
+    last bits of the input, so every CPU gives the same answer (the SVD's rounding, which
+    differs between CPUs, chose before). The answer is OpenCV's point of that pair."""
+    from helpers.scenes import look_at
+
+    from monet_ros.geometry import Camera
+
+    cams = []
+    for i in range(3):
+        angle = 2 * np.pi * i / 3
+        R, t = look_at((3 * np.cos(angle), 3 * np.sin(angle), 1.0), (0.0, 0.0, 0.7))
+        K = np.array([[500.0, 0, 319.5], [0, 500.0, 239.5], [0, 0, 1]])
+        cams.append(Camera(f'c{i}', K, np.zeros(5), R, t, 640, 480))
+    # each view sees a different point of the plane z = 1 (the cameras' centres' plane)
+    targets = np.array([[0.2, 0.1, 1.0], [-0.3, 0.0, 1.0], [0.1, -0.3, 1.0]])
+    base = np.stack([cam.project(targets[v:v + 1])[0] for v, cam in enumerate(cams)])
+    kept = set()
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        obs = (base + rng.normal(0, 1e-9, base.shape))[:, None]          # (3, 1, 2)
+        X, inl, err = triangulate_robust(obs, cams, threshold_px=5.0, errors=True)
+        kept.add(tuple(inl[:, 0].tolist()))
+        assert np.nanmax(err) < 1e-6
+    assert kept == {(False, True, True)}
+    Xh = cv2.triangulatePoints(cams[1].P, cams[2].P, base[1].reshape(2, 1),
+                               base[2].reshape(2, 1))
+    np.testing.assert_allclose(X[0], Xh[:3, 0] / Xh[3, 0], atol=1e-6)

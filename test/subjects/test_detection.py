@@ -547,22 +547,20 @@ def _resolve(settle_frames, scene, stamp=0, core=None, tracked=0):
 
 def test_a_ghost_joint_of_a_mixed_two_view_pair_is_solved_again_while_settling():
     # issue 39, the live start-up ghost: A's hypothesis (discovered this frame) has keypoint
-    # 0 at the meeting point of two subjects' rays. Each crop takes the peak nearest it, and
-    # the robust triangulation keeps a mixed pair (A's peak in camera 1, B's in camera 2)
-    # that meets with zero residual 0.36 m from A's joint; the crops would keep it. While
-    # the track settles the joint is solved again from all its crops' peaks by consistency
+    # 0 at the meeting point of two subjects' rays. Each crop takes the peak nearest it: A's
+    # in cameras 1 and 4, B's in camera 2, and every pair of them meets with zero residual
+    # (the level ring). The robust triangulation takes the first of those tied pairs (views
+    # 2 and 4: the ghost itself, which is then dropped as detached from A's other joints);
+    # without the tie rule the SVD's rounding chose, and a CPU kept the mixed pair 1-2,
+    # 0.36 m from A's joint. Either way the joint is not A's. While the track settles it is
+    # solved again from all its crops' peaks by consistency
     import cv2
-    from helpers.scenes import cv2_project
 
     scene = _level_ring()
     cams, A, B = scene[:3]
     _, off, (oA, oB) = _resolve(0, scene)
     a = off.association
-    assert a.inliers[oA, :, 0].tolist() == [False, True, True, False, False]     # setup
-    assert np.abs(a.points2d[oA, 1, 0] - cv2_project(cams[1], A[:1])[0]).max() < 0.5
-    assert np.abs(a.points2d[oA, 2, 0] - cv2_project(cams[2], B[:1])[0]).max() < 0.5
-    assert np.nanmax(a.view_errors[oA, :, 0]) < 0.1                   # zero residual
-    assert np.linalg.norm(a.X[oA, 0] - A[0]) > 0.3 and off.settled == 0
+    assert not np.linalg.norm(a.X[oA, 0] - A[0]) < 0.3 and off.settled == 0
     _, r, (sA, sB) = _resolve(3, scene)
     a = r.association
     assert r.settled == 1
