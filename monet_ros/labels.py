@@ -196,7 +196,8 @@ class LabelRow:
 
     source: file name (for messages); line: 1-based line (CSV) or row/record number;
     stamp_ns or frame (exactly one is not None); camera, keypoint: names as in the source;
-    u, v: pixels (finite; NaN only in a 2D points table). where: how to name the place in
+    u, v: pixels (finite; NaN in a 2D points table and in the missing points of an
+    importer, labels_import, kept with keep_missing only). where: how to name the place in
     messages (default 'line N'). score: the detection's confidence (likelihood) when the
     source has one, else None. subject: the labelled subject (int >= 0, checked by
     resolve_labels; module docstring); instance: the source's name of that subject (a

@@ -120,7 +120,10 @@ def run(args):
             OSError) as error:
         print(f'monet labels import: {error}', file=sys.stderr)
         return 2
-    extra = ''.join(f'; {note}' for note in (result.note, scaled) if note)
+    missing = (f'{result.missing} point{"" if result.missing == 1 else "s"} without a '
+               'position in the source (NaN / inf, not detected or not placed) left out'
+               if result.missing else '')
+    extra = ''.join(f'; {note}' for note in (result.note, missing, scaled) if note)
     print(f'monet labels import: {count} labels at {len(labels)} instants x '
           f'{len(labels.cameras)} cameras -> {args.out} ({report.summary()}{extra})')
     return 0

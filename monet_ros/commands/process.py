@@ -402,49 +402,57 @@ def run(args):
         note(detector.int8_note)
     if len(args.bag) > 1:         # several recordings: worker processes (process_many.py)
         from monet_ros.commands.process_many import run_many
-        return run_many(args, options, process_recording)
+        return run_many(args, options, process_recording, recording_lines)
     args.bag = args.bag[0]
     figures = process_recording(args.bag, out=args.out, device=device,
                                 progress=not args.quiet, threads=args.threads, log=note,
                                 **options)
+    for line in recording_lines(figures, args.out):
+        print(f'monet process: {line}')
+    print_reading(figures, args.bag)
+    return 0
+
+
+def recording_lines(figures, out):
+    """The summary of one recording's run (process_recording's figures, its results in
+    `out`): stdout lines without the 'monet process: ' prefix, for one subject and for
+    --subjects N (process_subjects.subject_lines): frames and errors, the subjects'
+    counts, the filter's summary and notes, the files written. A run of one recording
+    prints them as they are, a run of several each recording's after its name
+    (process_many)."""
+    lines = []
     if 'subjects' in figures:
-        from monet_ros.commands.process_subjects import print_subjects
-        print_subjects(figures, args.out)
+        from monet_ros.commands.process_subjects import subject_lines
+        lines += subject_lines(figures, out)
         if figures['filter'] is not None:
-            print(f'monet process: {figures["filter"].summary()}')
-            for ident, smoothed in figures['filter'].per_subject.items():
-                for note in smoothed.notes:
-                    print(f'monet process: filter: subject {ident}: {note}')
-        for fmt, path in figures['exports'].items():
-            print(f'monet process: wrote {fmt}: {path}')
-        print_reading(figures, args.bag)
-        return 0
+            lines.append(figures['filter'].summary())
+            lines += [f'filter: subject {ident}: {note}'
+                      for ident, smoothed in figures['filter'].per_subject.items()
+                      for note in smoothed.notes]
+        return lines + [f'wrote {fmt}: {path}' for fmt, path in figures['exports'].items()]
     fps = figures['frames'] / figures['seconds'] if figures['seconds'] else 0.0
     skipped = figures['skipped_views']
-    print(f'monet process: {figures["frames"]} frames ({figures["views"]} views, '
-          f'{figures["missing_views"]} missing'
-          f'{f", {sum(skipped.values())} of them skipped" if skipped else ""}) in '
-          f'{figures["seconds"]:.1f} s ({fps:.1f} frames/s); mean reprojection error '
-          f'{figures["mean_error"]:.2f} px; mean inlier views '
-          f'{0.0 if figures["mean_views"] != figures["mean_views"] else figures["mean_views"]:.2f}'
-          f' -> {args.out} (3D in {figures["units"]}, the rig\'s unit)')
+    views = figures['mean_views']
+    lines.append(f'{figures["frames"]} frames ({figures["views"]} views, '
+                 f'{figures["missing_views"]} missing'
+                 f'{f", {sum(skipped.values())} of them skipped" if skipped else ""}) in '
+                 f'{figures["seconds"]:.1f} s ({fps:.1f} frames/s); mean reprojection error '
+                 f'{figures["mean_error"]:.2f} px; mean inlier views '
+                 f'{0.0 if views != views else views:.2f} -> {out} (3D in '
+                 f'{figures["units"]}, the rig\'s unit)')
     summary = figures['summary']
     if summary['frames']:
         dropout = ', '.join(f'{k} {100 * v:.0f}%' for k, v in summary['dropout'].items())
         views = ', '.join(f'{k} {v:.1f}' if v == v else f'{k} none (never triangulated)'
                           for k, v in summary['inlier_views'].items())
-        print(f'monet process: per-joint dropout (not triangulated): {dropout}')
-        print(f'monet process: mean inlier views per joint: {views}')
-        print('monet process: reprojection error measures agreement between the views used, '
-              'not accuracy: score accuracy with `monet eval --reference`')
+        lines += [f'per-joint dropout (not triangulated): {dropout}',
+                  f'mean inlier views per joint: {views}',
+                  'reprojection error measures agreement between the views used, not '
+                  'accuracy: score accuracy with `monet eval --reference`']
     if figures['filter'] is not None:
-        print(f'monet process: {figures["filter"].summary()}')
-        for note in figures['filter'].notes:
-            print(f'monet process: filter: {note}')
-    for fmt, path in figures['exports'].items():
-        print(f'monet process: wrote {fmt}: {path}')
-    print_reading(figures, args.bag)
-    return 0
+        lines.append(figures['filter'].summary())
+        lines += [f'filter: {note}' for note in figures['filter'].notes]
+    return lines + [f'wrote {fmt}: {path}' for fmt, path in figures['exports'].items()]
 
 
 def print_reading(figures, bag):

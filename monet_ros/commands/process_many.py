@@ -6,7 +6,9 @@ function as a single run) in its own worker process and written to OUT/<recordin
 the 'spawn' context: torch's thread pools, CUDA and DDS threads do not survive fork().
 With several CUDA devices the jobs are spread over them round-robin (one device per job);
 CPU threads are split (default --threads per job = cores // jobs). A failed recording is
-reported (one line naming it) and the others go on; the command ends with a summary table
+reported (one line naming it) and the others go on; each recording's summary (the lines a
+run of it alone prints: process.recording_lines) is printed after its name as it ends; the
+command ends with a summary table
 (recording, its output folder, frames, frames/s, mean reprojection error, status) and exits
 2 if any failed.
 """
@@ -80,11 +82,12 @@ def _worker_signals():
     signal.signal(signal.SIGTERM, _stop)
 
 
-def process_job(job, options, work):
+def process_job(job, options, work, lines=None):
     """Worker body: process one recording with `work` (process.process_recording, passed
     in so that this module does not import the command that imports it; pickled by name);
     returns a dict (bag, out, frames, seconds, mean_error, error: None or the one-line
-    reason). Never raises for a bad recording."""
+    reason; lines: lines(figures, out), the recording's summary as a run of it alone
+    prints it: process.recording_lines). Never raises for a bad recording."""
     from monet_ros.cli import bad_input_errors, error_line
     from monet_ros.commands.common import check_threads
 
@@ -98,6 +101,8 @@ def process_job(job, options, work):
                       mean_error=figures['mean_error'],
                       skipped={name: (count, figures['skip_reasons'][name])
                                for name, count in figures['skipped_views'].items()})
+        if lines is not None:
+            result['lines'] = lines(figures, job.out)
         report = figures['report']
         if report is not None and not report.ok:
             result['read_report'] = report.summary()
@@ -124,10 +129,11 @@ def summary_table(results):
     return ['  '.join(cell.ljust(w) for cell, w in zip(row, widths)).rstrip() for row in rows]
 
 
-def run_many(args, options, work):
+def run_many(args, options, work, lines=None):
     """Process args.bag (several recordings) with args.jobs workers. work:
     process.process_recording; options: its keyword arguments shared by every recording
-    (model, rig, config, ...).
+    (model, rig, config, ...); lines: process.recording_lines, the summary of a recording
+    (stdout, after its name, as each recording ends: what a run of it alone prints).
     Returns the exit code: 0, or 2 if any recording failed. --out (the parent of one
     folder per recording) is made; removed again when the run is stopped (Ctrl-C /
     SIGTERM) or fails before a folder was kept in it."""
@@ -146,10 +152,10 @@ def run_many(args, options, work):
                      usable_cores())
     from monet_ros.commands.common import made_output_dir
     with made_output_dir(out):         # removed again when stopped before anything was kept
-        return _run_jobs(args, options, work, jobs, out)
+        return _run_jobs(args, options, work, jobs, out, lines)
 
 
-def _run_jobs(args, options, work, jobs, out):
+def _run_jobs(args, options, work, jobs, out, lines=None):
     """run_many's workers: the jobs run, the summary printed; the exit code."""
     from tqdm import tqdm
 
@@ -158,7 +164,7 @@ def _run_jobs(args, options, work, jobs, out):
     pool = ProcessPoolExecutor(max_workers=min(args.jobs, len(jobs)), mp_context=context,
                                initializer=_worker_signals)
     try:
-        futures = {pool.submit(process_job, job, options, work): job for job in jobs}
+        futures = {pool.submit(process_job, job, options, work, lines): job for job in jobs}
         done = tqdm(as_completed(futures), total=len(futures), desc='monet process',
                     unit='recording', disable=args.quiet, file=sys.stderr)
         for future in done:
@@ -174,6 +180,8 @@ def _run_jobs(args, options, work, jobs, out):
                 print(f'monet process: failed {job.bag}: {result["error"]}', file=sys.stderr,
                       flush=True)
                 continue
+            for line in result.get('lines', ()):
+                print(f'monet process: {job.bag}: {line}', flush=True)
             for name, (count, reason) in sorted(result['skipped'].items()):
                 print(f'monet process: {job.bag}: skipped {count} views of {name}: {reason}',
                       file=sys.stderr)

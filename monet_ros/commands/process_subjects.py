@@ -132,30 +132,28 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     return written
 
 
-def print_subjects(figures, out):
-    """The summary lines of `monet process --subjects N` (stdout)."""
+def subject_lines(figures, out):
+    """The summary lines of `monet process --subjects N` (process.recording_lines: without
+    the 'monet process: ' prefix)."""
     s, n = figures['subjects'], figures['subject_counts']
     per_frame = ', '.join(f'{k}: {v}' for k, v in sorted(n['per_frame'].items()))
-    name = 'monet process'
-    print(f'{name}: {figures["frames"]} frames ({figures["views"]} views, '
-          f'{figures["missing_views"]} missing) in {figures["seconds"]:.1f} s -> {out} (3D in '
-          f'{figures["units"]}, the rig\'s unit)')
-    print(f'{name}: subjects: {s.identities_text()}; frames by subjects tracked: '
-          f'{per_frame or "none"}')
-    print(f'{name}: {s.untriangulated_text(figures["subject_keypoints"])}')
-    print(f'{name}: detection: {n["crops"]} subject crops, {n["discoveries"]} full-frame '
-          f'discovery runs finding {n["discovered"]} subjects from {n["points"]} 3D keypoint '
-          f'candidates ({n["explained"]} near a live track, {n["loose"]} in no subject: '
-          f'too few keypoints or beyond --subjects, {n["repeated"]} in a second group of a '
-          'subject found in the same frame)')
-    print(f'{name}: skipped: {s.unmatched} of {s.instances} crop instances matched in no '
-          f'other camera, {n["duplicates"]} duplicate subjects (one body from two crops), '
-          f'{n["weak"]} weak subjects (median joint score below --min-score), '
-          f'{n["foreign"]} joint detections left out of a subject\'s triangulation as '
-          f"another subject's crop's (--foreign-views), "
-          f'{n["shared"]} joints decoded by two subjects (kept by one), {n["detached"]} '
-          f'joints not linked within --link-mm to the body of their subject, '
-          f'{n["settled"]} joints of a settling track solved again by consistency '
-          f'(--settle-frames), '
-          f'{s.extra} subjects beyond --subjects, {s.untracked} untracked (too few '
-          'keypoints for a track, or taken by no identity while N were alive)')
+    return [
+        f'{figures["frames"]} frames ({figures["views"]} views, {figures["missing_views"]} '
+        f'missing) in {figures["seconds"]:.1f} s -> {out} (3D in {figures["units"]}, the '
+        "rig's unit)",
+        f'subjects: {s.identities_text()}; frames by subjects tracked: {per_frame or "none"}',
+        s.untriangulated_text(figures['subject_keypoints']),
+        f'detection: {n["crops"]} subject crops, {n["discoveries"]} full-frame discovery runs '
+        f'finding {n["discovered"]} subjects from {n["points"]} 3D keypoint candidates '
+        f'({n["explained"]} near a live track, {n["loose"]} in no subject: too few keypoints '
+        f'or beyond --subjects, {n["repeated"]} in a second group of a subject found in the '
+        'same frame)',
+        f'skipped: {s.unmatched} of {s.instances} crop instances matched in no other camera, '
+        f'{n["duplicates"]} duplicate subjects (one body from two crops), {n["weak"]} weak '
+        f'subjects (median joint score below --min-score), {n["foreign"]} joint detections '
+        "left out of a subject's triangulation as another subject's crop's (--foreign-views), "
+        f'{n["shared"]} joints decoded by two subjects (kept by one), {n["detached"]} joints '
+        f'not linked within --link-mm to the body of their subject, {n["settled"]} joints of '
+        f'a settling track solved again by consistency (--settle-frames), {s.extra} subjects '
+        f'beyond --subjects, {s.untracked} untracked (too few keypoints for a track, or taken '
+        'by no identity while N were alive)']

@@ -329,7 +329,7 @@ def run(args):
     print(f'{name}: source frames {fig["first_frame"]}..{fig["last_frame"]} kept in the '
           f'exports: keypoints3d.csv fnum = frame, TRC Frame# = frame + 1, TRC Time and NWB '
           f'timestamps = frame / {fig["fps"]:g} s')
-    nan = f', {fig["nan_rows"]} of them NaN' if fig['nan_rows'] else ''
+    nan = f'; {fig["nan_rows"]} rows NaN in the input' if fig['nan_rows'] else ''
     print(f'{name}: skipped views: {n["missing"]} of {n["cells"]} missing (no detection'
           f'{nan}), '
           f'{n["low_score"]} below --confidence-threshold {args.confidence_threshold}')

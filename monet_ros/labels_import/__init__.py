@@ -6,6 +6,12 @@ import_labels(fmt, paths, cameras=..., camera=None, min_score=0.0, camera_map=No
 -> ImportResult(rows, keypoints, note, frame_counts, subjects). Errors are
 monet_ros.labels.LabelError naming the file and the row / field.
 
+Missing points: a reader gives an entry of its source without a position (a NaN / inf
+coordinate, SLEAP's unoccupied track or invisible node, OpenPose's c = 0) as a row with
+u = v = NaN; import_labels counts them (ImportResult.missing) and leaves them out, or
+keeps them (keep_missing: `monet triangulate`'s reader, points2d, counts them as its NaN
+rows with those of a points table): one count for every format.
+
 Several animals (SLEAP tracks, multi-animal DeepLabCut individuals) become subjects: each
 distinct track / individual name gets an id 0, 1, ... in order of first appearance (files
 in the order read, tracks / individuals in the file's order), the same id for the same
@@ -17,7 +23,8 @@ camera files, a DeepLabCut project's individuals. `monet triangulate --subjects`
 no such thing: its reader (points2d) names a detection '<instance>/<keypoint>' per camera
 as before.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+import math
 from pathlib import Path
 
 from monet_ros.labels import LabelError
@@ -31,13 +38,16 @@ class ImportResult:
     frame axis, a prediction table's rows), whatever their last detection; subjects:
     {instance name: subject id} of a source with several animals ({} for one);
     instance_keypoints: the sources' '<instance>/<keypoint>' names in their order (the
-    keypoints of `monet triangulate --subjects`), () for one animal."""
+    keypoints of `monet triangulate --subjects`), () for one animal; missing: entries of
+    the sources without a position (NaN / inf, not placed: module docstring), left out of
+    rows unless import_labels(keep_missing=True)."""
     rows: list
     keypoints: tuple
     note: str = ''
     frame_counts: dict = field(default_factory=dict)
     subjects: dict = field(default_factory=dict)
     instance_keypoints: tuple = ()
+    missing: int = 0
 
 
 def subject_note(subjects, what):
@@ -113,20 +123,25 @@ FORMATS = {
 
 
 def import_labels(fmt, paths, cameras=(), camera=None, min_score=0.0, camera_map=None,
-                  options=None):
+                  options=None, keep_missing=False):
     """ImportResult of labels files in format `fmt` (see FORMATS). paths: a path or a list
     (files, or folders searched for the format's files); cameras: the recording's camera
     names (to match file / video names to cameras); options: the format's own keyword
-    arguments (openpose: pose_model, keypoints)."""
+    arguments (openpose: pose_model, keypoints); keep_missing: keep the rows of missing
+    points (u = v = NaN; module docstring), else left out; counted in `missing` either
+    way."""
     if fmt not in FORMATS:
         raise LabelError(f'unknown labels format {fmt!r}; one of {", ".join(sorted(FORMATS))}')
     paths = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)]
     for p in paths:
         if not p.exists():
             raise LabelError(f'{p}: no such file or folder')
-    return FORMATS[fmt](paths, cameras=tuple(cameras), camera=camera,
-                        min_score=float(min_score), camera_map=camera_map or {},
-                        **(options or {}))
+    result = FORMATS[fmt](paths, cameras=tuple(cameras), camera=camera,
+                          min_score=float(min_score), camera_map=camera_map or {},
+                          **(options or {}))
+    placed = [r for r in result.rows if math.isfinite(r.u) and math.isfinite(r.v)]
+    missing = len(result.rows) - len(placed)
+    return replace(result, rows=result.rows if keep_missing else placed, missing=missing)
 
 
 # Formats keyed to the recording's own instants (monet's tables): in the recording's pixels.

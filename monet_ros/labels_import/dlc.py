@@ -71,7 +71,9 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
     else None. With several individuals a row's keypoint is the bodypart, its instance the
     individual and its subject the individual's id in `ids` ({name: id}, filled in order of
     first appearance). The unique bodyparts of a multi-animal project (individual 'single':
-    the arena's landmarks, no animal's) keep their plain name and subject 0."""
+    the arena's landmarks, no animal's) keep their plain name and subject 0. A point
+    without a position (empty / NaN / inf x or y) is a row with u = v = NaN
+    (labels_import's missing points)."""
     ids = {} if ids is None else ids
     levels = [tuple(c) for c in columns]
     groups = {}
@@ -122,9 +124,9 @@ def table_rows(source, columns, index, values, cameras=(), camera=None, min_scor
                     cam = video
         for name, coords in groups.items():
             u, v = values[r, coords['x']], values[r, coords['y']]
-            if not (math.isfinite(u) and math.isfinite(v)):
-                continue
             score = float(values[r, coords['likelihood']]) if 'likelihood' in coords else None
+            if not (math.isfinite(u) and math.isfinite(v)):
+                u = v = score = math.nan    # a row without a position (labels_import)
             if score is not None and math.isnan(score):
                 score = None                    # an empty likelihood cell: no score
             if score is not None and not score >= min_score:

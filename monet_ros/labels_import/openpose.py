@@ -14,7 +14,8 @@ the pose model. Read as:
   many keypoints (17, 18, 26); 25 is BODY_25 or BODY_25B and must be stated;
 - one subject: in a file with several people the person with the highest mean confidence
   (over all its keypoints) is kept, the others are left out and counted in the note;
-- a keypoint with c = 0 (OpenPose's "not detected") or non-finite x / y is missing;
+- a keypoint with c = 0 (OpenPose's "not detected") or non-finite x / y is missing (a
+  row with u = v = NaN of the best person: labels_import's missing points);
 - a folder's frame count is its largest file frame number + 1 (a file per frame, empty
   ones included).
 With a skeleton and a stated model, the model's keypoints the skeleton lacks are left out
@@ -116,8 +117,8 @@ def import_openpose(paths, cameras=(), camera=None, min_score=0.0, camera_map=No
             best = max(people, key=lambda p: _mean_confidence(p[:, 2]))
             for c, (u, v, score) in enumerate(best):
                 if not (np.isfinite(u) and np.isfinite(v)) or score == 0:
-                    continue
-                if not score >= min_score and np.isfinite(score):
+                    u = v = score = np.nan  # a row without a position (labels_import)
+                elif not score >= min_score and np.isfinite(score):
                     dropped += 1
                     continue
                 rows.append(LabelRow(str(folder), frame + 1, None, frame, cam, names[c],
@@ -135,7 +136,7 @@ def import_openpose(paths, cameras=(), camera=None, min_score=0.0, camera_map=No
         renamed = dict(keypoint_map or {})
         extra = [n for n in names if renamed.get(n, n) not in keypoints]
         if extra:
-            lost = sum(r.keypoint in extra for r in rows)
+            lost = sum(r.keypoint in extra and np.isfinite(r.u) for r in rows)
             rows = [r for r in rows if r.keypoint not in extra]
             names = tuple(n for n in names if n in keypoints)
             notes.append(f'{pose_model} keypoints not in the skeleton, left out: '

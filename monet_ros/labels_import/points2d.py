@@ -8,11 +8,14 @@ openpose), and the frame-indexed points table frame,camera,keypoint,u,v
 source without scores, an empty / NaN likelihood or score cell beside a point) gets score
 1, counted in the notes. Frames are the tables' frame indices (0-based video frames, kept
 as numbered: a table that starts at frame 10 starts there); the arrays cover every frame
-from the first to the last one seen. Per-camera files of one recording must have one
+from the first to the last with a detection (a point with a position). Missing points
+(NaN / empty u, v of a points table; the readers' missing points, labels_import) are
+counted as NaN rows, one count for every format. Per-camera files of one recording must have one
 length: a file's declared frame count (a SLEAP file's frame axis, a prediction table's
 rows), else its last frame + 1.
 """
 from dataclasses import dataclass, replace
+import math
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +38,11 @@ READ = ('DeepLabCut / Lightning Pose prediction .csv or .h5 per camera, SLEAP an
 class Points2D:
     """frames (T,) int frame indices (the source's numbers); cameras (V,) names; keypoints
     (C,); points (T, V, C, 2) px (NaN = missing); score (T, V, C) (NaN = missing); fmt: the
-    format read; rows: detections read; nan_rows: rows with NaN u / v (missing);
+    format read; rows: rows read (detections and missing points); nan_rows: rows with NaN
+    / inf u / v: a points table's, and the readers' missing points (NaN / inf coordinates,
+    SLEAP's unoccupied tracks and invisible nodes, OpenPose's c = 0: labels_import),
+    counted here for every format, also those outside the span of frames with
+    detections;
     unscored: detections without a score (given score 1); notes: what the reader left out
     or decided, one line each."""
     frames: np.ndarray
@@ -133,9 +140,9 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
         options = dict(pose_model=pose_model, keypoints=keypoints) if fmt == 'openpose' \
             else None
         result = import_labels(fmt, paths, cameras=cameras, camera_map=camera_map,
-                               options=options)
+                               options=options, keep_missing=True)
     rows = result.rows
-    if not rows:
+    if not any(math.isfinite(r.u) and math.isfinite(r.v) for r in rows):
         raise LabelError(f'{", ".join(map(str, paths))}: no 2D detections found')
     if result.instance_keypoints:    # several animals: '<instance>/<keypoint>' per camera
         rows = [replace(r, keypoint=f'{r.instance}/{r.keypoint}') if r.instance else r
@@ -159,9 +166,18 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
             raise LabelError(f'{r.place}: field keypoint: {r.keypoint!r} is not a keypoint '
                              f'of the skeleton ({", ".join(names)})')
     _check_lengths(rows, result.frame_counts)
+    uv = np.array([(r.u, r.v) for r in rows], np.float64)
+    present = np.isfinite(uv).all(-1)
+    # every missing point of every format counted here: a NaN / inf row of a points
+    # table, and the rows of the readers' missing points (labels_import, keep_missing)
+    nan_rows = int((~present).sum())
+    uv[~present] = np.nan
     frame = np.array([r.frame for r in rows], np.int64)
-    first, last = int(frame.min()), int(frame.max())
+    first, last = int(frame[present].min()), int(frame[present].max())
     T, V, C = last - first + 1, len(cameras), len(names)
+    inside = np.flatnonzero((frame >= first) & (frame <= last))   # the span of detections
+    rows = [rows[i] for i in inside]
+    frame, uv, present = frame[inside], uv[inside], present[inside]
     _check_span(rows, frame, T, V, C)
     cindex = {c: i for i, c in enumerate(cameras)}
     t = frame - first
@@ -176,21 +192,19 @@ def read_points2d(paths, cameras, fmt='auto', keypoints=None, camera_map=None,
                          f'{r.keypoint} is given twice')
     points = np.full((T, V, C, 2), np.nan)
     score = np.full((T, V, C), np.nan)
-    uv = np.array([(r.u, r.v) for r in rows], np.float64)
     s = np.array([np.nan if r.score is None else r.score for r in rows], np.float64)
-    present = np.isfinite(uv).all(-1)
     unscored = present & np.isnan(s)
     s[unscored] = 1.0                   # no score: as a source without scores
     points[t, v, c] = uv
     score[t, v, c] = s
-    nan_rows = int((~present).sum())
     notes = [result.note] if result.note else []
     if unscored.any():
         notes.append(f'{int(unscored.sum())} of {int(present.sum())} detections have no score '
                      '(no score column, or an empty / NaN likelihood or score cell): score 1 '
                      'used')
     return Points2D(frames=np.arange(first, last + 1), cameras=cameras, keypoints=names,
-                    points=points, score=score, fmt=fmt, rows=len(rows), nan_rows=nan_rows,
+                    points=points, score=score, fmt=fmt, rows=len(result.rows),
+                    nan_rows=nan_rows,
                     unscored=int(unscored.sum()), notes=tuple(notes))
 
 

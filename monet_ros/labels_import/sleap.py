@@ -52,9 +52,11 @@ def _numbers(f, key, path):
 def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None, ids=None):
     """(rows, keypoints, dropped, frames) of one SLEAP analysis HDF5 file: LabelRow list,
     keypoint names ('<track>/<node>' with several tracks), points below min_score left out,
-    the file's frame count. With several tracks a row's keypoint is the node, its instance
-    the track name and its subject the name's id in `ids` ({name: id}, filled in order of
-    first appearance). Raises LabelError naming the file and field."""
+    the file's frame count. An entry without a position (NaN / inf, or its track not
+    occupied in the frame) is a row with u = v = NaN (labels_import's missing points).
+    With several tracks a row's keypoint is the node, its instance the track name and its
+    subject the name's id in `ids` ({name: id}, filled in order of first appearance).
+    Raises LabelError naming the file and field."""
     ids = {} if ids is None else ids
     with open_hdf5(path) as f:
         for key in ('tracks', 'node_names'):
@@ -103,9 +105,13 @@ def read_sleap(path, cameras=(), camera=None, min_score=0.0, camera_map=None, id
     several = n_tracks > 1
     subject = [ids.setdefault(n, len(ids)) if several else 0 for n in names]
     rows = []
-    for frame, track, node in zip(*np.nonzero(ok)):
-        u, v = points[frame, track, node]
-        s = None if score is None else float(score[frame, track, node])
+    missing = ~(np.isfinite(points).all(-1) & occupancy[:, :, None])
+    for frame, track, node in zip(*np.nonzero(ok | missing)):
+        if missing[frame, track, node]:     # a row without a position (labels_import)
+            u = v = s = np.nan
+        else:
+            u, v = points[frame, track, node]
+            s = None if score is None else float(score[frame, track, node])
         rows.append(LabelRow(str(path), int(frame) + 1, None, int(frame), cam,
                              nodes[node], float(u), float(v),
                              f'frame {frame} track {names[track]} node {nodes[node]}',
@@ -132,7 +138,8 @@ def read_slp(path, cameras=(), camera=None, min_score=0.0, camera_map=None, ids=
     - instances (instance_id, instance_type 0 user / 1 predicted, frame_id, skeleton, track
       (-1: none), from_predicted, score, point_id_start, point_id_end);
     - points (user: x, y, visible, complete) and pred_points (+ score): pixels, NaN or
-      visible False where a node is not placed.
+      visible False where a node is not placed (a row with u = v = NaN: labels_import's
+      missing points).
     A predicted instance that a user instance of the frame was made from (from_predicted) is
     left out: the user's correction wins. Tracks are subjects as in the analysis file (ids by
     track name); two instances without a track in one frame of a camera are an error (their
@@ -193,10 +200,10 @@ def read_slp(path, cameras=(), camera=None, min_score=0.0, camera_map=None, ids=
         track_name = tracks[track] if track >= 0 and several else ''
         for node, point in zip(nodes, pts):
             u, v = float(point['x']), float(point['y'])
-            if not (point['visible'] and np.isfinite(u) and np.isfinite(v)):
-                continue
             score = None if is_user or 'score' not in pts.dtype.names \
                 else float(point['score'])
+            if not (point['visible'] and np.isfinite(u) and np.isfinite(v)):
+                u = v = score = np.nan      # a row without a position (labels_import)
             if score is not None and np.isnan(score):
                 score = None
             if score is not None and min_score > 0 and not score >= min_score:

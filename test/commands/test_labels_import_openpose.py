@@ -84,3 +84,30 @@ def test_pose2sim_json_maps_onto_a_skeleton_with_the_shipped_keypoint_map(shared
     assert main([*args, '--out', str(empty)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and 'no label left to write' in err[0] and not empty.exists()
+
+
+def test_points_without_a_position_are_counted(tmp_path, capsys):
+    """Keypoints OpenPose did not detect (c = 0) and non-finite ones are left out of the
+    labels and counted in the summary (they were left out without a word)."""
+    rec = blob_recording(num_views=3, T=12, C=3, labelled=(2, 9))
+    data = write_blob_folder(rec, tmp_path / 'data')
+    skeleton = tmp_path / 'blobs.yaml'
+    skeleton.write_text(SKELETON)
+    for v, cam in enumerate(rec.cameras):
+        folder = tmp_path / 'json' / f'{cam.name}_json'
+        folder.mkdir(parents=True)
+        for t in rec.labelled_instants:
+            person = np.concatenate([rec.labels[t, v], np.full((3, 1), 0.9)], -1)
+            if v == 0:
+                person[1] = 0.0                         # not detected: 0, 0, c = 0
+            if v == 2 and t == rec.labelled_instants[0]:
+                person[2, 0] = np.nan                   # json.dumps writes NaN
+            (folder / f'{cam.name}_{t:012d}_keypoints.json').write_text(json.dumps(
+                {'people': [{'pose_keypoints_2d': person.ravel().tolist()}]}))
+    out = tmp_path / 'labels.csv'
+    assert main(['labels', 'import', 'openpose', str(tmp_path / 'json'), '--rec', str(data),
+                 '--out', str(out), '--skeleton', str(skeleton)]) == 0
+    text = capsys.readouterr().out
+    assert 'monet labels import: 15 labels at 2 instants x 3 cameras' in text, text
+    assert '3 points without a position in the source (NaN / inf, not detected or not ' \
+        'placed) left out' in text, text

@@ -35,8 +35,12 @@ def test_two_jobs_equal_two_single_runs_and_a_failed_recording_is_reported(tmp_p
                 np.testing.assert_array_equal(b[field], a[field])
         assert (many / name / 'keypoints3d.csv').read_bytes() == \
             (tmp_path / f'single{i}' / 'keypoints3d.csv').read_bytes()
-    rows = [line for line in out.splitlines() if line.startswith(f'monet process: {recs[0]}')]
+    rows = [line for line in out.splitlines() if line.startswith(f'monet process: {recs[0]} ')]
     assert len(rows) == 1 and rows[0].split()[4] == '3' and rows[0].endswith('ok')
+    # each recording's summary after its name, as a run of it alone prints it
+    for rec, name, frames in zip(recs, ('session', 'session_2'), (3, 2)):
+        assert f'monet process: {rec}: {frames} frames (' in out, out
+        assert f'monet process: {rec}: wrote csv: {many / name / "keypoints3d.csv"}' in out
 
     # A corrupt recording: one line naming it, the other still written, exit 2.
     corrupt = tmp_path / 'corrupt.mcap'
@@ -70,7 +74,8 @@ def test_the_summary_says_which_folder_holds_which_recording(tmp_path, capfd):
     assert monet(['process', *map(str, recs), '--out', str(many), '--jobs', '2', '--model',
                   str(model), '--quiet', '--threads', '1']) == 0
     captured = capfd.readouterr()        # the workers' stderr too (file descriptor 2)
-    header = next(line for line in captured.out.splitlines() if 'recording ' in line)
+    header = next(line for line in captured.out.splitlines()
+                  if line.startswith('monet process: recording '))
     assert header.split()[2:4] == ['recording', 'output']
     for rec in recs:
         row, = [line for line in captured.out.splitlines()

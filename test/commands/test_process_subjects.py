@@ -212,3 +212,40 @@ def test_tracker_options_reach_the_tracker(scene, tmp_path, capsys):
     assert '0 identities, 0 subject-frames, 0 births, 0 deaths' in text, text
     assert f'{T} full-frame discovery runs finding 0 subjects' in text, text
     assert len(read_anipose_csv(out / 'keypoints3d.csv')['fnum']) == 0
+
+
+def test_several_recordings_print_each_ones_summary(scene, tmp_path, capsys):
+    """`monet process REC1 REC2 --subjects 2`: each recording's summary (frames, the
+    identities with their births and deaths, the keypoints not triangulated, the detection
+    and skipped counts, the filter's, the files written) is printed after the recording's
+    name, line for line what a run of that recording alone prints (only the closing table
+    was printed); the precision line is the command's, printed once."""
+    import re
+    folder, _, model = scene
+    other, _, _ = write_two_subjects(tmp_path / 'other', T=8)
+    recs = [folder / 'recording', other / 'recording']
+    options = ['--rig', str(folder / 'rig.yaml'), '--model', str(model), *COMMON,
+               '--subjects', '2', '--link-mm', '450', '--filter', 'kalman']
+
+    def plain(line, out):            # times and output folders differ from run to run
+        return re.sub(r'\d+\.\d+ s\b', 'S s', line.replace(str(out), 'OUT'))
+
+    alone = []
+    for i, rec in enumerate(recs):
+        out = tmp_path / f'single{i}'
+        assert monet(['process', str(rec), '--out', str(out), *options]) == 0
+        lines = capsys.readouterr().out.splitlines()
+        alone.append([plain(line.removeprefix('monet process: '), out) for line in lines
+                      if 'precision' not in line])
+    many = tmp_path / 'many'
+    assert monet(['process', *map(str, recs), '--out', str(many), *options]) == 0
+    text = capsys.readouterr().out.splitlines()
+    for rec, name, single in zip(recs, ('recording', 'recording_2'), alone):
+        head = f'monet process: {rec}: '
+        mine = [plain(line.removeprefix(head), many / name) for line in text
+                if line.startswith(head)]
+        assert mine == single, (mine, single)
+    assert any('2 births, 0 deaths' in line for line in alone[0]), alone[0]
+    assert any(line.startswith('subjects: ') for line in alone[1]), alone[1]
+    assert any(line.startswith('wrote trc subject ') for line in alone[1]), alone[1]
+    assert sum('precision' in line for line in text) == 1, text

@@ -227,3 +227,73 @@ def test_instances_without_subjects_name_the_option_with_a_skeleton(scene, tmp_p
         assert code == 2 and '\n' not in err, err
         assert 'instances per camera' in err and 'give --subjects N' in err, err
         assert not (tmp_path / 'x').exists()
+
+
+def _spoil(points, seed):
+    """A copy of points (T, V, N, C, 2) with ~5% of the points NaN and ~2% inf (in u or
+    v), as trackers leave them."""
+    rng = np.random.default_rng(seed)
+    points = points.copy()
+    draw = rng.random(points.shape[:-1])
+    axis = rng.integers(0, 2, draw.shape)
+    for value, hit in ((np.nan, draw < 0.05), (np.inf, (draw >= 0.05) & (draw < 0.07))):
+        points[..., 0][hit & (axis == 0)] = value
+        points[..., 1][hit & (axis == 1)] = value
+    return points
+
+
+@pytest.mark.parametrize('kind', ['sleap', 'dlc', 'dlc_h5'])
+def test_missing_points_of_every_reader_are_counted(scene, kind, tmp_path, capsys):
+    """NaN and inf points of SLEAP analysis files and multi-animal DeepLabCut tables are
+    counted with --subjects as the NaN rows of a points table are: the readers dropped them
+    before the count saw them (0 rows NaN), while without --subjects the grid counted them
+    as missing views."""
+    root, _, _, points, _ = scene
+    points = _spoil(points, seed=3)
+    missing = int((~np.isfinite(points).all(-1)).sum())          # brute force, (T, V, N, C)
+    assert missing > 100
+    if kind == 'sleap':
+        paths = _write_sleap(tmp_path / 'sleap', points)
+    else:
+        paths = _write_dlc(tmp_path / 'dlc', points, h5=kind == 'dlc_h5')
+    code = monet(['triangulate', *map(str, paths), '--rig', str(root / 'rig.yaml'),
+                  '--out', str(tmp_path / 'out'), '--subjects', '2', '--fps', str(FPS),
+                  '--skeleton', 'human14'])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert f'skipped 2D: {missing} rows NaN (no detection), 0 below' in text, text
+
+
+def test_missing_points_of_slp_files_are_counted(shared_data, tmp_path, capsys):
+    """The same for SLEAP .slp files: the real session's files, some predicted points made
+    NaN / inf / invisible, counted against the files' own points (every instance is
+    predicted: none is replaced by a user's)."""
+    import shutil
+
+    import h5py
+    session = shared_data / 'sleap_anipose_minimal_session'
+    rng = np.random.default_rng(5)
+    paths, missing = [], 0
+    for cam in ('back', 'mid', 'side', 'top'):
+        (tmp_path / cam).mkdir()
+        paths.append(tmp_path / cam / f'minimal_{cam}_proofread.slp')
+        shutil.copy(session / cam / paths[-1].name, paths[-1])
+        with h5py.File(paths[-1], 'r+') as f:
+            inst, pred = f['instances'][()], f['pred_points'][()]
+            assert (inst['instance_type'] == 1).all()
+            draw = rng.random(len(pred))
+            pred['x'][draw < 0.04] = np.nan
+            pred['y'][(draw >= 0.04) & (draw < 0.06)] = np.inf
+            pred['visible'][(draw >= 0.06) & (draw < 0.08)] = False
+            f['pred_points'][...] = pred
+            for i in inst:                              # brute force over the instances
+                pts = pred[i['point_id_start']:i['point_id_end']]
+                missing += int((~(pts['visible'].astype(bool) & np.isfinite(pts['x'])
+                                  & np.isfinite(pts['y']))).sum())
+    assert missing > 100
+    code = monet(['triangulate', *map(str, paths), '--rig',
+                  str(session / 'calibration.toml'), '--out', str(tmp_path / 'out'),
+                  '--subjects', '1', '--fps', str(FPS)])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert f'skipped 2D: {missing} rows NaN (no detection), ' in text, text
