@@ -182,7 +182,8 @@ class TrainingData:
     split (NaN at held-out and validation instants), other_instants (J,) their instants.
 
     Unlabelled instants per subject: when the mode trains on unlabelled instants (L_E, L_T,
-    L_R, tracked or bootstrapped pseudo-labels) and the crops follow the labels (box_source
+    L_R, tracked or bootstrapped pseudo-labels) or distils (config.distill_rounds: the
+    teacher's 3D of each subject goes to its own rows) and the crops follow the labels (box_source
     auto, labels or pseudo_labels), each labelled subject s >= 1 (other_subject_ids: a label
     in the train split) gets one more crop row T + J + m per unlabelled instant (m runs over
     the subjects, then unlabeled_instants): that instant's views cropped by subject 0's crop
@@ -250,11 +251,13 @@ class TrainingData:
         J = len(self.other_instants)
         # the labelled subjects other than 0 (a label in the train split), each with its own
         # rows of unlabelled instants when the mode trains on unlabelled instants (L_E, L_T,
-        # L_R, tracked or bootstrapped pseudo-labels) and the crops follow the labels (a
+        # L_R, tracked or bootstrapped pseudo-labels, distillation's) and the crops follow
+        # the labels (a
         # fixed or full crop, or the ground truth's subject 0, frames every subject alike)
         spec = config.spec
         self.other_subject_ids = np.unique(recording.other_subjects[other]) \
-            if (spec.unlabeled or spec.temporal or spec.bootstrap_rounds) and \
+            if (spec.unlabeled or spec.temporal or spec.bootstrap_rounds or
+                config.distill_rounds) and \
             config.box_source in ('auto', 'labels', 'pseudo_labels') \
             else np.zeros(0, np.int64)
         U = len(self.unlabeled_instants)
@@ -297,6 +300,7 @@ class TrainingData:
                 own.append(self.framing_boxes(s)[self.unlabeled_instants])
             boxes = np.concatenate([self.boxes, *own])
             rows = self.row_instants
+        self.row_boxes = boxes        # (num_rows, V, 4) px: each crop row's nominal box
         self.cache = CropCache(recording, boxes, input_size, heatmap_size,
                                config.cache_scale, instants=rows)
         # L_T's pairs: the unlabelled row of the same subject at the next instant, -1 none
@@ -611,7 +615,8 @@ class Trainer:
         # fits (epipolar_fit_heat_px); latched, saved with the state
         self.epipolar_started = None
         # distillation (learning.distill): the round trained now (0: none yet) and its
-        # pseudo-labels (T, V, C, 2) px with weights (T, V, C); set_distilled
+        # pseudo-labels (num_rows, V, C, 2) px with weights (num_rows, V, C) by crop row
+        # (each row's own subject's); set_distilled
         self.distill_round = 0
         self.distilled = None
         self.distilled_weight = None
@@ -699,18 +704,22 @@ class Trainer:
 
     def set_distilled(self, points, weight, round_index):
         """Start distillation round `round_index` (1-based) with its pseudo-labels: points
-        (T, V, C, 2) source px (NaN = none) and weight (T, V, C) (learning.distill.Distilled);
-        labelled cells and instants outside the training pools (held out, validation) never
-        get one. Its crops are the plan's 'D' part from the next step (batch_distill)."""
-        T, V, C, _ = self.data.labels.shape
+        (R, V, C, 2) source px (NaN = none) and weight (R, V, C) (learning.distill.Distilled)
+        by crop row (R = data.num_rows: each row's are its own subject's, TrainingData; R = T
+        with one subject); labelled cells and rows of instants outside the training pools
+        (held out, validation) never get one. Its crops are the plan's 'D' part from the next
+        step (batch_distill)."""
+        _, V, C, _ = self.data.labels.shape
+        R = self.data.num_rows
         points = np.array(points, np.float64)
         weight = np.array(weight, np.float64)
-        if points.shape != (T, V, C, 2) or weight.shape != (T, V, C):
-            raise ValueError(f'set_distilled: points must be {(T, V, C, 2)} and weight '
-                             f'{(T, V, C)}, got {points.shape} and {weight.shape}')
-        off = np.isfinite(self.data.labels[..., 0]) | ~np.isfinite(weight) | (weight <= 0)
-        off[self.data.held_out] = True
-        off[self.data.validation_instants] = True
+        if points.shape != (R, V, C, 2) or weight.shape != (R, V, C):
+            raise ValueError(f'set_distilled: points must be {(R, V, C, 2)} and weight '
+                             f'{(R, V, C)}, got {points.shape} and {weight.shape}')
+        off = np.isfinite(self.data.row_labels[..., 0]) | ~np.isfinite(weight) | (weight <= 0)
+        out = np.isin(self.data.row_instants, np.union1d(self.data.held_out,
+                                                         self.data.validation_instants))
+        off[out] = True
         points[off] = np.nan
         weight[off] = 0.0
         self.distilled, self.distilled_weight = points, weight
