@@ -8,6 +8,10 @@ weighted and gated by the filter's reprojection error) and training goes on for
 distill_round_steps more steps with their crops (L_D, the plan's 'D' part). Each round's
 teacher checkpoint and `monet process` output stay in OUT/distill/ for inspection.
 
+With labels of several subjects per instant the teacher runs with `--subjects S` (S: the
+most subjects labelled at an instant) and each subject's crop rows get its own identity's
+reprojected 3D (distill_round, learning.distill.match_identities).
+
 The exact control of a distillation run is the same run at lambda_d 0: the same rounds,
 teacher runs and crops, no L_D.
 """

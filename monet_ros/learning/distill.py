@@ -69,7 +69,8 @@ def distilled_labels(X, error, ncams, cameras, cells, units=None, gate_px=8.0, m
                      residual_px=2.0, matched=None):
     """Distilled pseudo-labels from filtered 3D.
 
-    X (T, C, 3) filtered points in `units` (default: the cameras', Camera.units), NaN where
+    X (T, C, 3) filtered points (T: instants, or the crop rows of several subjects:
+    commands.train_distill) in `units` (default: the cameras', Camera.units), NaN where
     the filter kept none; error (T, C) px mean reprojection error of each point over its
     inlier views and ncams (T, C) those views (temporal.Smoothed's); cameras: the V Camera
     the labels are for; cells (T, V, C) bool: the cells that may get a pseudo-label (e.g.
