@@ -124,6 +124,9 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
                                  units=figures['units'], gate_px=c.distill_gate_px,
                                  min_views=c.distill_min_views,
                                  residual_px=c.distill_residual_px, matched=matched)
+    if several:       # `matched` was by crop row: the summary counts instants
+        ran = np.isin(recording.stamps, np.asarray(figures.get('filter_stamps', ()), np.int64))
+        distilled.counts['frames_unmatched'] = int((~ran).sum())
     trainer.set_distilled(distilled.points, distilled.weight, index)
     kept = distilled.weight[distilled.weight > 0]
     stats = {'round': index, 'step': trainer.step_count, 'teacher': str(teacher),

@@ -70,6 +70,8 @@ def test_each_subjects_crop_rows_get_its_own_distilled_pseudo_labels(scene, tmp_
                           subjects=SubjectsConfig(subjects=2, link_mm=450.0))
     print('\n'.join(said))
     assert stats['subjects'] == 2 and stats['kept'] == trainer.distilled_count > 0
+    # the teacher ran on every instant and each crop row of those got an identity
+    assert stats['frames_unmatched'] == 0 and stats['rows_unmatched'] == 0
     points = trainer.distilled                                   # (num_rows, V, C, 2)
     assert points.shape == (data.num_rows, 4, 3, 2)
     truth = uv[data.row_instants]                                # (R, V, S, C, 2)
