@@ -50,7 +50,8 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     with k subjects, discoveries, crops, duplicates, instances, unmatched, and discovery's
     3D points: found, explained by a track, loose), and figures['filter']: the
     subjects.offline.SmoothedSubjects of filter_config (a temporal.FilterConfig, method
-    kalman or optim; None or 'none': no filter, figures['filter'] None)."""
+    kalman or optim; None or 'none': no filter, figures['filter'] None) with
+    figures['filter_stamps'] (F,) ns, the stamps of its rows' frame indices."""
     from collections import Counter
 
     from tqdm import tqdm
@@ -114,6 +115,7 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
             smoothed = smooth_subjects(result, stamps, cameras, edges if edges is not None
                                        else (), filter_config, progress=progress)
             write_filtered_subjects(writer, frame_id, smoothed, stamps, units)
+            figures['filter_stamps'] = stamps     # (F,) ns: the frames of smoothed.rows.frame
     figures['seconds'] = time.perf_counter() - figures['start']
     figures['filter'] = smoothed
     triangulated = np.isfinite(result.X).all(-1)

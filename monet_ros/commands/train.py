@@ -232,7 +232,13 @@ def run(args):
         v = summary['validation']
         print(f'error on the held-out validation labels (--validation-labels): median '
               f'{v["median_px"]:.2f} px, mean {v["mean_px"]:.2f} px ({v["count"]} keypoints of '
-              f'{len(data.validation_instants)} instants, never trained on)', file=sys.stderr)
+              f'{len(data.validation_instants)} instants, never trained on'
+              + (', every subject labelled there' if v.get('subjects') else '') + ')',
+              file=sys.stderr)
+        for subject, e in v.get('subjects', {}).items():
+            print(f'  subject {subject}: median {e["median_px"]:.2f} px, mean '
+                  f'{e["mean_px"]:.2f} px ({e["count"]} keypoints, in crops around it)',
+                  file=sys.stderr)
     for stats in summary['bootstrap']:
         print(f'bootstrapping round {stats["round"]} at step {stats["step"]}: '
               f'{stats["pseudo_labels"]} pseudo-labels (peak cut-off {stats["cutoff"]:.3g})',

@@ -9,6 +9,7 @@ a distillation round sees what a user's `monet process` run would give. No ROS h
 round itself (running `monet process`) is commands.train_distill.
 """
 from dataclasses import dataclass
+import warnings
 
 import numpy as np
 
@@ -68,7 +69,8 @@ def distilled_labels(X, error, ncams, cameras, cells, units=None, gate_px=8.0, m
                      residual_px=2.0, matched=None):
     """Distilled pseudo-labels from filtered 3D.
 
-    X (T, C, 3) filtered points in `units` (default: the cameras', Camera.units), NaN where
+    X (T, C, 3) filtered points (T: instants, or the crop rows of several subjects:
+    commands.train_distill) in `units` (default: the cameras', Camera.units), NaN where
     the filter kept none; error (T, C) px mean reprojection error of each point over its
     inlier views and ncams (T, C) those views (temporal.Smoothed's); cameras: the V Camera
     the labels are for; cells (T, V, C) bool: the cells that may get a pseudo-label (e.g.
@@ -126,3 +128,89 @@ def label_errors(points, truth):
     return {'count': int(err.size), 'median_px': float(np.median(err)),
             'mean_px': float(err.mean()), 'p90_px': float(np.percentile(err, 90)),
             'within_2px': float((err <= 2).mean()), 'within_5px': float((err <= 5).mean())}
+
+
+def match_identities(X, instants, row_instants, row_boxes, cameras, units=None, gate=1.0,
+                     row_points=None):
+    """Which of a teacher's identities (`monet process --subjects N`) is the subject of each
+    crop row of the training data (TrainingData.row_instants / row_boxes): the teacher's
+    identity numbers need not be the labels' subject ids (these are instance labels within
+    one labelled instant), so rows and identities are matched by geometry, instant by
+    instant.
+
+    The rule: per instant, the cost of (identity i, row r) is the median over the views
+    where i's reprojected joints (in front of the camera, inside the image) are seen of
+    |centre of their bounding box - r's anchor| / half the crop box's longer side, r's
+    anchor in a view being the centre of the bounding box of its labels there (row_points)
+    where it has one, else the centre of its crop box; the identities and the rows of that
+    instant are paired by a Hungarian assignment of that cost (scipy
+    linear_sum_assignment), a pair kept only where the cost is at most `gate` (default 1:
+    the identity's centre within half a crop side of the anchor in the median view). A
+    row's crop is cut around its subject (its labels, their tracks, or its nearest
+    labelled instant's box), so the identity centred in it is the subject the row trains;
+    a crop that shows both subjects is given the nearer one, and two rows never share an
+    identity. (A crop that follows no subject, box_source fixed / full, has no subject to
+    match at an unlabelled view: its row gets the identity nearest the crop's centre.)
+
+    X (R, C, 3) the teacher's rows (points in `units`, default the cameras'; NaN = none);
+    instants (R,) the training instant of each teacher row (-1: none); row_instants (N,),
+    row_boxes (N, V, 4) px (x0, y0, x1, y1); row_points (N, V, C, 2) px the rows' labels
+    (NaN = none; None: none); cameras: the V Camera. Returns (match (N,) int:
+    the teacher row of each crop row, -1 none; cost (N,): its cost, inf where none)."""
+    from scipy.optimize import linear_sum_assignment
+
+    X = np.asarray(X, np.float64)
+    instants = np.asarray(instants, np.int64)
+    row_instants = np.asarray(row_instants, np.int64)
+    boxes = np.asarray(row_boxes, np.float64)
+    own = rig_units(cameras)
+    if units is not None and units != own:
+        X = convert(X, units, own)
+    V = len(cameras)
+    if X.ndim != 3 or instants.shape != X.shape[:1] or \
+            boxes.shape != row_instants.shape + (V, 4):
+        raise ValueError(f'match_identities: X must be (R, C, 3), instants (R,), row_boxes '
+                         f'(N, V={V}, 4); got {X.shape}, {instants.shape}, {boxes.shape}')
+    match = np.full(len(row_instants), -1, np.int64)
+    cost = np.full(len(row_instants), np.inf)
+    if not len(X) or not len(row_instants):
+        return match, cost
+    has = np.isfinite(X).all(-1)                                             # (R, C)
+    uv = project_views(cameras, np.where(has[..., None], X, 0.0))           # (R, V, C, 2)
+    R_ = np.stack([c.R for c in cameras])
+    t_ = np.stack([c.t for c in cameras])
+    depth = np.einsum('vj,rcj->rvc', R_[:, 2], np.where(has[..., None], X, 0.0)) + \
+        t_[None, :, 2, None]
+    size = np.array([[c.width, c.height] for c in cameras], np.float64)[None, :, None]
+    seen = has[:, None] & (depth > 0) & np.all((uv >= -0.5) & (uv <= size - 0.5), -1) & \
+        np.isfinite(uv).all(-1)                                              # (R, V, C)
+    lo = np.where(seen[..., None], uv, np.inf).min(2)
+    hi = np.where(seen[..., None], uv, -np.inf).max(2)
+    with np.errstate(invalid='ignore'):            # unseen: inf - inf, replaced by NaN
+        centre = np.where(seen.any(2)[..., None], (lo + hi) / 2, np.nan)     # (R, V, 2)
+    box_centre = (boxes[..., :2] + boxes[..., 2:]) / 2                       # (N, V, 2)
+    if row_points is not None:       # a labelled view: its labels' centre
+        labels = np.asarray(row_points, np.float64)
+        has_label = np.isfinite(labels).all(-1)                              # (N, V, C)
+        with np.errstate(invalid='ignore'):
+            mid = (np.where(has_label[..., None], labels, np.inf).min(2) +
+                   np.where(has_label[..., None], labels, -np.inf).max(2)) / 2
+        box_centre = np.where(has_label.any(2)[..., None], mid, box_centre)
+    half = (boxes[..., 2:] - boxes[..., :2]).max(-1) / 2                     # (N, V)
+    for t in np.intersect1d(instants, row_instants):
+        ids = np.flatnonzero(instants == t)
+        rows = np.flatnonzero(row_instants == t)
+        d = np.linalg.norm(centre[ids][:, None] - box_centre[rows][None], axis=-1) / \
+            half[rows][None]                                                 # (k, m, V)
+        with warnings.catch_warnings():          # an identity seen in no view: no cost
+            warnings.simplefilter('ignore', RuntimeWarning)
+            c = np.nanmedian(np.where(np.isfinite(d), d, np.nan), axis=-1)   # (k, m)
+        c = np.where(np.isfinite(c), c, np.inf)
+        ok = c <= gate
+        if not ok.any():
+            continue
+        i, r = linear_sum_assignment(np.where(ok, c, 1e12))
+        keep = ok[i, r]
+        match[rows[r[keep]]] = ids[i[keep]]
+        cost[rows[r[keep]]] = c[i[keep], r[keep]]
+    return match, cost

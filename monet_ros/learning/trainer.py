@@ -182,7 +182,8 @@ class TrainingData:
     split (NaN at held-out and validation instants), other_instants (J,) their instants.
 
     Unlabelled instants per subject: when the mode trains on unlabelled instants (L_E, L_T,
-    L_R, tracked or bootstrapped pseudo-labels) and the crops follow the labels (box_source
+    L_R, tracked or bootstrapped pseudo-labels) or distils (config.distill_rounds: the
+    teacher's 3D of each subject goes to its own rows) and the crops follow the labels (box_source
     auto, labels or pseudo_labels), each labelled subject s >= 1 (other_subject_ids: a label
     in the train split) gets one more crop row T + J + m per unlabelled instant (m runs over
     the subjects, then unlabeled_instants): that instant's views cropped by subject 0's crop
@@ -193,15 +194,24 @@ class TrainingData:
     the same subject's unlabelled row at the next instant (-1 none: L_T's pairs).
     initial_pseudo_labels gives each row its own subject's pseudo-labels. A labels table of
     one subject has num_rows = T and unlabeled_rows = unlabeled_instants: it trains as
-    before. Distillation and the validation labels are subject 0's."""
+    before.
+
+    Validation labels of several subjects: the validation instants are chosen among subject
+    0's labelled instants (validation_split) and every subject labelled there is held out
+    and scored: validation_rows (M,) crop rows (the instants for subject 0, T + j for other
+    subject j), validation_row_labels (M, V, C, 2) px and validation_row_subjects (M,); an
+    other subject's validation row is framed without its labels, by framing_boxes (its
+    crop rule over its other instants' labels and tracks), as subject 0's validation views
+    are. Distillation's pseudo-labels go to every subject's rows (Trainer.set_distilled,
+    commands.train_distill)."""
 
     def __init__(self, recording, config, input_size, heatmap_size, tracked=None,
                  subject_tracked=None):
         self.recording = recording
         self.config = config
         self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
-        # among the instants labelled for subject 0 (validation labels are its); the
-        # other subjects of those instants are held out of training with them
+        # among the instants labelled for subject 0; the other subjects of those instants
+        # are held out of training with them and scored too (validation_rows)
         self.validation_instants = validation_split(recording.labels, self.held_out,
                                                     config.validation_labels)
         self.validation_labels = recording.labels[self.validation_instants].copy()
@@ -221,6 +231,7 @@ class TrainingData:
         if self.labelled_instants.size == 0:
             raise ValueError(f'{recording.name}: no labelled instant to train on')
         h_in, w_in = input_size
+        self.cache_input_size = (h_in, w_in)
         self._tracked = tracked       # tracks() given (rank 0's, in a torchrun job)
         # subject_tracks(s) given (rank 0's): {subject: PseudoLabels}
         self._subject_tracked = dict(subject_tracked or {})
@@ -240,11 +251,13 @@ class TrainingData:
         J = len(self.other_instants)
         # the labelled subjects other than 0 (a label in the train split), each with its own
         # rows of unlabelled instants when the mode trains on unlabelled instants (L_E, L_T,
-        # L_R, tracked or bootstrapped pseudo-labels) and the crops follow the labels (a
+        # L_R, tracked or bootstrapped pseudo-labels, distillation's) and the crops follow
+        # the labels (a
         # fixed or full crop, or the ground truth's subject 0, frames every subject alike)
         spec = config.spec
         self.other_subject_ids = np.unique(recording.other_subjects[other]) \
-            if (spec.unlabeled or spec.temporal or spec.bootstrap_rounds) and \
+            if (spec.unlabeled or spec.temporal or spec.bootstrap_rounds or
+                config.distill_rounds) and \
             config.box_source in ('auto', 'labels', 'pseudo_labels') \
             else np.zeros(0, np.int64)
         U = len(self.unlabeled_instants)
@@ -258,21 +271,36 @@ class TrainingData:
         self.unlabeled_rows = np.concatenate([
             self.unlabeled_instants,
             T + J + np.arange(U * len(self.other_subject_ids))]).astype(np.int64)
+        # the validation rows: subject 0's at the validation instants (the instants' rows),
+        # then every other subject labelled there (its row T + j)
+        at_validation = np.isin(self.other_instants, self.validation_instants) & \
+            np.isfinite(recording.other_labels[..., 0]).any(axis=(1, 2))
+        self.validation_rows = np.concatenate([
+            self.validation_instants, T + np.flatnonzero(at_validation)]).astype(np.int64)
+        self.validation_row_labels = np.concatenate([
+            self.validation_labels, recording.other_labels[at_validation]])
+        self.validation_row_subjects = np.concatenate([
+            np.zeros(len(self.validation_instants), np.int64),
+            recording.other_subjects[at_validation]]).astype(np.int64)
+        self._framing_boxes = {}
         boxes, rows = self.boxes, None
         if J:       # one more row of crops per other subject
             other_boxes = self.boxes[self.other_instants] if config.box_source in (
                 'fixed', 'full') else subject_label_boxes(
                     self.other_labels, self.other_instants, self.boxes, recording.cameras,
                     w_in / h_in, config.box_margin)
+            if config.box_source not in ('fixed', 'full'):
+                # a validation row is framed without its labels, as subject 0's are: by
+                # its subject's crop rule over the other instants' labels (and tracks)
+                for j in np.flatnonzero(at_validation):
+                    s = int(recording.other_subjects[j])
+                    other_boxes[j] = self.framing_boxes(s)[self.other_instants[j]]
             own = [other_boxes]
             for s in self.other_subject_ids:     # subject s's boxes: subject 0's crop rule
-                framing = self.subject_labels(s, framing=True)
-                s_boxes = crop_boxes(replace(recording, labels=framing), config.box_source,
-                                     w_in / h_in, config.box_margin,
-                                     self.subject_tracks(s).points if tracked_boxes else None)
-                own.append(s_boxes[self.unlabeled_instants])
+                own.append(self.framing_boxes(s)[self.unlabeled_instants])
             boxes = np.concatenate([self.boxes, *own])
             rows = self.row_instants
+        self.row_boxes = boxes        # (num_rows, V, 4) px: each crop row's nominal box
         self.cache = CropCache(recording, boxes, input_size, heatmap_size,
                                config.cache_scale, instants=rows)
         # L_T's pairs: the unlabelled row of the same subject at the next instant, -1 none
@@ -283,6 +311,23 @@ class TrainingData:
         found = (key[order][at] == key + 1) if len(key) else np.zeros(0, bool)
         self.next_row = np.full(len(self.row_instants), -1, np.int64)
         self.next_row[self.unlabeled_rows[found]] = self.unlabeled_rows[order[at[found]]]
+
+    def framing_boxes(self, subject):
+        """(T, V, 4) crop boxes of subject `subject` (>= 1) at every instant: subject 0's
+        crop rule (crop_boxes; box_source ground_truth, which is subject 0's, takes the
+        labels rule) on subject_labels(subject, framing=True) and, with box_source auto /
+        pseudo_labels, its tracks (subject_tracks); an instant without its labels takes the
+        nearest instant's box. Computed once per subject."""
+        if subject not in self._framing_boxes:
+            c = self.config
+            h_in, w_in = self.cache_input_size
+            source = 'labels' if c.box_source == 'ground_truth' else c.box_source
+            tracked = c.box_source in ('auto', 'pseudo_labels')
+            self._framing_boxes[subject] = crop_boxes(
+                replace(self.recording, labels=self.subject_labels(subject, framing=True)),
+                source, w_in / h_in, c.box_margin,
+                self.subject_tracks(subject).points if tracked else None)
+        return self._framing_boxes[subject]
 
     def subject_labels(self, subject, framing=False):
         """(T, V, C, 2) px labels of subject `subject` (>= 1) at their instants, NaN elsewhere:
@@ -570,7 +615,8 @@ class Trainer:
         # fits (epipolar_fit_heat_px); latched, saved with the state
         self.epipolar_started = None
         # distillation (learning.distill): the round trained now (0: none yet) and its
-        # pseudo-labels (T, V, C, 2) px with weights (T, V, C); set_distilled
+        # pseudo-labels (num_rows, V, C, 2) px with weights (num_rows, V, C) by crop row
+        # (each row's own subject's); set_distilled
         self.distill_round = 0
         self.distilled = None
         self.distilled_weight = None
@@ -658,18 +704,22 @@ class Trainer:
 
     def set_distilled(self, points, weight, round_index):
         """Start distillation round `round_index` (1-based) with its pseudo-labels: points
-        (T, V, C, 2) source px (NaN = none) and weight (T, V, C) (learning.distill.Distilled);
-        labelled cells and instants outside the training pools (held out, validation) never
-        get one. Its crops are the plan's 'D' part from the next step (batch_distill)."""
-        T, V, C, _ = self.data.labels.shape
+        (R, V, C, 2) source px (NaN = none) and weight (R, V, C) (learning.distill.Distilled)
+        by crop row (R = data.num_rows: each row's are its own subject's, TrainingData; R = T
+        with one subject); labelled cells and rows of instants outside the training pools
+        (held out, validation) never get one. Its crops are the plan's 'D' part from the next
+        step (batch_distill)."""
+        _, V, C, _ = self.data.labels.shape
+        R = self.data.num_rows
         points = np.array(points, np.float64)
         weight = np.array(weight, np.float64)
-        if points.shape != (T, V, C, 2) or weight.shape != (T, V, C):
-            raise ValueError(f'set_distilled: points must be {(T, V, C, 2)} and weight '
-                             f'{(T, V, C)}, got {points.shape} and {weight.shape}')
-        off = np.isfinite(self.data.labels[..., 0]) | ~np.isfinite(weight) | (weight <= 0)
-        off[self.data.held_out] = True
-        off[self.data.validation_instants] = True
+        if points.shape != (R, V, C, 2) or weight.shape != (R, V, C):
+            raise ValueError(f'set_distilled: points must be {(R, V, C, 2)} and weight '
+                             f'{(R, V, C)}, got {points.shape} and {weight.shape}')
+        off = np.isfinite(self.data.row_labels[..., 0]) | ~np.isfinite(weight) | (weight <= 0)
+        out = np.isin(self.data.row_instants, np.union1d(self.data.held_out,
+                                                         self.data.validation_instants))
+        off[out] = True
         points[off] = np.nan
         weight[off] = 0.0
         self.distilled, self.distilled_weight = points, weight
@@ -982,12 +1032,13 @@ class Trainer:
         the reprojection error (px) of the all-view triangulation of the detections
         (`reprojection_px`, `reprojection_std_px`): agreement between views, not accuracy.
         When the data holds validation labels (config.validation_labels): the error of the
-        detections on every validation instant against those labels (label_error, original
-        image px): `labelled_median_px`, `labelled_mean_px`, `labelled_keypoints`. Returns
-        {} when there is no instant to validate on."""
+        detections on every validation instant against those labels (validation_error's
+        overall figure, every subject's, original image px): `labelled_median_px`,
+        `labelled_mean_px`, `labelled_keypoints`. Returns {} when there is no instant to
+        validate on."""
         labelled = {}
         if len(self.data.validation_instants):
-            err = self.label_error(self.data.validation_instants, self.data.validation_labels)
+            err = self.validation_error()
             labelled = {'labelled_median_px': err['median_px'],
                         'labelled_mean_px': err['mean_px'], 'labelled_keypoints': err['count']}
         if instants is None:
@@ -1231,6 +1282,24 @@ class Trainer:
             labels = np.concatenate([labels, self.data.other_labels])
         return self.label_error(inst, labels)
 
+    def validation_error(self):
+        """label_error of every subject's validation labels (TrainingData.validation_rows:
+        each subject's detections in the crops of its own row) pooled over the subjects;
+        with several subjects labelled there, `subjects` {subject: its own label_error} too
+        (a subject with no validation label is left out). Raises ValueError when there is
+        no validation label."""
+        d = self.data
+        out = self.label_error(d.validation_rows, d.validation_row_labels)
+        subjects = np.unique(d.validation_row_subjects)
+        if len(subjects) > 1:
+            out['subjects'] = {}
+            for s in subjects:
+                mine = d.validation_row_subjects == s
+                if np.isfinite(d.validation_row_labels[mine][..., 0]).any():
+                    out['subjects'][int(s)] = self.label_error(d.validation_rows[mine],
+                                                               d.validation_row_labels[mine])
+        return out
+
     def label_error(self, instants, labels):
         """Distance between the detections (detect: cached crops, no augmentation) of every
         view of `instants` (N,) (crop rows: T + j is other subject j, TrainingData) and
@@ -1332,9 +1401,7 @@ class Trainer:
                       f'labelled crops to epipolar_fit_heat_px '
                       f'{self.config.epipolar_fit_heat_px:g} heatmap px in a step after the '
                       'warm-up (train longer, or raise epipolar_fit_heat_px)')
-        validation = (self.label_error(self.data.validation_instants,
-                                       self.data.validation_labels)
-                      if len(self.data.validation_instants) else None)
+        validation = self.validation_error() if len(self.data.validation_instants) else None
         return {'mode': self.config.mode, 'steps': self.step_count, 'seconds': seconds,
                 'steps_per_s': (self.step_count - first) / max(seconds, 1e-9),
                 'pseudo_labels': self.pseudo_label_count,

@@ -314,3 +314,78 @@ def test_a_resume_with_other_subjects_is_refused_by_name(scene, tmp_path):
     with pytest.raises(ValueError, match=r'trainer_state.pt: field pseudo holds pseudo-labels '
                        r'of 42 crop rows, this data has 24'):
         Trainer.resume(tmp_path, TrainingData(one, config, (48, 48), (12, 12)))
+
+
+def test_validation_labels_score_every_subject_in_its_own_crops(scene):
+    """--validation-labels with two subjects per instant: every subject labelled at a
+    validation instant is scored, in crops around it framed without its labels (its
+    nearest train instant's labels, as subject 0's validation views); each subject's figure
+    equals a brute-force computation (own crops from the labels, the network, decode, the
+    distance to that subject's ground-truth projection) and the overall one pools both."""
+    folder, cams, X, uv, root = scene
+    rec = load_recording(folder, labels=root / 'labels.csv', skeleton=list(NAMES))
+    config = TrainConfig(mode='supervised', steps=30, seed=1, validation_labels=0.34,
+                         **CONFIG)
+    data = TrainingData(rec, config, (48, 48), (12, 12))
+    np.testing.assert_array_equal(data.validation_instants, [3, 12])
+    np.testing.assert_array_equal(data.validation_row_subjects, [0, 0, 1, 1])
+    trainer = Trainer(config, data)
+    trainer.run(progress=False)
+    got = trainer.validation_error()
+    train_labelled = np.array([0, 6, 9, 15])                # the labelled train instants
+    brute = {}
+    for s in (0, 1):
+        boxes = np.full((2, 4, 4), np.nan)
+        for i, t in enumerate((3, 12)):
+            for v in range(4):         # nearest train instant labelling s in view v (earlier)
+                have = train_labelled[np.isfinite(uv[train_labelled, v, s, :, 0]).any(-1)]
+                near = have[np.abs(have - t).argmin()]
+                boxes[i, v] = boxes_from_points(uv[near, v, s], aspect=1.0, margin=0.25)
+        cache = CropCache(rec, boxes, (48, 48), (12, 12), 1.3, instants=np.array([3, 12]))
+        rows, views = np.repeat([0, 1], 4), np.tile(np.arange(4), 2)
+        batch = cache.views(rows, views)
+        trainer.model.eval()
+        with torch.no_grad():
+            heat = trainer.model(batch.images)[-1].float()
+        peaks, _ = decode_heatmaps(heat)
+        A_inv = np.linalg.inv(batch.A)
+        points = np.einsum('nij,ncj->nci', A_inv[:, :2, :2], peaks.numpy().astype(float)) + \
+            A_inv[:, None, :2, 2]
+        truth = uv[np.array([3, 12])[rows], views, s]
+        err = np.linalg.norm(points - truth, axis=-1)
+        brute[s] = err[np.isfinite(truth[..., 0])]
+        e = got['subjects'][s]
+        assert e['count'] == brute[s].size == np.isfinite(uv[[3, 12], :, s, :, 0]).sum()
+        assert e['median_px'] == pytest.approx(np.median(brute[s]), abs=1e-6)
+        assert e['mean_px'] == pytest.approx(np.mean(brute[s]), abs=1e-6)
+    pooled = np.concatenate([brute[0], brute[1]])
+    assert got['count'] == pooled.size
+    assert got['median_px'] == pytest.approx(np.median(pooled), abs=1e-6)
+    assert got['mean_px'] == pytest.approx(np.mean(pooled), abs=1e-6)
+    summary = trainer.run(progress=False)          # no step left: the summary's figure
+    assert summary['validation']['subjects'][1]['mean_px'] == pytest.approx(np.mean(brute[1]))
+    assert trainer.validate(instants=[])['labelled_keypoints'] == pooled.size
+
+
+def test_monet_train_reports_the_validation_error_per_subject(scene, repo_root, tmp_path):
+    import json
+
+    from helpers.commands import run_monet_process
+    folder, cams, X, uv, root = scene
+    skeleton = tmp_path / 'blobs3.yaml'
+    skeleton.write_text('name: blobs3\nkeypoints: [a, b, c]\n')
+    done = run_monet_process(
+        repo_root, 'train', folder, '--labels', root / 'labels.csv', '--skeleton', skeleton,
+        '--out', tmp_path / 'run', '--steps', 2, '--validation-labels', 0.34,
+        '--eval-fraction', 0.25, '--architecture', 'small', '--input-size', 48, '--width',
+        16, '--batch-labelled', 4, '--mode', 'supervised', '--device', 'cpu', '--threads', 1,
+        '--no-progress')
+    assert done.returncode == 0, done.stderr
+    v = json.loads(done.stdout)['validation']
+    counts = [np.isfinite(uv[[3, 12], :, s, :, 0]).sum() for s in (0, 1)]
+    assert [v['subjects'][s]['count'] for s in ('0', '1')] == counts
+    assert v['count'] == sum(counts)
+    assert f'({sum(counts)} keypoints of 2 instants, never trained on, every subject ' \
+        'labelled there)' in done.stderr, done.stderr
+    for s in ('0', '1'):
+        assert f'  subject {s}: median {v["subjects"][s]["median_px"]:.2f} px' in done.stderr
