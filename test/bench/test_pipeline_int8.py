@@ -35,7 +35,7 @@ def test_each_precision_gets_the_backend_that_runs_it(repo_root):
 
 def test_int8_on_torch_is_refused_in_one_line_before_any_run(repo_root):
     proc = subprocess.run([sys.executable, str(repo_root / 'bench' / 'pipeline.py'),
-                           '--precision', 'bfloat16', 'int8', '--backend', 'torch'],
+                           '--precision', 'float32', 'int8', '--backend', 'torch'],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.strip().splitlines()[-1] == (
