@@ -886,8 +886,8 @@ class SubjectsCore:
           view's tiles merged by merge_peaks, as offline); each discovered hypothesis, and
           each track without a crop of its own in a view, takes one of that view's
           discovery maps as its crop there (the detector has no crop of it): the whole
-          frame, or of its tiles the one whose centre is nearest the centre of the
-          hypothesis' crop-rule box (none where too few of its joints project: no box);
+          frame, or of its tiles the one whose centre is nearest its projected joints
+          (fallback_maps);
         - each subject crop is the crop of the track given by match_crops (per view, the
           Hungarian assignment of crop centres to the tracks' crop-rule box centres); a crop
           matched to none is a hypothesis of unknown joints (its highest peaks, step 3);
@@ -930,26 +930,38 @@ class SubjectsCore:
         """Which discovery map each hypothesis takes as its crop in a view (live_frame): hyp
         (H, C, 3), full: (view index, heat (C, h, w), K_heat) maps. -> {(view, hypothesis):
         index into full}: a view's only map for every hypothesis; of several (tiles), the
-        one whose centre (map_centres) is nearest the centre of the hypothesis' crop-rule
-        box (crop_boxes; none where it has no box in the view)."""
+        one whose centre (map_centres) is nearest the mean of the hypothesis' known joints
+        projected into the view (in front of it and within an image size of its borders;
+        none where no joint is: the hypothesis has no crop there). The mean, not the
+        crop-rule box: a hypothesis of fewer than the rule's min_points joints has no box,
+        and the whole frame it took before tiles served it all the same."""
         out = {}
         if not len(full) or not len(hyp):
             return out
         views = np.array([f[0] for f in full], np.int64)
         several = np.bincount(views)[views] > 1
-        centre = None
         if several.any():
             centre, _ = map_centres(cameras, views, [f[2] for f in full],
                                     [f[1].shape[1:] for f in full])
-            boxes = self.crop_boxes(cameras, hyp)                             # (V, H, 4)
-            box_centre = (boxes[..., :2] + boxes[..., 2:]) / 2 - 0.5          # pixel centres
+            rig = stack_cameras(cameras)
+            known = np.isfinite(hyp).all(-1)                                  # (H, C)
+            uv = project_views(rig, np.where(known[..., None], hyp, 0.0).reshape(-1, 3))
+            uv = uv.reshape(len(cameras), *known.shape, 2)                    # (V, H, C, 2)
+            depth = (np.einsum('vij,hcj->vhci', rig['R'], np.nan_to_num(hyp))
+                     + rig['t'][:, None, None])[..., 2]
+            size = np.array([[c.width, c.height] for c in cameras], np.float64)[:, None, None]
+            inside = (known[None] & (depth > 0) & np.isfinite(uv).all(-1)
+                      & (uv > -size).all(-1) & (uv < 2 * size).all(-1))          # (V, H, C)
+            with np.errstate(invalid='ignore', divide='ignore'):
+                mean = (np.where(inside[..., None], uv, 0.0).sum(2)
+                        / inside.sum(2)[..., None])                              # (V, H, 2)
         for v in np.unique(views).tolist():
             mine = np.flatnonzero(views == v)
             for h in range(len(hyp)):
                 if len(mine) == 1:
                     out[v, h] = int(mine[0])
-                elif np.isfinite(box_centre[v, h]).all():
-                    d = np.linalg.norm(centre[mine] - box_centre[v, h], axis=-1)
+                elif np.isfinite(mean[v, h]).all():
+                    d = np.linalg.norm(centre[mine] - mean[v, h], axis=-1)
                     out[v, h] = int(mine[np.argmin(d)])
         return out
 
