@@ -613,15 +613,15 @@ def heat_matrices(heat_cameras):
 def map_centres(cameras, views, K_heat, sizes):
     """Where heatmaps lie in their source images: cameras, the source Cameras; views (N,)
     int the view of each map, K_heat (N, 3, 3) (or heatmap Cameras), sizes (N,) (h, w) of
-    the maps. -> centre (N, 2) source px (pixel centres) of each map's centre, half (N,)
-    source px: the larger of its half width and half height."""
+    the maps. -> centre (N, 2) source px (pixel centres) of each map's centre, half (N, 2)
+    source px: its half width and half height."""
     views = np.asarray(views, np.int64)
     N = len(views)
     rig = stack_cameras([cameras[v] for v in views])
     S, _ = crop_scales(heat_matrices(K_heat), rig['K'], rig['K_inv'])
     hw = np.asarray(sizes, np.float64).reshape(N, 2)
     centre = heat_to_source_points(((hw[:, ::-1] - 1) / 2)[:, None], S)[:, 0]     # (N, 2)
-    half = (hw[:, ::-1] / 2 / np.diagonal(S, axis1=1, axis2=2)[:, :2]).max(-1)     # (N,)
+    half = hw[:, ::-1] / 2 / np.diagonal(S, axis1=1, axis2=2)[:, :2]              # (N, 2)
     return centre, half
 
 
@@ -886,8 +886,8 @@ class SubjectsCore:
           view's tiles merged by merge_peaks, as offline); each discovered hypothesis, and
           each track without a crop of its own in a view, takes one of that view's
           discovery maps as its crop there (the detector has no crop of it): the whole
-          frame, or of its tiles the one whose centre is nearest its projected joints
-          (fallback_maps);
+          frame, or of its tiles the one that holds its projected joints with the most
+          room (fallback_maps);
         - each subject crop is the crop of the track given by match_crops (per view, the
           Hungarian assignment of crop centres to the tracks' crop-rule box centres); a crop
           matched to none is a hypothesis of unknown joints (its highest peaks, step 3);
@@ -930,19 +930,19 @@ class SubjectsCore:
         """Which discovery map each hypothesis takes as its crop in a view (live_frame): hyp
         (H, C, 3), full: (view index, heat (C, h, w), K_heat) maps. -> {(view, hypothesis):
         index into full}: a view's only map for every hypothesis; of several (tiles), the
-        one whose centre (map_centres) is nearest the mean of the hypothesis' known joints
-        projected into the view (in front of it and within an image size of its borders;
-        none where no joint is: the hypothesis has no crop there). The mean, not the
-        crop-rule box: a hypothesis of fewer than the rule's min_points joints has no box,
-        and the whole frame it took before tiles served it all the same."""
+        one that holds its known joints projected into the view (in front of it and
+        within an image size of its borders) with the most room: the largest distance
+        (source px) of the joint nearest a tile edge (negative outside), so the tile
+        that holds the whole body when one does (tiles overlap by half: a body up to half
+        a tile's side fits in one); none where no joint projects (no crop there)."""
         out = {}
         if not len(full) or not len(hyp):
             return out
         views = np.array([f[0] for f in full], np.int64)
         several = np.bincount(views)[views] > 1
         if several.any():
-            centre, _ = map_centres(cameras, views, [f[2] for f in full],
-                                    [f[1].shape[1:] for f in full])
+            centre, half = map_centres(cameras, views, [f[2] for f in full],
+                                       [f[1].shape[1:] for f in full])
             rig = stack_cameras(cameras)
             known = np.isfinite(hyp).all(-1)                                  # (H, C)
             uv = project_views(rig, np.where(known[..., None], hyp, 0.0).reshape(-1, 3))
@@ -952,17 +952,15 @@ class SubjectsCore:
             size = np.array([[c.width, c.height] for c in cameras], np.float64)[:, None, None]
             inside = (known[None] & (depth > 0) & np.isfinite(uv).all(-1)
                       & (uv > -size).all(-1) & (uv < 2 * size).all(-1))          # (V, H, C)
-            with np.errstate(invalid='ignore', divide='ignore'):
-                mean = (np.where(inside[..., None], uv, 0.0).sum(2)
-                        / inside.sum(2)[..., None])                              # (V, H, 2)
         for v in np.unique(views).tolist():
             mine = np.flatnonzero(views == v)
             for h in range(len(hyp)):
                 if len(mine) == 1:
                     out[v, h] = int(mine[0])
-                elif np.isfinite(mean[v, h]).all():
-                    d = np.linalg.norm(centre[mine] - mean[v, h], axis=-1)
-                    out[v, h] = int(mine[np.argmin(d)])
+                elif inside[v, h].any():
+                    joints = uv[v, h, inside[v, h]]                                # (n, 2)
+                    room = (half[mine, None] - np.abs(joints[None] - centre[mine, None]))
+                    out[v, h] = int(mine[np.argmax(room.min(-1).min(-1))])
         return out
 
     def match_crops(self, cameras, hyp, views, K_heat, sizes):
@@ -981,6 +979,7 @@ class SubjectsCore:
             return owner
         views = np.asarray(views, np.int64)
         centre, half = map_centres(cameras, views, K_heat, sizes)
+        half = half.max(-1)                                   # the larger half side (N,)
         boxes = self.crop_boxes(cameras, hyp)                         # (V, H, 4)
         box_centre = (boxes[..., :2] + boxes[..., 2:]) / 2 - 0.5      # pixel centres
         for v in np.unique(views):
