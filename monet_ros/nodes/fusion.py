@@ -322,14 +322,18 @@ class FusionNode(Node):
     def announce(self):
         """Log the start-up line: the cameras, skeleton, frame and units fused."""
         config = self.config
+        slots = [sum(self.key_camera[key] == i for key in self.keys)
+                 for i in range(len(self.names))]
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
             f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}, '
             f'3D in {self.units} (the rig unit), published in m'
             + (f'; up to {config.subjects} subjects from the crop slots '
                f'{self.config.heatmap_topic.format(camera=crop_slots("<camera>", 1)[0])}'
-               f'..crop<N + discovery maps - 1> (discovery_tiles '
-               f'{config.discovery_tiles})' if self.subjects is not None else ''))
+               f'..crop<k> (k < {"/".join(map(str, sorted(set(slots))))} per camera: '
+               f'{config.subjects} subject crops, then the discovery maps of '
+               f'discovery_tiles {config.discovery_tiles})' if self.subjects is not None
+               else ''))
 
     @staticmethod
     def make_filter(config, derived):
