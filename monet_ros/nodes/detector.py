@@ -371,7 +371,9 @@ class DetectorNode(Node):
     def load_detector(self, path):
         """The Detector of checkpoint `path`; precision int8 calibrates on the crops this
         node makes (monet_ros.int8_calibration): tracked crops with the track_* rule when
-        it tracks (track true and every camera has rig extrinsics), else `box`'s crops,
+        it tracks (track true and every camera has rig extrinsics; with subjects >= 2 the
+        subject crops and discovery maps of a several-subject run, subject_crops, with the
+        default association and tracker settings), else `box`'s crops,
         else full-frame crops; the quant is cached under that crop mode's name. Set at
         load: changing track live keeps the loaded quant."""
         if not Path(path).is_file():
@@ -382,9 +384,13 @@ class DetectorNode(Node):
                               f'precision {self.config.precision} (set precision int8, or '
                               'leave calibration empty)')
         track = self.config.track and all(s.rig_camera is not None for s in self.slots)
+        subjects = SubjectsConfig(subjects=self.config.subjects,
+                                  discovery_tiles=self.config.discovery_tiles) \
+            if self.config.subjects > 1 else None
         int8_crops, calibration = int8_calibration(
             self.config.calibration or None, track, self.tracked_rule(self.config),
-            slop_ns=int(round(self.config.slop_ms * 1e6)), box=self.config.box or None)
+            slop_ns=int(round(self.config.slop_ms * 1e6)), box=self.config.box or None,
+            subjects=subjects)
         detector = Detector.from_checkpoint(path, device=self.device,
                                             backend=self.config.backend,
                                             threads=self.config.threads,
