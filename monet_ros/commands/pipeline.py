@@ -318,7 +318,7 @@ def groups_line(groups, processes, precision):
 
 
 def prepare_int8(model, bag, calibration=None, backend='onnxruntime', threads=0,
-                 fusion=None):
+                 fusion=None, subjects=None):
     """precision int8 of `monet pipeline`, once, before the detector processes start: the
     network of checkpoint `model` quantised on the tracked crops (the detector nodes track,
     with the default rule: monet_ros.int8_calibration) of `calibration` or else of the
@@ -329,11 +329,14 @@ def prepare_int8(model, bag, calibration=None, backend='onnxruntime', threads=0,
     line saying which quant: calibrated on what crops of what, or the cached one used).
     Raises ValueError (models.quantize.Int8Error: one line) as Detector.from_checkpoint
     does for precision int8. bench/pipeline.py --precision int8 prepares its runs with
-    this."""
+    this. subjects: the detectors' subjects.detection.SubjectsConfig with subjects >= 2
+    (--subjects N): the crops of a several-subject run (int8_calibration.subject_crops),
+    under the crops key the detector nodes look for."""
     from monet_ros.int8_calibration import int8_calibration
     from monet_ros.models import Detector
     from monet_ros.models.quantize import cached_int8
-    int8_crops, given = int8_calibration(calibration or bag, True, fusion=fusion)
+    int8_crops, given = int8_calibration(calibration or bag, True, fusion=fusion,
+                                         subjects=subjects)
     detector = Detector.from_checkpoint(model, device='cpu', backend=backend,
                                         threads=threads, precision='int8',
                                         calibration=given, int8_crops=int8_crops)
@@ -507,11 +510,14 @@ def run(args):
                 # every start check passed: what runs said, once
                 print(f'monet pipeline: {precision_line}', flush=True)
                 if args.precision == 'int8':  # quantised once here, before the detectors
+                    from monet_ros.subjects.detection import SubjectsConfig
                     detector_params['calibration'], note = prepare_int8(
                         args.model, args.bag, args.calibration, backend=args.backend,
                         threads=args.threads, fusion=FusionConfig(
                             threshold_px=args.threshold_px,
-                            confidence_threshold=args.confidence_threshold))
+                            confidence_threshold=args.confidence_threshold),
+                        subjects=SubjectsConfig(subjects=args.subjects, link_mm=args.link_mm)
+                        if args.subjects > 1 else None)
                     print(f'monet pipeline: {note}', file=sys.stderr, flush=True)
                 line = groups_line(groups, options.detector_processes, precision)
                 print(f'monet pipeline: {line}', flush=True)

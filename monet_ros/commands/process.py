@@ -198,7 +198,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     if config.min_views > len(cameras):
         raise ConfigError('monet process', 'min_views', f'{config.min_views} > the '
                           f'{len(cameras)} cameras processed ({[c.name for c in cameras]})')
-    int8_crops, calibration = run_calibration(config, calibration, bag, cameras, fusion_config)
+    int8_crops, calibration = run_calibration(config, calibration, bag, cameras, fusion_config,
+                                              subjects, association, tracker)
     detector = Detector.from_checkpoint(model, device=device, backend=backend, threads=threads,
                                         precision=precision, calibration=calibration,
                                         int8_crops=int8_crops)
@@ -295,19 +296,38 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     return figures
 
 
-def run_calibration(config, calibration, bag, cameras=None, fusion=None):
+def subject_association(config):
+    """The subjects.AssociationConfig of a --subjects run without association options: the
+    ProcessConfig's confidence threshold, min_views, threshold_px (the triangulation's
+    inlier error) and method."""
+    from monet_ros.subjects import AssociationConfig
+
+    return AssociationConfig(confidence_threshold=config.confidence_threshold,
+                             min_views=config.min_views, triangulation_px=config.threshold_px,
+                             method=config.method)
+
+
+def run_calibration(config, calibration, bag, cameras=None, fusion=None, subjects=None,
+                    association=None, tracker=None):
     """(int8 crops key, calibration) of a `monet process` run (int8_calibration.
     int8_calibration): tracked crops (the tracked rule's defaults, as the run's
-    TrackedCrops; also with --subjects N, whose per-subject crops follow each track) unless
-    config.track is False (--no-track: full-frame crops). calibration None = `bag`, whose
-    tracked crops are then made with the run's `cameras` (another recording: its own rig),
-    with the run's stamp tolerance and fusion settings."""
+    TrackedCrops) unless config.track is False (--no-track: full-frame crops); with
+    `subjects` (a SubjectsConfig, --subjects N >= 2) the crops of a several-subject run
+    (int8_calibration.subject_crops: subject crops and discovery maps, with the run's
+    association (None: from config, as the run's) and tracker configs). calibration None
+    = `bag`, whose crops are then made with the run's `cameras` (another recording: its
+    own rig), with the run's stamp tolerance and fusion settings."""
     from monet_ros.int8_calibration import int8_calibration
 
+    several = subjects is not None and subjects.subjects > 1
+    if several and association is None:
+        association = subject_association(config)
     return int8_calibration(bag if calibration is None else calibration, config.track,
                             cameras=cameras if calibration is None else None,
                             slop_ns=int(config.slop_ms * 1e6),
-                            fusion=fusion or config_subset(config, FusionConfig))
+                            fusion=fusion or config_subset(config, FusionConfig),
+                            subjects=subjects if several else None,
+                            association=association, tracker=tracker)
 
 
 def _several(reader, topics, cameras, detector, units, frame_id, out, config, subjects,
@@ -316,13 +336,9 @@ def _several(reader, topics, cameras, detector, units, frame_id, out, config, su
     """process_recording with --subjects N >= 2 (commands.process_subjects)."""
     from monet_ros.commands.common import atomic_output_dir
     from monet_ros.commands.process_subjects import process_subjects
-    from monet_ros.subjects import AssociationConfig
 
     if association is None:
-        association = AssociationConfig(confidence_threshold=config.confidence_threshold,
-                                         min_views=config.min_views,
-                                         triangulation_px=config.threshold_px,
-                                         method=config.method)
+        association = subject_association(config)
     figures['start'] = time.perf_counter()
     with atomic_output_dir(out) as staging:
         written = process_subjects(reader, topics, cameras, detector, units, frame_id,
@@ -395,7 +411,9 @@ def run(args):
         options.update(subjects=subjects, association=association, tracker=tracker)
     if len(args.bag) > 1 and args.precision == 'int8':   # quantised once, before the workers
         from monet_ros.models import Detector
-        int8_crops, calibration = run_calibration(config, args.calibration, args.bag[0])
+        int8_crops, calibration = run_calibration(
+            config, args.calibration, args.bag[0], subjects=options.get('subjects'),
+            association=options.get('association'), tracker=options.get('tracker'))
         detector = Detector.from_checkpoint(args.model, device='cpu', backend=args.backend,
                                             precision='int8', calibration=calibration,
                                             int8_crops=int8_crops)

@@ -50,11 +50,12 @@ INT8_FLAGS = (('amx_int8', 'AMX-INT8'), ('avx512_vnni', 'AVX512-VNNI'), ('avx_vn
 CALIBRATION_IMAGES = 64     # crops a recording gives for calibration (at most)
 INT8_SUFFIX = '.int8.onnx'
 FULL_CROPS = 'full'          # the crops key of full-frame calibration
-# crops keys (int8_calibration.crops_key): 'full', 'tracked-m<margin>-t<trim>-k<min_points>'
-# or 'box-<x0>_<y0>_<x1>_<y1>' (a fixed box)
+# crops keys (int8_calibration.crops_key): 'full', 'tracked-m<margin>-t<trim>-k<min_points>',
+# 'box-<x0>_<y0>_<x1>_<y1>' (a fixed box) or
+# 'subjects<N>-d<tiles>-m<margin>-t<trim>-k<min_points>' (several subjects)
 _NUMBER = r'-?[0-9.]+(?:e[+-][0-9]+)?'
-CROPS_KEY = re.compile(rf'full|tracked-m{_NUMBER}-t{_NUMBER}-k[0-9]+|'
-                       rf'box-{_NUMBER}_{_NUMBER}_{_NUMBER}_{_NUMBER}')
+CROPS_KEY = re.compile(rf'full|(?:tracked|subjects[0-9]+-d[0-9]+)-m{_NUMBER}-t{_NUMBER}-'
+                       rf'k[0-9]+|box-{_NUMBER}_{_NUMBER}_{_NUMBER}_{_NUMBER}')
 
 
 # the metadata_props keys of a quant's record: the checkpoint's full sha256, the crops key
@@ -101,7 +102,8 @@ def check_crops_key(crops):
     """`crops` (a crops key, see the module docstring) or ValueError naming it."""
     if not isinstance(crops, str) or not CROPS_KEY.fullmatch(crops):
         raise ValueError(f"int8 crops key must be 'full', 'tracked-m<margin>-t<trim>-"
-                         f"k<min_points>' or 'box-<x0>_<y0>_<x1>_<y1>', got {crops!r}")
+                         f"k<min_points>', 'box-<x0>_<y0>_<x1>_<y1>' or 'subjects<N>-"
+                         f"d<tiles>-m<margin>-t<trim>-k<min_points>', got {crops!r}")
     return crops
 
 

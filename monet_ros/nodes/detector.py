@@ -17,15 +17,20 @@ out of the PENDING_FRAMES) is counted as dropped; a bad
 message is counted and logged, never fatal.
 The checkpoint is hot-reloaded from /monet/model (std_msgs/String JSON {path, sha256}).
 
-Several subjects (`subjects` N >= 2, with the fusion node's `subjects` the same; docs/
-subjects.md "Live"): per camera and instant, N + 1 crop slots are published on
-`<cam>/crop<k>/heatmaps` + `<cam>/crop<k>/camera_info` (the `<cam>/heatmaps` topics of one
-subject are not): slot k < N the crop rule's box around the k-th subject (by identity) of
-the latest /monet/keypoints3d (its `subject` field; crop_rule.TrackedSubjects), slot N the
-full frame (or `box`) while fewer than N subjects are in it; a slot without a crop in that
+Several subjects (`subjects` N >= 2, with the fusion node's `subjects` and
+`discovery_tiles` the same; docs/subjects.md "Live"): per camera and instant, N + D crop
+slots are published on `<cam>/crop<k>/heatmaps` + `<cam>/crop<k>/camera_info` (the
+`<cam>/heatmaps` topics of one subject are not): slot k < N the crop rule's box around the
+k-th subject (by identity) of the latest /monet/keypoints3d (its `subject` field;
+crop_rule.TrackedSubjects), slots N..N+D-1 the discovery maps while fewer than N subjects
+are in it: `box` when given, else the maps of `monet process --subjects`' discovery
+(subjects.detection.discovery_boxes: the whole frame, or, where the network would shrink
+it more than 2 times, its discovery_tiles square tiles, one slot each; D =
+subjects.detection.discovery_slots of the rig camera's size). A slot without a crop in that
 view at that instant is an empty (0 x 0) heatmap and camera_info. All crops of the instant
 go through the network in one batch. JPEG views are decoded in full (each view has crops
-of several scales). Not with debug_image.
+of several scales). Not with debug_image; discovery_tiles >= 1 needs the rig (the slots
+are laid out for its image sizes).
 """
 from collections import deque
 from dataclasses import dataclass
@@ -77,6 +82,7 @@ from monet_ros.nodes.params import declare_config
 from monet_ros.nodes.qos import IMAGE_IN, LATCHED, STREAM_IN, STREAM_OUT
 from monet_ros.nodes.runner import log_bad_once, run_node
 from monet_ros.rig_select import load_node_rig, select_cameras
+from monet_ros.subjects.detection import SubjectsConfig, discovery_boxes, discovery_slots
 from monet_ros.sync import newest_common_instant
 from monet_ros.timing import StageTimer
 
@@ -167,8 +173,14 @@ class DetectorConfig:
                                'quant of those crops')
     subjects: int = setting(1, "most subjects cropped per view (as the fusion node's "
                             'subjects); 1 = the one-subject topics; N >= 2 publishes the '
-                            'crop slots <cam>/crop<k>/heatmaps, k <= N (docs/subjects.md)',
+                            'crop slots <cam>/crop<k>/heatmaps (docs/subjects.md)',
                             minimum=1)
+    discovery_tiles: int = setting(
+        SubjectsConfig.discovery_tiles, "subjects >= 2 (as the fusion node's "
+        'discovery_tiles): the discovery maps of a camera whose whole frame the network '
+        'would shrink more than 2 times are square tiles, this many along the shorter image '
+        'side, overlapping by half, one crop slot each (as `monet process --subjects`; 0: '
+        'the whole frame; needs the rig)', minimum=0)
 
     def __post_init__(self):
         validate_config(self)
@@ -263,6 +275,11 @@ class DetectorNode(Node):
             raise ConfigError(self.get_name(), 'debug_image', 'is not available with subjects '
                               '>= 2')
         self.slots = camera_slots(config, self.get_name())
+        if (config.subjects > 1 and config.discovery_tiles and not config.box
+                and any(s.rig_camera is None for s in self.slots)):
+            raise ConfigError(self.get_name(), 'discovery_tiles', 'needs the rig (its crop '
+                              "slots are laid out for the cameras' image sizes): give rig, "
+                              'or set discovery_tiles 0')
         self.detector = self.load_detector(config.model)
         self.model_sha256 = sha256_file(config.model)
         self.pubs = {}
@@ -280,7 +297,8 @@ class DetectorNode(Node):
                     (self.create_publisher(Image, HEATMAPS.format(camera=key), STREAM_OUT),
                      self.create_publisher(CameraInfo, HEATMAP_CAMERA_INFO.format(camera=key),
                                            STREAM_OUT))
-                    for key in crop_slots(slot.name, config.subjects)]
+                    for key in crop_slots(slot.name, config.subjects,
+                                          self.discovery_count(slot))]
                 continue
             self.pubs[slot.name] = (
                 self.create_publisher(Image, HEATMAPS.format(camera=slot.name), STREAM_OUT),
@@ -320,6 +338,15 @@ class DetectorNode(Node):
             f'{self.detector.backend}, {self.detector.precision_note}; decode and crop on '
             f'{self.detector.view_threads.threads} thread(s)')
 
+    def discovery_count(self, slot):
+        """subjects >= 2: the discovery crop slots of a camera (module docstring): 1 with
+        `box` or discovery_tiles 0, else subjects.detection.discovery_slots of its rig
+        camera's size."""
+        if self.config.box or not self.config.discovery_tiles:
+            return 1
+        camera = slot.rig_camera
+        return discovery_slots(camera.width, camera.height, self.config.discovery_tiles)
+
     @staticmethod
     def tracked_rule(config):
         """The crop rule's settings (monet_ros.crop_rule.TrackedRule) of a DetectorConfig."""
@@ -344,7 +371,9 @@ class DetectorNode(Node):
     def load_detector(self, path):
         """The Detector of checkpoint `path`; precision int8 calibrates on the crops this
         node makes (monet_ros.int8_calibration): tracked crops with the track_* rule when
-        it tracks (track true and every camera has rig extrinsics), else `box`'s crops,
+        it tracks (track true and every camera has rig extrinsics; with subjects >= 2 the
+        subject crops and discovery maps of a several-subject run, subject_crops, with the
+        default association and tracker settings), else `box`'s crops,
         else full-frame crops; the quant is cached under that crop mode's name. Set at
         load: changing track live keeps the loaded quant."""
         if not Path(path).is_file():
@@ -355,9 +384,13 @@ class DetectorNode(Node):
                               f'precision {self.config.precision} (set precision int8, or '
                               'leave calibration empty)')
         track = self.config.track and all(s.rig_camera is not None for s in self.slots)
+        subjects = SubjectsConfig(subjects=self.config.subjects,
+                                  discovery_tiles=self.config.discovery_tiles) \
+            if self.config.subjects > 1 else None
         int8_crops, calibration = int8_calibration(
             self.config.calibration or None, track, self.tracked_rule(self.config),
-            slop_ns=int(round(self.config.slop_ms * 1e6)), box=self.config.box or None)
+            slop_ns=int(round(self.config.slop_ms * 1e6)), box=self.config.box or None,
+            subjects=subjects)
         detector = Detector.from_checkpoint(path, device=self.device,
                                             backend=self.config.backend,
                                             threads=self.config.threads,
@@ -603,14 +636,34 @@ class DetectorNode(Node):
             return
         track = self.config.track and all(s.rig_camera is not None for s in self.slots)
         boxes = self.subject_tracks.boxes(cameras, stamp, N, self.config.box or None, track)
-        v_idx, k_idx = np.nonzero(np.isfinite(boxes).all(-1))
+        v_idx, k_idx = np.nonzero(np.isfinite(boxes[:, :N]).all(-1))
+        crop_boxes = self.detector.boxes_for([cameras[v] for v in v_idx],
+                                             boxes[v_idx, k_idx]).reshape(-1, 4)
+        # the discovery slots N.. (the whole frame or its tiles, as `monet process`), or box
+        discover = [v for v in range(len(work)) if np.isfinite(boxes[v, N]).all()]
+        if discover and not self.config.box:
+            found = discovery_boxes(self.detector, [cameras[v] for v in discover],
+                                    self.config.discovery_tiles)
+        else:
+            found = [self.detector.boxes_for([cameras[v]], boxes[v, N][None])
+                     for v in discover]
+        for v, tiles in zip(discover, found):
+            slots = len(self.pubs[work[v][0].name]) - N
+            if len(tiles) > slots:          # camera_info's size is not the rig camera's
+                self.bad_message(work[v][0], work[v][0].info_topic, ValueError(
+                    f'{len(tiles)} discovery tiles of a {cameras[v].width}x'
+                    f'{cameras[v].height} image but {slots} crop slots (laid out for the rig '
+                    "camera's size): discovery maps of this view not sent"))
+                continue
+            v_idx = np.append(v_idx, np.full(len(tiles), v))
+            k_idx = np.append(k_idx, N + np.arange(len(tiles)))
+            crop_boxes = np.concatenate([crop_boxes, tiles])
         heat, heat_cams = [], []
         if len(v_idx):
             crop_cams = [cameras[v] for v in v_idx]
             start = time.perf_counter()
             heat, heat_cams = self.detector.predict(
-                [work[v][2] for v in v_idx], crop_cams,
-                self.detector.boxes_for(crop_cams, boxes[v_idx, k_idx]), keep_aspect=False,
+                [work[v][2] for v in v_idx], crop_cams, crop_boxes, keep_aspect=False,
                 encodings=[work[v][3] for v in v_idx])
             self.forward_seconds = (self.forward_seconds
                                     + [time.perf_counter() - start])[-100:]

@@ -27,22 +27,24 @@ MessageInfo received_timestamp, to its callback) is not decoded or fused but cou
 and the newer frames behind it are fused in time (0 = fuse every frame however late).
 
 Several subjects (`subjects` N >= 2; docs/subjects.md "Live"): the detector nodes publish,
-per camera and instant, N + 1 crop slots `<cam>/crop<k>/heatmaps` + `<cam>/crop<k>/camera_info`
-(the heatmap_topic / camera_info_topic templates with camera = `<cam>/crop<k>`): k < N the
-crops around the subjects of the latest keypoints3d, k = N the full frame while fewer than N
-subjects were published; a slot without a crop at that instant carries an empty (0 x 0)
+per camera and instant, N + D crop slots `<cam>/crop<k>/heatmaps` +
+`<cam>/crop<k>/camera_info` (the heatmap_topic / camera_info_topic templates with camera =
+`<cam>/crop<k>`): k < N the crops around the subjects of the latest keypoints3d, k >= N the
+discovery maps while fewer than N subjects were published (the whole frame, or its tiles: D
+= subjects.detection.discovery_slots of the camera's size and `discovery_tiles`, which must
+be the detector nodes'); a slot without a crop at that instant carries an empty (0 x 0)
 heatmap and camera_info, so every slot has one message per instant. The node runs the same
 algorithm as `monet process --subjects` (subjects.detection.SubjectsCore.live_frame: crops
-matched to the tracks, discovery on the full-frame maps, association across views, the
-identity tracker) and publishes keypoints3d with one more UINT32 field `subject` (the
-identity; one point per keypoint and subject, ordered by identity), skeleton markers per
-subject (namespace <skeleton>/subject<id>, colours io.markers.SUBJECT_COLOURS) and a
-/diagnostics status per tracked subject. Its source counters are per slot. With
-`filter:=true` each identity has its own live filter (temporal.live.SubjectFilters: one
-LiveFilter per identity, started at its birth, dropped at its death, all dropped when the
-identities restart): the filtered points on keypoints3d, the raw ones on keypoints3d_raw,
-both with the `subject` field and the same points (the skeleton markers are the filtered
-ones).
+matched to the tracks, discovery on the discovery maps, a view's tiles merged as offline,
+association across views, the identity tracker) and publishes keypoints3d with one more
+UINT32 field `subject` (the identity; one point per keypoint and subject, ordered by
+identity), skeleton markers per subject (namespace <skeleton>/subject<id>, colours
+io.markers.SUBJECT_COLOURS) and a /diagnostics status per tracked subject. Its source
+counters are per slot. With `filter:=true` each identity has its own live filter
+(temporal.live.SubjectFilters: one LiveFilter per identity, started at its birth, dropped
+at its death, all dropped when the identities restart): the filtered points on keypoints3d,
+the raw ones on keypoints3d_raw, both with the `subject` field and the same points (the
+skeleton markers are the filtered ones).
 With N = 1 (the default) nothing of this exists: the topics and fields are the one-subject
 ones, byte for byte.
 
@@ -53,7 +55,7 @@ within `silent_after_s` is unpaired and let go.
 """
 from collections import OrderedDict
 import copy
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 import sys
 import time
 from types import SimpleNamespace
@@ -98,7 +100,12 @@ from monet_ros.nodes.tf import rig_tf_message, tf_message_class
 from monet_ros.rig_select import load_node_rig, select_cameras
 from monet_ros.skeleton import load_skeleton
 from monet_ros.subjects.association import AssociationConfig
-from monet_ros.subjects.detection import SubjectsConfig, SubjectsCore, subject_keypoints
+from monet_ros.subjects.detection import (
+    SubjectsConfig,
+    SubjectsCore,
+    discovery_slots,
+    subject_keypoints,
+)
 from monet_ros.subjects.tracking import SubjectTracker, TrackerConfig
 from monet_ros.sync import StampSynchronizer
 from monet_ros.temporal.live import LiveFilter, LiveFilterConfig, SubjectFilters
@@ -125,9 +132,6 @@ EMPTY = object()
 
 @dataclass(frozen=True)
 class FusionNodeConfig(LiveFilterConfig, FusionConfig, SubjectsConfig, TrackerConfig):
-    # not a parameter: discovery here has the detector nodes' whole-frame maps, no images
-    # to tile (SubjectsConfig.discovery_tiles is `monet process`'s)
-    discovery_tiles: int = field(default=0, init=False, repr=False)
     rig: str = setting('', 'rig file (any format load_rig reads) or a recording whose '
                        'camera_info + /tf_static give the rig; required')
     rig_units: str = setting('', "length unit of a rig file that states none (m, cm, mm; "
@@ -261,8 +265,12 @@ class FusionNode(Node):
         self.frame_id = config.frame_id or rig_frame
         self.subjects = self.subjects_core(config) if config.subjects > 1 else None
         # the message sources: the cameras, or with subjects >= 2 their crop slots
-        self.key_camera = {key: i for i, name in enumerate(self.names)
-                           for key in heatmap_sources(name, config.subjects)}
+        sources = [heatmap_sources(cam.name, config.subjects, discovery_slots(
+            cam.width, cam.height, config.discovery_tiles)) for cam in self.cameras]
+        self.key_camera = {key: i for i, keys in enumerate(sources) for key in keys}
+        # with subjects >= 2 the discovery slots (k >= N: the whole frame or its tiles)
+        self.discovery_keys = {key for keys in sources for key in keys[config.subjects:]} \
+            if config.subjects > 1 else set()
         self.keys = list(self.key_camera)
         self.subject_counts = dict(resets=0, duplicates=0, discoveries=0, shared=0, detached=0,
                                    extra=0, weak=0, foreign=0, settled=0)
@@ -314,13 +322,18 @@ class FusionNode(Node):
     def announce(self):
         """Log the start-up line: the cameras, skeleton, frame and units fused."""
         config = self.config
+        slots = [sum(self.key_camera[key] == i for key in self.keys)
+                 for i in range(len(self.names))]
         self.get_logger().info(
             f'fusing {len(self.names)} cameras {self.names} with {self.skeleton.name} '
             f'({self.skeleton.num_keypoints} keypoints) into frame {self.frame_id!r}, '
             f'3D in {self.units} (the rig unit), published in m'
             + (f'; up to {config.subjects} subjects from the crop slots '
                f'{self.config.heatmap_topic.format(camera=crop_slots("<camera>", 1)[0])}'
-               f'..crop{config.subjects}' if self.subjects is not None else ''))
+               f'..crop<k> (k < {"/".join(map(str, sorted(set(slots))))} per camera: '
+               f'{config.subjects} subject crops, then the discovery maps of '
+               f'discovery_tiles {config.discovery_tiles})' if self.subjects is not None
+               else ''))
 
     @staticmethod
     def make_filter(config, derived):
@@ -572,7 +585,6 @@ class FusionNode(Node):
         present = sorted({self.key_camera[key] for key in filled})
         cameras = [self.cameras[i] for i in present]
         view = {camera: v for v, camera in enumerate(present)}
-        full_slot = self.config.subjects
         crops, full, sources = [], [], []
         for key in filled:
             heat, K = group.items[key]
@@ -583,7 +595,7 @@ class FusionNode(Node):
                                  f'{cameras[v].name}')
                 continue
             sources.append(key)
-            (full if key.endswith(f'/crop{full_slot}') else crops).append((v, heat, K))
+            (full if key in self.discovery_keys else crops).append((v, heat, K))
         tracker = self.subjects.tracker
         if tracker.stamp is not None and group.stamp_ns <= tracker.stamp:
             # time went back (a replay looped, a new recording): identities start again

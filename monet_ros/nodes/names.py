@@ -26,16 +26,18 @@ TF_STATIC = '/tf_static'
 PLAYED_FRAMES = 'played_frames'   # the player's [stamp, wall time] per frame
 
 
-def crop_slots(camera, subjects):
-    """The N + 1 crop slot names (CROP_SLOT) of a camera with `subjects` N >= 2."""
-    return [CROP_SLOT.format(camera=camera, slot=k) for k in range(subjects + 1)]
+def crop_slots(camera, subjects, discovery=1):
+    """The N + D crop slot names (CROP_SLOT) of a camera with `subjects` N >= 2: slots
+    0..N-1 the subjects' crops, N..N+D-1 its D discovery maps (the whole frame, or its
+    tiles: subjects.detection.discovery_slots)."""
+    return [CROP_SLOT.format(camera=camera, slot=k) for k in range(subjects + discovery)]
 
 
-def heatmap_sources(camera, subjects):
+def heatmap_sources(camera, subjects, discovery=1):
     """What takes the place of {camera} in the heatmap and camera_info topics (HEATMAPS,
-    HEATMAP_CAMERA_INFO) of one camera: [camera] with `subjects` 1, its N + 1 crop slots
+    HEATMAP_CAMERA_INFO) of one camera: [camera] with `subjects` 1, its N + D crop slots
     (crop_slots) with N >= 2. `camera` may itself be a template ('{camera}')."""
-    return [camera] if subjects <= 1 else crop_slots(camera, subjects)
+    return [camera] if subjects <= 1 else crop_slots(camera, subjects, discovery)
 
 
 def node_namespace(kwargs):

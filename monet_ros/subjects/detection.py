@@ -26,8 +26,9 @@ Algorithm, per synchronized frame (stamps increasing):
       median peak of 0.16 at its joints (the other 0.36) and discovery never found it in
       30 runs (subject 1 missed in the first 35 frames, a ghost of subject 0 tracked
       instead: 2 identity switches; tiles of 160 px: found in frame 0;
-      bench/results/subjects_process.md, change 9). The live fusion's discovery takes the
-      detector nodes' whole frames.
+      bench/results/subjects_process.md, change 9). Live, the detector nodes cut the same
+      maps (discovery_boxes) and publish them as discovery crop slots, and the fusion node
+      merges them as here (live_frame).
    b. per keypoint, each (view, peak) is a one-keypoint instance; subjects.association.
       associate clusters them across views (epipolar distance, at most one per camera,
       >= min_views) and triangulates each cluster robustly: 3D points of that keypoint;
@@ -205,10 +206,11 @@ class SubjectsConfig:
         exclusive_minimum=True)
 
     discovery_tiles: int = setting(
-        2, 'discovery (monet process): the full-frame detection of a view whose whole '
-        'frame the network input would shrink more than 2 times, as square tiles, this many '
-        'along the shorter image side, neighbours overlapping by half (0: always the whole '
-        'frame); the live detector nodes send whole frames', minimum=0)
+        2, 'discovery: the full-frame detection of a view whose whole frame the network '
+        'input would shrink more than 2 times, as square tiles, this many along the shorter '
+        'image side, neighbours overlapping by half (0: always the whole frame); live, the '
+        "detector and fusion nodes' discovery_tiles must be equal (the discovery crop "
+        'slots)', minimum=0)
 
     def __post_init__(self):
         validate_config(self)
@@ -324,6 +326,35 @@ def tile_boxes(width, height, tiles):
     x, y = np.meshgrid(starts(width), starts(height))
     x, y = x.ravel(), y.ravel()
     return np.stack([x, y, x + side, y + side], axis=-1)
+
+
+def discovery_slots(width, height, tiles):
+    """The most discovery maps of a width x height view with discovery_tiles `tiles` (the
+    live discovery crop slots of a camera): its tile count (tile_boxes), 1 (the whole
+    frame) with tiles 0. -> int >= 1."""
+    return len(tile_boxes(width, height, tiles)) if tiles else 1
+
+
+def discovery_boxes(detector, cameras, tiles):
+    """The boxes of discovery's full-frame detection (module docstring step 1a), one list
+    entry per view of `cameras`: (T_v, 4) pixel edges, as detector.predict takes them with
+    keep_aspect False (already fitted to the network's aspect): the view's tiles
+    (tile_boxes, `tiles` along its shorter side) where its whole frame would go into the
+    network shrunk more than TILE_SHRINK times and tiles >= 1, else its whole frame
+    (detector.boxes_for: padded to the aspect). detector: a models.Detector (its
+    input_size and boxes_for). One implementation for `monet process` (SubjectsStep) and
+    the live detector node's discovery slots."""
+    full = detector.boxes_for(cameras)                                   # (V, 4) whole frames
+    shrink = (full[:, 2] - full[:, 0]) / detector.input_size[1]
+    out = []
+    for v, (camera, s) in enumerate(zip(cameras, shrink)):
+        if tiles and s > TILE_SHRINK:
+            out.append(detector.boxes_for([camera] * discovery_slots(
+                camera.width, camera.height, tiles), tile_boxes(camera.width, camera.height,
+                                                                tiles)))
+        else:
+            out.append(full[v:v + 1])
+    return out
 
 
 def merge_peaks(pts, conf, views, num_views, k, radius):
@@ -579,6 +610,21 @@ def heat_matrices(heat_cameras):
     return np.stack([np.asarray(getattr(c, 'K', c), np.float64) for c in heat_cameras])
 
 
+def map_centres(cameras, views, K_heat, sizes):
+    """Where heatmaps lie in their source images: cameras, the source Cameras; views (N,)
+    int the view of each map, K_heat (N, 3, 3) (or heatmap Cameras), sizes (N,) (h, w) of
+    the maps. -> centre (N, 2) source px (pixel centres) of each map's centre, half (N, 2)
+    source px: its half width and half height."""
+    views = np.asarray(views, np.int64)
+    N = len(views)
+    rig = stack_cameras([cameras[v] for v in views])
+    S, _ = crop_scales(heat_matrices(K_heat), rig['K'], rig['K_inv'])
+    hw = np.asarray(sizes, np.float64).reshape(N, 2)
+    centre = heat_to_source_points(((hw[:, ::-1] - 1) / 2)[:, None], S)[:, 0]     # (N, 2)
+    half = hw[:, ::-1] / 2 / np.diagonal(S, axis1=1, axis2=2)[:, :2]              # (N, 2)
+    return centre, half
+
+
 def crop_instances(heat, heat_cameras, cameras, targets, config, confidence_threshold,
                    rivals=None, candidates=False):
     """One instance per crop (module docstring, step 3).
@@ -830,29 +876,35 @@ class SubjectsCore:
 
     def live_frame(self, cameras, stamp_ns, crops, full=()):
         """One frame of the live fusion node (`subjects` >= 2): the crops were cut by the
-        detector nodes, around the subjects of the latest /monet/keypoints3d, plus a
-        full-frame crop per view while fewer than N subjects were published. The same
-        steps as SubjectsStep.step, the crops given instead of made:
+        detector nodes, around the subjects of the latest /monet/keypoints3d, plus the
+        discovery maps of each view (its whole frame, or its tiles: discovery_boxes) while
+        fewer than N subjects were published. The same steps as SubjectsStep.step, the
+        crops given instead of made:
 
-        - hypotheses: the cropped tracks' predictions (step 1); with full-frame maps and
-          fewer than N of them, discovery on those maps (discover_heatmaps, steps 1a-e);
-          each discovered hypothesis, and each track without a crop of its own in a view,
-          takes that view's full-frame map as its crop there (the detector has no crop of
-          it);
+        - hypotheses: the cropped tracks' predictions (step 1); with discovery maps and
+          fewer than N of them, discovery on those maps (discover_heatmaps, steps 1a-e: a
+          view's tiles merged by merge_peaks, as offline); each discovered hypothesis, and
+          each track without a crop of its own in a view, takes one of that view's
+          discovery maps as its crop there (the detector has no crop of it): the whole
+          frame, or of its tiles the one that holds its projected joints with the most
+          room (fallback_maps);
         - each subject crop is the crop of the track given by match_crops (per view, the
           Hungarian assignment of crop centres to the tracks' crop-rule box centres); a crop
           matched to none is a hypothesis of unknown joints (its highest peaks, step 3);
         - resolve (steps 3-6).
 
         cameras: the V source Cameras of the views present; crops / full: (view index,
-        heat (C, h, w), K_heat (3, 3)) of the subject crops / full-frame crops.
+        heat (C, h, w), K_heat (3, 3)) of the subject crops / discovery maps (a view's
+        tiles in discovery_boxes' order, the views in increasing order).
         -> FrameSubjects."""
         predicted = self.hypotheses(stamp_ns)
         new, counts, discovered = np.zeros((0, self.C, 3)), {}, -1
+        full_views = np.array([f[0] for f in full], np.int64)
         if len(full) and len(predicted) < self.config.subjects:
+            seen = np.unique(full_views)                      # views with discovery maps
             new, counts = self.discover_heatmaps(
-                [f[1] for f in full], [f[2] for f in full], [cameras[f[0]] for f in full],
-                predicted)
+                [f[1] for f in full], [f[2] for f in full], [cameras[v] for v in seen],
+                predicted, np.searchsorted(seen, full_views))
             discovered = len(new)
         owner = self.match_crops(cameras, predicted, [c[0] for c in crops],
                                  [c[2] for c in crops], [c[1].shape[1:] for c in crops])
@@ -862,17 +914,54 @@ class SubjectsCore:
         v_idx, h_idx = [c[0] for c in crops], owner.tolist()
         heat, K = [c[1] for c in crops], [c[2] for c in crops]
         # a track without a crop of its own in a view, and every discovered subject, takes
-        # that view's full-frame map as its crop
+        # one of that view's discovery maps as its crop
         owned = set(zip(v_idx, h_idx))
-        for v, full_heat, full_K in full:
-            for h in range(len(predicted) + len(new)):
-                if (v, h) not in owned:
-                    v_idx.append(v)
-                    h_idx.append(h)
-                    heat.append(full_heat)
-                    K.append(full_K)
+        fallback = self.fallback_maps(cameras, hyp[:len(predicted) + len(new)], full)
+        for (v, h), n in fallback.items():
+            if (v, h) not in owned:
+                v_idx.append(v)
+                h_idx.append(h)
+                heat.append(full[n][1])
+                K.append(full[n][2])
         return self.resolve(cameras, stamp_ns, hyp, v_idx, h_idx, heat, K,
                             tracked=len(predicted), discovered=discovered, counts=counts)
+
+    def fallback_maps(self, cameras, hyp, full):
+        """Which discovery map each hypothesis takes as its crop in a view (live_frame): hyp
+        (H, C, 3), full: (view index, heat (C, h, w), K_heat) maps. -> {(view, hypothesis):
+        index into full}: a view's only map for every hypothesis; of several (tiles), the
+        one that holds its known joints projected into the view (in front of it and
+        within an image size of its borders) with the most room: the largest distance
+        (source px) of the joint nearest a tile edge (negative outside), so the tile
+        that holds the whole body when one does (tiles overlap by half: a body up to half
+        a tile's side fits in one); none where no joint projects (no crop there)."""
+        out = {}
+        if not len(full) or not len(hyp):
+            return out
+        views = np.array([f[0] for f in full], np.int64)
+        several = np.bincount(views)[views] > 1
+        if several.any():
+            centre, half = map_centres(cameras, views, [f[2] for f in full],
+                                       [f[1].shape[1:] for f in full])
+            rig = stack_cameras(cameras)
+            known = np.isfinite(hyp).all(-1)                                  # (H, C)
+            uv = project_views(rig, np.where(known[..., None], hyp, 0.0).reshape(-1, 3))
+            uv = uv.reshape(len(cameras), *known.shape, 2)                    # (V, H, C, 2)
+            depth = (np.einsum('vij,hcj->vhci', rig['R'], np.nan_to_num(hyp))
+                     + rig['t'][:, None, None])[..., 2]
+            size = np.array([[c.width, c.height] for c in cameras], np.float64)[:, None, None]
+            inside = (known[None] & (depth > 0) & np.isfinite(uv).all(-1)
+                      & (uv > -size).all(-1) & (uv < 2 * size).all(-1))          # (V, H, C)
+        for v in np.unique(views).tolist():
+            mine = np.flatnonzero(views == v)
+            for h in range(len(hyp)):
+                if len(mine) == 1:
+                    out[v, h] = int(mine[0])
+                elif inside[v, h].any():
+                    joints = uv[v, h, inside[v, h]]                                # (n, 2)
+                    room = (half[mine, None] - np.abs(joints[None] - centre[mine, None]))
+                    out[v, h] = int(mine[np.argmax(room.min(-1).min(-1))])
+        return out
 
     def match_crops(self, cameras, hyp, views, K_heat, sizes):
         """Which hypothesis each live crop was cut for: per view, the assignment
@@ -889,11 +978,8 @@ class SubjectsCore:
         if not N or not len(hyp):
             return owner
         views = np.asarray(views, np.int64)
-        rig = stack_cameras([cameras[v] for v in views])
-        S, _ = crop_scales(heat_matrices(K_heat), rig['K'], rig['K_inv'])
-        hw = np.asarray(sizes, np.float64).reshape(N, 2)
-        centre = heat_to_source_points(((hw[:, ::-1] - 1) / 2)[:, None], S)[:, 0]   # (N, 2)
-        half = (hw[:, ::-1] / 2 / np.diagonal(S, axis1=1, axis2=2)[:, :2]).max(-1)   # (N,)
+        centre, half = map_centres(cameras, views, K_heat, sizes)
+        half = half.max(-1)                                   # the larger half side (N,)
         boxes = self.crop_boxes(cameras, hyp)                         # (V, H, 4)
         box_centre = (boxes[..., :2] + boxes[..., 2:]) / 2 - 0.5      # pixel centres
         for v in np.unique(views):
@@ -948,17 +1034,11 @@ class SubjectsStep(SubjectsCore):
     def discover(self, images, cameras, predicted, encodings=None):
         """discover_heatmaps of one full-frame detection of every view (module docstring
         step 1); encodings: as in step."""
-        tiles = self.config.discovery_tiles
-        full = self.detector.boxes_for(cameras)                      # (V, 4) whole frames
-        shrink = (full[:, 2] - full[:, 0]) / self.detector.input_size[1]
-        if not tiles or (shrink <= TILE_SHRINK).all():
-            heat, heat_cameras = self.detector.predict(images, cameras, encodings=encodings)
-            return self.discover_heatmaps(heat, heat_cameras, cameras, predicted)
-        boxes = [tile_boxes(c.width, c.height, tiles) if s > TILE_SHRINK else full[v:v + 1]
-                 for v, (c, s) in enumerate(zip(cameras, shrink))]
+        boxes = discovery_boxes(self.detector, cameras, self.config.discovery_tiles)
         views = np.repeat(np.arange(len(cameras)), [len(b) for b in boxes])
         heat, heat_cameras = self.detector.predict(
             [images[v] for v in views], [cameras[v] for v in views], np.concatenate(boxes),
+            keep_aspect=False,
             encodings=None if encodings is None else [encodings[v] for v in views])
         return self.discover_heatmaps(heat, heat_cameras, cameras, predicted, views)
 

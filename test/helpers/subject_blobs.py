@@ -50,11 +50,12 @@ def render(cameras, X, sigma_px=2.2):
     return frames
 
 
-def write_two_subjects(out, T=12, width=96, height=96, focal=190.0, camera_info=False):
+def write_two_subjects(out, T=12, width=96, height=96, focal=190.0, camera_info=False,
+                       sigma_px=2.2):
     """Write the folder (rig.yaml, recording/, ground_truth.npz: stamps, keypoints3d
     (subject 0's) and subjects_keypoints3d (T, 2, 3, 3) m); with camera_info, the
     recording also holds /<cam>/camera_info per frame (what `monet pipeline` replays);
-    returns (out, cameras, X)."""
+    sigma_px: the blobs' size (render's); returns (out, cameras, X)."""
     out = Path(out)
     out.mkdir(parents=True)
     cams = ring_rig(4, radius=3.0, width=width, height=height, focal=focal)
@@ -62,7 +63,7 @@ def write_two_subjects(out, T=12, width=96, height=96, focal=190.0, camera_info=
     X = two_subjects(T)
     save_rig(out / 'rig.yaml', cams)
     stamps = T0 + PERIOD * np.arange(T, dtype=np.int64)
-    frames = render(cams, X)
+    frames = render(cams, X, sigma_px)
     with BagWriter(out / 'recording') as bag:
         for t, stamp in enumerate(stamps):
             for cam, f in zip(cams, frames):

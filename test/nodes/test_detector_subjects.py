@@ -1,7 +1,8 @@
 """The detector executable with subjects:=2 in its own process over DDS: the crop slots
 <cam>/crop<k>/heatmaps + camera_info (docs/subjects.md "Live"): a crop per subject of the
 latest /monet/keypoints3d (its `subject` field), the full frame while fewer than 2 are
-tracked, empty slots elsewhere, every crop's heatmaps those of the network on that crop."""
+tracked (discovery_tiles 0: the tiles that are the default are test_subjects_live.py's),
+empty slots elsewhere, every crop's heatmaps those of the network on that crop."""
 import signal
 
 from helpers.detector_crops import INPUT, expected_box, expected_K, make_checkpoint
@@ -84,7 +85,7 @@ def test_one_crop_per_subject_and_the_full_frame_while_fewer(ros_env, tmp_path):
     A = rng.uniform([-0.4, -0.4, 0.6], [-0.1, -0.1, 1.5], (14, 3))     # two bodies apart
     B = rng.uniform([0.1, 0.1, 0.6], [0.4, 0.4, 1.5], (14, 3))
     params = dict(rig=str(rig_path), model=str(checkpoint), subjects=2, device='cpu',
-                  track_timeout_s=3600.0)
+                  track_timeout_s=3600.0, discovery_tiles=0)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = SlotStream(ros, rig)
         for image_pub, info_pub in stream.pubs.values():
@@ -150,4 +151,20 @@ def test_one_crop_per_subject_and_the_full_frame_while_fewer(ros_env, tmp_path):
                 break
         assert one_subject(got), node.output()
         assert not stream.one, 'the one-subject topics are not published with subjects 2'
+        assert node.stop(signal.SIGINT) == 0, node.output()
+
+
+def test_discovery_tiles_need_the_rig(ros_env, tmp_path):
+    # the discovery slots are laid out for the rig cameras' image sizes: without a rig the
+    # detector refuses to start (one line naming the parameter), with discovery_tiles 0 it
+    # needs none (one whole-frame slot)
+    checkpoint = make_checkpoint(tmp_path / 'model.pt', 1)
+    params = dict(model=str(checkpoint), cameras=['cam0', 'cam1'], subjects=2, device='cpu')
+    with NodeProcess('detector', ros_env, params) as node:
+        assert node.wait(timeout=90) == 2, node.output()
+        assert "parameter 'discovery_tiles': needs the rig" in node.output()
+    with RosHarness(ros_env) as ros, \
+            NodeProcess('detector', ros_env, {**params, 'discovery_tiles': 0}) as node:
+        assert ros.spin_until(lambda: ros.node.count_publishers('/monet/cam1/crop2/heatmaps'),
+                              timeout=120, process=node), node.output()
         assert node.stop(signal.SIGINT) == 0, node.output()

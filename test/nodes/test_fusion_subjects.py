@@ -3,7 +3,8 @@ detector node publishes (docs/subjects.md "Live") for a `monet synth --subjects 
 recording: heatmaps rendered from its ground truth (OpenCV projection, numpy Gaussians;
 helpers.scenes), each crop showing both subjects (its own higher), the slot order shuffled
 every frame, the full-frame slot for the first frames only (then empty, as a detector
-tracking both sends it)."""
+tracking both sends it); discovery_tiles 0 (one whole-frame discovery slot per camera:
+test_subjects_live.py has the tiles)."""
 import signal
 import subprocess
 import sys
@@ -99,7 +100,7 @@ def test_fusion_publishes_two_subjects_with_stable_identities(ros_env, tmp_path)
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                      reliability=ReliabilityPolicy.RELIABLE)
     params = dict(rig=str(rig_path), skeleton='human14', subjects=2, timeout_s=30.0,
-                  input_reliability='reliable')
+                  input_reliability='reliable', discovery_tiles=0)
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         markers = ros.collect('/monet/skeleton', MarkerArray)
@@ -190,7 +191,7 @@ def test_fusion_filters_each_subject(ros_env, tmp_path):
     qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                      reliability=ReliabilityPolicy.RELIABLE)
     params = dict(rig=str(rig_path), skeleton='human14', subjects=2, timeout_s=30.0,
-                  input_reliability='reliable', filter=True)
+                  input_reliability='reliable', filter=True, discovery_tiles=0)
     with RosHarness(ros_env) as ros, NodeProcess('fusion', ros_env, params) as node:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2)
         raws = ros.collect('/monet/keypoints3d_raw', PointCloud2)
