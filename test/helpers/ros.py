@@ -211,6 +211,16 @@ class RosHarness:
             client.remove_pending_request(future)
         raise AssertionError(f'{name}: no response to {attempts} requests')
 
+    def wait_heard(self, diagnostics, names, timeout=120.0, process=None):
+        """Spin until a /diagnostics status of every one of `names` arrived in
+        `diagnostics` (a collect() list). A node heard from has matched this harness's
+        readers: create the diagnostics collector after the others, so that its readers
+        are announced last and every earlier one is known to the node too (the first
+        messages of a node whose discovery of the harness lagged were lost otherwise)."""
+        ok = self.spin_until(lambda: all(newest_status(diagnostics, n) is not None
+                                         for n in names), timeout, process)
+        assert ok, f'no /diagnostics of {names} after {timeout} s'
+
     def wait_for_publishers(self, topic, count=1, timeout=20.0, process=None):
         ok = self.spin_until(lambda: self.node.count_publishers(topic) >= count, timeout,
                              process)

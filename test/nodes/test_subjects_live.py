@@ -66,11 +66,14 @@ def test_player_detector_fusion_track_two_subjects(ros_env, tmp_path):
                 and ros.node.count_publishers(f'/monet/{c.name}/crop{k}/heatmaps')
                 for c in cams for k in range(3)), timeout=120, process=detect), \
                 detect.output() + fuse.output()
+            ros.wait_heard(diagnostics, ['monet fusion', f'monet detector: {cams[0].name}'],
+                           process=fuse)
             with NodeProcess('player', ros_env, player) as play:
                 def done():
                     return {header_stamp_ns(c) for c in clouds} >= set(stamps.tolist())
-                assert ros.spin_until(done, timeout=180, process=fuse), \
-                    play.output() + detect.output() + fuse.output()
+                assert ros.spin_until(done, timeout=180, process=fuse), (
+                    sorted(set(stamps.tolist()) - {header_stamp_ns(c) for c in clouds}),
+                    play.output() + detect.output() + fuse.output())
                 assert play.wait(timeout=60) == 0, play.output()
             assert ros.spin_until(lambda: 'monet fusion: subject 1' in
                                   fusion_statuses(diagnostics), timeout=30, process=fuse)
@@ -134,6 +137,7 @@ def test_live_discovery_tiles_are_the_offline_ones_and_find_the_subjects_the_who
                           ros.collect(f'/monet/{c.name}/crop{2 + j}/camera_info', CameraInfo,
                                       100))
                  for v, c in enumerate(cams) for j in range(D)}
+        diagnostics = ros.collect('/diagnostics', DiagnosticArray)     # last: wait_heard
         with NodeProcess('fusion', ros_env, fusion) as fuse, \
                 NodeProcess('detector', ros_env, detector) as detect:
             assert ros.spin_until(lambda: all(
@@ -141,6 +145,8 @@ def test_live_discovery_tiles_are_the_offline_ones_and_find_the_subjects_the_who
                 and ros.node.count_publishers(f'/monet/{c.name}/crop{k}/heatmaps') == 1
                 for c in cams for k in range(2 + D)), timeout=120, process=detect), \
                 detect.output() + fuse.output()
+            ros.wait_heard(diagnostics, ['monet fusion', f'monet detector: {cams[0].name}'],
+                           process=fuse)
             with NodeProcess('player', ros_env, player) as play:
                 def done():
                     return ({header_stamp_ns(c) for c in clouds} >= set(stamps.tolist())
