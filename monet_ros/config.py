@@ -36,6 +36,12 @@ class ConfigError(ValueError):
         self.message = message
         super().__init__(f'{owner}: parameter {field_name!r}: {message}')
 
+    def __reduce__(self):
+        # raised in a worker process (monet process over several recordings, benches): it
+        # must unpickle in the parent, which calls the class with these arguments (the
+        # default would call it with the message alone)
+        return type(self), (self.owner, self.field, self.message)
+
 
 def setting(default, description, *, choices=None, minimum=None, maximum=None,
             exclusive_minimum=False, min_length=None, length=None, template_fields=None):

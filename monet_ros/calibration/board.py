@@ -40,6 +40,10 @@ class BoardError(ValueError):
         where = f'{path}: ' if path else ''
         super().__init__(f'{where}board field {field_name!r}: {message}')
 
+    def __reduce__(self):
+        # raised in a worker process: it must unpickle in the parent
+        return type(self), (self.field, self.message, self.path)
+
 
 def _integer(value):
     return isinstance(value, (int, np.integer)) and not isinstance(value, bool)

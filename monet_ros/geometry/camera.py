@@ -24,7 +24,12 @@ class CameraError(ValueError):
     def __init__(self, camera, field_name, message):
         self.camera = camera
         self.field = field_name
+        self.message = message
         super().__init__(f'camera {camera!r}: field {field_name!r}: {message}')
+
+    def __reduce__(self):
+        # raised in a worker process: it must unpickle in the parent
+        return type(self), (self.camera, self.field, self.message)
 
 
 def _matrix(value, shape, camera, field_name):

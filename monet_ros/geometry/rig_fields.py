@@ -86,6 +86,10 @@ class RigError(ValueError):
         where = f'{self.path}: field {field!r}: ' if field else f'{self.path}: '
         super().__init__(where + message)
 
+    def __reduce__(self):
+        # raised in a worker process: it must unpickle in the parent
+        return type(self), (self.path, self.field, self.message)
+
 
 # ----------------------------------------------------------------------------- helpers
 

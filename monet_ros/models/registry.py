@@ -18,7 +18,12 @@ class OptionError(ValueError):
 
     def __init__(self, option, message):
         self.option = option
+        self.message = message
         super().__init__(f'model option {option}: {message}')
+
+    def __reduce__(self):
+        # raised in a worker process: it must unpickle in the parent
+        return type(self), (self.option, self.message)
 
 
 def check_options(name, options):
