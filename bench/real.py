@@ -409,7 +409,8 @@ def read_journal(path):
 def curve(rows, counts, seeds, arms):
     """Markdown: the learning curve (mean over label sets per count and model) and paired
     differences against supervised and against each exact control."""
-    labels = [arm_label(a) for a in arms]
+    labels = [arm_label(a) for a in arms] + list(dict.fromkeys(
+        r['mode'] for r in rows if r['mode'].startswith('peer')))
     by = {(r['labels'], r['seed'], r['mode']): r for r in rows}
     stats = (('median_mm', '3D median', '.0f', 1), ('mean_mm', '3D mean', '.0f', 1),
              ('p90_mm', '3D p90', '.0f', 1), ('pck10', 'PCK@10 px', '.1f', 100))
@@ -503,8 +504,10 @@ def peer_rows(paths, count, seed, instants):
             if r['instants'] != instants.tolist():
                 raise SystemExit(f'{path}: its peer row for {count} labels, seed {seed} was '
                                  f'trained on instants {r["instants"]}, not {instants.tolist()}')
-            rows.append(dict(r, mode=f'peer sleap-nn ({Path(path).name}, '
-                                     f'{r["train_s"]:.0f} s)'))
+            # one name per training budget (its wall time is the table's column): the
+            # curve and the plot take every label set's peer row as one model
+            budget = f'{r["steps"]} steps' if r.get('steps') else f'{r["train_s"]:.0f} s'
+            rows.append(dict(r, mode=f'peer sleap-nn ({budget})'))
     return rows
 
 
@@ -674,6 +677,7 @@ def main(argv=None):
             rows += [dict(r, seed=seed) for r in baselines(n, seed)]
             rows += peer_rows(args.peer, n, seed,
                               choose_instants(recording.num_instants, n, seed))
+    peers = [r for r in rows if r['mode'].startswith('peer')]
     command = 'python bench/real.py ' + ' '.join(argv if argv is not None else sys.argv[1:])
     title = '# Label efficiency on real video (Pose2Sim 4-camera recording)'
     if args.quick:
@@ -686,7 +690,8 @@ def main(argv=None):
         f'run; seeds {args.seeds}; overrides {overrides or "none"}; scores on the unlabelled '
         'instants (OpenPose row: all instants). How the figures are made: bench/real.py.', '',
         table(rows), '',
-        *(['## Learning curve', '', curve(trained, args.labels, args.seeds, args.modes), '']
+        *(['## Learning curve', '', curve(trained + peers, args.labels, args.seeds,
+                                          args.modes), '']
           if len(args.labels) > 1 or len(args.seeds) > 1 else []),
         'Labelled instants per count: ' + '; '.join(
             f'{n} (seed {seed}): {choose_instants(recording.num_instants, n, seed).tolist()}'
