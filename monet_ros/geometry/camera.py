@@ -393,20 +393,30 @@ def project_uv(cameras, X):
     world points (the rig's unit), without stacking them: the same numbers, for hot paths
     that use the coordinates apart. Numpy's warnings for points in a focal plane are not
     silenced here (project_views silences them)."""
+    return project_uvz(cameras, X)[:2]
+
+
+def project_uvz(cameras, X):
+    """project_uv's (u, v) and the camera-frame depths z (..., V, N) (the rig's unit; > 0 in
+    front of the camera, geometry.triangulation.depths' numbers) of the same projection, for
+    hot paths that need both (the cheirality test beside the reprojection error)."""
     p = cameras if isinstance(cameras, dict) else stack_cameras(cameras)
     X = np.asarray(X, dtype=np.float64)
-    if not p['d12'].any():  # pinhole rig: x ~ P X
+    if not p['d12'].any():  # pinhole rig: x ~ P X (K's last row is [0, 0, 1]: h[2] = z)
         P = p['P'] if 'P' in p else p['K'] @ np.concatenate([p['R'], p['t'][..., None]], -1)
         h = _apply_views(P, X)  # (..., V, N, 3)
-        return h[..., 0] / h[..., 2], h[..., 1] / h[..., 2]
+        z = h[..., 2]
+        return h[..., 0] / z, h[..., 1] / z, z
     Rt = p['Rt'] if 'Rt' in p else np.concatenate([p['R'], p['t'][..., None]], -1)
     Xc = _apply_views(Rt, X)
-    x = Xc[..., 0] / Xc[..., 2]
-    y = Xc[..., 1] / Xc[..., 2]
+    z = Xc[..., 2]
+    x = Xc[..., 0] / z
+    y = Xc[..., 1] / z
     # 12 coefficient arrays (V, 1), over (..., V, N)
     xd, yd = _distort(p['model'] if 'model' in p else _model_terms(p['d12']), x, y)
     K = p['K'][:, None]  # (V, 1, 3, 3)
-    return K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2], K[..., 1, 1] * yd + K[..., 1, 2]
+    return (K[..., 0, 0] * xd + K[..., 0, 1] * yd + K[..., 0, 2],
+            K[..., 1, 1] * yd + K[..., 1, 2], z)
 
 
 def undistort_views(cameras, uv):

@@ -17,7 +17,12 @@ from math import comb
 
 import numpy as np
 
-from monet_ros.geometry.camera import project_uv, project_views, stack_cameras, undistort_views
+from monet_ros.geometry.camera import (
+    project_uvz,
+    project_views,
+    stack_cameras,
+    undistort_views,
+)
 from monet_ros.timing import NO_TIMER
 
 
@@ -124,11 +129,26 @@ def triangulate(points2d, cameras, weights=None):
 def _view_errors(rig, X, obs):
     """Pixel distances (..., V, N) between the projections of X (..., N, 3) and obs (V, N, 2)
     (the numbers of np.linalg.norm(project_views(rig, X) - obs, axis=-1))."""
+    return _errors_and_depths(rig, X, obs)[0]
+
+
+def _errors_and_depths(rig, X, obs):
+    """(_view_errors', camera-frame depths (..., V, N)) of one projection of X."""
     with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
-        u, v = project_uv(rig, X)
+        u, v, z = project_uvz(rig, X)
         du = u - obs[..., 0]
         dv = v - obs[..., 1]
-        return np.sqrt(du * du + dv * dv)
+        return np.sqrt(du * du + dv * dv), z
+
+
+def _errors_behind(rig, X, obs, used):
+    """_view_errors of X (..., N, 3) against obs (V, N, 2), inf at the `used` (..., V, N)
+    views that see X behind (or on) their camera plane (_behind's rule: cheirality, a view
+    behind is an outlier), from one projection."""
+    err, z = _errors_and_depths(rig, X, obs)
+    with np.errstate(invalid='ignore'):
+        err[used & ~(z > 0) & np.isfinite(X).all(axis=-1)[..., None, :]] = np.inf
+    return err
 
 
 def reprojection_error(X, points2d, cameras):
@@ -193,8 +213,7 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         # (w is 0 at the views not available: w * used is w when every available one is used)
         w_used = w[None, :, cols] if k == 0 else w[None, :, cols] * used
         Xs = solve_dlt(B[:, cols], w_used, rig['per_metre'])  # (S, n, 3)
-        err = _view_errors(rig, Xs, obs[:, cols])  # (S, V, n)
-        err[_behind(rig, Xs, used)] = np.inf  # cheirality: a view behind is an outlier
+        err = _errors_behind(rig, Xs, obs[:, cols], used)  # (S, V, n), inf: behind
         mean = _mean_used_error(err, used)
         if len(used) == 1:  # one candidate subset: it is the best
             best_mean, best_X, best_used, best_err = mean[0], Xs[0], used[0], err[0]
@@ -256,8 +275,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
         a, b = order[r1, cols], order[r2, cols]  # (H, n)
     valid = avail[a, todo] & avail[b, todo]
     Xh = _two_view_points(B[a, todo], B[b, todo], valid)
-    err = _view_errors(rig, Xh, obs[:, todo])  # (H, V, n)
-    err[_behind(rig, Xh, np.ones(err.shape, bool))] = np.inf  # cheirality
+    err = _errors_behind(rig, Xh, obs[:, todo], True)  # (H, V, n), inf: behind
     inl = (err < threshold_px) & avail[None, :, todo]
     count = inl.sum(axis=1).astype(np.float64)
     mean_inl = np.where(inl, err, 0.0).sum(axis=1) / np.maximum(count, 1)
@@ -265,8 +283,7 @@ def _ransac(obs, B, w, rig, threshold_px, min_views, max_hypotheses, rng):
     best_inl = inl[np.argmax(score, axis=0), :, cols].T  # (V, n)
     Xr = solve_dlt(B[:, todo], w[:, todo] * best_inl, rig['per_metre'])
     for _ in range(2):  # re-select the inliers of the refined point, refine again
-        err_r = _view_errors(rig, Xr, obs[:, todo])
-        err_r[_behind(rig, Xr, np.ones(err_r.shape, bool))] = np.inf
+        err_r = _errors_behind(rig, Xr, obs[:, todo], True)
         new_inl = (err_r < threshold_px) & avail[:, todo]
         new_inl = np.where(new_inl.sum(axis=0) >= 2, new_inl, best_inl)
         if np.array_equal(new_inl, best_inl):

@@ -53,15 +53,19 @@ from monet_ros.temporal import cv_kalman
 
 def masked_median(values, mask):
     """Per-axis median of values (..., C, 3) over the entries `mask` (..., C) -> (..., 3);
-    NaN where the mask is empty (np.nanmedian's numbers, by one sort)."""
-    if not values.shape[-2]:
-        return np.full(values.shape[:-2] + (3,), np.nan)
-    v = np.sort(np.where(mask[..., None], values, np.inf), axis=-2)
-    n = mask.sum(-1)[..., None, None]
-    lo = np.take_along_axis(v, np.maximum(n - 1, 0) // 2, axis=-2)[..., 0, :]
-    hi = np.take_along_axis(v, n // 2, axis=-2)[..., 0, :]
-    with np.errstate(invalid='ignore'):
-        return np.where(n[..., 0, :] > 0, (lo + hi) / 2, np.nan)
+    NaN where the mask is empty (np.nanmedian's numbers, by one sort; the middle entries
+    are taken by flat fancy indexing: take_along_axis costs more than the sort here)."""
+    C = values.shape[-2]
+    lead = values.shape[:-2]
+    if not C:
+        return np.full(lead + (3,), np.nan)
+    v = np.sort(np.where(mask[..., None], values, np.inf), axis=-2).reshape(-1, C, 3)
+    n = mask.sum(-1).reshape(-1)
+    rows = np.arange(len(n))
+    # (n - 1) // 2 and n // 2, both < C; n = 0 picks inf and is NaN below
+    out = 0.5 * (v[rows, np.maximum(n - 1, 0) // 2] + v[rows, n // 2])
+    out[n == 0] = np.nan
+    return out.reshape(lead + (3,))
 
 
 @dataclass(frozen=True)

@@ -32,7 +32,8 @@ def innovation(p, P, X, r2):
     axis P00 + r2; d2 (J,): squared Mahalanobis distance |y|^2 / S; measured (J,) bool: X
     finite). X (J, 3) measurements (m, NaN = none); r2 scalar or (J,)."""
     measured = np.isfinite(X).all(axis=1)
-    y = np.where(measured[:, None], X, 0.0) - np.where(measured[:, None], p, 0.0)
+    with np.errstate(invalid='ignore'):  # inf - inf where X is missing: replaced by 0
+        y = np.where(measured[:, None], X - p, 0.0)
     S = P[0] + r2
     return y, S, (y * y).sum(axis=1) / S, measured
 
@@ -40,10 +41,11 @@ def innovation(p, P, X, r2):
 def update(p, v, P, y, S, accept):
     """(p, v, P) after the Kalman update with innovation y (J, 3) and variance S (J,) at the
     joints `accept` (J,) bool; the others unchanged. New arrays."""
-    k0 = np.where(accept, P[0] / S, 0.0)
-    k1 = np.where(accept, P[1] / S, 0.0)
-    P = np.stack([(1 - k0) * P[0], (1 - k0) * P[1], P[2] - k1 * P[1]])
-    return p + k0[:, None] * y, v + k1[:, None] * y, P
+    k0, k1 = np.where(accept, P[:2] / S, 0.0)                   # the gains, 0 elsewhere
+    new = np.empty_like(P)
+    np.multiply(1 - k0, P[:2], out=new[:2])
+    np.subtract(P[2], k1 * P[1], out=new[2])
+    return p + k0[:, None] * y, v + k1[:, None] * y, new
 
 
 def start(p, v, P, X, which, r2, v0=V0):
