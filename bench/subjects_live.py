@@ -4,7 +4,7 @@ fed the crop slots a detector node publishes, in a lockstep loop, for 2 and 3 su
 Data: the subjects, rig and occlusion of bench/subjects.py (human14 subjects walking rings
 of 0.7 / 1.4 / 2.1 m that pass each other, --cameras synthetic 640x480 cameras, --frames
 frames at 30/s). Each frame the detector's part is simulated as the node does it
-(nodes/detector.py process_subjects, published_slots here): the crop slots from the
+(nodes/detector.py process_subjects; published_slots here): the crop slots from the
 previous frame's output (crop_rule.TrackedSubjects over the published subjects, at float32
 like the topic), slots 0..N-1 the subject crops (Detector.boxes_for: grown to the
 network's aspect), and while fewer than N are published slots N.. the discovery maps
@@ -13,7 +13,7 @@ network's aspect), and while fewer than N are published slots N.. the discovery 
 px, neighbours overlapping by half; --discovery-tiles 0: one map of the whole frame padded
 to the network's aspect). The boxes and heatmap grids are those of a real network of the
 bench's input size (bench_detector: `small`, input 256 x 192 (H, W) -> 64 x 48 heatmaps,
-random weights, never run; every slot is a 48 x 64 px map with its virtual camera
+random weights, never run; every slot is a 48 x 64 (w x h) map with its virtual camera
 Camera.crop(box, (48, 64)), as Detector.predict's). The network's output is a "perfect
 detector": every subject's visible keypoints (not hidden by a limb, inside the image)
 rendered as Gaussians (sigma 1.5 heatmap px, peak 0.9 whichever subject the crop is for)
@@ -24,10 +24,9 @@ duplicates, tracking) and the cost per frame, not a network's accuracy.
 Rows, with SubjectsConfig.rival_peaks off and on (the default): identity switches and IDF1
 (subjects.metrics, match within --match-m), 3D error per subject (mm, matched frames),
 live_frame per frame (wall median and p90, CPU of the thread median; heatmap peak decoding
-included), crops per frame (the maps published: subject crops and discovery maps)
-and the discovery runs. One
-subject through the same loop (N = 2, so discovery maps every frame) is the
-single-subject reference.
+included), crops per frame (the maps published: subject crops and discovery maps) and
+the discovery runs. One subject through the same loop (N = 2, so discovery maps every
+frame) is the single-subject reference.
 
 usage: python bench/subjects_live.py [--frames 300] [--cameras 8] [--noise 1] [--seed 0]
                                      [--discovery-tiles 2]
