@@ -56,8 +56,11 @@ def add_arguments(parser):
                         help='torch CPU threads (0 = torch default; 1 is fastest on a busy '
                         'machine)')
     parser.add_argument('--holdout-labelled', type=int, default=0, metavar='N',
-                        help='leave N labelled instants out of training and report the '
-                        "model's error on them (px, mm) at the end (0 = off)")
+                        help='leave N labelled instants (every subject labelled there) out '
+                        "of training and report the model's error on them at the end: every "
+                        "subject's, pooled and per subject, in crops around each (px, as "
+                        '--validation-labels), and with labels of one subject also as '
+                        '`monet process` runs the model (px, mm) (0 = off)')
     from monet_ros.commands.labels import add_label_arguments
     add_label_arguments(parser)
     group = parser.add_argument_group('training configuration (TrainConfig)')
@@ -176,7 +179,7 @@ def run(args):
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
     try:
         data = distributed.shared_training_data(recording, config, probe.input_size,
-                                                probe.heatmap_size)
+                                                probe.heatmap_size, holdout=held)
     except ValueError as error:
         raise ValueError(f'{error}; {_labels_text(recording, config)}') from None
     if args.resume and (out / 'trainer_state.pt').exists():
@@ -229,16 +232,10 @@ def run(args):
           f'({fit["median_heat"]:.2f} heatmap px), mean {fit["mean_px"]:.2f} px, p90 '
           f'{fit["p90_px"]:.2f} px ({fit["count"]} keypoints)', file=sys.stderr)
     if summary.get('validation'):
-        v = summary['validation']
-        print(f'error on the held-out validation labels (--validation-labels): median '
-              f'{v["median_px"]:.2f} px, mean {v["mean_px"]:.2f} px ({v["count"]} keypoints of '
-              f'{len(data.validation_instants)} instants, never trained on'
-              + (', every subject labelled there' if v.get('subjects') else '') + ')',
-              file=sys.stderr)
-        for subject, e in v.get('subjects', {}).items():
-            print(f'  subject {subject}: median {e["median_px"]:.2f} px, mean '
-                  f'{e["mean_px"]:.2f} px ({e["count"]} keypoints, in crops around it)',
-                  file=sys.stderr)
+        for line in scored_lines('error on the held-out validation labels '
+                                 '(--validation-labels)', summary['validation'],
+                                 len(data.validation_instants)):
+            print(line, file=sys.stderr)
     for stats in summary['bootstrap']:
         print(f'bootstrapping round {stats["round"]} at step {stats["step"]}: '
               f'{stats["pseudo_labels"]} pseudo-labels (peak cut-off {stats["cutoff"]:.3g})',
@@ -249,21 +246,47 @@ def run(args):
         for message in summary['warnings']:
             print(f'  WARNING: {message}', file=sys.stderr)
     if held_path is not None:
-        from monet_ros.learning.recording import find_recording_parts
-        parts = find_recording_parts(args.data)
-        figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
-                                held_path, recording,
-                                label_options_from_args(args).camera_map, args.rig_units)
-        summary['holdout'] = {'instants': held.tolist(), **figures}
-        print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
-              f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '
-              f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.1f} mm, mean '
-              f'{figures["mm_mean"]:.1f} mm (rig in {recording.cameras[0].units}), coverage '
-              f'{100 * figures["coverage"]:.0f}% '
-              '(as monet process runs the model)', file=sys.stderr)
+        # every subject's, in crops around each (as --validation-labels scores)
+        crops = trainer.holdout_error()
+        summary['holdout'] = {'instants': held.tolist(), 'crops': crops}
+        for line in scored_lines(f'monet train: held-out labelled instants {held.tolist()} '
+                                 '(--holdout-labelled), in crops around each subject',
+                                 crops, len(held)):
+            print(line, file=sys.stderr)
+        if recording.num_subjects == 1:        # as `monet process` runs the model
+            from monet_ros.learning.recording import find_recording_parts
+            parts = find_recording_parts(args.data)
+            figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
+                                    held_path, recording,
+                                    label_options_from_args(args).camera_map, args.rig_units)
+            summary['holdout'].update(figures)
+            print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
+                  f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '
+                  f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.1f} mm, '
+                  f'mean {figures["mm_mean"]:.1f} mm (rig in {recording.cameras[0].units}), '
+                  f'coverage {100 * figures["coverage"]:.0f}% '
+                  '(as monet process runs the model)', file=sys.stderr)
+        else:
+            print('monet train: the held-out instants hold several subjects: not scored as '
+                  '`monet process` runs the model (one subject; `monet eval --reference` '
+                  f"scores {held_path}, subject 0's labels, against a run of yours)",
+                  file=sys.stderr)
     print(json.dumps(summary, indent=1))
     distributed.shutdown()
     return 0
+
+
+def scored_lines(what, figures, instants):
+    """The lines of held-out labels scored in crops (Trainer.validation_error /
+    holdout_error figures of `instants` instants): `what`: pooled median / mean, then one
+    line per subject when several were labelled there."""
+    lines = [f'{what}: median {figures["median_px"]:.2f} px, mean {figures["mean_px"]:.2f} px '
+             f'({figures["count"]} keypoints of {instants} instants, never trained on'
+             + (', every subject labelled there' if figures.get('subjects') else '') + ')']
+    for subject, e in figures.get('subjects', {}).items():
+        lines.append(f'  subject {subject}: median {e["median_px"]:.2f} px, mean '
+                     f'{e["mean_px"]:.2f} px ({e["count"]} keypoints, in crops around it)')
+    return lines
 
 
 def skeleton_line(skeleton, given):
