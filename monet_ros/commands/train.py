@@ -71,6 +71,13 @@ def add_arguments(parser):
         default = COMMAND_DEFAULTS.get(f.name, f.default)
         group.add_argument(flag, dest=f.name, type=kind, default=None,
                            help=f'{f.metadata["description"]} (default {default!r})')
+    from monet_ros.commands.common import add_subject_settings_arguments
+    teacher = parser.add_argument_group(
+        'distillation teacher of several subjects (--distill-rounds N with labels of several '
+        'subjects: the teacher runs `monet process --subjects S --filter optim`, S the most '
+        "subjects labelled at an instant; these are that command's options, lengths in mm "
+        "whatever the rig's unit)")
+    add_subject_settings_arguments(teacher, help_prefix='teacher: ')
 
 
 def parse_bool(text):
@@ -129,6 +136,7 @@ def run(args):
 
     options = TrainRunOptions(max_instants=args.max_instants, threads=args.threads)
     config = config_from_args(args)
+    check_teacher_options(args, config.distill_rounds > 0)      # before any file is read
     check_device('monet train', None if config.device == 'auto' else config.device)
     check_threads('monet train', options.threads)
     world, device = distributed.init_from_env(config.device)     # a torchrun job, if any
@@ -165,6 +173,8 @@ def run(args):
         if 'is not a keypoint of the skeleton' not in str(error):
             raise
         raise LabelError(f'{error} [{said}]') from None
+    # the teacher's options once the labels say how many subjects (one line, before notes)
+    teacher = check_teacher_options(args, config.distill_rounds > 0, recording.num_subjects)
     # the skeleton and the arithmetic first (once the inputs are read: a bad input stays one
     # line), then what reading found
     notes = [f'monet train: {said}', f'monet train: {precision_note}']
@@ -214,7 +224,7 @@ def run(args):
                 trainer, parts['bag'], rig=args.rig or parts['rig'],
                 camera_map=label_options_from_args(args).camera_map,
                 rig_units=args.rig_units, skeleton=args.skeleton,
-                progress=not args.no_progress)
+                progress=not args.no_progress, **teacher)
         else:
             summary = trainer.run(progress=not args.no_progress)
     except RuntimeError as error:
@@ -287,6 +297,33 @@ def scored_lines(what, figures, instants):
         lines.append(f'  subject {subject}: median {e["median_px"]:.2f} px, mean '
                      f'{e["mean_px"]:.2f} px ({e["count"]} keypoints, in crops around it)')
     return lines
+
+
+def check_teacher_options(args, distill, subjects=None):
+    """The distillation teacher's several-subject options (add_subject_settings_arguments:
+    `monet process --subjects`' own, validated by process.subject_configs): ValueError
+    naming the first one given without --distill-rounds, or (subjects: the most labelled
+    at an instant, once the labels are read) with labels of one subject, or with a bad
+    value. Returns train_with_distillation's {subjects, association, tracker} ({} with one
+    subject or before the labels are read)."""
+    from monet_ros.commands.common import check_subject_only_options
+    from monet_ros.commands.train_distill import teacher_subject_configs
+    check_subject_only_options(
+        args, distill, 'monet train', needs='--distill-rounds N (the teacher of labels of '
+        'several subjects)', without='has no distillation teacher without it')
+    if subjects is None:
+        if distill:                    # the values, before the recording is read
+            teacher_subject_configs(args, 2)
+        return {}
+    check_subject_only_options(
+        args, not distill or subjects > 1, 'monet train',
+        needs='labels of several subjects (a subject column; the teacher then runs `monet '
+        'process --subjects N`)', without='has labels of one subject: its teacher runs `monet '
+        'process` on one')
+    if not distill or subjects < 2:
+        return {}
+    return dict(zip(('subjects', 'association', 'tracker'),
+                    teacher_subject_configs(args, subjects)))
 
 
 def skeleton_line(skeleton, given):
