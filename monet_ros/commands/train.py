@@ -56,7 +56,7 @@ def add_arguments(parser):
                         help='torch CPU threads (0 = torch default; 1 is fastest on a busy '
                         'machine)')
     parser.add_argument('--holdout-labelled', type=int, default=0, metavar='N',
-                        help='leave N labelled instants (every subject labelled there) out '
+                        help="leave N labelled instants (every subject's labels there) out "
                         "of training and report the model's error on them at the end: every "
                         "subject's, pooled and per subject, in crops around each (px, as "
                         '--validation-labels), and with labels of one subject also as '

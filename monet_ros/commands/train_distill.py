@@ -119,12 +119,12 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
         from monet_ros.subjects.detection import SubjectsConfig
         subjects = SubjectsConfig(subjects=trainer.data.recording.num_subjects)
     several = subjects is not None and subjects.subjects > 1
-    # the teacher's several-subject settings other than the defaults, as options
-    given = (changed_options(subjects, subjects_options())
-             + (changed_options(association, ASSOCIATION_OPTIONS) if association else [])
-             + (changed_options(tracker, tracker_options()) if tracker else []))
-    as_process = ' '.join([f'--subjects {subjects.subjects}', *given, '--filter optim']) \
-        if several else '--filter optim'
+    as_process = '--filter optim'
+    if several:      # the teacher's several-subject settings other than the defaults
+        given = (changed_options(subjects, subjects_options())
+                 + (changed_options(association, ASSOCIATION_OPTIONS) if association else [])
+                 + (changed_options(tracker, tracker_options()) if tracker else []))
+        as_process = ' '.join([f'--subjects {subjects.subjects}', *given, as_process])
     say(f'distillation round {index} of {c.distill_rounds} at step {trainer.step_count}: '
         f'the detector runs over {bag} as `monet process {as_process}` -> {run_dir}'
         + (f' (the labels hold up to {subjects.subjects} subjects per instant)'
