@@ -163,15 +163,38 @@ def subject_only_option(parser, option, **kwargs):
     return action
 
 
-def check_subject_only_options(args, several, command):
+def check_subject_only_options(args, several, command,
+                               needs='--subjects N (N >= 2)',
+                               without='runs one subject without it'):
     """ValueError naming the first --subjects-only option given a value other than its
-    default when `several` is false (one subject): such a value would be ignored."""
+    default when `several` is false (one subject): such a value would be ignored. needs /
+    without: what the option needs and what the command does without it (the error's
+    words; `monet train`'s teacher options need distillation and labels of several
+    subjects)."""
     if several:
         return
     for dest, (default, names) in (getattr(args, 'subject_only_defaults', None) or {}).items():
         if getattr(args, dest) != default:
-            raise ValueError(f'{names} applies only with --subjects N (N >= 2); {command} '
-                             'runs one subject without it')
+            raise ValueError(f'{names} applies only with {needs}; {command} {without}')
+
+
+def changed_options(config, options):
+    """['--option value', ...] of the fields of `config` (options: {option: field},
+    config_options) whose value is not the field's default, in `options`' order; a bool as
+    --x / --no-x: the options a command line needs to give that config."""
+    from dataclasses import fields
+    defaults = {f.name: f.default for f in fields(config)}
+    out = []
+    for option, name in options.items():
+        value = getattr(config, name)
+        if value == defaults[name]:
+            continue
+        if isinstance(value, bool):
+            out.append(option if value else '--no-' + option[2:])
+        else:
+            out.append(f'{option} {value:g}' if isinstance(value, float) else
+                       f'{option} {value}')
+    return out
 
 
 def config_options(config_cls, exclude=(), rename=None):
@@ -260,16 +283,16 @@ def tracker_options():
         'acceleration_m_s2': '--track-acceleration-m-s2'})
 
 
-def add_subject_tracking_arguments(parser):
+def add_subject_tracking_arguments(parser, help_prefix='--subjects: '):
     """--association-px and every tracker setting (tracker_options): the association and
     tracker settings of `monet triangulate --subjects` and `monet process --subjects`
     (subjects.association, subjects.tracking), all --subjects-only."""
     from monet_ros.subjects.tracking import TrackerConfig
     subject_only_option(parser, '--association-px', type=float, default=15.0,
-                        help='--subjects: largest median epipolar distance (px) between two '
+                        help=f'{help_prefix}largest median epipolar distance (px) between two '
                         'instances of one subject (default %(default)s)')
     add_config_options(parser, TrackerConfig, tracker_options(), add=subject_only_option,
-                       help_prefix='--subjects: ')
+                       help_prefix=help_prefix)
 
 
 def tracker_config_from_args(args):
@@ -298,12 +321,22 @@ def subjects_options():
 def add_subjects_detection_arguments(parser):
     """--subjects N and the subjects.detection.SubjectsConfig options of `monet process`
     (subjects_options; help: the config's field descriptions), with
-    add_subject_tracking_arguments."""
-    from monet_ros.subjects.detection import SubjectsConfig
+    add_subject_tracking_arguments (add_subject_settings_arguments)."""
     parser.add_argument('--subjects', type=int, default=1, metavar='N',
                         help='several subjects (N >= 2): per-subject crops tracked over time, '
                         'found by full-frame candidates; per-subject outputs as `monet '
                         'triangulate --subjects` (1 = one subject, the tracked crop)')
+    add_subject_settings_arguments(parser)
+
+
+def add_subject_settings_arguments(parser, help_prefix='--subjects: '):
+    """The several-subject settings of `monet process --subjects N` without --subjects:
+    the SubjectsConfig options (subjects_options), --association-px and the tracker's
+    (add_subject_tracking_arguments), every one --subjects-only (subject_only_option;
+    help_prefix: what their help starts with). `monet train` declares its distillation
+    teacher's with it: the same names, defaults, help and validation
+    (process.subject_configs)."""
+    from monet_ros.subjects.detection import SubjectsConfig
     add_config_options(parser, SubjectsConfig, subjects_options(), add=subject_only_option,
-                       help_prefix='--subjects: ')
-    add_subject_tracking_arguments(parser)
+                       help_prefix=help_prefix)
+    add_subject_tracking_arguments(parser, help_prefix)

@@ -351,9 +351,14 @@ def _several(reader, topics, cameras, detector, units, frame_id, out, config, su
     return figures
 
 
-def subject_configs(args):
-    """(SubjectsConfig, AssociationConfig or None, TrackerConfig) of the --subjects
-    options (ValueError naming the option: commands.common.config_from_options)."""
+def subject_configs(args, subjects=None, config=None):
+    """(SubjectsConfig, AssociationConfig, TrackerConfig) of the --subjects options
+    (commands.common.add_subject_settings_arguments; ValueError naming the option:
+    commands.common.config_from_options). subjects: N (default args.subjects); config: the
+    ProcessConfig whose confidence threshold, min_views, threshold_px and method the
+    association takes (subject_association's; default: those options of args, `monet
+    process`'). Lengths are in mm whatever the rig's unit (the subjects step and the
+    tracker convert them)."""
     from monet_ros.commands.common import (
         ASSOCIATION_OPTIONS,
         config_from_options,
@@ -363,12 +368,17 @@ def subject_configs(args):
     from monet_ros.subjects import AssociationConfig
     from monet_ros.subjects.detection import SubjectsConfig
 
+    if config is None:
+        config = ProcessConfig(threshold_px=args.threshold_px,
+                               confidence_threshold=args.confidence_threshold,
+                               min_views=args.min_views, method=args.method)
     subjects = config_from_options(args, SubjectsConfig, subjects_options(),
-                                   subjects=args.subjects)
+                                   subjects=args.subjects if subjects is None else subjects)
     association = config_from_options(args, AssociationConfig, ASSOCIATION_OPTIONS,
-                                      confidence_threshold=args.confidence_threshold,
-                                      min_views=args.min_views,
-                                      triangulation_px=args.threshold_px, method=args.method)
+                                      confidence_threshold=config.confidence_threshold,
+                                      min_views=config.min_views,
+                                      triangulation_px=config.threshold_px,
+                                      method=config.method)
     return subjects, association, tracker_config_from_args(args)
 
 
@@ -407,7 +417,7 @@ def run(args):
                    calibration=args.calibration)
     check_subject_only_options(args, args.subjects != 1, 'monet process')
     if args.subjects != 1:
-        subjects, association, tracker = subject_configs(args)
+        subjects, association, tracker = subject_configs(args, config=config)
         options.update(subjects=subjects, association=association, tracker=tracker)
     if len(args.bag) > 1 and args.precision == 'int8':   # quantised once, before the workers
         from monet_ros.models import Detector

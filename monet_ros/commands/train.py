@@ -56,8 +56,11 @@ def add_arguments(parser):
                         help='torch CPU threads (0 = torch default; 1 is fastest on a busy '
                         'machine)')
     parser.add_argument('--holdout-labelled', type=int, default=0, metavar='N',
-                        help='leave N labelled instants out of training and report the '
-                        "model's error on them (px, mm) at the end (0 = off)")
+                        help="leave N labelled instants (every subject's labels there) out "
+                        "of training and report the model's error on them at the end: every "
+                        "subject's, pooled and per subject, in crops around each (px, as "
+                        '--validation-labels), and with labels of one subject also as '
+                        '`monet process` runs the model (px, mm) (0 = off)')
     from monet_ros.commands.labels import add_label_arguments
     add_label_arguments(parser)
     group = parser.add_argument_group('training configuration (TrainConfig)')
@@ -68,6 +71,13 @@ def add_arguments(parser):
         default = COMMAND_DEFAULTS.get(f.name, f.default)
         group.add_argument(flag, dest=f.name, type=kind, default=None,
                            help=f'{f.metadata["description"]} (default {default!r})')
+    from monet_ros.commands.common import add_subject_settings_arguments
+    teacher = parser.add_argument_group(
+        'distillation teacher of several subjects (--distill-rounds N with labels of several '
+        'subjects: the teacher runs `monet process --subjects S --filter optim`, S the most '
+        "subjects labelled at an instant; these are that command's options, lengths in mm "
+        "whatever the rig's unit)")
+    add_subject_settings_arguments(teacher, help_prefix='teacher: ')
 
 
 def parse_bool(text):
@@ -126,6 +136,7 @@ def run(args):
 
     options = TrainRunOptions(max_instants=args.max_instants, threads=args.threads)
     config = config_from_args(args)
+    check_teacher_options(args, config.distill_rounds > 0)      # before any file is read
     check_device('monet train', None if config.device == 'auto' else config.device)
     check_threads('monet train', options.threads)
     world, device = distributed.init_from_env(config.device)     # a torchrun job, if any
@@ -162,6 +173,8 @@ def run(args):
         if 'is not a keypoint of the skeleton' not in str(error):
             raise
         raise LabelError(f'{error} [{said}]') from None
+    # the teacher's options once the labels say how many subjects (one line, before notes)
+    teacher = check_teacher_options(args, config.distill_rounds > 0, recording.num_subjects)
     # the skeleton and the arithmetic first (once the inputs are read: a bad input stays one
     # line), then what reading found
     notes = [f'monet train: {said}', f'monet train: {precision_note}']
@@ -176,7 +189,7 @@ def run(args):
     probe = build_model(config.architecture, recording.num_keypoints, **config.model_options())
     try:
         data = distributed.shared_training_data(recording, config, probe.input_size,
-                                                probe.heatmap_size)
+                                                probe.heatmap_size, holdout=held)
     except ValueError as error:
         raise ValueError(f'{error}; {_labels_text(recording, config)}') from None
     if args.resume and (out / 'trainer_state.pt').exists():
@@ -211,7 +224,7 @@ def run(args):
                 trainer, parts['bag'], rig=args.rig or parts['rig'],
                 camera_map=label_options_from_args(args).camera_map,
                 rig_units=args.rig_units, skeleton=args.skeleton,
-                progress=not args.no_progress)
+                progress=not args.no_progress, **teacher)
         else:
             summary = trainer.run(progress=not args.no_progress)
     except RuntimeError as error:
@@ -229,16 +242,10 @@ def run(args):
           f'({fit["median_heat"]:.2f} heatmap px), mean {fit["mean_px"]:.2f} px, p90 '
           f'{fit["p90_px"]:.2f} px ({fit["count"]} keypoints)', file=sys.stderr)
     if summary.get('validation'):
-        v = summary['validation']
-        print(f'error on the held-out validation labels (--validation-labels): median '
-              f'{v["median_px"]:.2f} px, mean {v["mean_px"]:.2f} px ({v["count"]} keypoints of '
-              f'{len(data.validation_instants)} instants, never trained on'
-              + (', every subject labelled there' if v.get('subjects') else '') + ')',
-              file=sys.stderr)
-        for subject, e in v.get('subjects', {}).items():
-            print(f'  subject {subject}: median {e["median_px"]:.2f} px, mean '
-                  f'{e["mean_px"]:.2f} px ({e["count"]} keypoints, in crops around it)',
-                  file=sys.stderr)
+        for line in scored_lines('error on the held-out validation labels '
+                                 '(--validation-labels)', summary['validation'],
+                                 len(data.validation_instants)):
+            print(line, file=sys.stderr)
     for stats in summary['bootstrap']:
         print(f'bootstrapping round {stats["round"]} at step {stats["step"]}: '
               f'{stats["pseudo_labels"]} pseudo-labels (peak cut-off {stats["cutoff"]:.3g})',
@@ -249,21 +256,74 @@ def run(args):
         for message in summary['warnings']:
             print(f'  WARNING: {message}', file=sys.stderr)
     if held_path is not None:
-        from monet_ros.learning.recording import find_recording_parts
-        parts = find_recording_parts(args.data)
-        figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
-                                held_path, recording,
-                                label_options_from_args(args).camera_map, args.rig_units)
-        summary['holdout'] = {'instants': held.tolist(), **figures}
-        print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
-              f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '
-              f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.1f} mm, mean '
-              f'{figures["mm_mean"]:.1f} mm (rig in {recording.cameras[0].units}), coverage '
-              f'{100 * figures["coverage"]:.0f}% '
-              '(as monet process runs the model)', file=sys.stderr)
+        # every subject's, in crops around each (as --validation-labels scores)
+        crops = trainer.holdout_error()
+        summary['holdout'] = {'instants': held.tolist(), 'crops': crops}
+        for line in scored_lines(f'monet train: held-out labelled instants {held.tolist()} '
+                                 '(--holdout-labelled), in crops around each subject',
+                                 crops, len(held)):
+            print(line, file=sys.stderr)
+        if recording.num_subjects == 1:        # as `monet process` runs the model
+            from monet_ros.learning.recording import find_recording_parts
+            parts = find_recording_parts(args.data)
+            figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
+                                    held_path, recording,
+                                    label_options_from_args(args).camera_map, args.rig_units)
+            summary['holdout'].update(figures)
+            print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
+                  f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '
+                  f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.1f} mm, '
+                  f'mean {figures["mm_mean"]:.1f} mm (rig in {recording.cameras[0].units}), '
+                  f'coverage {100 * figures["coverage"]:.0f}% '
+                  '(as monet process runs the model)', file=sys.stderr)
+        else:
+            print('monet train: the held-out instants hold several subjects: not scored as '
+                  '`monet process` runs the model (one subject; `monet eval --reference` '
+                  f"scores {held_path}, subject 0's labels, against a run of yours)",
+                  file=sys.stderr)
     print(json.dumps(summary, indent=1))
     distributed.shutdown()
     return 0
+
+
+def scored_lines(what, figures, instants):
+    """The lines of held-out labels scored in crops (Trainer.validation_error /
+    holdout_error figures of `instants` instants): `what`: pooled median / mean, then one
+    line per subject when several were labelled there."""
+    lines = [f'{what}: median {figures["median_px"]:.2f} px, mean {figures["mean_px"]:.2f} px '
+             f'({figures["count"]} keypoints of {instants} instants, never trained on'
+             + (', every subject labelled there' if figures.get('subjects') else '') + ')']
+    for subject, e in figures.get('subjects', {}).items():
+        lines.append(f'  subject {subject}: median {e["median_px"]:.2f} px, mean '
+                     f'{e["mean_px"]:.2f} px ({e["count"]} keypoints, in crops around it)')
+    return lines
+
+
+def check_teacher_options(args, distill, subjects=None):
+    """The distillation teacher's several-subject options (add_subject_settings_arguments:
+    `monet process --subjects`' own, validated by process.subject_configs): ValueError
+    naming the first one given without --distill-rounds, or (subjects: the most labelled
+    at an instant, once the labels are read) with labels of one subject, or with a bad
+    value. Returns train_with_distillation's {subjects, association, tracker} ({} with one
+    subject or before the labels are read)."""
+    from monet_ros.commands.common import check_subject_only_options
+    from monet_ros.commands.train_distill import teacher_subject_configs
+    check_subject_only_options(
+        args, distill, 'monet train', needs='--distill-rounds N (the teacher of labels of '
+        'several subjects)', without='has no distillation teacher without it')
+    if subjects is None:
+        if distill:                    # the values, before the recording is read
+            teacher_subject_configs(args, 2)
+        return {}
+    check_subject_only_options(
+        args, not distill or subjects > 1, 'monet train',
+        needs='labels of several subjects (a subject column; the teacher then runs `monet '
+        'process --subjects N`)', without='has labels of one subject: its teacher runs `monet '
+        'process` on one')
+    if not distill or subjects < 2:
+        return {}
+    return dict(zip(('subjects', 'association', 'tracker'),
+                    teacher_subject_configs(args, subjects)))
 
 
 def skeleton_line(skeleton, given):

@@ -10,7 +10,10 @@ teacher checkpoint and `monet process` output stay in OUT/distill/ for inspectio
 
 With labels of several subjects per instant the teacher runs with `--subjects S` (S: the
 most subjects labelled at an instant) and each subject's crop rows get its own identity's
-reprojected 3D (distill_round, learning.distill.match_identities).
+reprojected 3D (distill_round, learning.distill.match_identities). Its several-subject
+settings are `monet train`'s options of the same names as `monet process --subjects`'
+(--link-mm, --gate-mm, ...: commands.common.add_subject_settings_arguments, in mm whatever
+the rig's unit; teacher_subject_configs).
 
 The exact control of a distillation run is the same run at lambda_d 0: the same rounds,
 teacher runs and crops, no L_D.
@@ -25,14 +28,32 @@ def _say(line):
     print(f'monet train: {line}', file=sys.stderr, flush=True)
 
 
+def teacher_process_config():
+    """The commands.process.ProcessConfig of the teacher's `monet process` run: `monet
+    process`' defaults."""
+    from monet_ros.commands.process import ProcessConfig
+    return ProcessConfig()
+
+
+def teacher_subject_configs(args, subjects):
+    """(SubjectsConfig, AssociationConfig, TrackerConfig) of the teacher's `monet process
+    --subjects N` run from `monet train`'s teacher options (commands.common.
+    add_subject_settings_arguments; process.subject_configs: the same validation, errors
+    naming the option), N = `subjects`, the association on teacher_process_config()."""
+    from monet_ros.commands.process import subject_configs
+    return subject_configs(args, subjects, teacher_process_config())
+
+
 def train_with_distillation(trainer, bag, rig=None, camera_map=(), rig_units=None,
-                            skeleton=None, progress=True, say=_say, subjects=None):
+                            skeleton=None, progress=True, say=_say, subjects=None,
+                            association=None, tracker=None):
     """Train `trainer` to config.steps, then its config.distill_rounds rounds (resumes in
     the round trainer.distill_round where a resumed trainer stands). bag: the training
     recording (rosbag2 folder / .mcap) for the teacher's `monet process` run; rig,
     camera_map, rig_units, skeleton: as `monet process` takes them (skeleton: preset or
-    YAML, for the filter's bone term); subjects: distill_round's. Returns the last
-    Trainer.run summary with `distill`: a list of each round's figures (distill_round)."""
+    YAML, for the filter's bone term); subjects, association, tracker: distill_round's.
+    Returns the last Trainer.run summary with `distill`: a list of each round's figures
+    (distill_round)."""
     c = trainer.config
     rounds = []
     while True:
@@ -43,20 +64,24 @@ def train_with_distillation(trainer, bag, rig=None, camera_map=(), rig_units=Non
         rounds.append(distill_round(trainer, trainer.distill_round + 1, bag, rig=rig,
                                     camera_map=camera_map, rig_units=rig_units,
                                     skeleton=skeleton, progress=progress, say=say,
-                                    subjects=subjects))
+                                    subjects=subjects, association=association,
+                                    tracker=tracker))
     summary['distill'] = rounds
     return summary
 
 
 def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, skeleton=None,
-                  progress=True, say=_say, subjects=None):
+                  progress=True, say=_say, subjects=None, association=None, tracker=None):
     """Round `index` (1-based): the teacher's checkpoint (OUT/distill/teacher_<index>.pt),
     its `monet process --filter optim` run over `bag` (OUT/distill/round_<index>/), the
     distilled pseudo-labels set on the trainer. Returns the round's figures (counts of
     learning.distill.Distilled, frames, seconds, median weight).
 
     Several subjects (labels with up to N > 1 subjects per instant; subjects: a
-    subjects.detection.SubjectsConfig, default SubjectsConfig(subjects=N)): the teacher
+    subjects.detection.SubjectsConfig, default SubjectsConfig(subjects=N); association: a
+    subjects.AssociationConfig, tracker: a subjects.tracking.TrackerConfig, default `monet
+    process --subjects`' (teacher_subject_configs makes all three from `monet train`'s
+    options); lengths in mm whatever the rig's unit): the teacher
     runs as `monet process --subjects N --filter optim` (one filter per identity), each of
     its identities is matched to the crop rows of the training data instant by instant
     (learning.distill.match_identities: the identity centred in the row's crop, Hungarian,
@@ -65,7 +90,13 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
     rows) get their own subject's. The figures add `subjects`, `rows_unmatched` (rows of
     instants the teacher ran on that got no identity) and `rows_per_subject` (rows that got
     a pseudo-label)."""
-    from monet_ros.commands.process import ProcessConfig, process_recording
+    from monet_ros.commands.common import (
+        ASSOCIATION_OPTIONS,
+        changed_options,
+        subjects_options,
+        tracker_options,
+    )
+    from monet_ros.commands.process import process_recording
     from monet_ros.learning.distill import align_to_instants, distilled_labels
     from monet_ros.models import save_checkpoint
     from monet_ros.temporal import FilterConfig
@@ -80,7 +111,7 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
         shutil.rmtree(run_dir)
     teacher = folder / f'teacher_{index}.pt'
     save_checkpoint(teacher, trainer.model, trainer.metadata())
-    process = ProcessConfig()
+    process = teacher_process_config()
     filter_config = FilterConfig(method='optim',
                                  confidence_threshold=process.confidence_threshold,
                                  threshold_px=process.threshold_px)
@@ -88,8 +119,12 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
         from monet_ros.subjects.detection import SubjectsConfig
         subjects = SubjectsConfig(subjects=trainer.data.recording.num_subjects)
     several = subjects is not None and subjects.subjects > 1
-    as_process = f'--subjects {subjects.subjects} --filter optim' if several else \
-        '--filter optim'
+    as_process = '--filter optim'
+    if several:      # the teacher's several-subject settings other than the defaults
+        given = (changed_options(subjects, subjects_options())
+                 + (changed_options(association, ASSOCIATION_OPTIONS) if association else [])
+                 + (changed_options(tracker, tracker_options()) if tracker else []))
+        as_process = ' '.join([f'--subjects {subjects.subjects}', *given, as_process])
     say(f'distillation round {index} of {c.distill_rounds} at step {trainer.step_count}: '
         f'the detector runs over {bag} as `monet process {as_process}` -> {run_dir}'
         + (f' (the labels hold up to {subjects.subjects} subjects per instant)'
@@ -98,7 +133,9 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
                                 device=str(trainer.device), skeleton=skeleton,
                                 progress=progress, exports=('csv',), camera_map=camera_map,
                                 precision=trainer.precision, filter_config=filter_config,
-                                rig_units=rig_units, subjects=subjects if several else None)
+                                rig_units=rig_units, subjects=subjects if several else None,
+                                association=association if several else None,
+                                tracker=tracker if several else None)
     data = trainer.data
     recording = data.recording
     T, V, C, _ = data.labels.shape

@@ -1,10 +1,13 @@
 """Leave-instants-out check for `monet train --holdout-labelled N`: N labelled instants
-(spread over the labelled ones: learning.trainer.spread_instants, the rule of the online
-learner's validation labels too) lose their labels before training;
-after training, the saved model runs over the recording exactly as `monet process` runs
-it (tracked crops), and its 2D detections and 3D points are scored against those labels
-(pixels on the labelled views; mm against the labels' own triangulation) with
-monet_ros.evaluation.reference - an accuracy figure, unlike the reprojection error.
+(spread over the instants where any subject is labelled: learning.trainer.spread_instants,
+the rule of the online learner's validation labels too) lose every subject's labels before
+training (learning.trainer.TrainingData's holdout). After training they are scored two
+ways: every subject's, pooled and per subject, in crops around each subject framed without
+its labels, as `--validation-labels` scores its instants (Trainer.holdout_error); and,
+with labels of one subject, as `monet process` runs the saved model (tracked crops), its
+2D detections and 3D points against those labels (pixels on the labelled views; mm against
+the labels' own triangulation) with monet_ros.evaluation.reference - an accuracy figure,
+unlike the reprojection error.
 """
 from pathlib import Path
 import tempfile
@@ -24,8 +27,11 @@ def choose_holdout(labelled, n):
 
 
 def hold_out(recording, n, out):
-    """Remove the labels of n labelled instants from `recording` (in place) and write them
-    to OUT/heldout_labels.csv -> (instant indices, path) or ((), None) when n == 0."""
+    """Choose n labelled instants of `recording` (choose_holdout of Recording.
+    labelled_instants: any subject's) and write subject 0's labels there to
+    OUT/heldout_labels.csv (what `monet eval --reference` scores, one subject) -> (instant
+    indices, path) or ((), None) when n == 0. The recording is not changed: TrainingData
+    removes every subject's labels there (its holdout)."""
     from monet_ros.labels import label_rows, write_labels
     held = choose_holdout(recording.labelled_instants, n)
     if not len(held):
@@ -35,10 +41,6 @@ def hold_out(recording, n, out):
     path = out / 'heldout_labels.csv'
     write_labels(path, label_rows(recording.stamps[held], [c.name for c in recording.cameras],
                                   recording.keypoints, recording.labels[held]))
-    recording.labels[held] = np.nan
-    # the other subjects' labels of those instants are held out too (not written: the
-    # held-out figures are subject 0's, as the reference labels are)
-    recording.other_labels[np.isin(recording.other_instants, held)] = np.nan
     return held, path
 
 

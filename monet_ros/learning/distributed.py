@@ -226,19 +226,19 @@ class DistributedTrainer(Trainer):
         return trainer
 
 
-def shared_training_data(recording, config, input_size, heatmap_size):
+def shared_training_data(recording, config, input_size, heatmap_size, holdout=()):
     """trainer.TrainingData on every rank, its spatiotemporal pseudo-labels (optical-flow
     tracking of the labels, every labelled subject's) computed once by rank 0 and
-    broadcast."""
+    broadcast; holdout: TrainingData's (the instants of --holdout-labelled)."""
     from monet_ros.learning.trainer import TrainingData
 
     world = current_world()
     if not world.distributed:
-        return TrainingData(recording, config, input_size, heatmap_size)
+        return TrainingData(recording, config, input_size, heatmap_size, holdout=holdout)
     data, failure = None, None
     if world.writer:
         try:
-            data = TrainingData(recording, config, input_size, heatmap_size)
+            data = TrainingData(recording, config, input_size, heatmap_size, holdout=holdout)
             if config.spec.temporal:
                 data.tracked_labels()
                 for s in data.other_subject_ids:       # each subject's own tracks
@@ -253,5 +253,5 @@ def shared_training_data(recording, config, input_size, heatmap_size):
         raise ValueError(failure)
     if data is None:
         data = TrainingData(recording, config, input_size, heatmap_size, tracked=tracked,
-                            subject_tracked=subject_tracked)
+                            subject_tracked=subject_tracked, holdout=holdout)
     return data

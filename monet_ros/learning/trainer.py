@@ -136,15 +136,18 @@ def spread_instants(candidates, n):
     return candidates[np.unique(picks)]
 
 
-def validation_split(labels, held_out, fraction):
+def validation_split(labelled, held_out, fraction):
     """(K,) sorted instants whose labels are held out for validation (never trained on).
 
-    labels (T, V, C, 2) px, NaN = none; held_out: the eval_fraction tail (already never
-    trained on). fraction 0 -> none; else the target is max(1, round(fraction x labelled
-    instants)): the tail's labelled instants count first, the rest are spread_instants of
-    the labelled instants before the tail, always leaving at least one of those to train on.
-    Deterministic: a resumed run (same labels, tail and fraction) gets the same split."""
-    labelled = np.flatnonzero(np.isfinite(labels[..., 0]).any(axis=(1, 2)))
+    labelled (L,) the labelled instants to choose among: those where ANY subject is
+    labelled (Recording.labelled_instants; a labels table of several subjects counts an
+    instant labelled for subject 1 only too); held_out: the eval_fraction tail (already
+    never trained on). fraction 0 -> none; else the target is max(1, round(fraction x
+    labelled instants)): the tail's labelled instants count first, the rest are
+    spread_instants of the labelled instants before the tail, always leaving at least one
+    of those to train on. Deterministic: a resumed run (same labels, tail and fraction)
+    gets the same split."""
+    labelled = np.unique(np.asarray(labelled, np.int64))
     if fraction <= 0 or labelled.size == 0:
         return np.zeros(0, dtype=np.int64)
     target = max(1, int(round(fraction * labelled.size)))
@@ -196,23 +199,40 @@ class TrainingData:
     one subject has num_rows = T and unlabeled_rows = unlabeled_instants: it trains as
     before.
 
-    Validation labels of several subjects: the validation instants are chosen among subject
-    0's labelled instants (validation_split) and every subject labelled there is held out
-    and scored: validation_rows (M,) crop rows (the instants for subject 0, T + j for other
-    subject j), validation_row_labels (M, V, C, 2) px and validation_row_subjects (M,); an
+    Validation labels of several subjects: the validation instants are chosen among the
+    instants where any subject is labelled (validation_split of Recording.
+    labelled_instants) and every subject labelled there is held out and scored:
+    validation_rows (M,) crop rows (the instants for subject 0, T + j for other subject j),
+    validation_row_labels (M, V, C, 2) px and validation_row_subjects (M,) (scored_rows); an
     other subject's validation row is framed without its labels, by framing_boxes (its
     crop rule over its other instants' labels and tracks), as subject 0's validation views
     are. Distillation's pseudo-labels go to every subject's rows (Trainer.set_distilled,
-    commands.train_distill)."""
+    commands.train_distill).
+
+    holdout (H,) instants (`monet train --holdout-labelled`, commands.train_holdout): every
+    subject's labels there are removed before anything is made of them (self.recording is
+    the recording without them: as before subjects, the instants stay unlabelled training
+    instants, their images used without labels) and scored as the validation labels are:
+    holdout_instants, holdout_rows / holdout_row_labels / holdout_row_subjects (the
+    recording's labels there, every subject's; framed without them). Validation instants
+    are chosen among the other labelled instants."""
 
     def __init__(self, recording, config, input_size, heatmap_size, tracked=None,
-                 subject_tracked=None):
+                 subject_tracked=None, holdout=()):
+        self.holdout_instants = np.unique(np.asarray(holdout, np.int64))
+        source = recording          # the labels scored at the holdout instants
+        if len(self.holdout_instants):
+            labels = recording.labels.copy()
+            labels[self.holdout_instants] = np.nan
+            other = recording.other_labels.copy()
+            other[np.isin(recording.other_instants, self.holdout_instants)] = np.nan
+            recording = replace(recording, labels=labels, other_labels=other)
         self.recording = recording
         self.config = config
         self.train, self.held_out = split_instants(recording.num_instants, config.eval_fraction)
-        # among the instants labelled for subject 0; the other subjects of those instants
-        # are held out of training with them and scored too (validation_rows)
-        self.validation_instants = validation_split(recording.labels, self.held_out,
+        # among the instants where any subject is labelled; every subject of those instants
+        # is held out of training with them and scored (validation_rows)
+        self.validation_instants = validation_split(recording.labelled_instants, self.held_out,
                                                     config.validation_labels)
         self.validation_labels = recording.labels[self.validation_instants].copy()
         self.labels = recording.labels.copy()
@@ -272,16 +292,11 @@ class TrainingData:
             self.unlabeled_instants,
             T + J + np.arange(U * len(self.other_subject_ids))]).astype(np.int64)
         # the validation rows: subject 0's at the validation instants (the instants' rows),
-        # then every other subject labelled there (its row T + j)
-        at_validation = np.isin(self.other_instants, self.validation_instants) & \
-            np.isfinite(recording.other_labels[..., 0]).any(axis=(1, 2))
-        self.validation_rows = np.concatenate([
-            self.validation_instants, T + np.flatnonzero(at_validation)]).astype(np.int64)
-        self.validation_row_labels = np.concatenate([
-            self.validation_labels, recording.other_labels[at_validation]])
-        self.validation_row_subjects = np.concatenate([
-            np.zeros(len(self.validation_instants), np.int64),
-            recording.other_subjects[at_validation]]).astype(np.int64)
+        # then every other subject labelled there (its row T + j); the holdout's alike
+        (self.validation_rows, self.validation_row_labels, self.validation_row_subjects,
+         at_validation) = self.scored_rows(self.validation_instants, recording)
+        (self.holdout_rows, self.holdout_row_labels, self.holdout_row_subjects,
+         at_holdout) = self.scored_rows(self.holdout_instants, source)
         self._framing_boxes = {}
         boxes, rows = self.boxes, None
         if J:       # one more row of crops per other subject
@@ -292,7 +307,7 @@ class TrainingData:
             if config.box_source not in ('fixed', 'full'):
                 # a validation row is framed without its labels, as subject 0's are: by
                 # its subject's crop rule over the other instants' labels (and tracks)
-                for j in np.flatnonzero(at_validation):
+                for j in np.flatnonzero(at_validation | at_holdout):
                     s = int(recording.other_subjects[j])
                     other_boxes[j] = self.framing_boxes(s)[self.other_instants[j]]
             own = [other_boxes]
@@ -311,6 +326,21 @@ class TrainingData:
         found = (key[order][at] == key + 1) if len(key) else np.zeros(0, bool)
         self.next_row = np.full(len(self.row_instants), -1, np.int64)
         self.next_row[self.unlabeled_rows[found]] = self.unlabeled_rows[order[at[found]]]
+
+    def scored_rows(self, instants, source):
+        """The crop rows that score the labels of `instants` (K,) (validation or holdout),
+        every subject's: (rows (M,): the instants for subject 0, then T + j for each other
+        labelled (instant, subject) j there; labels (M, V, C, 2) px from `source` (a
+        Recording: its labels and other_labels); subjects (M,); at (J,) bool: the other
+        rows j among them)."""
+        T = self.recording.num_instants
+        at = np.isin(self.other_instants, instants) & \
+            np.isfinite(source.other_labels[..., 0]).any(axis=(1, 2))
+        rows = np.concatenate([instants, T + np.flatnonzero(at)]).astype(np.int64)
+        labels = np.concatenate([source.labels[instants], source.other_labels[at]])
+        subjects = np.concatenate([np.zeros(len(instants), np.int64),
+                                   source.other_subjects[at]]).astype(np.int64)
+        return rows, labels, subjects, at
 
     def framing_boxes(self, subject):
         """(T, V, 4) crop boxes of subject `subject` (>= 1) at every instant: subject 0's
@@ -1286,18 +1316,30 @@ class Trainer:
         """label_error of every subject's validation labels (TrainingData.validation_rows:
         each subject's detections in the crops of its own row) pooled over the subjects;
         with several subjects labelled there, `subjects` {subject: its own label_error} too
-        (a subject with no validation label is left out). Raises ValueError when there is
-        no validation label."""
+        (a subject with no validation label is left out): scored_error. Raises ValueError
+        when there is no validation label."""
         d = self.data
-        out = self.label_error(d.validation_rows, d.validation_row_labels)
-        subjects = np.unique(d.validation_row_subjects)
-        if len(subjects) > 1:
+        return self.scored_error(d.validation_rows, d.validation_row_labels,
+                                 d.validation_row_subjects)
+
+    def holdout_error(self):
+        """scored_error of the holdout instants' labels (TrainingData.holdout_rows: `monet
+        train --holdout-labelled`), every subject's, as validation_error scores the
+        validation labels. Raises ValueError when there is none."""
+        d = self.data
+        return self.scored_error(d.holdout_rows, d.holdout_row_labels, d.holdout_row_subjects)
+
+    def scored_error(self, rows, labels, subjects):
+        """label_error of crop rows (M,) against labels (M, V, C, 2) px pooled over the
+        subjects, and with several subjects (subjects (M,)) `subjects`: {subject: its own
+        label_error} for each subject with a label among them."""
+        out = self.label_error(rows, labels)
+        if len(np.unique(subjects)) > 1:
             out['subjects'] = {}
-            for s in subjects:
-                mine = d.validation_row_subjects == s
-                if np.isfinite(d.validation_row_labels[mine][..., 0]).any():
-                    out['subjects'][int(s)] = self.label_error(d.validation_rows[mine],
-                                                               d.validation_row_labels[mine])
+            for s in np.unique(subjects):
+                mine = subjects == s
+                if np.isfinite(labels[mine][..., 0]).any():
+                    out['subjects'][int(s)] = self.label_error(rows[mine], labels[mine])
         return out
 
     def label_error(self, instants, labels):

@@ -119,3 +119,92 @@ def test_match_identities_pairs_by_the_crops_not_by_the_numbers(scene):
     labels[0, :2], labels[1, 2:] = uv[2, :2, 0], uv[2, 2:, 1]    # some views, one subject each
     by_label, _ = match_identities(Xr, t, row_instants, full, cams, row_points=labels)
     np.testing.assert_array_equal(by_label[:2], [1, 0])
+
+
+def teacher_of(folder, *options):
+    """train_with_distillation's teacher settings of `monet train ... OPTIONS` (the real
+    parser and checks), the labels holding 2 subjects."""
+    from monet_ros.cli import build_parser
+    from monet_ros.commands.train import check_teacher_options
+    args = build_parser().parse_args(['train', str(folder), '--out', 'o', '--distill-rounds',
+                                      '1', *options])
+    return check_teacher_options(args, True, 2)
+
+
+def test_the_teacher_options_of_monet_train_reach_the_teacher_in_any_rig_unit(scene,
+                                                                               tmp_path):
+    """`monet train --link-mm / --duplicate-mm ...` (`monet process --subjects`' options of
+    those names, in mm) are the teacher's (before: no such option of `monet train`). The
+    blob subjects are 0.32 m across, their keypoints 0.34 m apart: --link-mm 450 links
+    them and each subject's rows get its own 3D; --link-mm 300 links no keypoint, so the
+    teacher finds no subject (a misread unit would link everything in m or nothing in mm);
+    --duplicate-mm 1000 takes the two subjects, 0.7 m apart, for one body: only one
+    subject's rows get pseudo-labels. The rig in mm gives the same pseudo-labels as in m."""
+    from monet_ros.geometry import load_rig, save_rig
+    from monet_ros.geometry.units import rescale
+    from monet_ros.subjects import AssociationConfig
+    from monet_ros.subjects.tracking import TrackerConfig
+    folder, cams, X, uv, root, skeleton, net = scene
+    teacher = teacher_of(folder, '--link-mm', '450', '--gate-mm', '350')
+    # written out: the settings a user typed, the rest `monet process`' defaults
+    assert teacher['subjects'] == SubjectsConfig(subjects=2, link_mm=450.0)
+    assert teacher['tracker'] == TrackerConfig(gate_mm=350.0)
+    assert teacher['association'] == AssociationConfig()
+    assert teacher_of(folder)['subjects'] == SubjectsConfig(subjects=2)
+    rigs = {'m': folder / 'rig.yaml', 'mm': tmp_path / 'rig_mm.yaml'}
+    save_rig(rigs['mm'], rescale(load_rig(rigs['m']), 'mm'))
+    rec = load_recording(folder, labels=root / 'labels.csv', skeleton=list(NAMES))
+    config = TrainConfig(mode='supervised', steps=1, **CONFIG)
+    data = TrainingData(rec, config, (64, 64), (16, 16))
+
+    def teach(units, *options):
+        trainer = Trainer(config, TrainingData(rec, config, (64, 64), (16, 16)),
+                          tmp_path / f'{units}{"".join(options)}')
+        trainer.model.load_state_dict(net.state_dict())
+        said = []
+        stats = distill_round(trainer, 1, folder / 'recording', rig=rigs[units],
+                              skeleton=skeleton, progress=False, say=said.append,
+                              **teacher_of(folder, *options))
+        return stats, trainer.distilled.copy(), said[0]
+
+    stats, points, said = teach('m', '--link-mm', '450')
+    assert 'as `monet process --subjects 2 --link-mm 450 --filter optim`' in said, said
+    assert stats['rows_unmatched'] == 0 and stats['kept'] > 80
+    truth = uv[data.row_instants]
+    for s in (0, 1):
+        mine = data.row_subjects == s
+        own = np.linalg.norm(points[mine] - truth[mine][:, :, SWAP[s]], axis=-1)
+        ok = np.isfinite(own)
+        assert ok.sum() > 40 and np.median(own[ok]) < 2.0, (s, ok.sum())
+    for units in ('m', 'mm'):
+        none = teach(units, '--link-mm', '300')[0]
+        assert none['kept'] == 0 and none['rows_per_subject'] == {0: 0, 1: 0}, (units, none)
+    one, one_points, said = teach('m', '--duplicate-mm', '1000')
+    assert '--duplicate-mm 1000' in said
+    assert 0 < one['kept'] < stats['kept'] and 0 in one['rows_per_subject'].values()
+    one_mm, one_mm_points, _ = teach('mm', '--duplicate-mm', '1000')
+    assert one_mm['kept'] == one['kept']
+    np.testing.assert_allclose(one_mm_points, one_points, atol=1e-3, equal_nan=True)
+
+
+@pytest.mark.parametrize('labels, options, error', [
+    ('labels.csv', ['--link-mm', '450'], '--link-mm applies only with --distill-rounds N'),
+    ('labels0.csv', ['--distill-rounds', '1', '--gate-mm', '300'],
+     '--gate-mm applies only with labels of several subjects'),
+    ('labels.csv', ['--distill-rounds', '1', '--link-mm', '-1'],
+     "--link-mm: SubjectsConfig: parameter 'link_mm': must be > 0.0, got -1.0"),
+])
+def test_a_teacher_option_monet_train_cannot_use_is_one_line(scene, tmp_path, capsys, labels,
+                                                            options, error):
+    from monet_ros.cli import main as monet
+    folder, cams, X, uv, root, skeleton, net = scene
+    if not (root / 'labels0.csv').exists():          # subject 0's rows only
+        lines = (root / 'labels.csv').read_text().splitlines()
+        (root / 'labels0.csv').write_text('\n'.join(
+            [lines[0].rsplit(',', 1)[0]] + [r.rsplit(',', 1)[0] for r in lines[1:]
+                                            if r.endswith(',0')]) + '\n')
+    code = monet(['train', str(folder), '--labels', str(root / labels), '--skeleton',
+                  str(skeleton), '--out', str(tmp_path / 'run'), '--steps', '1',
+                  '--architecture', 'small', '--device', 'cpu', *options])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and error in err[0], err

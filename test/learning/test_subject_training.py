@@ -316,6 +316,53 @@ def test_a_resume_with_other_subjects_is_refused_by_name(scene, tmp_path):
         Trainer.resume(tmp_path, TrainingData(one, config, (48, 48), (12, 12)))
 
 
+def brute_force_errors(trainer, rec, uv, instants, subject, train_labelled):
+    """(N,) px distances of `trainer`'s detections of `subject` at `instants` (each view
+    cropped around that subject's labels at its nearest labelled train instant in that view,
+    `train_labelled`: the earlier on a tie, as the labels crop rule frames a view without
+    labels) to its ground-truth projection uv, over the views and keypoints it is seen at."""
+    instants = np.asarray(instants)
+    train_labelled = np.asarray(train_labelled)
+    boxes = np.full((len(instants), 4, 4), np.nan)
+    for i, t in enumerate(instants):
+        for v in range(4):
+            have = train_labelled[np.isfinite(uv[train_labelled, v, subject, :, 0]).any(-1)]
+            near = have[np.abs(have - t).argmin()]
+            boxes[i, v] = boxes_from_points(uv[near, v, subject], aspect=1.0, margin=0.25)
+    cache = CropCache(rec, boxes, (48, 48), (12, 12), 1.3, instants=instants)
+    rows, views = np.repeat(np.arange(len(instants)), 4), np.tile(np.arange(4), len(instants))
+    batch = cache.views(rows, views)
+    trainer.model.eval()
+    with torch.no_grad():
+        heat = trainer.model(batch.images)[-1].float()
+    peaks, _ = decode_heatmaps(heat)
+    A_inv = np.linalg.inv(batch.A)
+    points = np.einsum('nij,ncj->nci', A_inv[:, :2, :2], peaks.numpy().astype(float)) + \
+        A_inv[:, None, :2, 2]
+    truth = uv[instants[rows], views, subject]
+    err = np.linalg.norm(points - truth, axis=-1)
+    return err[np.isfinite(truth[..., 0])]
+
+
+def check_against_brute_force(got, trainer, rec, uv, instants, train_labelled):
+    """Assert figures `got` (Trainer.scored_error's) equal brute_force_errors of each subject
+    s at instants[s] (train_labelled[s]: its labelled train instants) and pooled; returns
+    {subject: errors}."""
+    brute = {}
+    for s in (0, 1):
+        at = np.atleast_1d(instants[s] if isinstance(instants, dict) else instants)
+        brute[s] = brute_force_errors(trainer, rec, uv, at, s, train_labelled[s])
+        e = got['subjects'][s]
+        assert e['count'] == brute[s].size == np.isfinite(uv[at, :, s, :, 0]).sum()
+        assert e['median_px'] == pytest.approx(np.median(brute[s]), abs=1e-6)
+        assert e['mean_px'] == pytest.approx(np.mean(brute[s]), abs=1e-6)
+    pooled = np.concatenate([brute[0], brute[1]])
+    assert got['count'] == pooled.size
+    assert got['median_px'] == pytest.approx(np.median(pooled), abs=1e-6)
+    assert got['mean_px'] == pytest.approx(np.mean(pooled), abs=1e-6)
+    return brute
+
+
 def test_validation_labels_score_every_subject_in_its_own_crops(scene):
     """--validation-labels with two subjects per instant: every subject labelled at a
     validation instant is scored, in crops around it framed without its labels (its
@@ -332,36 +379,9 @@ def test_validation_labels_score_every_subject_in_its_own_crops(scene):
     trainer = Trainer(config, data)
     trainer.run(progress=False)
     got = trainer.validation_error()
-    train_labelled = np.array([0, 6, 9, 15])                # the labelled train instants
-    brute = {}
-    for s in (0, 1):
-        boxes = np.full((2, 4, 4), np.nan)
-        for i, t in enumerate((3, 12)):
-            for v in range(4):         # nearest train instant labelling s in view v (earlier)
-                have = train_labelled[np.isfinite(uv[train_labelled, v, s, :, 0]).any(-1)]
-                near = have[np.abs(have - t).argmin()]
-                boxes[i, v] = boxes_from_points(uv[near, v, s], aspect=1.0, margin=0.25)
-        cache = CropCache(rec, boxes, (48, 48), (12, 12), 1.3, instants=np.array([3, 12]))
-        rows, views = np.repeat([0, 1], 4), np.tile(np.arange(4), 2)
-        batch = cache.views(rows, views)
-        trainer.model.eval()
-        with torch.no_grad():
-            heat = trainer.model(batch.images)[-1].float()
-        peaks, _ = decode_heatmaps(heat)
-        A_inv = np.linalg.inv(batch.A)
-        points = np.einsum('nij,ncj->nci', A_inv[:, :2, :2], peaks.numpy().astype(float)) + \
-            A_inv[:, None, :2, 2]
-        truth = uv[np.array([3, 12])[rows], views, s]
-        err = np.linalg.norm(points - truth, axis=-1)
-        brute[s] = err[np.isfinite(truth[..., 0])]
-        e = got['subjects'][s]
-        assert e['count'] == brute[s].size == np.isfinite(uv[[3, 12], :, s, :, 0]).sum()
-        assert e['median_px'] == pytest.approx(np.median(brute[s]), abs=1e-6)
-        assert e['mean_px'] == pytest.approx(np.mean(brute[s]), abs=1e-6)
+    brute = check_against_brute_force(got, trainer, rec, uv, (3, 12), {0: [0, 6, 9, 15],
+                                                                      1: [0, 6, 9, 15]})
     pooled = np.concatenate([brute[0], brute[1]])
-    assert got['count'] == pooled.size
-    assert got['median_px'] == pytest.approx(np.median(pooled), abs=1e-6)
-    assert got['mean_px'] == pytest.approx(np.mean(pooled), abs=1e-6)
     summary = trainer.run(progress=False)          # no step left: the summary's figure
     assert summary['validation']['subjects'][1]['mean_px'] == pytest.approx(np.mean(brute[1]))
     assert trainer.validate(instants=[])['labelled_keypoints'] == pooled.size
@@ -389,3 +409,82 @@ def test_monet_train_reports_the_validation_error_per_subject(scene, repo_root, 
         'labelled there)' in done.stderr, done.stderr
     for s in ('0', '1'):
         assert f'  subject {s}: median {v["subjects"][s]["median_px"]:.2f} px' in done.stderr
+
+
+def test_validation_instants_are_chosen_where_any_subject_is_labelled(scene, tmp_path):
+    """Subject 0 labelled at 0, 3, 6 and subject 1 at 9, 12, 15 (never together): the
+    validation instants are a share of the six instants where a subject is labelled (before:
+    of subject 0's three only, [3], and subject 1 was never validated), each scored for the
+    subject labelled there against a brute-force computation."""
+    folder, cams, X, uv, root = scene
+    path = tmp_path / 'apart.csv'
+    write_labels(path, [(T0 + PERIOD * t, cam.name, NAMES[c], *uv[t, v, s, c], s)
+                        for s, instants in ((0, (0, 3, 6)), (1, (9, 12, 15)))
+                        for t in instants for v, cam in enumerate(cams) for c in range(3)
+                        if np.isfinite(uv[t, v, s, c, 0])])
+    rec = load_recording(folder, labels=path, skeleton=list(NAMES))
+    config = TrainConfig(mode='supervised', steps=10, seed=1, validation_labels=0.34,
+                         **CONFIG)
+    data = TrainingData(rec, config, (48, 48), (12, 12))
+    # round(0.34 x 6) = 2 of the six, evenly spread: the middles of (0 3 6) and (9 12 15)
+    np.testing.assert_array_equal(data.validation_instants, [3, 12])
+    trainer = Trainer(config, data)
+    trainer.run(progress=False)
+    got = trainer.validation_error()
+    assert sorted(got['subjects']) == [0, 1]
+    check_against_brute_force(got, trainer, rec, uv, {0: 3, 1: 12}, {0: [0, 6], 1: [9, 15]})
+
+
+def test_holdout_instants_score_every_subject_as_the_validation_labels(scene):
+    """TrainingData's holdout (`monet train --holdout-labelled`): every subject's labels at
+    the held-out instants are out of training and scored in crops around each subject,
+    framed without them, as the validation labels are: each subject's figure and the pooled
+    one equal a brute-force computation from the ground truth (before: subject 0 only, by
+    `monet process`)."""
+    folder, cams, X, uv, root = scene
+    rec = load_recording(folder, labels=root / 'labels.csv', skeleton=list(NAMES))
+    config = TrainConfig(mode='supervised', steps=30, seed=1, **CONFIG)
+    data = TrainingData(rec, config, (48, 48), (12, 12), holdout=[3, 12])
+    np.testing.assert_array_equal(data.holdout_instants, [3, 12])
+    assert len(data.validation_instants) == 0
+    np.testing.assert_array_equal(data.holdout_row_subjects, [0, 0, 1, 1])
+    for s in (0, 1):     # the scored labels are the ground truth's projections
+        np.testing.assert_array_equal(data.holdout_row_labels[data.holdout_row_subjects == s],
+                                      uv[[3, 12], :, s])
+    assert np.isfinite(rec.labels[[3, 12]]).any()              # the recording keeps them
+    trainer = Trainer(config, data)
+    rows = trainer.labelled_pool[:, 0]
+    instants = np.where(rows < T, rows, data.other_instants[np.maximum(rows - T, 0)])
+    assert set(instants.tolist()) == {0, 6, 9, 15}             # neither 3 nor 12
+    trainer.run(progress=False)
+    got = trainer.holdout_error()
+    check_against_brute_force(got, trainer, rec, uv, (3, 12), {0: [0, 6, 9, 15],
+                                                               1: [0, 6, 9, 15]})
+
+
+def test_monet_train_reports_the_holdout_error_per_subject(scene, repo_root, tmp_path):
+    import json
+
+    from helpers.commands import run_monet_process
+    folder, cams, X, uv, root = scene
+    skeleton = tmp_path / 'blobs3.yaml'
+    skeleton.write_text('name: blobs3\nkeypoints: [a, b, c]\n')
+    done = run_monet_process(
+        repo_root, 'train', folder, '--labels', root / 'labels.csv', '--skeleton', skeleton,
+        '--out', tmp_path / 'run', '--steps', 2, '--holdout-labelled', 2,
+        '--eval-fraction', 0.25, '--architecture', 'small', '--input-size', 48, '--width',
+        16, '--batch-labelled', 4, '--mode', 'supervised', '--device', 'cpu', '--threads', 1,
+        '--no-progress')
+    assert done.returncode == 0, done.stderr
+    held = json.loads(done.stdout)['holdout']
+    # 2 of the 6 labelled instants, evenly spread (written out: the middles of 0 3 6 | 9 12 15)
+    assert held['instants'] == [3, 12]
+    crops = held['crops']
+    counts = [np.isfinite(uv[[3, 12], :, s, :, 0]).sum() for s in (0, 1)]
+    assert [crops['subjects'][s]['count'] for s in ('0', '1')] == counts
+    assert crops['count'] == sum(counts)
+    assert f'({sum(counts)} keypoints of 2 instants, never trained on, every subject ' \
+        'labelled there)' in done.stderr, done.stderr
+    for s in ('0', '1'):
+        assert f'  subject {s}: median {crops["subjects"][s]["median_px"]:.2f} px' in \
+            done.stderr
