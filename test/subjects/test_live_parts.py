@@ -199,3 +199,49 @@ def test_tiled_discovery_maps_keep_two_subjects_tracked():
             assert d[body] < 0.005, (t, d)
             assert identity.setdefault(body, int(ident)) == int(ident)
     assert core.tracker.births == 2
+
+
+def _due_frames(stamps, period_s):
+    from monet_ros.subjects.detection import discovery_due
+    previous, due = None, []
+    for i, stamp in enumerate(stamps):
+        if discovery_due(stamp, previous, period_s):
+            due.append(i)
+        previous = stamp
+    return due
+
+
+def test_discovery_is_due_in_the_first_frame_of_each_period_of_the_stamp_clock():
+    period_ns = 250_000_000
+    start = 1_767_225_600_000_000_000 + 12_345_678
+    stamps = [start + round(i * 1e9 / 30) for i in range(100)]      # 30 Hz, 3.3 s
+    # brute force: frame 0, then the first frame at or after each multiple of the period
+    expected = [0] + [next(i for i, s in enumerate(stamps) if s >= b)
+                      for b in range((start // period_ns + 1) * period_ns, stamps[-1] + 1,
+                                     period_ns)]
+    assert _due_frames(stamps, 0.25) == expected
+    assert 13 <= len(expected) <= 15                        # ~one frame in 7.5, not all 100
+    assert _due_frames(stamps, 0.0) == list(range(100))     # 0: every frame
+    assert _due_frames(stamps, 10.0) == [0]                 # longer than the run: the first
+    # frames 1/3 s apart under a 0.25 s period: every frame is the first of its window
+    assert _due_frames([start + i * 333_333_333 for i in range(10)], 0.25) == list(range(10))
+
+
+def test_detectors_that_skip_frames_still_discover_in_the_same_frames():
+    # two detectors of one rig see the same stamps; one lets a frame go (stale) that is not
+    # the first of its window: both send discovery maps in the same frames
+    start = 1_767_225_600_000_000_000
+    stamps = [start + round(i * 1e9 / 30) for i in range(60)]
+    skipped = [s for i, s in enumerate(stamps) if i not in (3, 11, 20)]
+    all_due = {stamps[i] for i in _due_frames(stamps, 0.25)}
+    some_due = {skipped[i] for i in _due_frames(skipped, 0.25)}
+    assert not {stamps[i] for i in (3, 11, 20)} & all_due   # (the skipped were not due)
+    assert some_due == all_due
+
+
+def test_a_negative_discovery_period_is_refused():
+    import pytest
+
+    from monet_ros.subjects.detection import discovery_due
+    with pytest.raises(ValueError, match='discovery period'):
+        discovery_due(0, None, -0.1)
