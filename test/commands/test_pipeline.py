@@ -78,7 +78,10 @@ def test_bad_arguments_fail_at_start(ros_env, tmp_path):
          'precision bfloat16 needs backend torch'),
         ((*run, '--detector-processes', 3),
          "parameter 'detector_processes': 3 detector processes for 2 cameras; give at most 2"),
-        ((*run, '--subjects', 0), "parameter 'subjects': must be >= 1, got 0"),
+        ((*run, '--subjects', 0),              # the option named, not fusion's parameter
+         "--subjects: SubjectsConfig: parameter 'subjects': must be >= 1, got 0"),
+        ((*run, '--subjects', 2, '--discovery-tiles', -1),
+         "--discovery-tiles: SubjectsConfig: parameter 'discovery_tiles': must be >= 0, got -1"),
         ((*run, '--skeleton', 'quadruped13'),
          "parameter 'skeleton': quadruped13 has keypoints ['nose', "),
     ]
