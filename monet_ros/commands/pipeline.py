@@ -464,6 +464,7 @@ def run(args):
     from monet_ros.nodes.fusion import FusionNode
     from monet_ros.nodes.names import PLAYED_FRAMES, node_namespace
     from monet_ros.nodes.player import PlayerConfig
+    from monet_ros.nodes.runner import EXIT_BAD_START
 
     rig = args.rig or args.bag
     cameras = list(args.cameras or [])
@@ -580,10 +581,12 @@ def run(args):
                          if child is not None]
                 code = next(((name, c) for name, c in codes if c is not None), None)
                 if code is not None:       # 0: it got the terminal's Ctrl-C first
-                    if code[1] != 0:
+                    # EXIT_BAD_START: a node executable's start error, whose one line it
+                    # printed itself (one line in all); any other code is said here
+                    if code[1] not in (0, EXIT_BAD_START):
                         start_error('monet pipeline', f'the {code[0]} process exited with '
                                     f'code {code[1]}')
-                        failed = True
+                    failed = code[1] != 0
                     break
                 if player is None:
                     if not detector_connected(fusion):
