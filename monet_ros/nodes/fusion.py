@@ -566,15 +566,20 @@ class FusionNode(Node):
         found = {}                                   # (camera index, node) -> slots
         for i, camera in enumerate(self.cameras):
             prefix, suffix = self.slot_topic_parts(camera.name)
+            slots = {}                                      # k -> its topic
             for topic in topics:
                 middle = topic[len(prefix):len(topic) - len(suffix)]
-                if not (topic.startswith(prefix) and topic.endswith(suffix)
-                        and middle.isdigit()):
-                    continue
-                for info in self.get_publishers_info_by_topic(topic):
-                    node = '/'.join(p for p in (info.node_namespace.strip('/'),
-                                                info.node_name) if p)
-                    found[i, '/' + node] = max(found.get((i, '/' + node), 0), int(middle) + 1)
+                if topic.startswith(prefix) and topic.endswith(suffix) and middle.isdigit():
+                    slots[int(middle)] = topic
+            expected = len(self.sources[i])
+            # the publishers of crop0, of this node's last slot and of any beyond (a few
+            # graph queries per camera); all of them where a node stops short of the last
+            first = self.slot_publishers(slots, [0, expected - 1]
+                                         + [k for k in slots if k >= expected])
+            if any(k < expected - 1 for k in first.values()):
+                first = self.slot_publishers(slots, sorted(slots))
+            for node, k in first.items():
+                found[i, node] = k + 1
         for i in range(len(self.cameras)):
             seen = self.detector_slots.setdefault(i, {})
             for node in [n for n in seen if (i, n) not in found]:
@@ -603,6 +608,19 @@ class FusionNode(Node):
         self.unpublished = unpublished
         for (node, slots, expected), cams in new.items():
             self.get_logger().error(self.mismatch_line(node, slots, expected, cams))
+
+    def slot_publishers(self, topics, ks):
+        """{publisher node (fully qualified): its highest slot k} among the slot topics
+        `topics` ({k: topic}) of the slots `ks`."""
+        out = {}
+        for k in ks:
+            if k not in topics:
+                continue
+            for info in self.get_publishers_info_by_topic(topics[k]):
+                node = '/' + '/'.join(p for p in (info.node_namespace.strip('/'),
+                                                  info.node_name) if p)
+                out[node] = max(out.get(node, -1), k)
+        return out
 
     def mismatch_line(self, node, slots, expected, cams):
         """The one line logged for a publisher `node` sending `slots` crop slots per instant
