@@ -550,7 +550,7 @@ class FusionNode(Node):
         prefix, _, suffix = topic.partition(marker)
         return prefix, suffix
 
-    def check_detector_slots(self, now=None):
+    def check_detector_slots(self):
         """subjects >= 2, every SLOT_CHECK_S: the crop slots each node publishes for each
         camera, from the ROS graph (its highest `<cam>/crop<k>/heatmaps` topic + 1), against
         the N + D this node subscribes (D from its discovery_tiles). A count held for
@@ -560,7 +560,7 @@ class FusionNode(Node):
         (discovery_slot_mismatch: instants received since), and the slots it never sends
         are no longer waited for (unpublished). Slots it sends beyond this node's are not
         subscribed: discovery sees only the first D of its maps."""
-        now = time.monotonic() if now is None else now
+        now = time.monotonic()
         N = self.config.subjects
         topics = [name for name, _ in self.get_topic_names_and_types()]
         found = {}                                   # (camera index, node) -> slots
