@@ -9,11 +9,12 @@ and a player when `bag` is given, all in one namespace (default `monet`).
         skeleton:=mouse6.yaml link_mm:=450.0                         # docs/subjects.md
 
 Parameters come from config/{detector,fusion,player}.yaml, then these arguments (the
-defaults of skeleton and link_mm are fusion.yaml's). The player waits until the detector
-subscribes to its image topics and the fusion node to the heatmaps of every camera
-(player.yaml wait_for_subscribers / wait_for_subscribers_s; wait_for_topics: `<cam>/heatmaps`,
-with subjects N >= 2 the crop slots' `<cam>/crop<k>/heatmaps`, k <= N, named by
-monet_ros.nodes.names as the nodes name them) before it plays. The Fast DDS profile
+defaults of skeleton, link_mm and discovery_tiles are fusion.yaml's; discovery_tiles goes
+to the detector too, so that the two nodes' discovery crop slots agree). The player waits
+until the detector subscribes to its image topics and the fusion node to the heatmaps of
+every camera (player.yaml wait_for_subscribers / wait_for_subscribers_s; wait_for_topics:
+`<cam>/heatmaps`, with subjects N >= 2 the crop slots' `<cam>/crop<k>/heatmaps`, k <= N,
+named by monet_ros.nodes.names as the nodes name them) before it plays. The Fast DDS profile
 (config/fastdds_profile.xml, 64 MB shared memory) carries full-size images.
 """
 import json
@@ -59,6 +60,9 @@ ARGUMENTS = {
                  'and bones; default: config/fusion.yaml)'),
     'link_mm': (FUSION_YAML, 'fusion, subjects >= 2: largest distance (mm) between two linked '
                 'keypoints of one subject (default: config/fusion.yaml)'),
+    'discovery_tiles': (FUSION_YAML, 'detector and fusion, subjects >= 2: discovery tiles '
+                        'along the shorter image side, one value for both nodes (they must '
+                        'agree: the discovery crop slots; default: config/fusion.yaml)'),
 }
 
 
@@ -122,6 +126,7 @@ def generate_launch_description():
                  'device': ParameterValue(arg['device'], value_type=str),
                  'slop_ms': ParameterValue(arg['slop_ms'], value_type=float),
                  'subjects': ParameterValue(arg['subjects'], value_type=int),
+                 'discovery_tiles': ParameterValue(arg['discovery_tiles'], value_type=int),
                  'use_sim_time': sim_time}], **common),
         Node(executable='fusion', name='fusion',
              parameters=[os.path.join(config, 'fusion.yaml'), {
@@ -130,5 +135,6 @@ def generate_launch_description():
                  'subjects': ParameterValue(arg['subjects'], value_type=int),
                  'skeleton': ParameterValue(arg['skeleton'], value_type=str),
                  'link_mm': ParameterValue(arg['link_mm'], value_type=float),
+                 'discovery_tiles': ParameterValue(arg['discovery_tiles'], value_type=int),
                  'use_sim_time': sim_time}], **common),
     ])

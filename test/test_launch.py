@@ -61,7 +61,7 @@ def test_launch_file_declares_its_arguments_and_nodes(repo_root, tmp_path, monke
     arguments = {a.name: a for a in description.get_launch_arguments()}
     assert set(arguments) == {'bag', 'rig', 'model', 'namespace', 'transport', 'debug_image',
                               'use_sim_time', 'slop_ms', 'rate', 'precision', 'backend',
-                              'device', 'subjects', 'skeleton', 'link_mm'}
+                              'device', 'subjects', 'skeleton', 'link_mm', 'discovery_tiles'}
     context = launch.LaunchContext()
     defaults = {name: ''.join(s.perform(context) for s in a.default_value)
                 for name, a in arguments.items() if name not in ('model', 'rig')}
@@ -69,7 +69,7 @@ def test_launch_file_declares_its_arguments_and_nodes(repo_root, tmp_path, monke
                         'debug_image': 'false', 'use_sim_time': 'false', 'slop_ms': '0.0',
                         'rate': '1.0', 'precision': 'auto', 'backend': 'torch',
                         'device': '', 'subjects': '1', 'skeleton': 'human14',
-                        'link_mm': '600.0'}
+                        'link_mm': '600.0', 'discovery_tiles': '2'}
     nodes = [e for e in description.entities if isinstance(e, Node)]
     assert sorted(n.node_executable for n in nodes) == ['detector', 'fusion', 'player']
     for node in nodes:
@@ -85,6 +85,8 @@ def test_player_waits_for_the_topics_of_one_subject(repo_root, tmp_path, monkeyp
     assert params['player']['wait_for_topics'] == ['{camera}/heatmaps']
     assert params['detector']['subjects'] == params['fusion']['subjects'] == 1
     assert params['fusion']['skeleton'] == 'human14' and params['fusion']['link_mm'] == 600.0
+    # one value for both nodes (their discovery crop slots must agree): fusion.yaml's
+    assert params['detector']['discovery_tiles'] == params['fusion']['discovery_tiles'] == 2
 
 
 def test_two_subjects_reach_the_nodes_and_the_player_waits_for_the_crop_slots(
@@ -95,8 +97,10 @@ def test_two_subjects_reach_the_nodes_and_the_player_waits_for_the_crop_slots(
     only after wait_for_subscribers_s)."""
     description = launch_description(repo_root, tmp_path, monkeypatch)
     params = node_parameters(description, {'model': 'm.pt', 'bag': 'rec', 'subjects': '2',
-                                           'skeleton': 'blobs.yaml', 'link_mm': '450'})
+                                           'skeleton': 'blobs.yaml', 'link_mm': '450',
+                                           'discovery_tiles': '1'})
     assert params['detector']['subjects'] == 2 and params['fusion']['subjects'] == 2
+    assert params['detector']['discovery_tiles'] == params['fusion']['discovery_tiles'] == 1
     assert params['fusion']['skeleton'] == 'blobs.yaml' and params['fusion']['link_mm'] == 450.0
     assert params['player']['wait_for_topics'] == [
         '{camera}/crop0/heatmaps', '{camera}/crop1/heatmaps', '{camera}/crop2/heatmaps']

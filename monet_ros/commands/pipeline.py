@@ -103,6 +103,11 @@ def add_arguments(parser):
     subject_only_option(parser, '--link-mm', type=float, default=600.0,
                         help='--subjects >= 2: largest distance (mm) between two linked '
                         'keypoints of one subject (fusion link_mm)')
+    subject_only_option(parser, '--discovery-tiles', type=int, default=None,
+                        help='--subjects >= 2: discovery tiles along the shorter image side '
+                        "(0: the whole frame); the fusion node's discovery_tiles (default its "
+                        "parameter's, 2), given to the detectors too: their discovery crop "
+                        'slots agree')
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
     parser.add_argument('--detector-processes', type=int, default=0,
                         help='detector processes, each batching its share of the cameras '
@@ -414,6 +419,11 @@ def run(args):
                                       '--confidence-threshold': 'confidence_threshold'}):
         FusionConfig(threshold_px=args.threshold_px,   # the option named, before any node
                      confidence_threshold=args.confidence_threshold)
+    from monet_ros.subjects.detection import SubjectsConfig
+    with options_named(SubjectsConfig, {'--subjects': 'subjects',
+                                        '--discovery-tiles': 'discovery_tiles'}):
+        SubjectsConfig(subjects=args.subjects, **({} if args.discovery_tiles is None else
+                                                  {'discovery_tiles': args.discovery_tiles}))
     if args.subjects > 1:
         if not args.bag:
             raise ConfigError('monet pipeline', 'subjects', 'the demo is one subject; give '
@@ -454,6 +464,7 @@ def run(args):
     from monet_ros.nodes.fusion import FusionNode
     from monet_ros.nodes.names import PLAYED_FRAMES, node_namespace
     from monet_ros.nodes.player import PlayerConfig
+    from monet_ros.nodes.runner import EXIT_BAD_START
 
     rig = args.rig or args.bag
     cameras = list(args.cameras or [])
@@ -479,7 +490,10 @@ def run(args):
                                                    threshold_px=args.threshold_px,
                                                    confidence_threshold=args.confidence_threshold,
                                                    subjects=args.subjects,
-                                                   link_mm=args.link_mm),
+                                                   link_mm=args.link_mm,
+                                                   **({} if args.discovery_tiles is None else
+                                                      {'discovery_tiles':
+                                                       args.discovery_tiles})),
                                     announce=False)   # said once every check below passed
                 nodes.append(fusion)
                 # the detectors' and the player's parameters, checked here (one line, exit
@@ -492,7 +506,9 @@ def run(args):
                                        device=args.device, backend=args.backend,
                                        threads=args.threads, debug_image=args.debug_image,
                                        lockstep=args.lockstep, precision=args.precision,
-                                       calibration='', subjects=args.subjects)
+                                       calibration='', subjects=args.subjects,
+                                       # the fusion node's: their crop slots agree
+                                       discovery_tiles=fusion.config.discovery_tiles)
                 slots = camera_slots(DetectorConfig(**detector_params))
                 groups = detector_groups(slots, options.detector_processes, precision)
                 check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],
@@ -516,7 +532,9 @@ def run(args):
                         threads=args.threads, fusion=FusionConfig(
                             threshold_px=args.threshold_px,
                             confidence_threshold=args.confidence_threshold),
-                        subjects=SubjectsConfig(subjects=args.subjects, link_mm=args.link_mm)
+                        subjects=SubjectsConfig(
+                            subjects=args.subjects, link_mm=args.link_mm,
+                            discovery_tiles=fusion.config.discovery_tiles)
                         if args.subjects > 1 else None)
                     print(f'monet pipeline: {note}', file=sys.stderr, flush=True)
                 line = groups_line(groups, options.detector_processes, precision)
@@ -563,10 +581,12 @@ def run(args):
                          if child is not None]
                 code = next(((name, c) for name, c in codes if c is not None), None)
                 if code is not None:       # 0: it got the terminal's Ctrl-C first
-                    if code[1] != 0:
+                    # EXIT_BAD_START: a node executable's start error, whose one line it
+                    # printed itself (one line in all); any other code is said here
+                    if code[1] not in (0, EXIT_BAD_START):
                         start_error('monet pipeline', f'the {code[0]} process exited with '
                                     f'code {code[1]}')
-                        failed = True
+                    failed = code[1] != 0
                     break
                 if player is None:
                     if not detector_connected(fusion):

@@ -45,6 +45,20 @@ counters are per slot. With `filter:=true` each identity has its own live filter
 at its death, all dropped when the identities restart): the filtered points on keypoints3d,
 the raw ones on keypoints3d_raw, both with the `subject` field and the same points (the
 skeleton markers are the filtered ones).
+A detector whose `discovery_tiles` (or `subjects`) differs sends another number of slots
+than this node subscribes. Every SLOT_CHECK_S the node reads from the ROS graph how many
+slots each publisher node sends per camera (its highest `<cam>/crop<k>/heatmaps` + 1; the
+messages carry no count); a count that differs and held for `silent_after_s` is logged
+once per detector (ERROR: the parameter, the detector's value read back from its count,
+subjects.detection.discovery_tiles_for, and this node's, the nodes and cameras) and counted
+per camera in /diagnostics (summary `discovery_slot_mismatch`: {camera: instants received
+since}; `detector_discovery_slots`: {camera: [its discovery slots]}; the slot statuses
+WARN). Nothing stalls: the slots it never sends (fewer tiles) are no longer waited for
+and make no frame partial; of more slots than this node's, the ones beyond are not
+subscribed, so discovery works on the first D of its maps only (each map with its own
+virtual camera, so what is found is right, but a subject only in the maps left out is
+not found until it enters the others). The safe fix is the same value on both nodes
+(`monet pipeline` and the launch file give both one value).
 With N = 1 (the default) nothing of this exists: the topics and fields are the one-subject
 ones, byte for byte.
 
@@ -81,6 +95,7 @@ from monet_ros.io import (
 from monet_ros.io.convert import delete_all_markers, marker_array
 from monet_ros.io.markers import frustum_marker_specs
 from monet_ros.nodes.names import (
+    CROP_SLOT,
     DIAGNOSTICS,
     HEATMAP_CAMERA_INFO,
     HEATMAPS,
@@ -104,6 +119,7 @@ from monet_ros.subjects.detection import (
     SubjectsConfig,
     SubjectsCore,
     discovery_slots,
+    discovery_tiles_for,
     subject_keypoints,
 )
 from monet_ros.subjects.tracking import SubjectTracker, TrackerConfig
@@ -117,6 +133,9 @@ LIVE = ('confidence_threshold', 'threshold_px', 'min_views', 'peaks_per_view', '
         *FILTER_PARAMETERS)
 # Unpaired heatmaps / camera_info kept per camera while waiting for their partner.
 _PAIR_BACKLOG = 30
+# subjects >= 2: how often (s) the ROS graph is read for the crop slots each detector
+# publishes (FusionNode.check_detector_slots)
+SLOT_CHECK_S = 0.5
 # Where a received heatmap ends (one per heatmap): in a fused frame; rejected (decoding,
 # validation, or the fusion core refused the view); no camera_info of its stamp came;
 # its stamp repeated one the camera gave; its instant was already released; its frame had
@@ -272,6 +291,17 @@ class FusionNode(Node):
         self.discovery_keys = {key for keys in sources for key in keys[config.subjects:]} \
             if config.subjects > 1 else set()
         self.keys = list(self.key_camera)
+        self.sources = sources
+        # subjects >= 2: the crop slots the detectors publish, read from the ROS graph
+        # (check_detector_slots): camera index -> {publisher node: [slots, since]}; the
+        # cameras whose detector publishes another count than `sources` (confirmed: the
+        # same count for silent_after_s) -> {node: slots}; the instants of each camera
+        # received while so; the slots no detector publishes (not waited for)
+        self.detector_slots = {}
+        self.slot_mismatch = {}
+        self.mismatch_frames = [0] * len(self.cameras)
+        self.unpublished = set()
+        self.slot_logged = set()
         self.subject_counts = dict(resets=0, duplicates=0, discoveries=0, shared=0, detached=0,
                                    extra=0, weak=0, foreign=0, settled=0)
         self.subject_stats = {}   # identity -> {frames, keypoints, error, last_stamp_ns}
@@ -315,6 +345,8 @@ class FusionNode(Node):
                 self.get_clock().now().nanoseconds, self.frame_id,
                 frustum_marker_specs(self.cameras, derived.marker_depth, scale=0.005)))
         self.create_timer(0.02, self.on_poll)
+        if self.subjects is not None:
+            self.create_timer(SLOT_CHECK_S, self.check_detector_slots)
         self.create_timer(config.diagnostics_period_s, self.publish_diagnostics)
         if announce:
             self.announce()
@@ -505,9 +537,112 @@ class FusionNode(Node):
         live = [n for n, s in self.stats.items()
                 if (s.last_seen is None and starting)
                 or (s.last_seen is not None and now - s.last_seen < self.config.silent_after_s)]
-        self.sync.set_expected(live)
+        self.sync.set_expected([n for n in live if n not in self.unpublished])
         for group in self.sync.poll():
             self.fuse(group)
+
+    def slot_topic_parts(self, camera):
+        """(prefix, suffix) of the resolved heatmap topic of `camera`'s crop slots: a slot
+        topic is prefix + k + suffix."""
+        marker = 'Xslotnumber'
+        topic = self.resolve_topic_name(self.config.heatmap_topic.format(
+            camera=CROP_SLOT.format(camera=camera, slot=marker)))
+        prefix, _, suffix = topic.partition(marker)
+        return prefix, suffix
+
+    def check_detector_slots(self):
+        """subjects >= 2, every SLOT_CHECK_S: the crop slots each node publishes for each
+        camera, from the ROS graph (its highest `<cam>/crop<k>/heatmaps` topic + 1), against
+        the N + D this node subscribes (D from its discovery_tiles). A count held for
+        silent_after_s (the detector's publishers all discovered) that differs is a
+        discovery_tiles mismatch: logged once per publisher node (ERROR, naming the
+        parameter, both values, the nodes and cameras), counted per camera in /diagnostics
+        (discovery_slot_mismatch: instants received since), and the slots it never sends
+        are no longer waited for (unpublished). Slots it sends beyond this node's are not
+        subscribed: discovery sees only the first D of its maps."""
+        now = time.monotonic()
+        N = self.config.subjects
+        topics = [name for name, _ in self.get_topic_names_and_types()]
+        found = {}                                   # (camera index, node) -> slots
+        for i, camera in enumerate(self.cameras):
+            prefix, suffix = self.slot_topic_parts(camera.name)
+            slots = {}                                      # k -> its topic
+            for topic in topics:
+                middle = topic[len(prefix):len(topic) - len(suffix)]
+                if topic.startswith(prefix) and topic.endswith(suffix) and middle.isdigit():
+                    slots[int(middle)] = topic
+            expected = len(self.sources[i])
+            # the publishers of crop0, of this node's last slot and of any beyond (a few
+            # graph queries per camera); all of them where a node stops short of the last
+            first = self.slot_publishers(slots, [0, expected - 1]
+                                         + [k for k in slots if k >= expected])
+            if any(k < expected - 1 for k in first.values()):
+                first = self.slot_publishers(slots, sorted(slots))
+            for node, k in first.items():
+                found[i, node] = k + 1
+        for i in range(len(self.cameras)):
+            seen = self.detector_slots.setdefault(i, {})
+            for node in [n for n in seen if (i, n) not in found]:
+                del seen[node]                      # gone: its slots are no longer known
+        for (i, node), slots in found.items():
+            entry = self.detector_slots[i].get(node)
+            if entry is None or entry[0] != slots:
+                self.detector_slots[i][node] = [slots, now]
+        unpublished, new = set(), {}
+        for i, seen in self.detector_slots.items():
+            expected = len(self.sources[i])
+            held = {node: slots for node, (slots, since) in seen.items()
+                    if now - since >= self.config.silent_after_s}
+            wrong = {node: slots for node, slots in held.items() if slots != expected}
+            if wrong:
+                self.slot_mismatch[i] = wrong
+            else:
+                self.slot_mismatch.pop(i, None)
+            if held and len(held) == len(seen):     # every publisher's count is settled
+                most = max(held.values())
+                unpublished.update(self.sources[i][max(most, N):])
+            for node, slots in wrong.items():
+                if (node, i) not in self.slot_logged:
+                    self.slot_logged.add((node, i))
+                    new.setdefault((node, slots, expected), []).append(i)
+        self.unpublished = unpublished
+        for (node, slots, expected), cams in new.items():
+            self.get_logger().error(self.mismatch_line(node, slots, expected, cams))
+
+    def slot_publishers(self, topics, ks):
+        """{publisher node (fully qualified): its highest slot k} among the slot topics
+        `topics` ({k: topic}) of the slots `ks`."""
+        out = {}
+        for k in ks:
+            if k not in topics:
+                continue
+            for info in self.get_publishers_info_by_topic(topics[k]):
+                node = '/' + '/'.join(p for p in (info.node_namespace.strip('/'),
+                                                  info.node_name) if p)
+                out[node] = max(out.get(node, -1), k)
+        return out
+
+    def mismatch_line(self, node, slots, expected, cams):
+        """The one line logged for a publisher `node` sending `slots` crop slots per instant
+        for the cameras `cams` (indices) where this node expects `expected`."""
+        N, tiles = self.config.subjects, self.config.discovery_tiles
+        camera = self.cameras[cams[0]]
+        theirs = discovery_tiles_for(camera.width, camera.height, slots - N)
+        value = (' or '.join(map(str, theirs)) if theirs else 'unknown')
+        if slots > expected:
+            effect = (f'its slots crop{expected}..crop{slots - 1} are not subscribed: '
+                      f'discovery uses only the first {expected - N} of its maps')
+        else:
+            effect = (f'frames no longer wait for the slots crop{max(slots, N)}..'
+                      f'crop{expected - 1} it never sends')
+        return (f'discovery_tiles differs between {node} and {self.get_fully_qualified_name()}'
+                f': for camera(s) {", ".join(self.names[i] for i in cams)} '
+                f'({camera.width}x{camera.height}) {node} publishes {slots - N} discovery '
+                f'crop slot(s) (its discovery_tiles {value}), this node expects '
+                f'{expected - N} (its discovery_tiles {tiles}); set the parameter '
+                f'discovery_tiles (and subjects, {N} here) the same on both nodes. '
+                f'Meanwhile {effect}; counted per camera in /diagnostics '
+                '(discovery_slot_mismatch)')
 
     # ------------------------------------------------------------------ fusion
     def fuse(self, group):
@@ -578,6 +713,9 @@ class FusionNode(Node):
         """subjects >= 2: the crops of one instant (every slot of every camera present)
         through SubjectsCore.live_frame, the tracked subjects published."""
         keys = [key for key in self.keys if key in group.items]
+        for i in {self.key_camera[key] for key in keys}:
+            if i in self.slot_mismatch:
+                self.mismatch_frames[i] += 1
         if any(group.items[key] is STALE for key in keys):
             self.skip_stale(group, keys)
             return
@@ -615,7 +753,8 @@ class FusionNode(Node):
             return
         self.timer.add('subjects', time.perf_counter() - start)
         self.frames += 1
-        self.partial_frames += bool(group.missing)
+        # a slot its detector never sends (a discovery_tiles mismatch) makes no frame partial
+        self.partial_frames += any(key not in self.unpublished for key in group.missing)
         self.fusion_seconds = (self.fusion_seconds + [time.perf_counter() - start])[-100:]
         for key in ('duplicates', 'shared', 'detached', 'extra', 'weak', 'foreign', 'settled'):
             self.subject_counts[key] += getattr(result, key)
@@ -748,6 +887,14 @@ class FusionNode(Node):
                 ('births', tracker.births), ('deaths', tracker.deaths),
                 ('untracked', tracker.untracked),
                 ('identity_resets', self.subject_counts['resets']),
+                # per camera: the discovery slots its detector publishes (the ROS graph) and,
+                # where that is not this node's count (discovery_tiles), the instants since
+                ('detector_discovery_slots', {
+                    self.names[i]: sorted({slots - self.config.subjects
+                                           for slots, _ in seen.values()})
+                    for i, seen in self.detector_slots.items() if seen}),
+                ('discovery_slot_mismatch', {self.names[i]: self.mismatch_frames[i]
+                                             for i in sorted(self.slot_mismatch)}),
                 *((f'subject_{key}', value) for key, value in self.subject_counts.items()
                   if key != 'resets')]
 
@@ -796,7 +943,10 @@ class FusionNode(Node):
         for name, stats in self.stats.items():
             silent_for = None if stats.last_seen is None else now - stats.last_seen
             error = stats.mean_error()
-            if stats.last_seen is None:
+            if name in self.unpublished:
+                level, text = DiagnosticStatus.WARN, ('not published by the detector: '
+                                                      'discovery_tiles differs (the log)')
+            elif stats.last_seen is None:
                 level, text = DiagnosticStatus.WARN, 'silent: no heatmaps received yet'
             elif silent_for >= self.config.silent_after_s:
                 level, text = DiagnosticStatus.WARN, f'silent for {silent_for:.1f} s'
@@ -809,6 +959,10 @@ class FusionNode(Node):
                 text += f'; {stats.unpaired} heatmaps without a camera_info of their stamp'
                 if not stats.fused:
                     level = DiagnosticStatus.WARN
+            if (name in self.discovery_keys and name not in self.unpublished
+                    and self.key_camera[name] in self.slot_mismatch):
+                level = DiagnosticStatus.WARN
+                text += "; the detector's discovery slots differ: discovery_tiles (the log)"
             msg.status.append(DiagnosticStatus(
                 level=level, name=f'monet fusion: {name}', hardware_id=name, message=text,
                 values=[KeyValue(key=k, value=str(v)) for k, v in (

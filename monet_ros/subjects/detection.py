@@ -354,6 +354,19 @@ def discovery_due(stamp_ns, previous_ns, period_s):
     return int(stamp_ns) // period != int(previous_ns) // period
 
 
+def discovery_tiles_for(width, height, slots):
+    """The discovery_tiles values that give a width x height view `slots` discovery maps
+    (the inverse of discovery_slots: a detector's value read from the crop slots it
+    publishes). -> sorted list of int >= 0, empty when none does (e.g. 3 for a square
+    view); both 0 and 1 give 1 slot on a square view."""
+    out, tiles = [], 0
+    while tiles <= max(int(slots), 1) and discovery_slots(width, height, tiles) <= slots:
+        if discovery_slots(width, height, tiles) == slots:
+            out.append(tiles)
+        tiles += 1
+    return out
+
+
 def discovery_boxes(detector, cameras, tiles):
     """The boxes of discovery's full-frame detection (module docstring step 1a), one list
     entry per view of `cameras`: (T_v, 4) pixel edges, as detector.predict takes them with

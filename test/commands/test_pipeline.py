@@ -78,7 +78,10 @@ def test_bad_arguments_fail_at_start(ros_env, tmp_path):
          'precision bfloat16 needs backend torch'),
         ((*run, '--detector-processes', 3),
          "parameter 'detector_processes': 3 detector processes for 2 cameras; give at most 2"),
-        ((*run, '--subjects', 0), "parameter 'subjects': must be >= 1, got 0"),
+        ((*run, '--subjects', 0),              # the option named, not fusion's parameter
+         "--subjects: SubjectsConfig: parameter 'subjects': must be >= 1, got 0"),
+        ((*run, '--subjects', 2, '--discovery-tiles', -1),
+         "--discovery-tiles: SubjectsConfig: parameter 'discovery_tiles': must be >= 0, got -1"),
         ((*run, '--skeleton', 'quadruped13'),
          "parameter 'skeleton': quadruped13 has keypoints ['nose', "),
     ]
@@ -89,6 +92,25 @@ def test_bad_arguments_fail_at_start(ros_env, tmp_path):
         lines = out.removeprefix('--- stdout\n').splitlines() + err.splitlines()
         assert len(lines) == 1 and message in lines[0], proc.output()
         assert lines[0].startswith('monet pipeline: error: '), proc.output()
+
+
+def test_a_detector_process_that_fails_at_start_is_one_line(ros_env, tmp_path):
+    # a parameter file for the detector alone, with a value its own start check refuses
+    # (the command checks only what it gives the detectors): the detector child process
+    # prints its one line and exits 2, the command exits 2 without a second line (before:
+    # also 'monet pipeline: error: the detector process exited with code 2')
+    rig, _ = noise_recording(tmp_path / 'rec', cameras=2, frames=1)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**/detector:\n  ros__parameters:\n    batch_wait_ms: -1.0\n')
+    with pipeline(ros_env, '--bag', tmp_path / 'rec', '--model', model, '--lockstep',
+                  '--ros-args', '--params-file', params) as proc:
+        assert proc.wait(timeout=120) == 2, proc.output()
+    out, err = proc.output().split('--- stderr\n')
+    errors = [line for line in out.removeprefix('--- stdout\n').splitlines()
+              + err.splitlines() if 'error' in line]
+    assert len(errors) == 1 and 'batch_wait_ms' in errors[0], proc.output()
+    assert errors[0].startswith('detector: error: '), proc.output()
 
 
 def test_ros_args_move_the_rig_with_debug_images_and_tf(ros_env, tmp_path):

@@ -52,3 +52,35 @@ def test_subjects_refuse_the_one_subject_demo_and_learn(ros_env):
         assert done.returncode == 2, done.stderr
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and 'subjects' in lines[0], done.stderr
+
+
+def test_detectors_take_the_fusion_nodes_discovery_tiles(ros_env, tmp_path):
+    # a parameter file that sets discovery_tiles for the fusion node alone (1: one discovery
+    # slot per 96 px camera, crop2; the detectors' default 2 would send crop2..crop5): the
+    # detector child process is given fusion's value, so the two nodes' crop slots agree
+    import yaml
+    folder, stamps, _, model, skeleton = two_subject_scene(tmp_path, T=T)
+    params = tmp_path / 'params.yaml'
+    params.write_text(yaml.safe_dump({'/**/fusion': {'ros__parameters': {
+        'discovery_tiles': 1}}}))
+    argv = [sys.executable, '-m', 'monet_ros.cli', 'pipeline', '--bag',
+            str(folder / 'recording'), '--rig', str(folder / 'rig.yaml'), '--model',
+            str(model), '--skeleton', str(skeleton), '--subjects', '2', '--lockstep',
+            '--precision', 'float32', '--threads', '1', '--quiet', '--start-delay', '2.0',
+            '--ros-args', '--params-file', str(params)]
+    seen = {'crop2': 0, 'crop3': 0}
+    with RosHarness(ros_env) as ros:
+        clouds = ros.collect('/monet/keypoints3d', PointCloud2, 100)
+
+        def look():
+            for slot in seen:
+                seen[slot] = max(seen[slot], ros.node.count_publishers(
+                    f'/monet/cam0/{slot}/heatmaps'))
+            return len(clouds) >= T or not proc.running()
+        with NodeProcess('pipeline', ros_env, argv=argv) as proc:
+            ros.spin_until(look, timeout=180)
+            assert proc.wait(timeout=120) == 0, proc.output()
+    assert [header_stamp_ns(c) for c in clouds] == stamps, proc.output()
+    assert seen == {'crop2': 1, 'crop3': 0}, (seen, proc.output())
+    assert 'discovery_tiles 1' in proc.output(), proc.output()      # fusion's start line
+    assert 'discovery_tiles differs' not in proc.output(), proc.output()

@@ -245,3 +245,22 @@ def test_a_negative_discovery_period_is_refused():
     from monet_ros.subjects.detection import discovery_due
     with pytest.raises(ValueError, match='discovery period'):
         discovery_due(0, None, -0.1)
+
+
+def test_a_detectors_discovery_tiles_is_read_back_from_its_slot_count():
+    # what the fusion node says of a detector whose discovery slots differ from its own:
+    # every value that gives the count (tile_boxes counted independently: `tiles` along the
+    # shorter side, as many at the same step along the longer one)
+    from monet_ros.subjects.detection import discovery_slots, discovery_tiles_for, tile_boxes
+    for width, height in ((96, 96), (640, 480), (1920, 1080), (200, 3000)):
+        for tiles in range(7):
+            count = discovery_slots(width, height, tiles)
+            assert count == (len(tile_boxes(width, height, tiles)) if tiles else 1)
+            values = discovery_tiles_for(width, height, count)
+            assert tiles in values
+            assert all(discovery_slots(width, height, v) == count for v in values)
+    assert discovery_tiles_for(96, 96, 1) == [0, 1]          # a square frame: one tile
+    assert discovery_tiles_for(96, 96, 4) == [2]
+    assert discovery_tiles_for(640, 480, 2) == [1]           # 480 px squares, 2 across
+    assert discovery_tiles_for(96, 96, 3) == []              # no value gives 3
+    assert discovery_tiles_for(96, 96, 0) == []
