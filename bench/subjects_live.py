@@ -11,7 +11,9 @@ network's aspect), and while fewer than N are published slots N.. the discovery 
 (subjects.detection.discovery_boxes with --discovery-tiles, the node's default 2: a
 640x480 frame, which would go into the network shrunk 3.3 times, as 6 square tiles of 320
 px, neighbours overlapping by half; --discovery-tiles 0: one map of the whole frame padded
-to the network's aspect). The boxes and heatmap grids are those of a real network of the
+to the network's aspect), in the first frame of each --discovery-period-s window of the
+stamps (the node's discovery_period_s, default 0.25 s: crop_rule.discovery_due; 0: every
+frame). The boxes and heatmap grids are those of a real network of the
 bench's input size (bench_detector: `small`, input 256 x 192 (H, W) -> 64 x 48 heatmaps,
 random weights, never run; every slot is a 48 x 64 (w x h) map with its virtual camera
 Camera.crop(box, (48, 64)), as Detector.predict's). The network's output is a "perfect
@@ -25,11 +27,11 @@ Rows, with SubjectsConfig.rival_peaks off and on (the default): identity switche
 (subjects.metrics, match within --match-m), 3D error per subject (mm, matched frames),
 live_frame per frame (wall median and p90, CPU of the thread median; heatmap peak decoding
 included), crops per frame (the maps published: subject crops and discovery maps) and
-the discovery runs. One subject through the same loop (N = 2, so discovery maps every
-frame) is the single-subject reference.
+the discovery runs. One subject through the same loop (N = 2, so discovery maps in every
+discovery_period_s window) is the single-subject reference.
 
 usage: python bench/subjects_live.py [--frames 300] [--cameras 8] [--noise 1] [--seed 0]
-                                     [--discovery-tiles 2]
+                                     [--discovery-tiles 2] [--discovery-period-s 0.25]
 """
 import os
 
@@ -42,7 +44,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 
 from monet_ros.cores import cpu_model  # noqa: E402
-from monet_ros.crop_rule import TrackedSubjects  # noqa: E402
+from monet_ros.crop_rule import DISCOVERY_PERIOD_S, TrackedSubjects  # noqa: E402
 from monet_ros.models import Detector, build_model  # noqa: E402
 from monet_ros.skeleton import load_skeleton  # noqa: E402
 from monet_ros.subjects.detection import (  # noqa: E402
@@ -117,13 +119,14 @@ def frame_maps(detector, cameras, boxes, tiles, uv, visible):
     return present, sub, full
 
 
-def run(truth, hidden, cameras, noise, seed, N, rival_peaks=False, tiles=2, detector=None):
+def run(truth, hidden, cameras, noise, seed, N, rival_peaks=False, tiles=2, detector=None,
+        period_s=0.0):
     T, S, C, _ = truth.shape
     rng = np.random.default_rng(seed)
     detector = detector or bench_detector(load_skeleton('human14').keypoints)
     core = SubjectsCore(C, 'm', SubjectsConfig(subjects=N, rival_peaks=rival_peaks,
                                                discovery_tiles=tiles))
-    tracks = TrackedSubjects(units='m')
+    tracks = TrackedSubjects(units='m', discovery_period_s=period_s)
     size = np.array([[c.width, c.height] for c in cameras], np.float64)
     X_out, ids_out = np.full((T, N, C, 3), np.nan), np.full((T, N), -1)
     wall, cpu, crops, discoveries = np.zeros(T), np.zeros(T), 0, 0
@@ -158,7 +161,12 @@ def main(argv=None):
     parser.add_argument('--discovery-tiles', type=int, default=SubjectsConfig.discovery_tiles,
                         help="the detector node's discovery_tiles (default: its default; 0: "
                              'one discovery map of the whole frame per view)')
+    parser.add_argument('--discovery-period-s', type=float, default=DISCOVERY_PERIOD_S,
+                        help="the detector node's discovery_period_s (default: its default; "
+                             '0: discovery maps in every frame with fewer than N subjects)')
     args = parser.parse_args(argv)
+    if not args.discovery_period_s >= 0:
+        parser.error(f'--discovery-period-s must be >= 0, got {args.discovery_period_s}')
     if args.discovery_tiles < 0:
         parser.error(f'--discovery-tiles must be >= 0, got {args.discovery_tiles}')
     sk = load_skeleton('human14')
@@ -171,7 +179,8 @@ def main(argv=None):
     print(f'# network input {INPUT[0]}x{INPUT[1]} (H x W) -> heatmaps '
           f'{detector.heatmap_size[0]}x{detector.heatmap_size[1]}; discovery_tiles '
           f'{args.discovery_tiles}: {len(slots)} discovery map(s) per '
-          f'{cameras[0].width}x{cameras[0].height} view')
+          f'{cameras[0].width}x{cameras[0].height} view, sent in the first frame of each '
+          f'{args.discovery_period_s:g} s window')
     print(f'# CPU: {cpu_model()}; loadavg at start {os.getloadavg()}')
     print('| subjects | rival_peaks | closest pass (m) | IDSW | IDF1 | 3D error per subject '
           '(mm) | crops/frame | discovery runs | live_frame ms/frame median (p90) | CPU '
@@ -183,7 +192,7 @@ def main(argv=None):
         for rival in ((False,) if S == 1 else (False, True)):
             X, ids, wall, cpu, crops, discoveries = run(
                 truth, hidden, cameras, args.noise, args.seed + S, max(S, 2), rival,
-                args.discovery_tiles, detector)
+                args.discovery_tiles, detector, args.discovery_period_s)
             scores = identity_scores(truth, X, ids, args.match_m)
             closest = '-'
             if S > 1:

@@ -148,6 +148,31 @@ class TrackedCrops:
                           self.rule.min_points, self.rule.trim)
 
 
+# the detector node's discovery_period_s by default (s): a subject that appears or is lost
+# waits at most this long for discovery, which otherwise runs in every frame that has fewer
+# than N subjects (its maps: the whole frame or its tiles, 4x a view's subject crops at N 2)
+DISCOVERY_PERIOD_S = 0.25
+
+
+def discovery_due(stamp_ns, previous_ns, period_s):
+    """Whether the detector node publishes discovery maps in a frame of stamp_ns (ns) while
+    fewer than N subjects are tracked (its `discovery_period_s`): with period_s 0 every
+    frame; else the first frame of each window floor(stamp / period) of the stamp clock,
+    i.e. a frame whose window differs from that of the frame before it (previous_ns; None:
+    the first frame, due). A rule of the stamps alone, so the detectors of a rig, which see
+    the same stamps, send their discovery maps in the same frames and fusion discovers on
+    every view at once; between those frames their discovery slots stay empty (a subject
+    that is lost or new waits at most period_s, and a missing subject no longer costs the
+    discovery crops of every frame: docs/subjects.md "Live"; TrackedSubjects.boxes applies
+    it). Raises ValueError for a negative period_s."""
+    if not period_s >= 0:
+        raise ValueError(f'discovery period must be >= 0 s, got {period_s}')
+    if period_s == 0 or previous_ns is None:
+        return True
+    period = max(1, round(period_s * 1e9))
+    return int(stamp_ns) // period != int(previous_ns) // period
+
+
 class TrackedSubjects:
     """The tracked rule with several subjects (the detector node's `subjects` >= 2): the
     subjects of the last /monet/keypoints3d (its `subject` field) and their stamp.
@@ -155,13 +180,17 @@ class TrackedSubjects:
     `update(X, subject, keypoint, stamp_ns, num_keypoints)`; `current(stamp_ns)` -> [(identity,
     (C, 3) keypoints)] by identity, [] when stale (rule.timeout_ns, as TrackedCrops);
     `boxes(cameras, stamp_ns, subjects, fallback_box)` -> the crop slots' boxes. units: the
-    length unit of the keypoints and cameras (the rig's)."""
+    length unit of the keypoints and cameras (the rig's); discovery_period_s: the discovery
+    slot only in the frames discovery_due gives (0: every frame)."""
 
-    def __init__(self, rule=None, units='m'):
+    def __init__(self, rule=None, units='m', discovery_period_s=0.0):
         self.rule = rule or TrackedRule()
         self.units = check_units(units)
+        discovery_due(0, None, discovery_period_s)          # ValueError when negative
+        self.discovery_period_s = float(discovery_period_s)
         self.subjects = []
         self.stamp_ns = None
+        self.previous_ns = None         # the stamp of the last boxes() (discovery_due)
 
     def update(self, X, subject, keypoint, stamp_ns, num_keypoints):
         """X (M, 3) points in `units` (as read from the topic), subject (M,) identities,
@@ -190,14 +219,18 @@ class TrackedSubjects:
         view): slot k < subjects around the k-th current subject (by identity; subject_boxes
         with the rule's margin, min_points and trim: NaN in a view where too few of its
         joints project); slot `subjects` the full frame (or `fallback_box`) while fewer than
-        `subjects` are current, else NaN. track False: no subject crops."""
+        `subjects` are current and discovery is due (discovery_due of stamp_ns after the
+        previous call's), else NaN. track False: no subject crops. Call it once per frame,
+        stamps increasing."""
+        due = discovery_due(stamp_ns, self.previous_ns, self.discovery_period_s)
+        self.previous_ns = int(stamp_ns)
         V = len(cameras)
         out = np.full((V, subjects + 1, 4), np.nan)
         current = self.current(stamp_ns)[:subjects] if track else []
         for k, (_, X) in enumerate(current):
             out[:, k] = subject_boxes(cameras, X, self.rule.margin, self.rule.min_points,
                                       trim=self.rule.trim)
-        if len(current) < subjects:
+        if len(current) < subjects and due:
             out[:, subjects] = crop_boxes(cameras, None, fallback_box)
         return out
 

@@ -108,6 +108,11 @@ def add_arguments(parser):
                         "(0: the whole frame); the fusion node's discovery_tiles (default its "
                         "parameter's, 2), given to the detectors too: their discovery crop "
                         'slots agree')
+    subject_only_option(parser, '--discovery-period-s', type=float, default=None,
+                        help='--subjects >= 2: while fewer subjects are tracked, the '
+                        'detectors send discovery maps in the first frame of each window of '
+                        "this many seconds of the stamps (0: every frame; default the "
+                        "detector's discovery_period_s, 0.25)")
     parser.add_argument('--quiet', action='store_true', help='no per-second summary lines')
     parser.add_argument('--detector-processes', type=int, default=0,
                         help='detector processes, each batching its share of the cameras '
@@ -424,6 +429,9 @@ def run(args):
                                         '--discovery-tiles': 'discovery_tiles'}):
         SubjectsConfig(subjects=args.subjects, **({} if args.discovery_tiles is None else
                                                   {'discovery_tiles': args.discovery_tiles}))
+    if args.discovery_period_s is not None and not args.discovery_period_s >= 0:
+        raise ConfigError('monet pipeline', '--discovery-period-s',
+                          f'must be >= 0 s, got {args.discovery_period_s}')
     if args.subjects > 1:
         if not args.bag:
             raise ConfigError('monet pipeline', 'subjects', 'the demo is one subject; give '
@@ -508,7 +516,9 @@ def run(args):
                                        lockstep=args.lockstep, precision=args.precision,
                                        calibration='', subjects=args.subjects,
                                        # the fusion node's: their crop slots agree
-                                       discovery_tiles=fusion.config.discovery_tiles)
+                                       discovery_tiles=fusion.config.discovery_tiles,
+                                       **({} if args.discovery_period_s is None else
+                                          {'discovery_period_s': args.discovery_period_s}))
                 slots = camera_slots(DetectorConfig(**detector_params))
                 groups = detector_groups(slots, options.detector_processes, precision)
                 check_skeleton(fusion, read_checkpoint(args.model)[0]['keypoints'],

@@ -23,14 +23,15 @@ slots are published on `<cam>/crop<k>/heatmaps` + `<cam>/crop<k>/camera_info` (t
 `<cam>/heatmaps` topics of one subject are not): slot k < N the crop rule's box around the
 k-th subject (by identity) of the latest /monet/keypoints3d (its `subject` field;
 crop_rule.TrackedSubjects), slots N..N+D-1 the discovery maps while fewer than N subjects
-are in it: `box` when given, else the maps of `monet process --subjects`' discovery
-(subjects.detection.discovery_boxes: the whole frame, or, where the network would shrink
-it more than 2 times, its discovery_tiles square tiles, one slot each; D =
-subjects.detection.discovery_slots of the rig camera's size). A slot without a crop in that
-view at that instant is an empty (0 x 0) heatmap and camera_info. All crops of the instant
-go through the network in one batch. JPEG views are decoded in full (each view has crops
-of several scales). Not with debug_image; discovery_tiles >= 1 needs the rig (the slots
-are laid out for its image sizes).
+are in it, in the first frame of each `discovery_period_s` window of the stamps
+(crop_rule.discovery_due; 0: every frame): `box` when given, else the maps of
+`monet process --subjects`' discovery (subjects.detection.discovery_boxes: the whole frame,
+or, where the network would shrink it more than 2 times, its discovery_tiles square tiles,
+one slot each; D = subjects.detection.discovery_slots of the rig camera's size). A slot
+without a crop in that view at that instant is an empty (0 x 0) heatmap and camera_info.
+All crops of the instant go through the network in one batch. JPEG views are decoded in
+full (each view has crops of several scales). Not with debug_image; discovery_tiles >= 1
+needs the rig (the slots are laid out for its image sizes).
 """
 from collections import deque
 from dataclasses import dataclass
@@ -48,7 +49,7 @@ from std_msgs.msg import String
 
 from monet_ros.atomic import sha256_file
 from monet_ros.config import MAX_THREADS, ConfigError, setting, validate_config
-from monet_ros.crop_rule import TrackedCrops, TrackedRule, TrackedSubjects
+from monet_ros.crop_rule import DISCOVERY_PERIOD_S, TrackedCrops, TrackedRule, TrackedSubjects
 from monet_ros.error_text import error_line
 from monet_ros.geometry.units import UNITS, rig_units
 from monet_ros.int8_calibration import int8_calibration
@@ -181,6 +182,13 @@ class DetectorConfig:
         'would shrink more than 2 times are square tiles, this many along the shorter image '
         'side, overlapping by half, one crop slot each (as `monet process --subjects`; 0: '
         'the whole frame; needs the rig)', minimum=0)
+    discovery_period_s: float = setting(
+        DISCOVERY_PERIOD_S, 'subjects >= 2: while fewer than `subjects` subjects are tracked, the '
+        'discovery maps are sent in the first frame of each window of this many seconds of '
+        'the stamp clock (the same frames on every detector of the rig; '
+        'crop_rule.discovery_due), their slots empty in the other frames: a new or '
+        'lost subject waits at most this long, and a missing one does not cost the '
+        'discovery crops of every frame (0: every frame)', minimum=0.0)
 
     def __post_init__(self):
         validate_config(self)
@@ -312,7 +320,8 @@ class DetectorNode(Node):
         # keypoints3d (m) read into the rig's unit, that of the cameras they are projected with
         self.units = rig_units([s.rig_camera for s in self.slots if s.rig_camera is not None])
         self.tracker = TrackedCrops(self.derived.rule, self.units)
-        self.subject_tracks = TrackedSubjects(self.derived.rule, self.units)
+        self.subject_tracks = TrackedSubjects(self.derived.rule, self.units,
+                                              self.config.discovery_period_s)
         self.create_subscription(PointCloud2, KEYPOINTS3D, self.on_keypoints,
                                  STREAM_IN)
         self.create_subscription(String, MODEL, self.on_model, LATCHED)
@@ -336,7 +345,17 @@ class DetectorNode(Node):
             f'{self.detector.metadata.get("architecture")} ({len(self.detector.keypoints)} '
             f'keypoints, heatmaps {self.detector.heatmap_size}) on {self.detector.device}, '
             f'{self.detector.backend}, {self.detector.precision_note}; decode and crop on '
-            f'{self.detector.view_threads.threads} thread(s)')
+            f'{self.detector.view_threads.threads} thread(s){self.subjects_note()}')
+
+    def subjects_note(self):
+        """The start line's several-subject part: '' with one subject."""
+        c = self.config
+        if c.subjects < 2:
+            return ''
+        when = ('every frame' if c.discovery_period_s == 0 else
+                f'the first frame of each {c.discovery_period_s:g} s window')
+        return (f'; subjects {c.subjects}: discovery maps (discovery_tiles '
+                f'{c.discovery_tiles}) in {when} with fewer tracked')
 
     def discovery_count(self, slot):
         """subjects >= 2: the discovery crop slots of a camera (module docstring): 1 with

@@ -335,25 +335,6 @@ def discovery_slots(width, height, tiles):
     return len(tile_boxes(width, height, tiles)) if tiles else 1
 
 
-def discovery_due(stamp_ns, previous_ns, period_s):
-    """Whether the detector node publishes discovery maps in a frame of stamp_ns (ns) while
-    fewer than N subjects are tracked (its `discovery_period_s`): with period_s 0 every
-    frame; else the first frame of each window floor(stamp / period) of the stamp clock,
-    i.e. a frame whose window differs from that of the frame before it (previous_ns; None:
-    the first frame, due). A rule of the stamps alone, so the detectors of a rig, which see
-    the same stamps, send their discovery maps in the same frames and fusion discovers on
-    every view at once; between those frames their discovery slots stay empty (a subject
-    that is lost or new waits at most period_s, and a missing subject no longer costs the
-    discovery crops of every frame: docs/subjects.md "Live"). Raises ValueError for a
-    negative period_s."""
-    if not period_s >= 0:
-        raise ValueError(f'discovery period must be >= 0 s, got {period_s}')
-    if period_s == 0 or previous_ns is None:
-        return True
-    period = max(1, round(period_s * 1e9))
-    return int(stamp_ns) // period != int(previous_ns) // period
-
-
 def discovery_tiles_for(width, height, slots):
     """The discovery_tiles values that give a width x height view `slots` discovery maps
     (the inverse of discovery_slots: a detector's value read from the crop slots it

@@ -52,6 +52,15 @@ def test_subjects_refuse_the_one_subject_demo_and_learn(ros_env):
         assert done.returncode == 2, done.stderr
         lines = done.stderr.strip().splitlines()
         assert len(lines) == 1 and 'subjects' in lines[0], done.stderr
+    # a negative --discovery-period-s, or one without --subjects: one line naming it
+    for extra in (['--subjects', '2', '--discovery-period-s', '-1'],
+                  ['--discovery-period-s', '1']):
+        done = subprocess.run([sys.executable, '-m', 'monet_ros.cli', 'pipeline',
+                               '--bag', 'rec', '--model', 'm.pt', *extra], env=ros_env,
+                              capture_output=True, text=True, timeout=120)
+        assert done.returncode == 2, done.stderr
+        lines = done.stderr.strip().splitlines()
+        assert len(lines) == 1 and '--discovery-period-s' in lines[0], done.stderr
 
 
 def test_detectors_take_the_fusion_nodes_discovery_tiles(ros_env, tmp_path):
@@ -67,7 +76,7 @@ def test_detectors_take_the_fusion_nodes_discovery_tiles(ros_env, tmp_path):
             str(folder / 'recording'), '--rig', str(folder / 'rig.yaml'), '--model',
             str(model), '--skeleton', str(skeleton), '--subjects', '2', '--lockstep',
             '--precision', 'float32', '--threads', '1', '--quiet', '--start-delay', '2.0',
-            '--ros-args', '--params-file', str(params)]
+            '--discovery-period-s', '0.5', '--ros-args', '--params-file', str(params)]
     seen = {'crop2': 0, 'crop3': 0}
     with RosHarness(ros_env) as ros:
         clouds = ros.collect('/monet/keypoints3d', PointCloud2, 100)
@@ -84,3 +93,6 @@ def test_detectors_take_the_fusion_nodes_discovery_tiles(ros_env, tmp_path):
     assert seen == {'crop2': 1, 'crop3': 0}, (seen, proc.output())
     assert 'discovery_tiles 1' in proc.output(), proc.output()      # fusion's start line
     assert 'discovery_tiles differs' not in proc.output(), proc.output()
+    # --discovery-period-s reaches the detector (its start line)
+    assert ('discovery maps (discovery_tiles 1) in the first frame of each 0.5 s window'
+            in proc.output()), proc.output()

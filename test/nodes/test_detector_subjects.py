@@ -84,8 +84,10 @@ def test_one_crop_per_subject_and_the_full_frame_while_fewer(ros_env, tmp_path):
     rng = np.random.default_rng(5)
     A = rng.uniform([-0.4, -0.4, 0.6], [-0.1, -0.1, 1.5], (14, 3))     # two bodies apart
     B = rng.uniform([0.1, 0.1, 0.6], [0.4, 0.4, 1.5], (14, 3))
+    # discovery_period_s 0: the full frame in every frame while fewer (the stamps here are
+    # ns apart: one window; the period is test_discovery_maps_in_the_first_frame_of_...)
     params = dict(rig=str(rig_path), model=str(checkpoint), subjects=2, device='cpu',
-                  track_timeout_s=3600.0, discovery_tiles=0)
+                  track_timeout_s=3600.0, discovery_tiles=0, discovery_period_s=0.0)
     with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
         stream = SlotStream(ros, rig)
         for image_pub, info_pub in stream.pubs.values():
@@ -151,6 +153,34 @@ def test_one_crop_per_subject_and_the_full_frame_while_fewer(ros_env, tmp_path):
                 break
         assert one_subject(got), node.output()
         assert not stream.one, 'the one-subject topics are not published with subjects 2'
+        assert node.stop(signal.SIGINT) == 0, node.output()
+
+
+def test_discovery_maps_in_the_first_frame_of_each_period(ros_env, tmp_path):
+    # nothing tracked, discovery_period_s 0.25, frames 0.1 s apart from a window start: the
+    # discovery slot (crop2) carries the full frame in frames 0, 3, 5, 8 (at 0, 0.3, 0.5,
+    # 0.8 s: the first of each 0.25 s window), its empty message in the others; the
+    # subject slots are empty throughout
+    rig = ring_rig(2)
+    rig_path = tmp_path / 'rig.yaml'
+    save_rig(rig_path, rig)
+    checkpoint = make_checkpoint(tmp_path / 'model.pt', 1)
+    images = np.random.default_rng(0).integers(0, 255, (2, 480, 640, 3), dtype=np.uint8)
+    assert T0 % 250_000_000 == 0
+    params = dict(rig=str(rig_path), model=str(checkpoint), subjects=2, device='cpu',
+                  discovery_tiles=0, discovery_period_s=0.25)
+    with RosHarness(ros_env) as ros, NodeProcess('detector', ros_env, params) as node:
+        stream = SlotStream(ros, rig)
+        for image_pub, info_pub in stream.pubs.values():
+            ros.wait_for_subscribers(image_pub, timeout=120, process=node)
+            ros.wait_for_subscribers(info_pub, process=node)
+        sent = []
+        for k in range(10):
+            got = stream.roundtrip(T0 + k * 100_000_000, images, node)
+            sent.append([got[cam.name, 2][0].width > 0 for cam in rig])
+            for cam in rig:
+                assert got[cam.name, 0][0].width == 0 and got[cam.name, 1][0].width == 0
+        assert sent == [[k in (0, 3, 5, 8)] * 2 for k in range(10)], node.output()
         assert node.stop(signal.SIGINT) == 0, node.output()
 
 

@@ -3,8 +3,9 @@
 keypoints3d cloud's `subject` field (io.fields)."""
 from helpers.scenes import ring_rig
 import numpy as np
+import pytest
 
-from monet_ros.crop_rule import TrackedRule, TrackedSubjects, subject_boxes
+from monet_ros.crop_rule import TrackedRule, TrackedSubjects, discovery_due, subject_boxes
 from monet_ros.io.fields import cloud_to_arrays, keypoint_cloud_fields
 from monet_ros.subjects.detection import SubjectsConfig, SubjectsCore
 
@@ -202,7 +203,6 @@ def test_tiled_discovery_maps_keep_two_subjects_tracked():
 
 
 def _due_frames(stamps, period_s):
-    from monet_ros.subjects.detection import discovery_due
     previous, due = None, []
     for i, stamp in enumerate(stamps):
         if discovery_due(stamp, previous, period_s):
@@ -240,9 +240,6 @@ def test_detectors_that_skip_frames_still_discover_in_the_same_frames():
 
 
 def test_a_negative_discovery_period_is_refused():
-    import pytest
-
-    from monet_ros.subjects.detection import discovery_due
     with pytest.raises(ValueError, match='discovery period'):
         discovery_due(0, None, -0.1)
 
@@ -264,3 +261,25 @@ def test_a_detectors_discovery_tiles_is_read_back_from_its_slot_count():
     assert discovery_tiles_for(640, 480, 2) == [1]           # 480 px squares, 2 across
     assert discovery_tiles_for(96, 96, 3) == []              # no value gives 3
     assert discovery_tiles_for(96, 96, 0) == []
+
+
+def test_the_discovery_slot_waits_for_the_next_window_and_the_subject_slots_do_not():
+    # TrackedSubjects with discovery_period_s 0.25, frames 0.1 s apart: one subject tracked
+    # (N = 2), its crop in every frame; the full frame in frames 0, 3, 5, 8 only (the first
+    # of each 0.25 s window, at 0, 0.3, 0.5, 0.8 s)
+    cams = ring_rig(2)
+    _, B = bodies()
+    tracks = TrackedSubjects(TrackedRule(timeout_ns=10**12), 'm', discovery_period_s=0.25)
+    tracks.update(B, np.full(14, 9), np.arange(14), 0, 14)
+    full = np.array([[0, 0, c.width, c.height] for c in cams], np.float64)
+    discovery = []
+    for k in range(10):
+        boxes = tracks.boxes(cams, k * 100_000_000, 2)
+        np.testing.assert_array_equal(boxes[:, 0], subject_boxes(cams, B))
+        assert np.isnan(boxes[:, 1]).all()
+        discovery.append(bool(np.isfinite(boxes[:, 2]).all()))
+        if discovery[-1]:
+            assert np.array_equal(boxes[:, 2], full)
+    assert discovery == [k in (0, 3, 5, 8) for k in range(10)]
+    with pytest.raises(ValueError, match='discovery period'):
+        TrackedSubjects(discovery_period_s=-1.0)
