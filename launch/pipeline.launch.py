@@ -51,7 +51,8 @@ ARGUMENTS = {
     'rate': ('1.0', 'player: playback speed (0 = as fast as possible)'),
     'precision': ('auto', 'detector: network arithmetic, auto (bfloat16 where native, else '
                   'float32), float32 or bfloat16 (CPUs with AVX512-BF16 / AMX, CUDA)'),
-    'backend': ('torch', 'detector: inference backend, torch or onnxruntime'),
+    'backend': ('auto', 'detector: inference backend, auto (onnxruntime for float32 on a '
+                'CPU, torch for bfloat16 and on a GPU), torch or onnxruntime'),
     'device': ('', "detector: torch device ('' = CUDA when available, else CPU)"),
     'subjects': ('1', 'detector and fusion: most subjects tracked (>= 2: crop slots and the '
                  'keypoints3d subject field, docs/subjects.md; the player waits for the crop '

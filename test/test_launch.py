@@ -67,7 +67,7 @@ def test_launch_file_declares_its_arguments_and_nodes(repo_root, tmp_path, monke
                 for name, a in arguments.items() if name not in ('model', 'rig')}
     assert defaults == {'bag': '', 'namespace': 'monet', 'transport': 'auto',
                         'debug_image': 'false', 'use_sim_time': 'false', 'slop_ms': '0.0',
-                        'rate': '1.0', 'precision': 'auto', 'backend': 'torch',
+                        'rate': '1.0', 'precision': 'auto', 'backend': 'auto',
                         'device': '', 'subjects': '1', 'skeleton': 'human14',
                         'link_mm': '600.0', 'discovery_tiles': '2'}
     nodes = [e for e in description.entities if isinstance(e, Node)]

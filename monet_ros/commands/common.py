@@ -26,10 +26,16 @@ def check_threads(owner, threads):
 
 
 def add_precision_options(parser, calibration_default):
-    """--precision and --calibration of the commands that run the detector (monet process,
-    monet pipeline): one help text; `calibration_default` names what int8 calibrates on
-    when --calibration is not given."""
+    """--backend, --precision and --calibration of the commands that run the detector
+    (monet process, monet pipeline): one help text; `calibration_default` names what int8
+    calibrates on when --calibration is not given."""
     from monet_ros.models.detector import PRECISIONS
+    from monet_ros.models.onnx_backend import BACKEND_CHOICES
+    parser.add_argument('--backend', choices=BACKEND_CHOICES, default='auto',
+                        help='detector inference backend: auto (default: onnxruntime for '
+                        'float32 and int8 on a CPU, torch for bfloat16 and on a GPU: '
+                        'models.detector.resolve_backend; the choice is printed), torch, or '
+                        'onnxruntime (exported once, cached beside the checkpoint)')
     parser.add_argument('--precision', choices=PRECISIONS, default='auto',
                         help='network arithmetic: auto (default: bfloat16 with torch where '
                         'native, else float32; never int8, measured slower; the choice is '
@@ -65,13 +71,19 @@ def precision_note(owner, precision, backend='torch', device=None, checkpoint=No
     it)."""
     import torch
 
-    from monet_ros.models.detector import resolve_precision
+    from monet_ros.models.detector import resolve_backend, resolve_precision
     if device is None:
         device = 'cuda' if torch.cuda.is_available() else 'cpu'
+    try:
+        backend, backend_note = resolve_backend(backend, precision, device)
+    except ValueError as error:
+        raise ConfigError(owner, 'backend', str(error)) from None
     try:
         chosen, note = resolve_precision(precision, backend, device, checkpoint)
     except ValueError as error:
         raise ConfigError(owner, 'precision', str(error)) from None
+    if backend_note:
+        note = f'{backend_note}; {note}'
     if calibration is not None and chosen != 'int8':
         raise ConfigError(owner, 'calibration', f'{calibration}: calibration data of '
                           f'--precision int8 only; this run is {chosen} (give --precision '

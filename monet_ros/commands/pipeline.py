@@ -85,9 +85,6 @@ def add_arguments(parser):
                         help='do not publish <cam>/debug_image (on by default, 2 Hz per camera, '
                         'only drawn while someone subscribes)')
     parser.add_argument('--device', default='', help="torch device ('' = auto)")
-    parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
-                        help='detector inference backend (onnxruntime: exported once, cached '
-                        'beside the checkpoint)')
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network and of decoding and cropping the views '
                         'in each detector process (0 = the backend default and the cores '

@@ -87,9 +87,6 @@ def add_arguments(parser):
     parser.add_argument('--heatmaps', action='store_true',
                         help='also write /monet/<cam>/heatmaps')
     parser.add_argument('--device', default=None, help='torch device (default: auto)')
-    parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default='torch',
-                        help='detector inference backend (onnxruntime: exported once, cached '
-                        'beside the checkpoint)')
     parser.add_argument('--threads', type=int, default=0,
                         help='CPU threads of the network (0 = the backend default) and of '
                         'decoding and cropping the views (0 = the cores the process may use)')

@@ -13,7 +13,12 @@ from monet_ros.cores import ViewThreads
 from monet_ros.models.checkpoint import load_checkpoint
 from monet_ros.models.crop import crop_images, fit_boxes_to_aspect, full_frame_boxes
 from monet_ros.models.layers import fuse_for_inference
-from monet_ros.models.onnx_backend import BACKENDS, OnnxRunner, export_onnx, onnx_runner_for
+from monet_ros.models.onnx_backend import (
+    BACKEND_CHOICES,
+    OnnxRunner,
+    export_onnx,
+    onnx_runner_for,
+)
 from monet_ros.timing import StageTimer
 
 PRECISIONS = ('auto', 'float32', 'bfloat16', 'int8')
@@ -68,6 +73,40 @@ def check_precision(precision, backend, device):
                              f'there)')
 
 
+def resolve_backend(backend, precision='auto', device='cpu', native_bfloat16=None):
+    """(backend run, one line saying why, '' when given) of a backend of BACKEND_CHOICES for
+    `precision` (PRECISIONS, before resolve_precision) on `device`. auto -> torch on a GPU
+    and for bfloat16 (asked for, or auto where native: native_bfloat16, None = probed with
+    bfloat16_feature), onnxruntime for int8 and float32 on a CPU (precision float32, or auto
+    without native bfloat16): the same network exported to ONNX ran 1.2-1.45x torch's
+    keypoints3d/s end to end on an AVX2 CPU at 8 and 4 cameras (bench/results/pipeline.md)
+    and its bare forward ~2x torch's float32 on both CPUs measured; torch where the
+    onnxruntime package is missing (said). Raises ValueError naming backend for an unknown
+    one."""
+    if backend not in BACKEND_CHOICES:
+        raise ValueError(f'backend must be one of {BACKEND_CHOICES}, got {backend!r}')
+    if backend != 'auto':
+        return backend, ''
+    device = torch.device(device)
+    if device.type != 'cpu':
+        return 'torch', f'backend auto: torch (device {device})'
+    if precision == 'bfloat16':
+        return 'torch', 'backend auto: torch (bfloat16 runs on torch)'
+    if precision == 'auto':
+        if native_bfloat16 is None:
+            native_bfloat16 = bfloat16_native(device)
+        if native_bfloat16:
+            return 'torch', 'backend auto: torch (bfloat16 is native on this CPU)'
+    try:
+        import onnxruntime  # noqa: F401 - only whether it is there
+    except ImportError:
+        return 'torch', ('backend auto: torch (the onnxruntime package is not installed; '
+                         'it runs float32 faster on a CPU: pip install -r requirements.txt)')
+    why = 'int8 runs on it' if precision == 'int8' else (
+        'float32 on a CPU: faster than torch, bench/results/pipeline.md')
+    return 'onnxruntime', f'backend auto: onnxruntime ({why})'
+
+
 def resolve_precision(precision, backend='torch', device='cpu', checkpoint=None):
     """(precision run, one line saying why) for a precision of PRECISIONS (check_precision
     first: ValueError naming precision). auto -> with backend torch: bfloat16 where it runs
@@ -114,9 +153,11 @@ class Detector:
     model: a detector from build_model / load_checkpoint (it is copied, put in eval mode,
     BatchNorm folded into the convolutions, so the caller's model is never changed).
     metadata: its checkpoint metadata (at least 'keypoints'). device: None = CUDA when
-    available, else CPU. backend: 'torch' or 'onnxruntime' (the same network exported to
+    available, else CPU. backend: 'torch', 'onnxruntime' (the same network exported to
     ONNX, see monet_ros.models.onnx_backend; exported in memory here, or cached beside the
-    checkpoint by from_checkpoint). threads: CPU threads of the onnxruntime session
+    checkpoint by from_checkpoint) or 'auto' (resolve_backend: `backend` is then the one
+    chosen, its line the start of precision_note). threads: CPU threads of the onnxruntime
+    session
     (0 = its default; torch's are process-wide: torch.set_num_threads) and of the per-view
     work of an instant (view_threads, a cores.ViewThreads: the crops here, the JPEG
     decodes of io.jpeg_scale.decode_views; 0 = the cores the process may use).
@@ -153,14 +194,18 @@ class Detector:
         if architecture != model.architecture:
             raise ValueError(f'Detector: metadata.architecture is {architecture!r} but the '
                              f'model is {model.architecture!r}')
-        if backend not in BACKENDS:
-            raise ValueError(f'Detector: backend must be one of {BACKENDS}, got {backend!r}')
+        if backend not in BACKEND_CHOICES:
+            raise ValueError(f'Detector: backend must be one of {BACKEND_CHOICES}, got '
+                             f'{backend!r}')
         if device is None:
             device = 'cuda' if torch.cuda.is_available() else 'cpu'
         self.device = torch.device(device)
+        backend, backend_note = resolve_backend(backend, precision, self.device)
         # auto -> the precision run here; precision_note: the one line saying which and why
         self.precision, self.precision_note = resolve_precision(precision, backend, self.device,
                                                                 checkpoint)
+        if backend_note:
+            self.precision_note = f'{backend_note}; {self.precision_note}'
         self.model = copy.deepcopy(model).eval().to(self.device)
         if fuse:
             fuse_for_inference(self.model)

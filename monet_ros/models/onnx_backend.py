@@ -18,6 +18,9 @@ import torch
 from monet_ros.atomic import atomic_write, sha256_file
 
 BACKENDS = ('torch', 'onnxruntime')
+# what the detector node, `monet process` and `monet pipeline` take: auto picks one of
+# BACKENDS (models.detector.resolve_backend)
+BACKEND_CHOICES = ('auto',) + BACKENDS
 OPSET = 17
 
 

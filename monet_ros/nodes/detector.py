@@ -68,6 +68,7 @@ from monet_ros.io.jpeg_scale import decode_views, is_jpeg, jpeg_size
 from monet_ros.models import CheckpointError, Detector
 from monet_ros.models.detector import PRECISIONS
 from monet_ros.models.device import check_device
+from monet_ros.models.onnx_backend import BACKEND_CHOICES
 from monet_ros.nodes.names import (
     DEBUG_CAMERA_INFO,
     DEBUG_IMAGE,
@@ -154,9 +155,10 @@ class DetectorConfig:
     threads: int = setting(0, 'CPU threads of the network (torch and onnxruntime; 0 = their '
                            'default) and of decoding and cropping the views of an instant (0 = '
                            'the cores the process may use)', minimum=0, maximum=MAX_THREADS)
-    backend: str = setting('torch', 'inference backend: torch, or onnxruntime (the network '
-                           'exported to ONNX once, cached beside the checkpoint)',
-                           choices=('torch', 'onnxruntime'))
+    backend: str = setting('auto', 'inference backend: auto (onnxruntime for float32 and int8 '
+                           'on a CPU, torch for bfloat16 and on a GPU; the start-up line says '
+                           'which), torch, or onnxruntime (the network exported to ONNX once, '
+                           'cached beside the checkpoint)', choices=BACKEND_CHOICES)
     precision: str = setting('auto', 'network arithmetic: auto (bfloat16 with torch where '
                              'native, else float32; never int8, measured slower; the start-up '
                              'line says which and why), float32, bfloat16 (torch backend, 2-3x '
