@@ -40,7 +40,7 @@ the detector children, not the publisher).
 differ by several percent. --second-job N runs N CPU-bound processes beside the end-to-end
 runs (the loaded-machine figures); --input-size the small net at another input side;
 --precision float32 bfloat16 int8 runs every end-to-end case with each detector precision
-(backend torch, int8 on onnxruntime: see --backend), side by side; int8 as `monet pipeline
+(`monet pipeline --backend auto`'s backend: --backend), side by side; int8 as `monet pipeline
 --precision int8 --backend onnxruntime` (commands.pipeline.prepare_int8): the network
 quantised once before the measured runs, calibrated on the tracked crops of a recording of
 the bench's own camera frames and rig, and cached beside the checkpoint; every int8 run's
@@ -371,9 +371,11 @@ def feed_frames(views):
 
 def backend_for(precision, backend=None):
     """The detector backend of the end-to-end runs in `precision`: `backend` when given
-    (--backend), else onnxruntime for int8 (the only one that runs it: `monet pipeline
-    --precision int8 --backend onnxruntime`) and torch for the others."""
-    return backend or ('onnxruntime' if precision == 'int8' else 'torch')
+    (--backend), else what `monet pipeline`'s default --backend auto runs for it on this
+    machine's CPU (models.detector.resolve_backend: onnxruntime for float32 and int8,
+    torch for bfloat16), named in the tables."""
+    from monet_ros.models.detector import resolve_backend
+    return backend or resolve_backend('auto', precision, 'cpu')[0]
 
 
 def write_feed_recording(path, rig, instants):
@@ -793,8 +795,9 @@ def main():
                         '`monet pipeline`: the backend default with one detector process, '
                         'the cores shared out with several)')
     parser.add_argument('--backend', choices=('torch', 'onnxruntime'), default=None,
-                        help='detector backend of the end-to-end runs (default: torch, and '
-                        'onnxruntime for int8, the only one that runs it)')
+                        help="detector backend of the end-to-end runs (default: `monet "
+                        "pipeline`'s --backend auto: onnxruntime for float32 and int8, torch "
+                        'for bfloat16)')
     parser.add_argument('--precision', choices=('float32', 'bfloat16', 'int8'), nargs='+',
                         default=['float32'], help='detector precision(s) of the end-to-end '
                         'runs (several: each case with each, side by side); int8 as `monet '

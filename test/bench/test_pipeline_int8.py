@@ -28,8 +28,10 @@ def bench_module(repo_root):
 
 def test_each_precision_gets_the_backend_that_runs_it(repo_root):
     bench = bench_module(repo_root)
+    # as `monet pipeline`'s default --backend auto (onnxruntime is installed here)
     assert [bench.backend_for(p) for p in ('float32', 'bfloat16', 'int8')] == \
-        ['torch', 'torch', 'onnxruntime']
+        ['onnxruntime', 'torch', 'onnxruntime']
+    assert bench.backend_for('float32', 'torch') == 'torch'
     assert bench.backend_for('float32', 'onnxruntime') == 'onnxruntime'
 
 
