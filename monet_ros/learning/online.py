@@ -435,6 +435,7 @@ class OnlineLearner:
         self.checkpoints += 1
         self.last_result = result
         if publish:
+            self.prepare_onnx(result.path)
             self.published = result
             self.reference_px = metrics[self.metric]
             _write_json_atomic(self.out / PUBLISHED, {
@@ -443,8 +444,29 @@ class OnlineLearner:
         self.prune()
         return result
 
+    def prepare_onnx(self, path):
+        """Export a checkpoint to be announced for the detectors' ONNX Runtime backend
+        (their default on a CPU: models.detector.resolve_backend) beside it, as the detector
+        itself caches it (Detector.from_checkpoint with backend onnxruntime, keyed by the
+        checkpoint's sha256): the export (~1 s for the small net) is then done here, not in
+        a running detector's reload. Skipped without onnxruntime; a failed export is said
+        and left to the detectors."""
+        from importlib.util import find_spec
+
+        from monet_ros.models import Detector
+        from monet_ros.models.onnx_backend import OnnxBackendError
+        if not find_spec('onnxruntime'):
+            return
+        try:
+            Detector.from_checkpoint(path, device='cpu', backend='onnxruntime',
+                                     precision='float32')
+        except (OnnxBackendError, ValueError, OSError) as error:
+            self.log(f'{path}: ONNX export for the detectors failed, they will export it '
+                     f'themselves: {error}')
+
     def prune(self):
-        """Delete unannounced checkpoints beyond the newest keep_checkpoints."""
+        """Delete unannounced checkpoints beyond the newest keep_checkpoints (with their
+        ONNX exports)."""
         keep = self.config.keep_checkpoints
         if not keep:
             return
@@ -453,3 +475,5 @@ class OnlineLearner:
         candidates = [p for p in files if p.name != announced]
         for path in candidates[:-keep]:
             path.unlink(missing_ok=True)
+            for export in path.parent.glob(f'{path.stem}.*.onnx'):
+                export.unlink(missing_ok=True)

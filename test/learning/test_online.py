@@ -20,6 +20,7 @@ from monet_ros.learning.online import (
 )
 from monet_ros.learning.recording import RecordingError
 from monet_ros.models import build_model, load_checkpoint, save_checkpoint
+from monet_ros.models.onnx_backend import onnx_path_for
 
 TINY = dict(batch_labelled=4, batch_pseudo=4, batch_unlabeled=1, views_per_instant=3,
             lr=3e-3, eval_fraction=0.25, device='cpu', threads=1)
@@ -103,6 +104,11 @@ def test_learner_announces_only_checkpoints_not_worse_and_resumes(folder, tmp_pa
     announced = f'step_{last.step:06d}.pt'
     written = [f'step_{r.step:06d}.pt' for r in results]
     assert kept == sorted({announced, *[w for w in written if w != announced][-2:]})
+    # the announced checkpoint's ONNX export is ready for the detectors (their cache name),
+    # the deleted checkpoints' exports are gone with them
+    exports = sorted(p.name for p in (out / 'checkpoints').glob('*.onnx'))
+    assert onnx_path_for(last.path, last.sha256).name in exports
+    assert all(e.split('.')[0] + '.pt' in kept for e in exports), (exports, kept)
 
     # a restarted learner continues at step 30 with the last announcement as reference
     again = OnlineLearner(config, log=lambda *a: None)
