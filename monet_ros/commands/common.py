@@ -61,29 +61,24 @@ def print_precision(owner, precision, backend='torch', device=None, checkpoint=N
 
 def precision_note(owner, precision, backend='torch', device=None, checkpoint=None,
                    calibration=None):
-    """Resolve --precision (auto: bfloat16 with torch where native, else float32; int8 only
-    when asked for: models.detector.resolve_precision) for `device` (None = CUDA when
-    present, else CPU): (the precision run, the note saying which and why), nothing
-    printed (`monet pipeline` prints it once every start check passed). ConfigError names
-    precision for a value that cannot run (bfloat16 on a CPU that would emulate it, int8
-    without onnxruntime or without VNNI / AMX-INT8); ConfigError names calibration when
-    one (--calibration, int8's data) is given for another precision (nothing would use
+    """Resolve --precision (auto: bfloat16 with torch where native, else float32; int8 only when
+    asked for) and --backend (auto: models.detector.resolve_inference) for `device` (None =
+    CUDA when present, else CPU): (the precision run, the note saying which and why),
+    nothing printed (`monet pipeline` prints it once every start check passed). ConfigError
+    names precision for a value that cannot run (bfloat16 on a CPU that would emulate it,
+    int8 without onnxruntime or without VNNI / AMX-INT8); ConfigError names calibration
+    when one (--calibration, int8's data) is given for another precision (nothing would use
     it)."""
     import torch
 
-    from monet_ros.models.detector import resolve_backend, resolve_precision
+    from monet_ros.models.detector import resolve_inference
     if device is None:
         device = 'cuda' if torch.cuda.is_available() else 'cpu'
     try:
-        backend, backend_note = resolve_backend(backend, precision, device)
+        chosen, _, note = resolve_inference(precision, backend, device, checkpoint)
     except ValueError as error:
-        raise ConfigError(owner, 'backend', str(error)) from None
-    try:
-        chosen, note = resolve_precision(precision, backend, device, checkpoint)
-    except ValueError as error:
-        raise ConfigError(owner, 'precision', str(error)) from None
-    if backend_note:
-        note = f'{backend_note}; {note}'
+        field = 'backend' if str(error).startswith('backend') else 'precision'
+        raise ConfigError(owner, field, str(error)) from None
     if calibration is not None and chosen != 'int8':
         raise ConfigError(owner, 'calibration', f'{calibration}: calibration data of '
                           f'--precision int8 only; this run is {chosen} (give --precision '

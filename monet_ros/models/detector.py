@@ -133,6 +133,26 @@ def resolve_precision(precision, backend='torch', device='cpu', checkpoint=None)
     return 'float32', f'precision auto: float32 ({what})'
 
 
+def resolve_inference(precision, backend, device='cpu', checkpoint=None):
+    """(precision run, backend run, one line saying both and why) of the detector's
+    `precision` (PRECISIONS) and `backend` (BACKEND_CHOICES) on `device`: with backend auto
+    the precision is resolved first as torch would run it (int8 as onnxruntime: the only
+    backend that runs it), then the backend for that precision (resolve_backend), and the
+    pair is checked (check_precision); a given backend as resolve_precision. Raises
+    ValueError naming backend or precision. One rule for Detector and the commands' line
+    (commands.common.precision_note)."""
+    if backend not in BACKEND_CHOICES:
+        raise ValueError(f'backend must be one of {BACKEND_CHOICES}, got {backend!r}')
+    if backend != 'auto':
+        chosen, note = resolve_precision(precision, backend, device, checkpoint)
+        return chosen, backend, note
+    chosen, note = resolve_precision(precision, 'onnxruntime' if precision == 'int8'
+                                     else 'torch', device, checkpoint)
+    backend, backend_note = resolve_backend('auto', chosen, device)
+    check_precision(chosen, backend, device)
+    return chosen, backend, f'{note}; {backend_note}'
+
+
 def images_to_tensor(images, device='cpu'):
     """(N, H, W, 3) uint8 RGB (numpy or torch) -> (N, 3, H, W) float32 in [0, 1] on device.
 
@@ -155,8 +175,8 @@ class Detector:
     metadata: its checkpoint metadata (at least 'keypoints'). device: None = CUDA when
     available, else CPU. backend: 'torch', 'onnxruntime' (the same network exported to
     ONNX, see monet_ros.models.onnx_backend; exported in memory here, or cached beside the
-    checkpoint by from_checkpoint) or 'auto' (resolve_backend: `backend` is then the one
-    chosen, its line the start of precision_note). threads: CPU threads of the onnxruntime
+    checkpoint by from_checkpoint) or 'auto' (resolve_inference: `backend` is then the one
+    chosen, its line the end of precision_note). threads: CPU threads of the onnxruntime
     session
     (0 = its default; torch's are process-wide: torch.set_num_threads) and of the per-view
     work of an instant (view_threads, a cores.ViewThreads: the crops here, the JPEG
@@ -200,12 +220,9 @@ class Detector:
         if device is None:
             device = 'cuda' if torch.cuda.is_available() else 'cpu'
         self.device = torch.device(device)
-        backend, backend_note = resolve_backend(backend, precision, self.device)
-        # auto -> the precision run here; precision_note: the one line saying which and why
-        self.precision, self.precision_note = resolve_precision(precision, backend, self.device,
-                                                                checkpoint)
-        if backend_note:
-            self.precision_note = f'{backend_note}; {self.precision_note}'
+        # auto -> the precision / backend run here; precision_note: the line saying why
+        self.precision, backend, self.precision_note = resolve_inference(
+            precision, backend, self.device, checkpoint)
         self.model = copy.deepcopy(model).eval().to(self.device)
         if fuse:
             fuse_for_inference(self.model)

@@ -34,6 +34,16 @@ def expected_line():
                        'bfloat16 would be emulated)')
 
 
+def expected_process_line():
+    """monet process's line: its --backend auto follows the precision (models.detector.
+    resolve_inference): torch for native bfloat16, ONNX Runtime for float32 on a CPU."""
+    choice, line = expected_line()
+    if choice == 'bfloat16':
+        return f'{line}; backend auto: torch (bfloat16 is native on this CPU)'
+    return (f'{line}; backend auto: onnxruntime (float32 on a CPU: faster than torch, '
+            'bench/results/pipeline.md)')
+
+
 pytestmark = pytest.mark.skipif(not Path('/proc/cpuinfo').is_file(),
                                 reason='CPU flags are read from /proc/cpuinfo')
 
@@ -69,5 +79,6 @@ def test_train_and_process_default_to_auto_and_say_it_once(repo_root, tmp_path):
                  '--device', 'cpu', '--threads', '1', '--quiet', '--export', 'none')
     assert done.returncode == 0, done.stderr
     # process: on stdout (its stderr keeps one line for a bad input)
-    assert done.stdout.splitlines().count(f'monet process: {line}') == 1
+    assert done.stdout.splitlines().count(f'monet process: {expected_process_line()}') == 1, \
+        done.stdout
     assert sum('precision' in x for x in (done.stdout + done.stderr).splitlines()) == 1

@@ -81,7 +81,7 @@ def test_backend_auto_picks_by_precision_and_cpu(precision, native, expected):
 @pytest.mark.skipif(not find_spec('onnxruntime'),
                     reason='onnxruntime is not installed')
 def test_a_detector_with_backend_auto_runs_what_it_says(trained):
-    # this CPU's choice (probed): the backend run, the note leading precision_note, and the
+    # this CPU's choice (probed): the backend run, the note ending precision_note, and the
     # heatmaps of the backend it names (torch float32 within 1e-4)
     rng = np.random.default_rng(0)
     images, _ = blob_images(rng, 4)
@@ -89,7 +89,8 @@ def test_a_detector_with_backend_auto_runs_what_it_says(trained):
     auto = Detector(trained, {'keypoints': NAMES}, device='cpu', backend='auto',
                     precision='float32')
     assert auto.backend == 'onnxruntime'
-    assert auto.precision_note.startswith('backend auto: onnxruntime (float32 on a CPU')
+    assert auto.precision_note == ('precision float32; backend auto: onnxruntime (float32 on '
+                                   'a CPU: faster than torch, bench/results/pipeline.md)')
     torch32 = Detector(trained, {'keypoints': NAMES}, device='cpu', precision='float32')
     np.testing.assert_allclose(auto.predict(images, cams)[0], torch32.predict(images, cams)[0],
                                atol=1e-4)
