@@ -130,7 +130,7 @@ class RunningMean:
 
 
 def process_recording(bag, model, out, rig=None, cameras=(), config=None, device=None,
-                      skeleton=None, progress=True, backend='torch', threads=0, exports=(),
+                      skeleton=None, progress=True, backend='auto', threads=0, exports=(),
                       trc_axes='xyz', camera_map=(), precision='auto', filter_config=None,
                       rig_units=None, reduced_decode=True, calibration=None, subjects=None,
                       association=None, tracker=None, log=None):
@@ -138,7 +138,8 @@ def process_recording(bag, model, out, rig=None, cameras=(), config=None, device
     atomically). config: ProcessConfig. Returns a dict of figures: frames, views,
     missing_views, skipped_views (Counter camera -> views skipped), skip_reasons (camera ->
     first reason), seconds, mean_error, mean_views, report (the reader's ReadReport).
-    backend: 'torch' or 'onnxruntime'; threads: CPU threads (0 = the library's default);
+    backend: 'auto' (the command's default: models.detector.resolve_inference), 'torch' or
+    'onnxruntime'; threads: CPU threads (0 = the library's default);
     precision: 'auto' (the command's default: models.detector.resolve_precision),
     'float32', 'bfloat16' or 'int8' (backend onnxruntime); `monet eval --reference`
     and `monet train --holdout-labelled` score models through this function, so as `monet
