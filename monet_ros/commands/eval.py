@@ -1,6 +1,7 @@
 """`monet eval`: PCK and reprojection-error tables (rows = modes, columns = datasets);
 with --reference, accuracy against labels or a 3D reference in px and mm, one row per
-checkpoint (commands/eval_reference.py)."""
+checkpoint, and with --subjects N one more per reference subject (commands/
+eval_reference.py)."""
 from pathlib import Path
 import sys
 
@@ -96,6 +97,11 @@ def _run(args, out, device):
     if args.reference:
         from monet_ros.commands.eval_reference import run_reference
         return run_reference(args)
+    if args.subjects != 1 or any(getattr(args, dest) != default for dest, (default, _) in
+                                 (args.subject_only_defaults or {}).items()):
+        raise ValueError('--subjects and its settings apply only with --reference (a '
+                         'reference of several subjects); monet eval against a synth ground '
+                         'truth scores one subject')
     if args.from_json:
         summaries = load_results_json(args.from_json)
     else:

@@ -4,6 +4,18 @@ a reference (monet_ros.evaluation.reference): ONE row per checkpoint with 2D pix
 and PCK@px on labelled views (a 3D reference: on its projection into the cameras), 3D
 error in mm (median / mean / p90), PCK@mm and coverage.
 
+Several subjects (`--subjects N`, N >= 2; labels with a `subject` column, or an importer's
+tracks / individuals): every checkpoint runs as `monet process --subjects N` runs it (the
+same function, run_model; the several-subject settings are that command's options) and
+every reference subject is scored against the track matched to it (evaluation.reference.
+score_subjects: one-to-one, least mean 3D distance over the scored instants both have,
+the labels' own triangulation against the track's 3D): the checkpoint's row is then the
+pooled figures (subject `all`) and one row per reference subject follows (subject, track:
+the matched identity or -1, match_mm: the pair's mean 3D distance in mm, and its own
+figures). A reference of several subjects without --subjects N is refused (one line
+naming the file, the field subject and --subjects); a reference of one subject is scored
+against its matched track.
+
 Instants scored: those with a reference, less the instants labelled in the training
 labels (--labels, or for a 3D reference the data folder's labels.csv) unless
 --include-labelled: a model is not scored on what it was trained on. The command says
@@ -44,6 +56,13 @@ def add_reference_arguments(parser):
     parser.add_argument('--rig', help="rig file (default: the recording's)")
     from monet_ros.commands.common import add_rig_units_argument
     add_rig_units_argument(parser)
+    parser.add_argument('--subjects', type=int, default=1, metavar='N',
+                        help='with --reference: run the checkpoints as `monet process '
+                        '--subjects N` (N >= 2) and score every subject of the reference '
+                        '(labels with a subject column), each against the track matched to '
+                        'it (1 = one subject)')
+    from monet_ros.commands.common import add_subject_settings_arguments
+    add_subject_settings_arguments(parser)
     parser.add_argument('--px-thresholds', default='5,10,20', help='2D PCK thresholds (px)')
     parser.add_argument('--mm-thresholds', default='25,50,100', help='3D PCK thresholds (mm)')
 
@@ -58,21 +77,25 @@ def _thresholds(text, flag):
     return values
 
 
-def _has_reference(reference):
-    """(T,) bool: instants where the reference has a 3D point or a 2D point."""
-    has = np.isfinite(reference.X).all(-1).any(-1)
-    if reference.points2d is not None:
-        has |= np.isfinite(reference.points2d).all(-1).any(axis=(1, 2))
+def _has_reference(references):
+    """(T,) bool: instants where a reference (of any subject) has a 3D or a 2D point."""
+    has = np.zeros(len(references[0].stamps), bool)
+    for reference in references:
+        has |= np.isfinite(reference.X).all(-1).any(-1)
+        if reference.points2d is not None:
+            has |= np.isfinite(reference.points2d).all(-1).any(axis=(1, 2))
     return has
 
 
-def _scored_instants(args, reference, bag_path):
+def _scored_instants(args, references, bag_path):
     """(T,) bool scored, (T,) bool labelled (with a reference), labels path or None: the
-    rule of the module docstring. ValueError when labelled instants leave none."""
+    rule of the module docstring (references: every subject's, on the same instants).
+    ValueError when labelled instants leave none."""
     from monet_ros.evaluation.reference import labelled_instants
     from monet_ros.learning.recording import find_recording_parts
 
-    has_ref = _has_reference(reference)
+    reference = references[0]
+    has_ref = _has_reference(references)
     path = args.labels or (find_recording_parts(bag_path)['labels']
                            if reference.kind == '3d' else None)
     labelled = has_ref & (labelled_instants(path, reference.stamps) if path else False)
@@ -94,12 +117,81 @@ def _write_instants(path, reference, scored, labelled):
             w.writerow([t, int(stamp), status])
 
 
+def run_model(bag, model, cameras, rig=None, device=None, camera_map=(), rig_units=None,
+              subjects=None, association=None, tracker=None):
+    """`model` run over `bag` as `monet process` runs it (process.process_recording: the
+    one-subject tracked crops; with `subjects` a subjects.detection.SubjectsConfig of
+    N >= 2 as `monet process --subjects N`, with association / tracker its other configs,
+    None: that command's defaults) -> dict: stamps (R,) ns, subject (R,) int track
+    identities (None for one subject), X (R, C, 3) in the rig's unit, points2d
+    (R, V, C, 2) px: the 2D detections in `cameras` (Camera list; matched by name, NaN
+    for a camera the run lacks) - one row per processed instant, or per instant and track.
+    The one place `monet eval --reference` and `monet train --holdout-labelled` run a
+    model; raises as process_recording."""
+    from monet_ros.commands.process import process_recording
+    from monet_ros.io.export_tables import read_anipose_csv
+
+    several = subjects is not None and subjects.subjects > 1
+    with tempfile.TemporaryDirectory(prefix='monet-eval-') as tmp:
+        out = Path(tmp) / 'run'
+        figures = process_recording(bag, model, out, rig=rig, device=device, progress=False,
+                                    exports=() if several else ('csv', 'npz'),
+                                    camera_map=camera_map, rig_units=rig_units,
+                                    subjects=subjects if several else None,
+                                    association=association, tracker=tracker)
+        if several:
+            rows = figures['subjects']
+            frame = np.asarray(rows.frame, np.int64)
+            stamps = np.asarray(figures['subject_stamps'], np.int64)[frame]
+            ident, X, p2 = np.asarray(rows.subject, np.int64), rows.X, rows.points2d
+            names = list(figures['subject_cameras'])
+            X = np.asarray(X, float).reshape(len(stamps), -1, 3)
+        else:
+            table = read_anipose_csv(out / 'keypoints3d.csv')
+            det = np.load(out / 'detections2d.npz')
+            stamps, ident, X = table['stamps_ns'], None, table['X']
+            p2, names = det['points2d'], list(det['cameras'])
+    C = X.shape[1]
+    points2d = np.full((len(stamps), len(cameras), C, 2), np.nan)
+    if len(stamps):
+        p2 = np.asarray(p2, float).reshape(len(stamps), len(names), C, 2)
+        for v, cam in enumerate(cameras):
+            if cam.name in names:
+                points2d[:, v] = p2[:, names.index(cam.name)]
+    return dict(stamps=np.asarray(stamps, np.int64), subject=ident, X=X, points2d=points2d)
+
+
+def score_run(references, run, px_thresholds, mm_thresholds, instants=None):
+    """evaluation.reference figures of a run_model result against load_references'
+    references: one subject's run by score (one reference), several subjects' by
+    score_subjects (pooled, with `subjects`: one dict per reference subject and its
+    matched track)."""
+    from monet_ros.evaluation.reference import score, score_subjects
+    if run['subject'] is None:
+        return score(references[0], run['stamps'], run['X'], run['points2d'], px_thresholds,
+                     mm_thresholds, instants=instants)
+    return score_subjects(references, run['stamps'], run['subject'], run['X'],
+                          run['points2d'], px_thresholds, mm_thresholds, instants=instants)
+
+
+def subject_configs_of(args, owner):
+    """(subjects, association, tracker) of `monet eval --subjects N` (N >= 2: process.
+    subject_configs on `monet process`' default ProcessConfig, the run's) or (None, None,
+    None) for one subject (a several-subject option then refused: ValueError naming it)."""
+    from monet_ros.commands.common import check_subject_only_options
+    from monet_ros.commands.process import ProcessConfig, subject_configs
+    several = args.subjects != 1
+    check_subject_only_options(args, several, owner, without='scores one subject without it')
+    if not several:
+        return None, None, None
+    return subject_configs(args, config=ProcessConfig())
+
+
 def run_reference(args):
     from monet_ros.commands.common import print_precision
     from monet_ros.commands.labels import label_options_from_args
-    from monet_ros.commands.process import process_recording
-    from monet_ros.evaluation.reference import alignment_text, load_reference, score
-    from monet_ros.io.export_tables import ExportError, read_anipose_csv
+    from monet_ros.evaluation.reference import alignment_text, load_reference, load_references
+    from monet_ros.io.export_tables import ExportError
     from monet_ros.labels import LabelError
     from monet_ros.learning.recording import RecordingError
     from monet_ros.learning.recording_index import recording_index
@@ -112,6 +204,7 @@ def run_reference(args):
         return 2
     rows = []
     try:
+        subjects, association, tracker = subject_configs_of(args, prog)
         px = _thresholds(args.px_thresholds, '--px-thresholds')
         mm = _thresholds(args.mm_thresholds, '--mm-thresholds')
         options = label_options_from_args(args)
@@ -120,36 +213,30 @@ def run_reference(args):
         references = {}
         # the models run as `monet process` runs them: its default precision, said once
         print_precision(prog, 'auto', 'torch', args.device or None)
-        with tempfile.TemporaryDirectory(prefix='monet-eval-') as tmp:
-            for n, path in enumerate(args.checkpoints):
-                _, meta = load_checkpoint(path)
-                keypoints = tuple(meta['keypoints'])
-                if keypoints not in references:
-                    ref = load_reference(
-                        args.reference, index, keypoints, fmt=args.reference_format,
-                        options=options, axes=args.reference_axes,
-                        reference_fps=args.reference_fps,
-                        rate_policy=args.reference_rate_mismatch)
-                    references[keypoints] = (ref, *_scored_instants(args, ref,
-                                                                    args.data[0]))
-                reference, scored, labelled, labels_path = references[keypoints]
-                out = Path(tmp) / f'run{n}'
-                process_recording(index.bag, path, out, rig=args.rig, device=args.device,
-                                  progress=False, exports=('csv', 'npz'),
-                                  camera_map=options.camera_map, rig_units=args.rig_units)
-                table = read_anipose_csv(out / 'keypoints3d.csv')
-                det = np.load(out / 'detections2d.npz')
-                names = [c.name for c in index.cameras]
-                order = [list(det['cameras']).index(c) if c in det['cameras'] else None
-                         for c in names]
-                p2 = np.full((len(table['stamps_ns']), len(names), len(keypoints), 2), np.nan)
-                for v, o in enumerate(order):
-                    if o is not None:
-                        p2[:, v] = det['points2d'][:, o]
-                figures = score(reference, table['stamps_ns'], table['X'], p2, px, mm,
-                                instants=scored)
-                rows.append(dict(checkpoint=str(path), mode=meta.get('mode') or Path(path).stem,
-                                 step=meta.get('step'), **figures))
+        for path in args.checkpoints:
+            _, meta = load_checkpoint(path)
+            keypoints = tuple(meta['keypoints'])
+            if keypoints not in references:
+                load = load_references if subjects is not None else load_reference
+                refs = load(args.reference, index, keypoints, fmt=args.reference_format,
+                            options=options, axes=args.reference_axes,
+                            reference_fps=args.reference_fps,
+                            rate_policy=args.reference_rate_mismatch)
+                refs = refs if subjects is not None else [refs]
+                references[keypoints] = (refs, *_scored_instants(args, refs, args.data[0]))
+            refs, scored, labelled, labels_path = references[keypoints]
+            run = run_model(index.bag, path, index.cameras, rig=args.rig, device=args.device,
+                            camera_map=options.camera_map, rig_units=args.rig_units,
+                            subjects=subjects, association=association, tracker=tracker)
+            figures = score_run(refs, run, px, mm, instants=scored)
+            row = dict(checkpoint=str(path), mode=meta.get('mode') or Path(path).stem,
+                       step=meta.get('step'))
+            per = figures.pop('subjects', None)
+            if per is None:
+                rows.append(dict(row, **figures))
+            else:          # the pooled row, then one row per reference subject
+                rows.append(dict(row, subject='all', track='', match_mm='', **figures))
+                rows += [dict(row, **p) for p in per]
     except (LabelError, ExportError, RecordingError, CheckpointError, ValueError,
             OSError) as error:
         print(f'{prog}: {error}', file=sys.stderr)
@@ -162,10 +249,12 @@ def run_reference(args):
         w.writeheader()
         w.writerows(rows)
     (out_dir / 'reference.json').write_text(json.dumps(rows, indent=1))
-    ref, scored, labelled, labels_path = next(iter(references.values()))
+    refs, scored, labelled, labels_path = next(iter(references.values()))
+    ref = refs[0]
     _write_instants(out_dir / 'reference_instants.csv', ref, scored, labelled)
-    cols = ['mode', 'step', 'px_median', *[f'pck2d@{t:g}px' for t in px], 'mm_median',
-            'mm_mean', 'mm_p90', *[f'pck3d@{t:g}mm' for t in mm], 'coverage']
+    cols = ['mode', 'step', 'subject', 'track', 'px_median',
+            *[f'pck2d@{t:g}px' for t in px], 'mm_median', 'mm_mean', 'mm_p90',
+            *[f'pck3d@{t:g}mm' for t in mm], 'coverage']
     cols = [c for c in cols if c in keys]
     two_d = (f', {rows[0].get("views_2d")} labelled views' if ref.kind == '2d' else
              f'; 2D: its projection into the {len(index.cameras)} cameras '
@@ -176,6 +265,12 @@ def run_reference(args):
     print(f'3D errors in mm (the rig and the 3D in {ref.units}, converted)')
     if ref.alignment:
         print(f'reference time: {alignment_text(ref.alignment)}')
+    if 'subject' in keys:
+        print(f'subjects: {len(refs)} in the reference ({", ".join(str(r.subject) for r in refs)}'
+              f'), the model run with --subjects {args.subjects}; each reference subject '
+              'scored against the track matched to it (one-to-one, least mean 3D distance '
+              'over the scored instants both have; track -1: none); rows subject all: '
+              'every subject pooled')
     from monet_ros.commands.info import _ranges
     print(f'scored instants: {int(scored.sum())} of {len(scored)} '
           f'({_ranges(np.flatnonzero(scored).tolist())})'
@@ -187,7 +282,8 @@ def run_reference(args):
     print('|' + '---|' * (len(cols) + 1))
     for r in rows:
         cells = [r['checkpoint']] + [
-            f'{r[c]:.3g}' if isinstance(r[c], float) else str(r[c]) for c in cols]
+            f'{r.get(c):.3g}' if isinstance(r.get(c), float) else str(r.get(c, ''))
+            for c in cols]
         print('| ' + ' | '.join(cells) + ' |')
     print('written: ' + str(out_dir / 'reference.csv'), file=sys.stderr)
     return 0

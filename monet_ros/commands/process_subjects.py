@@ -46,6 +46,8 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
     subjects: SubjectsConfig; association: AssociationConfig; tracker: TrackerConfig.
     Fills `figures` (process_recording's dict) and adds figures['subjects']: the
     subjects.offline.SubjectRows, figures['subject_keypoints'] its C keypoint names,
+    figures['subject_stamps'] (F,) ns the stamps of its rows' frame indices,
+    figures['subject_cameras'] the names of its V cameras (points2d's order),
     figures['subject_counts']: per-frame counts (frames
     with k subjects, discoveries, crops, duplicates, instances, unmatched, and discovery's
     3D points: found, explained by a track, loose), and figures['filter']: the
@@ -130,6 +132,8 @@ def process_subjects(reader, topics, cameras, detector, units, frame_id, staging
                                         trc_axes=trc_axes, smoothed=smoothed)
     figures['subjects'] = result
     figures['subject_keypoints'] = list(detector.keypoints)
+    figures['subject_stamps'] = stamps
+    figures['subject_cameras'] = [cam.name for cam in cameras]
     figures['subject_counts'] = counts
     return written
 

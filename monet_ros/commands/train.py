@@ -59,8 +59,9 @@ def add_arguments(parser):
                         help="leave N labelled instants (every subject's labels there) out "
                         "of training and report the model's error on them at the end: every "
                         "subject's, pooled and per subject, in crops around each (px, as "
-                        '--validation-labels), and with labels of one subject also as '
-                        '`monet process` runs the model (px, mm) (0 = off)')
+                        '--validation-labels), and as `monet process` runs the model (px, '
+                        'mm; with labels of several subjects as `monet process --subjects N`, '
+                        'pooled and per subject) (0 = off)')
     from monet_ros.commands.labels import add_label_arguments
     add_label_arguments(parser)
     group = parser.add_argument_group('training configuration (TrainConfig)')
@@ -263,27 +264,43 @@ def run(args):
                                  '(--holdout-labelled), in crops around each subject',
                                  crops, len(held)):
             print(line, file=sys.stderr)
-        if recording.num_subjects == 1:        # as `monet process` runs the model
-            from monet_ros.learning.recording import find_recording_parts
-            parts = find_recording_parts(args.data)
-            figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
-                                    held_path, recording,
-                                    label_options_from_args(args).camera_map, args.rig_units)
-            summary['holdout'].update(figures)
-            print(f'monet train: held-out labelled instants {held.tolist()}: 2D median '
-                  f'{figures["px_median"]:.1f} px, PCK@10px {100 * figures["pck2d@10px"]:.0f}% '
-                  f'({figures["views_2d"]} views); 3D median {figures["mm_median"]:.1f} mm, '
-                  f'mean {figures["mm_mean"]:.1f} mm (rig in {recording.cameras[0].units}), '
-                  f'coverage {100 * figures["coverage"]:.0f}% '
-                  '(as monet process runs the model)', file=sys.stderr)
-        else:
-            print('monet train: the held-out instants hold several subjects: not scored as '
-                  '`monet process` runs the model (one subject; `monet eval --reference` '
-                  f"scores {held_path}, subject 0's labels, against a run of yours)",
-                  file=sys.stderr)
+        # as `monet process` runs the model (--subjects N with labels of several subjects)
+        from monet_ros.learning.recording import find_recording_parts
+        parts = find_recording_parts(args.data)
+        configs = {}
+        if recording.num_subjects > 1:
+            from monet_ros.commands.train_distill import teacher_subject_configs
+            configs = teacher or dict(zip(('subjects', 'association', 'tracker'),
+                                          teacher_subject_configs(args,
+                                                                  recording.num_subjects)))
+        figures = score_holdout(parts['bag'], args.rig or parts['rig'], out / 'model.pt',
+                                held_path, recording,
+                                label_options_from_args(args).camera_map, args.rig_units,
+                                **configs)
+        per = figures.pop('subjects', None)
+        summary['holdout'].update(figures)
+        run = (f'as monet process --subjects {configs["subjects"].subjects} runs the model'
+               if configs else 'as monet process runs the model')
+        print(f'monet train: held-out labelled instants {held.tolist()}: '
+              + holdout_text(figures, recording.cameras[0].units)
+              + (f' ({run}; every subject pooled)' if per else f' ({run})'), file=sys.stderr)
+        if per:
+            summary['holdout']['subjects'] = {str(p['subject']): p for p in per}
+            for p in per:
+                print(f'  subject {p["subject"]} (track {p["track"]}): '
+                      + holdout_text(p, recording.cameras[0].units), file=sys.stderr)
     print(json.dumps(summary, indent=1))
     distributed.shutdown()
     return 0
+
+
+def holdout_text(figures, units):
+    """'2D median 3.1 px, PCK@10px 90% (12 views); 3D median 4.2 mm, mean 5.0 mm (rig in m),
+    coverage 100%' of evaluation.reference.score figures."""
+    return (f'2D median {figures["px_median"]:.1f} px, PCK@10px '
+            f'{100 * figures["pck2d@10px"]:.0f}% ({figures["views_2d"]} views); 3D median '
+            f'{figures["mm_median"]:.1f} mm, mean {figures["mm_mean"]:.1f} mm (rig in {units}), '
+            f'coverage {100 * figures["coverage"]:.0f}%')
 
 
 def scored_lines(what, figures, instants):

@@ -44,7 +44,8 @@ class Reference:
     cameras (project_reference); X (T, C, 3) in `units` (the rig's length unit, NaN =
     none); unused: reference keypoint names the model lacks; kind '2d' (labels, X
     triangulated) or '3d'; alignment: how 3D rows were put on the instants (align_rows'
-    info), None for labels."""
+    info), None for labels; subject: the labels' subject id (0 for a 3D reference and
+    labels without a subject column)."""
     source: str
     keypoints: tuple
     stamps: np.ndarray
@@ -54,6 +55,7 @@ class Reference:
     unused: tuple = field(default_factory=tuple)
     alignment: dict = None
     units: str = 'm'
+    subject: int = 0
 
 
 def guess_format(path):
@@ -243,10 +245,29 @@ def labelled_instants(path, stamps):
 def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
                    camera=None, reference_fps=None, rate_policy='resample'):
     """Reference of `path` on the recording `index` (learning.recording_index.RecordingIndex)
-    for the model's `keypoints` (module docstring). options: LabelOptions (name maps,
-    skip_bad); reference_fps: rate of an anipose CSV's fnum (default the recording's);
+    for the model's `keypoints` (module docstring): one subject. options: LabelOptions (name
+    maps, skip_bad); reference_fps: rate of an anipose CSV's fnum (default the recording's);
     rate_policy: 'resample' or 'refuse' a 3D reference at another rate (align_rows).
-    Raises LabelError (or ExportError) naming the file and what does not fit."""
+    Raises LabelError (or ExportError) naming the file and what does not fit; labels of
+    several subjects (field subject) are refused here: load_references reads them, for a
+    model run with several subjects (--subjects N)."""
+    references = load_references(path, index, keypoints, fmt, options, axes, camera,
+                                 reference_fps, rate_policy)
+    if len(references) > 1:
+        raise LabelError(f'{path}: field subject: the reference labels hold subjects '
+                         f'{", ".join(str(r.subject) for r in references)}; score them '
+                         'against a model run with several subjects (--subjects N), or keep '
+                         'the rows of one subject (subject 0, no subject column)')
+    return references[0]
+
+
+def load_references(path, index, keypoints, fmt='auto', options=None, axes='xyz',
+                    camera=None, reference_fps=None, rate_policy='resample'):
+    """[Reference, ...] of `path`, one per subject, in subject order (load_reference's
+    arguments and errors): labels with a `subject` column (the labels CSV; an importer's
+    tracks / individuals) give one Reference per labelled subject (its `subject` id, its
+    labels and their triangulation; T instants each, NaN where it is unlabelled); every
+    other reference is one subject (subject 0)."""
     from monet_ros.geometry.triangulation import triangulate
     from monet_ros.io.export_tables import read_anipose_csv, read_csv_units, read_trc
     from monet_ros.labels import LabelOptions, read_label_rows, resolve_labels
@@ -290,8 +311,8 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
         pick, unused = _names(names, keypoints, kmap)
         X, info = align_rows(path, ref_stamps, _take(values, pick, (3,)), stamps,
                              ref_period_ns=period, policy=rate_policy)
-        return Reference(str(path), keypoints, stamps, project_reference(X, index.cameras),
-                         X, '3d', unused, info, units)
+        return [Reference(str(path), keypoints, stamps, project_reference(X, index.cameras),
+                          X, '3d', unused, info, units)]
     if fmt not in LABEL_FORMATS:
         raise LabelError(f'unknown reference format {fmt!r}; one of trc, anipose3d, '
                          f'{", ".join(LABEL_FORMATS)}')
@@ -311,21 +332,20 @@ def load_reference(path, index, keypoints, fmt='auto', options=None, axes='xyz',
         raise LabelError(f'{path}: no reference keypoint ({", ".join(names)}) is a model '
                          f'keypoint ({", ".join(keypoints)}); map names with --keypoint-map')
     labels, _ = resolve_labels(rows, stamps, index.cameras, keypoints, options)
-    if labels.subjects not in ([], [0]):
-        raise LabelError(f'{path}: field subject: the reference labels hold subjects '
-                         f'{", ".join(map(str, labels.subjects))}; monet eval scores one '
-                         'subject against them: keep the rows of one subject (subject 0, no '
-                         'subject column)')
     cam_names = [c.name for c in index.cameras]
-    points2d = np.full((T, V, C, 2), np.nan)
     where = {int(s): i for i, s in enumerate(stamps)}
-    for s in labels.stamps:
-        points2d[where[int(s)]] = labels.points(s, cam_names)
-    X = np.full((T, C, 3), np.nan)
-    labelled = np.flatnonzero(np.isfinite(points2d[..., 0]).any(axis=(1, 2)))
-    for t in labelled:
-        X[t] = triangulate(points2d[t], index.cameras)
-    return Reference(str(path), keypoints, stamps, points2d, X, '2d', unused, units=units)
+    out = []
+    for subject in labels.subjects or [0]:
+        points2d = np.full((T, V, C, 2), np.nan)
+        for s in labels.stamps:
+            points2d[where[int(s)]] = labels.points(s, cam_names, subject)
+        X = np.full((T, C, 3), np.nan)
+        labelled = np.flatnonzero(np.isfinite(points2d[..., 0]).any(axis=(1, 2)))
+        for t in labelled:
+            X[t] = triangulate(points2d[t], index.cameras)
+        out.append(Reference(str(path), keypoints, stamps, points2d, X, '2d', unused,
+                             units=units, subject=int(subject)))
+    return out
 
 
 def _pct(values, thresholds):
@@ -334,30 +354,35 @@ def _pct(values, thresholds):
             for t in thresholds}
 
 
-def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
-          mm_thresholds=MM_THRESHOLDS, instants=None):
-    """Figures of a prediction against a Reference. stamps (N,) of the predicted instants
-    (a subset of the reference's); X (N, C, 3) in reference.units (the rig's; the 3D
-    errors are reported in mm whatever the unit); points2d (N, V, C, 2) source px;
-    instants: (T,) bool of the reference's instants to score (default all). An instant /
-    joint the prediction lacks (not processed, or not triangulated) counts against
-    coverage, not in the error statistics. 2D figures are on the labelled views, or for a
-    3D reference on its projection into every camera (points2d_from says which)."""
+def _on_instants(reference, stamps, X, points2d, instants):
+    """(ref_X, pred_X (T, C, 3), ref2, pred2 (T, V, C, 2) or None) on the reference's T
+    instants: the prediction at its stamps (others NaN), the reference outside `instants`
+    NaN (score's arguments)."""
     keep_t = np.ones(len(reference.stamps), bool) if instants is None else \
         np.asarray(instants, bool)
     where = {int(s): i for i, s in enumerate(reference.stamps)}
-    rows = np.array([where.get(int(s), -1) for s in stamps])
+    rows = np.array([where.get(int(s), -1) for s in stamps], np.int64)
     keep = rows >= 0
-    ref_X = np.full((len(reference.stamps),) + reference.X.shape[1:], np.nan)
-    pred_X = ref_X.copy()
+    pred_X = np.full(reference.X.shape, np.nan)
     pred_X[rows[keep]] = np.asarray(X, float)[keep]
-    ref_X[:] = reference.X
-    ref_X[~keep_t] = np.nan
+    ref_X = np.where(keep_t[:, None, None], reference.X, np.nan)
+    if reference.points2d is None or points2d is None:
+        return ref_X, pred_X, None, None
+    pred2 = np.full(reference.points2d.shape, np.nan)
+    pred2[rows[keep]] = np.asarray(points2d, float)[keep]
+    ref2 = np.where(keep_t[:, None, None, None], reference.points2d, np.nan)
+    return ref_X, pred_X, ref2, pred2
+
+
+def _figures(reference, ref_X, pred_X, ref2, pred2, px_thresholds, mm_thresholds):
+    """score's dict of arrays with a leading subject axis: ref_X, pred_X (S, T, C, 3),
+    ref2, pred2 (S, T, V, C, 2) or None. instants_scored counts instants with a reference
+    of any subject; joints_3d and views_2d count every subject's."""
     has_ref = np.isfinite(ref_X).all(-1)
     has_pred = np.isfinite(pred_X).all(-1)
     mm = to_mm(np.linalg.norm(pred_X - ref_X, axis=-1)[has_ref & has_pred], reference.units)
     out = dict(reference=reference.source, kind=reference.kind,
-               instants_scored=int(has_ref.any(-1).sum()), joints_3d=int(has_ref.sum()),
+               instants_scored=int(has_ref.any(-1).any(0).sum()), joints_3d=int(has_ref.sum()),
                coverage=float((has_ref & has_pred).sum() / has_ref.sum()) if has_ref.any()
                else float('nan'),
                mm_median=float(np.median(mm)) if mm.size else float('nan'),
@@ -365,10 +390,7 @@ def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
                mm_p90=float(np.percentile(mm, 90)) if mm.size else float('nan'))
     for t, v in _pct(mm, mm_thresholds).items():
         out[f'pck3d@{t:g}mm'] = v
-    if reference.points2d is not None and points2d is not None:
-        pred2 = np.full(reference.points2d.shape, np.nan)
-        pred2[rows[keep]] = np.asarray(points2d, float)[keep]
-        ref2 = np.where(keep_t[:, None, None, None], reference.points2d, np.nan)
+    if ref2 is not None:
         labelled = np.isfinite(ref2).all(-1)
         px_all = np.linalg.norm(pred2 - ref2, axis=-1)[labelled]
         # a labelled view without a detection is a miss: infinitely far
@@ -381,3 +403,67 @@ def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
         for t in px_thresholds:
             out[f'pck2d@{t:g}px'] = float((px <= t).mean()) if px.size else float('nan')
     return out
+
+
+def score(reference, stamps, X, points2d=None, px_thresholds=PX_THRESHOLDS,
+          mm_thresholds=MM_THRESHOLDS, instants=None):
+    """Figures of a prediction against a Reference. stamps (N,) of the predicted instants
+    (a subset of the reference's); X (N, C, 3) in reference.units (the rig's; the 3D
+    errors are reported in mm whatever the unit); points2d (N, V, C, 2) source px;
+    instants: (T,) bool of the reference's instants to score (default all). An instant /
+    joint the prediction lacks (not processed, or not triangulated) counts against
+    coverage, not in the error statistics. 2D figures are on the labelled views, or for a
+    3D reference on its projection into every camera (points2d_from says which)."""
+    arrays = _on_instants(reference, stamps, X, points2d, instants)
+    return _figures(reference, *(None if a is None else a[None] for a in arrays),
+                    px_thresholds, mm_thresholds)
+
+
+def score_subjects(references, stamps, ids, X, points2d=None, px_thresholds=PX_THRESHOLDS,
+                   mm_thresholds=MM_THRESHOLDS, instants=None):
+    """Figures of a several-subject prediction (rows: one per instant and track) against
+    references of several subjects (load_references; on the same T instants). stamps (R,)
+    ns, ids (R,) int track identities, X (R, C, 3) in the references' unit, points2d
+    (R, V, C, 2) px or None; instants: (T,) bool, as score's.
+
+    Track identities are not the references' subject numbers: each reference subject is
+    matched to one track by subjects.metrics.assign_subjects over the scored instants (the
+    one-to-one assignment minimising the sum of the pairs' mean 3D distance over the
+    instants both have, the mean over their common keypoints). Returns score's dict of
+    the pooled figures (every subject's joints and views; an unmatched subject's are
+    misses: coverage, and 2D at infinite distance) with `subjects`: one dict per reference
+    subject, in order: subject (its id), track (the matched identity, -1 = none),
+    match_mm (the pair's mean 3D distance, mm; NaN for none) and score's figures of that
+    subject against that track alone."""
+    from monet_ros.subjects.metrics import assign_subjects
+    references = list(references)
+    ref = references[0]
+    T = len(ref.stamps)
+    stamps, ids = np.asarray(stamps, np.int64), np.asarray(ids, np.int64)
+    X = np.asarray(X, float).reshape(len(stamps), len(ref.keypoints), 3)
+    uids = np.unique(ids)
+    where = {int(s): i for i, s in enumerate(ref.stamps)}
+    rows = np.array([where.get(int(s), -1) for s in stamps], np.int64)
+    on = rows >= 0
+    tracks = np.full((T, len(uids)) + X.shape[1:], np.nan)          # (T, H, C, 3)
+    col = np.searchsorted(uids, ids)
+    tracks[rows[on], col[on]] = X[on]
+    track_ids = np.where(np.isfinite(tracks).all(-1).any(-1), uids[None], -1)
+    keep_t = np.ones(T, bool) if instants is None else np.asarray(instants, bool)
+    gt = np.stack([np.where(keep_t[:, None, None], r.X, np.nan) for r in references], 1)
+    matched, distance = assign_subjects(gt, tracks, track_ids)
+    per, arrays = [], []
+    for r, track, d in zip(references, matched, distance):
+        mine = ids == track
+        a = _on_instants(r, stamps[mine], X[mine],
+                         None if points2d is None else np.asarray(points2d, float)[mine],
+                         instants)
+        arrays.append(a)
+        figures = _figures(r, *(None if x is None else x[None] for x in a), px_thresholds,
+                           mm_thresholds)
+        per.append(dict(subject=r.subject, track=int(track),
+                        match_mm=float(to_mm(d, r.units)), **figures))
+    pooled = _figures(ref, *(None if arrays[0][k] is None else np.stack([a[k] for a in arrays])
+                             for k in range(4)), px_thresholds, mm_thresholds)
+    pooled['subjects'] = per
+    return pooled

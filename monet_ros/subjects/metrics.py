@@ -10,6 +10,11 @@ distance over their common finite keypoints is <= threshold (the rig's unit).
   Multi-Camera Tracking", ECCV 2016 workshops): one global one-to-one assignment of tracks
   to ground-truth subjects maximising IDTP, the frames where assigned pairs match;
   IDF1 = 2 IDTP / (ground-truth detections + track detections).
+- assign_subjects (the reference subjects of `monet eval --reference` / `monet train
+  --holdout-labelled` to the tracks of a several-subject run): one global one-to-one
+  assignment (Hungarian) of ground-truth subjects to tracks minimising the sum of each
+  assigned pair's mean distance over the frames both have; no threshold (every subject
+  that shares a frame with a track gets one while tracks remain).
 """
 from dataclasses import dataclass
 
@@ -92,3 +97,40 @@ def identity_scores(gt_X, pred_X, pred_ids, threshold):
     return IdentityScores(switches=switches, idf1=idf1, idtp=idtp, gt=n_gt, pred=n_pred,
                           matched=matched, error=error, found=err_n.astype(np.int64),
                           track=track, distance=distance)
+
+
+def assign_subjects(gt_X, pred_X, pred_ids):
+    """(track (G,) int, distance (G,)): the track identity assigned to each ground-truth /
+    reference subject and the pair's mean distance (module docstring's rule).
+
+    gt_X (T, G, C, D) subject g in slot g (all NaN = absent; D = 3 for 3D points, any D
+    works); pred_X (T, H, C, D) tracked subjects per frame (padded with NaN), pred_ids
+    (T, H) int their identities (-1 = none / padding), as identity_scores takes them. A
+    pair's distance in a frame is the mean over their common finite keypoints (the one of
+    identity_scores), its cost the mean of those over the frames where both have one.
+    The assignment (scipy linear_sum_assignment) first pairs as many subjects as share a
+    frame with some track, then minimises the sum of the pairs' costs. track -1 and
+    distance NaN: a subject sharing no frame with any track left to it."""
+    gt_X, pred_X = np.asarray(gt_X, float), np.asarray(pred_X, float)
+    pred_ids = np.asarray(pred_ids)
+    G = gt_X.shape[1]
+    track, distance = np.full(G, -1), np.full(G, np.nan)
+    uids = np.unique(pred_ids[pred_ids >= 0])
+    if not len(uids) or not G:
+        return track, distance
+    dist = _distance(gt_X, pred_X)                                      # (T, G, H)
+    t, g, h = np.nonzero((pred_ids >= 0)[:, None, :] & np.isfinite(dist))
+    col = np.searchsorted(uids, pred_ids[t, h])
+    total, count = np.zeros((G, len(uids))), np.zeros((G, len(uids)), np.int64)
+    np.add.at(total, (g, col), dist[t, g, h])
+    np.add.at(count, (g, col), 1)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        cost = np.where(count > 0, total / np.maximum(count, 1), np.inf)
+    # pairs without a common frame cost more than any sum of real pairs: as many pairs as
+    # possible first, then the least total distance
+    big = 1.0 + G * float(np.max(cost[np.isfinite(cost)], initial=0.0)) * 2
+    rows, cols = linear_sum_assignment(np.where(np.isfinite(cost), cost, big))
+    keep = count[rows, cols] > 0
+    track[rows[keep]] = uids[cols[keep]]
+    distance[rows[keep]] = cost[rows[keep], cols[keep]]
+    return track, distance
