@@ -145,7 +145,7 @@ def run_model(bag, model, cameras, rig=None, device=None, camera_map=(), rig_uni
             stamps = np.asarray(figures['subject_stamps'], np.int64)[frame]
             ident, X, p2 = np.asarray(rows.subject, np.int64), rows.X, rows.points2d
             names = list(figures['subject_cameras'])
-            X = np.asarray(X, float).reshape(len(stamps), -1, 3)
+            X = np.asarray(X, float).reshape(len(stamps), len(figures['subject_keypoints']), 3)
         else:
             table = read_anipose_csv(out / 'keypoints3d.csv')
             det = np.load(out / 'detections2d.npz')

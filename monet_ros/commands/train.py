@@ -287,7 +287,8 @@ def run(args):
         if per:
             summary['holdout']['subjects'] = {str(p['subject']): p for p in per}
             for p in per:
-                print(f'  subject {p["subject"]} (track {p["track"]}): '
+                track = f'track {p["track"]}' if p['track'] >= 0 else 'no track matched'
+                print(f'  subject {p["subject"]} ({track}): '
                       + holdout_text(p, recording.cameras[0].units), file=sys.stderr)
     print(json.dumps(summary, indent=1))
     distributed.shutdown()

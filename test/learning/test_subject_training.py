@@ -162,8 +162,15 @@ def test_monet_train_says_what_the_other_subjects_add(scene, repo_root):
     # subject
     assert '19 unlabeled (unlabelled (instant, subject) rows: subject 0 19, subject 1 19)' \
         in done.stderr, done.stderr
-    held = (out / 'heldout_labels.csv').read_text().splitlines()
-    assert held[0] == 'stamp_ns,camera,keypoint,u,v'           # subject 0's, as scored
+    # every subject's held-out labels, as scored (monet eval --reference reads them too)
+    held = read_labels(out / 'heldout_labels.csv', NAMES)
+    assert (out / 'heldout_labels.csv').read_text().splitlines()[0] == \
+        'stamp_ns,camera,keypoint,u,v,subject'
+    assert held.subjects == [0, 1] and len(held) == 1
+    t = (held.stamps[0] - T0) // PERIOD
+    names = [c.name for c in cams]
+    for s in (0, 1):
+        np.testing.assert_array_equal(held.points(held.stamps[0], names, s), uv[t, :, s])
 
 
 def test_validation_and_held_out_instants_hold_every_subject_out(scene):
@@ -488,3 +495,15 @@ def test_monet_train_reports_the_holdout_error_per_subject(scene, repo_root, tmp
     for s in ('0', '1'):
         assert f'  subject {s}: median {crops["subjects"][s]["median_px"]:.2f} px' in \
             done.stderr
+    # and as `monet process --subjects 2` runs the model: pooled, then per subject
+    assert 'held-out labelled instants [3, 12]: 2D median' in done.stderr
+    assert '(as monet process --subjects 2 runs the model; every subject pooled)' in \
+        done.stderr, done.stderr
+    views = [int(np.isfinite(uv[[3, 12], :, s, :, 0]).sum()) for s in (0, 1)]
+    assert held['views_2d'] == sum(views) and held['joints_3d'] == 12
+    assert [held['subjects'][s]['views_2d'] for s in ('0', '1')] == views
+    for s in ('0', '1'):
+        assert held['subjects'][s]['joints_3d'] == 6
+        track = held['subjects'][s]['track']            # -1: the 2-step model found none
+        assert f'  subject {s} (' + (f'track {track}' if track >= 0 else 'no track matched') \
+            + '): 2D median ' in done.stderr
