@@ -18,11 +18,20 @@ load_reference(path, index, keypoints, ...) -> Reference on the recording's inst
   (`Reference.alignment`), never paired by index.
 Reference keypoints are matched to the model's by name (keypoint_map renames); names the
 model lacks are listed in `Reference.unused` and not scored.
+Labels of several subjects (the labels CSV's `subject` column, an importer's tracks /
+individuals): load_references gives one Reference per subject (its `subject` id, its
+labels (T, V, C, 2) px and their triangulation (T, C, 3)); load_reference, one subject,
+refuses them (LabelError naming the file, the field subject and --subjects).
 
 score(...) -> dict of figures on the chosen instants: 2D pixel error of detections
 (median, mean, PCK@px) on labelled views - for a 3D reference on its projection into
 every camera (project_reference) -, 3D error (median, mean, p90 in mm, PCK@mm) and
 coverage (fraction of reference joints that were triangulated).
+score_subjects(...) -> the same of a several-subject prediction (rows of instant, track
+identity, 3D, 2D) against several references: pooled, plus one dict per reference subject
+scored against the track matched to it (subjects.metrics.assign_subjects: one-to-one,
+least mean 3D distance over the scored instants both have; the track ids are not the
+labels' subject numbers).
 """
 from dataclasses import dataclass, field
 from pathlib import Path
