@@ -101,3 +101,18 @@ def test_each_reference_subject_gets_its_own_track_and_errors(scene, tmp_path, c
         pooled_views += views
     assert int(got[0]['views_2d']) == pooled_views and int(got[0]['joints_3d']) == 24
     assert float(got[0]['mm_median']) == pytest.approx(np.median(pooled_mm), abs=1e-3)
+
+
+@pytest.mark.parametrize('extra, words', [
+    (['--reference', 'ref.csv', '--link-mm', '500'],
+     'monet eval: --link-mm applies only with --subjects N (N >= 2); monet eval scores one '
+     'subject without it'),
+    (['--subjects', '2'], '--subjects and its settings apply only with --reference'),
+])
+def test_subject_options_without_their_run_are_refused(extra, words, tmp_path, capsys,
+                                                       monkeypatch):
+    # they would be ignored: refused in one line before any file is read
+    monkeypatch.chdir(tmp_path)
+    assert monet(['eval', 'm.pt', '--data', 'rec', '--out', 'o', *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert '\n' not in err and words in err, err
