@@ -5,7 +5,8 @@ real two-subject recording (helpers.subject_blobs) go through `monet labels impo
 labels table with a subject column whose points are exactly the ground-truth projections of
 each subject, with one id per track / individual name in every camera (even where a file
 lists the tracks in another order), the mapping reported; `monet triangulate` still reads
-the same files as '<instance>/<keypoint>' per camera."""
+the same files as '<instance>/<keypoint>' per camera, and `monet eval --reference` reads
+the tracks as one reference per subject (evaluation.reference.load_references)."""
 from helpers.subject_blobs import write_two_subjects
 import numpy as np
 import pandas as pd
@@ -73,6 +74,13 @@ def test_sleap_tracks_become_subjects(scene, tmp_path, capsys):
     assert 'subjects: mouse_a=0, mouse_b=1 (SLEAP tracks)' in text
     assert out.read_text().splitlines()[0] == 'stamp_ns,camera,keypoint,u,v,subject'
     check_table(out, folder, uv)
+    # a reference for `monet eval --reference --subjects N`: one per track, its points
+    from monet_ros.evaluation.reference import load_references
+    from monet_ros.learning.recording_index import recording_index
+    refs = load_references(sleap, recording_index(folder), NAMES, fmt='sleap')
+    assert [r.subject for r in refs] == [0, 1]
+    for s, r in enumerate(refs):
+        np.testing.assert_array_equal(r.points2d, uv[:, :, s])
     # monet triangulate's reader: '<track>/<node>' per camera, as before
     points = read_points2d(sleap, [c.name for c in cams])
     assert points.keypoints == tuple(f'{t}/{n}' for t in TRACKS for n in NAMES)
@@ -145,5 +153,6 @@ def test_info_counts_every_subject_and_eval_refuses_them(scene, tmp_path, capsys
         n = sum(r[1] == cam.name for r in rows)
         assert f'  {cam.name}: {n} labelled keypoints' in text
     with pytest.raises(LabelError, match=r'labels.csv: field subject: the reference labels '
-                       'hold subjects 0, 1; monet eval scores one subject'):
+                       r'hold subjects 0, 1; score them against a model run with several '
+                       r'subjects \(--subjects N\)'):
         load_reference(path, index, NAMES)
