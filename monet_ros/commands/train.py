@@ -279,11 +279,11 @@ def run(args):
                                 **configs)
         per = figures.pop('subjects', None)
         summary['holdout'].update(figures)
-        run = (f'as monet process --subjects {configs["subjects"].subjects} runs the model'
+        how = (f'as monet process --subjects {configs["subjects"].subjects} runs the model'
                if configs else 'as monet process runs the model')
         print(f'monet train: held-out labelled instants {held.tolist()}: '
               + holdout_text(figures, recording.cameras[0].units)
-              + (f' ({run}; every subject pooled)' if per else f' ({run})'), file=sys.stderr)
+              + (f' ({how}; every subject pooled)' if per else f' ({how})'), file=sys.stderr)
         if per:
             summary['holdout']['subjects'] = {str(p['subject']): p for p in per}
             for p in per:
