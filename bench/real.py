@@ -238,6 +238,43 @@ def probe_seconds_per_step(config, data, steps=6):
     return w * warm + (1 - w) * full
 
 
+def teacher_precision(process_dir, config, recording, reference, reference2d, instants):
+    """What a distillation round taught, against the reference on `instants` (the unlabelled
+    ones): its pseudo-labels made as the round makes them (learning.distill.distilled_labels
+    on the teacher's `monet process --filter optim` keypoints3d.csv in `process_dir`, with
+    `config`'s distill settings) -> dict: pl_* their 2D error (px: median, mean, p90, share
+    within 2 / 5 px) to the reference's projection, pl_kept how many; teacher_mean_mm /
+    teacher_p90_mm the filtered 3D's error, teacher_kept_mean_mm that of the points the
+    gate keeps (>= distill_min_views inlier views, error <= distill_gate_px)."""
+    from monet_ros.io.export_tables import read_anipose_csv
+    from monet_ros.learning.distill import align_to_instants, distilled_labels
+
+    table = read_anipose_csv(process_dir / 'keypoints3d.csv')
+    stamps = recording.stamps
+    X, matched = align_to_instants(stamps, table['stamps_ns'], table['X'])
+    error = align_to_instants(stamps, table['stamps_ns'], table['error'])[0]
+    ncams = align_to_instants(stamps, table['stamps_ns'], table['ncams'], fill=0)[0]
+    cells = np.zeros(reference2d.shape[:3], bool)
+    cells[instants] = True
+    labels = distilled_labels(X, error, ncams, recording.cameras, cells,
+                              gate_px=config.distill_gate_px,
+                              min_views=config.distill_min_views,
+                              residual_px=config.distill_residual_px, matched=matched)
+    px = np.linalg.norm(labels.points - reference2d, axis=-1)[labels.weight > 0]
+    px = px[np.isfinite(px)]
+    mm = np.linalg.norm(X[instants] - reference[instants], axis=-1) * 1000.0
+    with np.errstate(invalid='ignore'):
+        kept = (ncams[instants] >= config.distill_min_views) & \
+            (error[instants] <= config.distill_gate_px) & np.isfinite(mm)
+    have = np.isfinite(mm)
+    return {'pl_median_px': float(np.median(px)), 'pl_mean_px': float(px.mean()),
+            'pl_p90_px': float(np.percentile(px, 90)), 'pl_within2': float((px <= 2).mean()),
+            'pl_within5': float((px <= 5).mean()), 'pl_kept': int(px.size),
+            'teacher_mean_mm': float(mm[have].mean()),
+            'teacher_p90_mm': float(np.percentile(mm[have], 90)),
+            'teacher_kept_mean_mm': float(mm[kept].mean())}
+
+
 def run_job(job):
     """Worker: train one mode on one label set within the budget, detect, fuse, score."""
     import dataclasses
@@ -288,6 +325,10 @@ def run_job(job):
             trainer, _STATE['bag'], skeleton='human14', progress=False,
             say=lambda line: print(f'[{count} labels {mode}] {line}', file=sys.stderr,
                                    flush=True))
+        unlabelled = np.setdiff1d(np.arange(rec.num_instants), instants)
+        for stats in summary.get('distill') or []:    # before the round's folder goes
+            stats['precision'] = teacher_precision(Path(stats['process']), config, recording,
+                                                   reference, reference2d, unlabelled)
         shutil.rmtree(train_dir, ignore_errors=True)
     else:
         trainer = Trainer(config, data, warn=said.append)

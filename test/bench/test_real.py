@@ -128,3 +128,52 @@ def test_modes_take_exact_controls_and_the_curve_pairs_them(repo_root, tmp_path)
     # also scored with `monet process --filter optim`: another run; 'none' is the plain one
     assert real.job_key(job + ('none',)) == real.job_key(job)
     assert real.job_key(job + ('optim',)) != real.job_key(job)
+
+
+def test_teacher_precision_scores_the_rounds_pseudo_labels_against_the_reference(tmp_path,
+                                                                                 repo_root):
+    """bench/real.py's teacher_precision (what a distillation round taught): a perfect
+    teacher's pseudo-labels are the reference's projection (0 px, 0 mm); a teacher 10 mm off
+    in x is 10 mm off, its pseudo-labels as far as the projections of the shifted points
+    (brute force with Camera.project), and a point above the gate is not a pseudo-label."""
+    from monet_ros.io.export_tables import write_anipose_csv
+    data = tmp_path / 'synth'
+    assert monet(['synth', '--out', str(data), '--frames', '6', '--cameras', '3', '--width',
+                  '160', '--height', '120', '--seed', '1', '--quiet']) == 0
+    rec = load_recording(data)
+    real = bench_real(repo_root)
+    gt = rec.gt3d
+    T, C, _ = gt.shape
+    reference2d = real.project_reference(gt, rec.cameras)
+    config = TrainConfig()
+    instants = np.array([1, 2, 4])
+    names = list(rec.keypoints)
+
+    def teacher(X, error):
+        folder = tmp_path / f'round_{len(list(tmp_path.glob("round_*")))}'
+        folder.mkdir()
+        write_anipose_csv(folder / 'keypoints3d.csv', names, rec.stamps, X, error,
+                          np.full((T, C), len(rec.cameras)), np.ones((T, C)))
+        return real.teacher_precision(folder, config, rec, gt, reference2d, instants)
+
+    perfect = teacher(gt, np.zeros((T, C)))
+    assert perfect['pl_median_px'] < 1e-6 and perfect['pl_p90_px'] < 1e-6
+    assert perfect['teacher_mean_mm'] < 1e-6 and perfect['teacher_kept_mean_mm'] < 1e-6
+    inside = np.isfinite(reference2d[instants]).all(-1)
+    assert perfect['pl_kept'] == inside.sum()
+
+    shifted = gt + np.array([0.01, 0.0, 0.0])
+    error = np.zeros((T, C))
+    error[instants[0], 0] = config.distill_gate_px + 1          # above the gate
+    got = teacher(shifted, error)
+    assert got['teacher_mean_mm'] == pytest.approx(10.0)
+    brute = []
+    for t in instants:
+        for v, cam in enumerate(rec.cameras):
+            uv = cam.project(shifted[t])
+            for c in range(C):
+                if (t, c) != (instants[0], 0) and inside[list(instants).index(t), v, c]:
+                    brute.append(np.linalg.norm(uv[c] - reference2d[t, v, c]))
+    assert got['pl_kept'] == len(brute)
+    assert got['pl_median_px'] == pytest.approx(np.median(brute), abs=1e-6)
+    assert got['pl_p90_px'] == pytest.approx(np.percentile(brute, 90), abs=1e-6)
