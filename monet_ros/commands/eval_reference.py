@@ -212,7 +212,7 @@ def run_reference(args):
                                 rig_units=args.rig_units)
         references = {}
         # the models run as `monet process` runs them: its default precision, said once
-        print_precision(prog, 'auto', 'torch', args.device or None)
+        print_precision(prog, 'auto', 'auto', args.device or None)
         for path in args.checkpoints:
             _, meta = load_checkpoint(path)
             keypoints = tuple(meta['keypoints'])

@@ -26,6 +26,9 @@ def test_eval_reference_one_row_per_checkpoint(tmp_path, capsys):
     out = capsys.readouterr().out
     assert code == 0
     assert 'labels.csv (2d, ' in out and '84 labelled views' in out
+    # the line says the precision and backend the models run with: monet process's default
+    from monet_ros.commands.common import precision_note
+    assert f"monet eval: {precision_note('monet eval', 'auto', 'auto')[1]}" in out, out
     with open(tmp_path / 'report' / 'reference.csv') as f:
         rows = list(csv.DictReader(f))
     assert [r['checkpoint'] for r in rows] == [str(m) for m in models]
