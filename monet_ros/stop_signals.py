@@ -11,8 +11,13 @@ signal with -2 / -15). Three phases, each with its handlers here:
 - the end: ignore_stop_signals() - once the work has returned, a further signal (while
   nodes are destroyed, or Python's exit hooks run) is ignored.
 
+Within the work, stop_signals_deferred() holds a signal back to the end of a block (the
+lazy imports of C extensions, which can turn the KeyboardInterrupt into an ImportError) and
+then gives it to the handler in force.
+
 Standard library only: imported before any heavy module.
 """
+from contextlib import contextmanager
 import os
 import signal
 import threading
@@ -65,3 +70,36 @@ def ignore_stop_signals():
             return
         except KeyboardInterrupt:
             continue
+
+
+@contextmanager
+def stop_signals_deferred():
+    """SIGINT / SIGTERM that land inside the block are delivered when it ends, to the
+    handler in force before it (a clean stop stays a clean stop: KeyboardInterrupt from the
+    command's handler, the trainer's stop between steps, ...). For imports of C extensions:
+    a KeyboardInterrupt raised while one initialises can come out as an ImportError
+    (onnxruntime's does: ImportError('import numpy failed')), and the stop would be lost
+    and the package taken for missing. Main thread only; elsewhere the block runs as is."""
+    if not _in_main_thread():
+        yield
+        return
+    got = []
+    previous = {s: signal.getsignal(s) for s in STOP_SIGNALS}
+    previous = {s: h for s, h in previous.items() if h is not None}   # not set from Python
+
+    def defer(signum, frame):
+        got.append(signum)
+
+    for sig in previous:
+        signal.signal(sig, defer)
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+        if got:
+            handler = previous[got[0]]
+            if callable(handler):
+                handler(got[0], None)
+            elif handler == signal.SIG_DFL:
+                os.kill(os.getpid(), got[0])          # its default action, as it came

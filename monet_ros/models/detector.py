@@ -17,6 +17,7 @@ from monet_ros.models.onnx_backend import (
     BACKEND_CHOICES,
     OnnxRunner,
     export_onnx,
+    import_onnxruntime,
     onnx_runner_for,
 )
 from monet_ros.timing import StageTimer
@@ -98,7 +99,7 @@ def resolve_backend(backend, precision='auto', device='cpu', native_bfloat16=Non
         if native_bfloat16:
             return 'torch', 'backend auto: torch (bfloat16 is native on this CPU)'
     try:
-        import onnxruntime  # noqa: F401 - only whether it is there
+        import_onnxruntime()                 # only whether it is there (and importable)
     except ImportError:
         return 'torch', ('backend auto: torch (the onnxruntime package is not installed; '
                          'it runs float32 faster on a CPU: pip install -r requirements.txt)')

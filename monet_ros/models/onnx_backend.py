@@ -65,9 +65,28 @@ def export_onnx(model):
     return buffer.getvalue()
 
 
+def import_deferred(name):
+    """importlib.import_module(name) with a stop signal deferred to the end of the import
+    (stop_signals.stop_signals_deferred): a Ctrl-C / SIGTERM that lands while a C extension
+    initialises can come out of the import as an ImportError (onnxruntime's: ImportError(
+    'import numpy failed')), and the stop would be lost. For the lazy imports of
+    onnxruntime and onnx. Raises ImportError where the module is not installed (or
+    broken)."""
+    from importlib import import_module
+
+    from monet_ros.stop_signals import stop_signals_deferred
+    with stop_signals_deferred():
+        return import_module(name)
+
+
+def import_onnxruntime():
+    """The onnxruntime module (import_deferred). Raises ImportError where it is missing."""
+    return import_deferred('onnxruntime')
+
+
 def _onnxruntime():
     try:
-        import onnxruntime
+        onnxruntime = import_onnxruntime()
     except ImportError:
         raise OnnxBackendError("backend 'onnxruntime' needs the onnxruntime package "
                                '(pip install -r requirements.txt)') from None

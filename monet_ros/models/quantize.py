@@ -44,6 +44,7 @@ import tempfile
 import numpy as np
 
 from monet_ros.atomic import atomic_write, sha256_file
+from monet_ros.models.onnx_backend import import_deferred
 
 # CPU flags (/proc/cpuinfo) of the int8 dot-product instructions, and their names
 INT8_FLAGS = (('amx_int8', 'AMX-INT8'), ('avx512_vnni', 'AVX512-VNNI'), ('avx_vnni', 'AVX-VNNI'))
@@ -119,7 +120,7 @@ def int8_path_for(checkpoint, sha256, crops=FULL_CROPS):
 def with_record(data, sha256, crops):
     """The quant's ONNX bytes `data` with its record (RECORD_KEYS in metadata_props): the
     full sha256 of the checkpoint it was made from and the crops key it was calibrated on."""
-    import onnx
+    onnx = import_deferred('onnx')
 
     model = onnx.load_from_string(data)
     for key, value in zip(RECORD_KEYS, (sha256, crops)):
@@ -132,7 +133,7 @@ def check_record(path, sha256, crops, what='calibration'):
     """Int8Error (one line naming `what` and the file) unless the quant at `path` records
     (with_record) the checkpoint sha256 `sha256` (full) and the crops key `crops`: a file
     that is not ONNX, one without a record, or one of other weights or crops."""
-    import onnx
+    onnx = import_deferred('onnx')
 
     try:
         model = onnx.load(str(path), load_external_data=False)
@@ -217,7 +218,7 @@ def calibration_crops(recording, input_size, count=CALIBRATION_IMAGES, box=None)
 
 
 def _reader(inputs, batch=8):
-    from onnxruntime.quantization import CalibrationDataReader
+    CalibrationDataReader = import_deferred('onnxruntime.quantization').CalibrationDataReader
 
     class Batches(CalibrationDataReader):
         def __init__(self):
@@ -235,12 +236,7 @@ def quantize_onnx(float_onnx, crops):
     calibrated (MinMax) on `crops` (N, H, W, 3) uint8 RGB. Raises Int8Error when ONNX Runtime's
     quantiser is missing or fails."""
     try:
-        from onnxruntime.quantization import (
-            CalibrationMethod,
-            QuantFormat,
-            QuantType,
-            quantize_static,
-        )
+        quantization = import_deferred('onnxruntime.quantization')
     except ImportError:
         raise Int8Error('precision int8 needs the onnxruntime package (pip install -r '
                         'requirements.txt)') from None
@@ -255,10 +251,12 @@ def quantize_onnx(float_onnx, crops):
         # the quantiser logs advice (pre-processing) to the root logger: not the user's
         logging.disable(logging.WARNING)
         try:
-            quantize_static(str(source), str(target), _reader(inputs),
-                            quant_format=QuantFormat.QDQ, per_channel=True,
-                            activation_type=QuantType.QUInt8, weight_type=QuantType.QInt8,
-                            calibrate_method=CalibrationMethod.MinMax)
+            q = quantization
+            q.quantize_static(str(source), str(target), _reader(inputs),
+                              quant_format=q.QuantFormat.QDQ, per_channel=True,
+                              activation_type=q.QuantType.QUInt8,
+                              weight_type=q.QuantType.QInt8,
+                              calibrate_method=q.CalibrationMethod.MinMax)
         except Exception as error:  # noqa: BLE001 - the quantiser raises many kinds
             raise Int8Error(f'int8 quantisation failed ({type(error).__name__}: '
                             f'{error})') from None
