@@ -9,8 +9,8 @@ import errno
 import hashlib
 import os
 from pathlib import Path
+import secrets
 import shutil
-import tempfile
 
 # Free bytes below which a failed write is reported as a full disk (torch's zip writer
 # raises RuntimeError "enforce fail at inline_container.cc", without errno or path).
@@ -46,6 +46,19 @@ def write_error(path, error):
                    f'{path}: cannot write: {getattr(error, "strerror", None) or error}')
 
 
+def _create_temporary(path):
+    """(fd, name) of a new file beside `path`, made with mode 0o666 less the umask, as
+    open() makes a file (tempfile.mkstemp's 0o600 would leave checkpoints unreadable to the
+    detectors of another user reading a shared folder, and to colleagues)."""
+    for _ in range(100):
+        tmp = path.parent / f'.{path.name}.{secrets.token_hex(4)}.tmp'
+        try:
+            return os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666), str(tmp)
+        except FileExistsError:
+            continue
+    raise FileExistsError(errno.EEXIST, f'{path}: no free temporary name beside it')
+
+
 @contextmanager
 def atomic_write(path, mode='wb'):
     """Context manager yielding a stream; on success the file appears at `path` whole, on any
@@ -54,7 +67,7 @@ def atomic_write(path, mode='wb'):
     naming `path` and saying so, whatever the writer raised."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f'.{path.name}.', suffix='.tmp', dir=path.parent)
+    fd, tmp = _create_temporary(path)
     try:
         with os.fdopen(fd, mode) as stream:
             yield stream
