@@ -104,8 +104,9 @@ class LearnerConfig(TrainConfig):
     threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0,
                            maximum=MAX_THREADS)
     # Redefined with the learner's meaning and defaults:
-    steps: int = setting(0, 'stop after this many training steps (0 = run until stopped)',
-                         minimum=0)
+    steps: int = setting(0, 'training steps; after them training stops and the node stays up, '
+                         'idle: its last announced model stays on /monet/model, its services '
+                         'answer; stop it with Ctrl-C (0 = train until stopped)', minimum=0)
     checkpoint_every: int = setting(200, 'steps between checkpoints (each is validated and '
                                     'maybe announced)', minimum=1)
     epipolar_warmup: float = setting(0.0, 'fraction of `steps` trained without the loss on '
