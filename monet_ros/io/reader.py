@@ -6,7 +6,9 @@ held until the next chunk starts), files are merged with a heap. Messages are de
 mcap_ros2's decoders built from the schemas stored in the bag (no message packages
 needed, e.g. tf2_msgs). Nothing in a damaged bag crashes the reader: undecodable topics,
 messages that fail to decode, damaged chunks and truncated files are counted and named in
-`reader.report` (a ReadReport) while every readable message is still given.
+`reader.report` (a ReadReport) while every readable message is still given; only a bag in
+which no message at all can be read (not an MCAP file, or one cut before its first message)
+is refused at open, with one line (BagError).
 """
 import bisect
 from collections import Counter
