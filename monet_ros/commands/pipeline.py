@@ -53,8 +53,9 @@ HELP = ('live all-in-one: player + detector + fusion as ROS nodes (player and de
 
 
 def add_arguments(parser):
-    parser.add_argument('--bag', help='recording (rosbag2 folder or .mcap); default: a small '
-                        'synthetic recording generated (once) in --workdir')
+    parser.add_argument('--bag', help='recording (rosbag2 folder, .mcap or `monet synth` '
+                        'folder); default: a small synthetic recording generated (once) in '
+                        '--workdir')
     parser.add_argument('--rig', help="rig file (default: the recording's camera_info + "
                         '/tf_static, or the rig.yaml beside a synthetic recording)')
     from monet_ros.commands.common import (

@@ -1,7 +1,8 @@
 """`monet pipeline --learn`: the online learner beside the player, detector and fusion.
 
 The learner node (monet_ros.nodes.learner) fine-tunes the pipeline's model on the same
-recording (L_L on the labelled instants, lambda_e L_E on the unlabeled ones) in a background
+recording in its default mode, reprojection (L_L on the labelled instants, lambda_p L_B on
+pseudo-labels tracked from them, lambda_r L_R on the unlabeled ones; no L_E) in a background
 thread and announces better checkpoints on /monet/model; the detector hot-reloads them
 between frames. Every validated checkpoint prints one line with the learner's held-out
 reprojection error and the live pipeline's mean reprojection error of the frames fused with
@@ -28,8 +29,11 @@ def add_learn_arguments(parser):
                        'when not worse)')
     group.add_argument('--learn-lr', type=float, default=1e-4, help='learning rate')
     group.add_argument('--learn-tolerance-px', type=float, default=0.0,
-                       help='announce a checkpoint whose held-out reprojection error is at '
-                       "most the last announced one's + this")
+                       help="announce a checkpoint whose criterion is at most the last "
+                       "announced one's + this (px); the criterion is the learner's "
+                       'publish_metric: the held-out labelled error (mean px on the labelled '
+                       'instants held out for validation) by default, the held-out '
+                       'reprojection error when no labelled instant can be held out')
 
 
 def learner_bags(bag):
@@ -38,6 +42,13 @@ def learner_bags(bag):
     if bag.name == 'recording' and (bag.parent / 'labels.csv').is_file():
         return bag.parent
     return bag
+
+
+def _px(value, missing):
+    """'1.23 px', or `missing` for a metric the validation could not give (None / NaN)."""
+    if value is None or not np.isfinite(value):
+        return missing
+    return f'{value:.2f} px'
 
 
 class AnnouncementLog:
@@ -52,13 +63,14 @@ class AnnouncementLog:
         with self.summary.lock:
             errors = [e for t, e in self.summary.errors if t >= self.since]
         live = f'{np.mean(errors):.2f} px over {len(errors)} frames' if errors else 'no frames'
-        held = result.metrics.get('reprojection_px')
-        labelled = result.metrics.get('labelled_mean_px')
+        held = _px(result.metrics.get('reprojection_px'), 'none (no held-out instant '
+                   'triangulated)')
+        labelled = _px(result.metrics.get('labelled_mean_px'), 'none (no labelled instant '
+                       'held out)')
         verdict = 'announced' if result.published else 'kept back'
-        print(f'learner: step {result.step} {verdict} (held-out reprojection '
-              f'{held if held is None else round(held, 2)} px, held-out labelled error '
-              f'{labelled if labelled is None else round(labelled, 2)} px: {result.reason}); '
-              f'live reprojection with the previous weights: {live}', flush=True)
+        print(f'learner: step {result.step} {verdict} (held-out reprojection {held}, held-out '
+              f'labelled error {labelled}: {result.reason}); live reprojection with the '
+              f'previous weights: {live}', flush=True)
         if result.published:
             self.since = now
 

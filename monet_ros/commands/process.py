@@ -55,8 +55,9 @@ HELP = 'run detector + fusion over a recording offline, write keypoints3d to an 
 
 def add_arguments(parser):
     from monet_ros.commands.common import add_precision_options, add_rig_units_argument
-    parser.add_argument('bag', nargs='+', help='recording(s): rosbag2 folder or .mcap (with '
-                        'several, --out is their parent: OUT/<recording name>/ each)')
+    parser.add_argument('bag', nargs='+', help='recording(s): rosbag2 folder, .mcap or `monet '
+                        'synth` folder (with several, --out is their parent: OUT/<recording '
+                        'name>/ each)')
     parser.add_argument('--jobs', type=int, default=1,
                         help='recordings processed at once, one worker process each (one GPU '
                         'per job when several; --threads default cores // jobs)')

@@ -6,7 +6,9 @@ held until the next chunk starts), files are merged with a heap. Messages are de
 mcap_ros2's decoders built from the schemas stored in the bag (no message packages
 needed, e.g. tf2_msgs). Nothing in a damaged bag crashes the reader: undecodable topics,
 messages that fail to decode, damaged chunks and truncated files are counted and named in
-`reader.report` (a ReadReport) while every readable message is still given.
+`reader.report` (a ReadReport) while every readable message is still given; only a bag in
+which no message at all can be read (not an MCAP file, or one cut before its first message)
+is refused at open, with one line (BagError).
 """
 import bisect
 from collections import Counter
@@ -136,29 +138,56 @@ class ReadReport:
         return None if self.ok else f'reading {what}: {self.summary()}'
 
 
-def _scan_channels(path):
-    """(topic, message type, offered QoS) of every channel record of an MCAP file read
-    from start to end: the topics of a file without a usable summary (a recording cut
-    short by a crash or a kill has no footer and, from rosbag2, no metadata.yaml either).
-    Reads the whole file; damage is left to the read that follows (its report)."""
+def _scan_file(path, first_message_only=False):
+    """Read an MCAP file from start to end without its summary: (channels, has_message,
+    scan) where channels are the (topic, message type, offered QoS) of every channel record
+    (the topics of a file without a usable summary: a recording cut short by a crash or a
+    kill has no footer and, from rosbag2, no metadata.yaml either), has_message whether any
+    message record could be read, and scan the McapScan (its report names the damage met).
+    first_message_only: stop at the first message (channels then incomplete). Damage is
+    left to the read that follows (its report)."""
     scan = McapScan(path, ReadReport([path]), False)
-    schemas, found = {}, {}
+    schemas, found, has_message = {}, {}, False
     for event in scan.events(lambda offset: False):
         if event[0] in ('schema', 'channel'):
             defs = [event]
         elif event[0] == 'message':
-            continue
+            defs = []
+            has_message = True
         else:
             defs = event[2]
+            has_message = has_message or bool(event[3])
         for kind, record in defs:
             if kind == 'schema':
                 schemas[record.id] = record
             else:
                 found.setdefault(record.id, record)
+        if has_message and first_message_only:
+            break
+    channels = []
     for ch in found.values():
         schema = schemas.get(ch.schema_id)
-        yield (ch.topic, schema.name if schema else '',
-               ch.metadata.get('offered_qos_profiles', ''))
+        channels.append((ch.topic, schema.name if schema else '',
+                         ch.metadata.get('offered_qos_profiles', '')))
+    return channels, has_message, scan
+
+
+def _unreadable_line(path, scan):
+    """One line: why an MCAP file without a usable summary gives no message at all (not an
+    MCAP file, or one cut before its first message), with the scan's first finding."""
+    if not _starts_like_mcap(path):
+        return (f'{path} is not an MCAP file (it does not start with the MCAP magic and no '
+                'message in it can be read): give a rosbag2 folder, a .mcap file or a '
+                '`monet synth` folder')
+    prefix = f'{path}: '
+    found = [e[len(prefix):] if e.startswith(prefix) else e for e in scan.report.errors]
+    if scan.size < len(MAGIC):
+        found = ['the file ends inside the MCAP magic']
+    found = found[:1] + [scan.summary_problem or 'no summary']
+    if len(found) == 1:
+        found.insert(0, 'no message record')
+    return (f'{path} is not a complete MCAP file: no message can be read from its '
+            f'{scan.size} bytes ({"; ".join(found)})')
 
 
 def _natural_key(path):
@@ -263,11 +292,19 @@ def _starts_like_mcap(path):
     return MAGIC.startswith(head)
 
 
+def recording_bag(path):
+    """The bag of a recording path: a `monet synth` output folder (a folder holding
+    recording/, with rig.yaml, labels.csv, ...) gives its recording/; any other path is the
+    bag itself. The one rule for every command (open_bag, learning.find_recording_parts)."""
+    path = Path(path)
+    return path / 'recording' if path.is_dir() and (path / 'recording').exists() else path
+
+
 class BagReader:
     """Reader of one bag (see open_bag). Re-iterable; `report` describes the last read."""
 
     def __init__(self, path, validate_crcs=False, max_buffer_bytes=512 * 2**20):
-        self.path = Path(path)
+        self.path = recording_bag(path)
         self.validate_crcs = validate_crcs
         self.max_buffer_bytes = int(max_buffer_bytes)
         self.metadata = None
@@ -349,6 +386,7 @@ class BagReader:
                 except (KeyError, TypeError, ValueError):
                     continue
         counts, types, qos, summary_ok = Counter(), {}, {}, True
+        unreadable = []          # files without a summary in which no message can be read
         for f in self.files:
             scan = McapScan(f, self.report, self.validate_crcs)
             try:
@@ -358,10 +396,15 @@ class BagReader:
                 summary = None
             if summary is None:
                 summary_ok = False
-                if self.metadata is None:        # nothing else lists this file's topics
-                    for name, msgtype, profiles in _scan_channels(f):
+                # nothing else lists this file's topics without metadata.yaml: all of them;
+                # else only whether a message can be read at all
+                channels, has_message, scan = _scan_file(f, self.metadata is not None)
+                if self.metadata is None:
+                    for name, msgtype, profiles in channels:
                         types.setdefault(name, msgtype)
                         qos.setdefault(name, profiles)
+                if not has_message:
+                    unreadable.append(_unreadable_line(f, scan))
                 continue
             for cid, ch in summary.channels.items():
                 schema = summary.schemas.get(ch.schema_id)
@@ -369,6 +412,11 @@ class BagReader:
                 qos.setdefault(ch.topic, ch.metadata.get('offered_qos_profiles', ''))
                 if summary.statistics is not None:
                     counts[ch.topic] += summary.statistics.channel_message_counts.get(cid, 0)
+        if unreadable and len(unreadable) == len(self.files):   # nothing at all to read
+            if len(unreadable) == 1:
+                raise BagError(unreadable[0])
+            raise BagError(f'bag {self.path}: no message can be read from any of its '
+                           f'{len(unreadable)} .mcap files; {unreadable[0]}')
         # the listing is complete when metadata.yaml, every file's summary or a scan of
         # the files without one gave it
         self.topics_complete = True
@@ -535,7 +583,8 @@ class BagReader:
 
 
 def open_bag(path, validate_crcs=False, max_buffer_bytes=512 * 2**20):
-    """A BagReader for a rosbag2 folder (metadata.yaml + .mcap files) or a bare .mcap file.
+    """A BagReader for a rosbag2 folder (metadata.yaml + .mcap files), a bare .mcap file or
+    a `monet synth` output folder (its recording/, recording_bag).
 
     validate_crcs: also check every chunk's CRC (costs ~1 s per GB on these machines;
     mismatches are reported, the messages still given). The summary's CRC is always
@@ -544,6 +593,9 @@ def open_bag(path, validate_crcs=False, max_buffer_bytes=512 * 2**20):
     max_buffer_bytes bounds the message data held per file to restore log-time order
     (chunks written far out of order beyond it come out of order, counted in the report).
 
-    Raises BagError naming the path when it does not exist, is empty or unreadable, or
-    holds no .mcap file; damage inside the files never raises (see BagReader.report)."""
+    Raises BagError naming the path when it does not exist, is empty or unreadable, holds
+    no .mcap file, or when no message at all can be read from it (a file that is not an
+    MCAP file, or one cut before its first message: the line names the file, its size and
+    the reader's finding); damage inside otherwise readable files never raises (it is
+    counted in BagReader.report and every readable message is given)."""
     return BagReader(path, validate_crcs=validate_crcs, max_buffer_bytes=max_buffer_bytes)

@@ -159,7 +159,7 @@ class TrainConfig:
                                    maximum=0.9)
     validation_labels: float = setting(
         0.0, 'fraction of the labelled instants held out as validation labels, never trained '
-        'on (no L_L, no pseudo-labels, no L_E on them; labelled instants of the '
+        'on (no L_L, no pseudo-labels, no L_R or L_E on them; labelled instants of the '
         'eval_fraction tail count first, the rest evenly spread; at least one when > 0, '
         'always leaving one to train on): the held-out labelled error of Trainer.validate',
         minimum=0.0, maximum=0.9)

@@ -2,17 +2,19 @@
 
     learner = OnlineLearner(LearnerConfig(bags=('rec/',), model='start.pt', out='run/'))
     while True:
-        terms = learner.step()              # one Trainer step: L_L + lambda_e L_E + lambda_p L_B
+        terms = learner.step()    # one Trainer step of `mode`; default L_L + L_B + L_R
         result = learner.checkpoint_due()   # every checkpoint_every steps: CheckpointResult
         if result is not None and result.published:
             announce(result.announcement())     # JSON of /monet/model
 
 The bags are decoded once into memory (learning.recording) and replayed as a shuffled,
 looping stream of multiview instants: every step the Trainer samples labelled views (L_L),
-unlabeled instants (L_E) and pseudo-labelled views (L_B) at random, forever. The held-out
-slice (the tail of the recordings, `eval_fraction`) is never trained on, and neither are the
-validation labels (`validation_labels`: a fraction of the labelled instants, the tail's
-first, the rest evenly spread; trainer.TrainingData keeps them out of L_L, L_B and L_E).
+pseudo-labelled views (L_B) and unlabeled instants (L_R in the default mode `reprojection`;
+L_E or L_T in the modes that train them) at random, forever. The held-out slice (the tail
+of the recordings, `eval_fraction`) is never trained on, and neither are the validation
+labels (`validation_labels`: a fraction of the labelled instants, the tail's first, the
+rest evenly spread; trainer.TrainingData keeps them out of L_L, L_B and the unlabeled
+instants' terms).
 Every checkpoint is validated (Trainer.validate) without ground truth: the mean
 epipolar divergence and reprojection error of the all-view triangulation of the detections
 on the tail (agreement between views), and the error of the detections against the held-out
@@ -102,8 +104,9 @@ class LearnerConfig(TrainConfig):
     threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0,
                            maximum=MAX_THREADS)
     # Redefined with the learner's meaning and defaults:
-    steps: int = setting(0, 'stop after this many training steps (0 = run until stopped)',
-                         minimum=0)
+    steps: int = setting(0, 'training steps; after them training stops and the node stays up, '
+                         'idle: its last announced model stays on /monet/model, its services '
+                         'answer; stop it with Ctrl-C (0 = train until stopped)', minimum=0)
     checkpoint_every: int = setting(200, 'steps between checkpoints (each is validated and '
                                     'maybe announced)', minimum=1)
     epipolar_warmup: float = setting(0.0, 'fraction of `steps` trained without the loss on '

@@ -136,11 +136,13 @@ def load_ground_truth(path, stamps, num_keypoints):
 
 def find_recording_parts(path):
     """A `monet synth` output folder (recording/, rig.yaml, labels.csv, ground_truth.npz)
-    or a bag path -> dict bag, rig, labels, ground_truth (None where absent)."""
+    or a bag path -> dict bag, rig, labels, ground_truth (None where absent). The folder
+    rule is io.reader.recording_bag, which open_bag follows too."""
+    from monet_ros.io.reader import recording_bag
+
     path = Path(path)
-    parts = {'bag': path, 'rig': None, 'labels': None, 'ground_truth': None}
-    if path.is_dir() and (path / 'recording').exists():
-        parts['bag'] = path / 'recording'
+    parts = {'bag': recording_bag(path), 'rig': None, 'labels': None, 'ground_truth': None}
+    if parts['bag'] != path:
         for key, name in (('rig', 'rig.yaml'), ('labels', 'labels.csv'),
                           ('ground_truth', 'ground_truth.npz')):
             if (path / name).is_file():

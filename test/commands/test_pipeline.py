@@ -234,15 +234,45 @@ def test_player_and_two_detectors_run_in_child_processes_and_lockstep_fuses_ever
 
 
 def test_a_recording_that_plays_no_frame_is_an_error(ros_env, tmp_path):
-    """A recording cut short before its first complete chunk (its rig given as a file):
-    the replay ends without a frame, which exits 2 with one error line, not an empty 0."""
-    rig, _ = noise_recording(tmp_path / 'rec', cameras=2, frames=3)
+    """A recording cut short after its first chunk, which holds one view of the first
+    instant (its rig given as a file): the replay ends without a frame, which exits 2 with
+    one error line, not an empty 0. (Cut before any message, it is refused at start:
+    test/commands/test_info_not_a_recording.py.)"""
+    import io
+
+    from mcap.reader import make_reader
+
+    from monet_ros.io import BagWriter
+
+    rig, _ = noise_recording(tmp_path / 'whole', cameras=2, frames=1)
     save_rig(tmp_path / 'rig.yaml', rig)
     model = small_checkpoint(tmp_path / 'model.pt')
+    rng = np.random.default_rng(0)
+    with BagWriter(tmp_path / 'rec', chunk_size=1000) as bag:   # a chunk per image
+        bag.write_tf_static(1000, rig)
+        for k in range(3):
+            for cam in rig:
+                image = rng.integers(0, 255, (cam.height, cam.width, 3), dtype=np.uint8)
+                bag.write_image(f'/{cam.name}/image_raw', 1000 + k, image, f'{cam.name}_optical')
+                bag.write_camera_info(f'/{cam.name}/camera_info', 1000 + k, cam,
+                                      f'{cam.name}_optical')
     mcap = next((tmp_path / 'rec').glob('*.mcap'))
     data = mcap.read_bytes()
-    mcap.write_bytes(data[:len(data) // 3])
+    summary = make_reader(io.BytesIO(data)).get_summary()
+    first = min(summary.chunk_indexes, key=lambda ci: ci.chunk_start_offset)
+    assert first.message_end_time == 1000         # /tf_static and cam0's first image only
+    mcap.write_bytes(data[:first.chunk_start_offset + first.chunk_length + 20])
     with pipeline(ros_env, '--bag', tmp_path / 'rec', '--rig', tmp_path / 'rig.yaml',
                   '--model', model) as proc:
         assert proc.wait(timeout=120) == 2, proc.output()
     assert 'the replay ended without playing a frame' in proc.output(), proc.output()
+
+
+def test_a_synth_folder_is_a_bag(ros_env, tmp_path):
+    """`monet pipeline --bag D`, D a `monet synth` output folder (the bag in D/recording),
+    as `monet train D` takes it: it said 'bag folder D has no readable .mcap files'."""
+    _, stamps = noise_recording(tmp_path / 'synth' / 'recording', cameras=2, frames=3)
+    model = small_checkpoint(tmp_path / 'model.pt')
+    with pipeline(ros_env, '--bag', tmp_path / 'synth', '--model', model, '--lockstep') as proc:
+        assert proc.wait(timeout=120) == 0, proc.output()
+    assert f'frames {len(stamps)} fused of {len(stamps)} played' in proc.output(), proc.output()

@@ -3,6 +3,7 @@ its announced checkpoints are hot-reloaded by the detector, each validated check
 the live reprojection error, and the run ends cleanly."""
 import subprocess
 import sys
+import time
 
 from helpers.blob_bag import write_blob_folder
 from helpers.blobs import blob_recording
@@ -38,3 +39,39 @@ def test_pipeline_learn_announces_and_the_detector_reloads(repo_root, ros_env, t
     assert steps == sorted(steps) and all(s % 2 == 0 for s in steps)
     assert load_checkpoint(out / 'model.pt')[1]['keypoints'] == ['k0', 'k1', 'k2']
     assert any(line.startswith('monet pipeline: ') for line in proc.stdout.splitlines())
+
+
+def test_the_learner_line_says_what_a_missing_metric_means(capsys):
+    """One labelled instant (none can be held out: the criterion falls back to the
+    reprojection error): the line read 'held-out labelled error None px'."""
+    from monet_ros.commands.pipeline import Summary
+    from monet_ros.commands.pipeline_learn import AnnouncementLog
+    from monet_ros.learning.online import CheckpointResult
+
+    summary = Summary()
+    log = AnnouncementLog(summary)
+    summary.errors.append((time.monotonic(), 2.0))    # a frame fused before the first line
+    log(CheckpointResult('ck.pt', 4, 'ab', {'reprojection_px': 1.234}, True, 'first'))
+    log(CheckpointResult('ck.pt', 6, 'cd', {'reprojection_px': float('nan'),
+                                            'labelled_mean_px': 3.456}, False, 'worse'))
+    lines = capsys.readouterr().out.splitlines()
+    assert lines == [
+        'learner: step 4 announced (held-out reprojection 1.23 px, held-out labelled error '
+        'none (no labelled instant held out): first); live reprojection with the previous '
+        'weights: 2.00 px over 1 frames',
+        'learner: step 6 kept back (held-out reprojection none (no held-out instant '
+        'triangulated), held-out labelled error 3.46 px: worse); live reprojection with the '
+        'previous weights: no frames']
+
+
+def test_learn_tolerance_help_names_the_criterion():
+    import argparse
+
+    from monet_ros.commands.pipeline_learn import add_learn_arguments
+
+    parser = argparse.ArgumentParser()
+    add_learn_arguments(parser)
+    text = ' '.join(next(a for a in parser._actions
+                         if a.dest == 'learn_tolerance_px').help.split())
+    assert 'held-out labelled error' in text and 'by default' in text
+    assert 'held-out reprojection error when no labelled instant can be held out' in text

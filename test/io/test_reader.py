@@ -108,6 +108,91 @@ def test_path_errors_are_named(tmp_path):
         open_bag(tmp_path / 'folder')
 
 
+def _first_chunk(mcap):
+    """(offset, length) of the file's first chunk, from the mcap library's summary."""
+    import io
+
+    from mcap.reader import make_reader
+    summary = make_reader(io.BytesIO(mcap.read_bytes())).get_summary()
+    first = min(summary.chunk_indexes, key=lambda ci: ci.chunk_start_offset)
+    return first.chunk_start_offset, first.chunk_length
+
+
+def test_a_file_with_nothing_to_read_is_named_at_open(tmp_path):
+    """Random bytes or a text file named .mcap, and a real MCAP cut inside its first chunk,
+    opened as bags without topics: every command then said 'no image topic for camera
+    cam0' or 'no CameraInfo topic'. Opening one now says, on one line, that it is not an
+    MCAP file or not a complete one (its size and the reader's finding)."""
+    noise = tmp_path / 'noise.mcap'
+    noise.write_bytes(np.random.default_rng(0).integers(0, 256, 100_000, np.uint8).tobytes())
+    text = tmp_path / 'notes.mcap'
+    text.write_text('# a README renamed\n' * 200)
+    for path in (noise, text):
+        with pytest.raises(BagError) as error:
+            open_bag(path)
+        assert str(error.value) == (
+            f'{path} is not an MCAP file (it does not start with the MCAP magic and no '
+            'message in it can be read): give a rosbag2 folder, a .mcap file or a `monet '
+            'synth` folder')
+    cams = [make_camera(f'cam{i}', seed=i) for i in range(2)]
+    write_rig_bag(tmp_path / 'b', cams, T0, 4)             # one chunk of 4 MiB at most
+    mcap = next((tmp_path / 'b').glob('*.mcap'))
+    start, length = _first_chunk(mcap)
+    cut = start + length // 2
+    mcap.write_bytes(mcap.read_bytes()[:cut])
+    for path in (tmp_path / 'b', mcap):           # the rosbag2 folder (metadata.yaml), the file
+        with pytest.raises(BagError) as error:
+            open_bag(path)
+        line = str(error.value)
+        assert '\n' not in line
+        assert line.startswith(
+            f'{mcap} is not a complete MCAP file: no message can be read from its {cut} '
+            f'bytes (record at byte {start} (opcode 0x06, length {length - 9}) runs past the '
+            'end of the file (truncated?)'), line
+
+
+def test_a_split_bag_with_nothing_to_read_is_named_at_open(tmp_path):
+    folder = tmp_path / 'split'
+    folder.mkdir()
+    for k in range(2):
+        (folder / f'split_{k}.mcap').write_bytes(b'\x89MCAP0\r\n' + bytes(100))
+    with pytest.raises(BagError) as error:
+        open_bag(folder)
+    line = str(error.value)
+    assert line.startswith(f'bag {folder}: no message can be read from any of its 2 .mcap '
+                           f'files; {folder / "split_0.mcap"} is not a complete MCAP file'), line
+
+
+def test_a_cut_file_that_still_holds_messages_is_read_and_reported(tmp_path):
+    """Cut after its first chunks: not an error at open; what is whole is read, the rest
+    counted in the report (unchanged)."""
+    cams = [make_camera(f'cam{i}', seed=i) for i in range(2)]
+    write_rig_bag(tmp_path / 'b', cams, T0, 6, chunk_size=4000)
+    mcap = next((tmp_path / 'b').glob('*.mcap'))
+    start, length = _first_chunk(mcap)
+    mcap.write_bytes(mcap.read_bytes()[:start + length + 20])
+    reader = open_bag(tmp_path / 'b')
+    assert len(list(reader.messages(decode=False))) >= 1
+    assert not reader.report.ok and 'truncated' in reader.report.summary()
+
+
+def test_a_synth_folder_opens_as_its_recording(tmp_path):
+    """A `monet synth` output folder (recording/ beside rig.yaml, labels.csv) is a bag for
+    every command, as for `monet train` (learning.find_recording_parts): one rule."""
+    from monet_ros.learning.recording import find_recording_parts
+
+    cams = [make_camera(f'cam{i}', seed=i) for i in range(2)]
+    write_rig_bag(tmp_path / 'synth' / 'recording', cams, T0, 3)
+    (tmp_path / 'synth' / 'labels.csv').write_text('')
+    reader = open_bag(tmp_path / 'synth')
+    assert reader.path == tmp_path / 'synth' / 'recording'
+    direct = open_bag(tmp_path / 'synth' / 'recording')
+    assert [(m.topic, m.log_time_ns) for m in reader.messages(decode=False)] == \
+        [(m.topic, m.log_time_ns) for m in direct.messages(decode=False)]
+    parts = find_recording_parts(tmp_path / 'synth')
+    assert parts['bag'] == reader.path and parts['labels'] == tmp_path / 'synth' / 'labels.csv'
+
+
 def test_damaged_metadata_and_missing_files_are_reported(tmp_path):
     with BagWriter(tmp_path / 'b') as bag:
         bag.write('/a', 'std_msgs/msg/String', bag.message('std_msgs/msg/String', data='x'), 1)
