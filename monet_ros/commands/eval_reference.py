@@ -6,15 +6,15 @@ error in mm (median / mean / p90), PCK@mm and coverage.
 
 Several subjects (`--subjects N`, N >= 2; labels with a `subject` column, or an importer's
 tracks / individuals): every checkpoint runs as `monet process --subjects N` runs it (the
-same function, run_model; the several-subject settings are that command's options) and
-every reference subject is scored against the track matched to it (evaluation.reference.
-score_subjects: one-to-one, least mean 3D distance over the scored instants both have,
-the labels' own triangulation against the track's 3D): the checkpoint's row is then the
-pooled figures (subject `all`) and one row per reference subject follows (subject, track:
-the matched identity or -1, match_mm: the pair's mean 3D distance in mm, and its own
-figures). A reference of several subjects without --subjects N is refused (one line
-naming the file, the field subject and --subjects); a reference of one subject is scored
-against its matched track.
+same function, commands.model_run.run_model; the several-subject settings are that
+command's options) and every reference subject is scored against the track matched to it
+(evaluation.reference.score_subjects: one-to-one, least mean 3D distance over the scored
+instants both have, the labels' own triangulation against the track's 3D): the
+checkpoint's row is then the pooled figures (subject `all`) and one row per reference
+subject follows (subject, track: the matched identity or -1, match_mm: the pair's mean 3D
+distance in mm, and its own figures). A reference of several subjects without --subjects N
+is refused (one line naming the file, the field subject and --subjects); a reference of
+one subject is scored against its matched track.
 
 Instants scored: those with a reference, less the instants labelled in the training
 labels (--labels, or for a 3D reference the data folder's labels.csv) unless
@@ -27,7 +27,6 @@ import csv
 import json
 from pathlib import Path
 import sys
-import tempfile
 
 import numpy as np
 
@@ -117,63 +116,6 @@ def _write_instants(path, reference, scored, labelled):
             w.writerow([t, int(stamp), status])
 
 
-def run_model(bag, model, cameras, rig=None, device=None, camera_map=(), rig_units=None,
-              subjects=None, association=None, tracker=None):
-    """`model` run over `bag` as `monet process` runs it (process.process_recording: the
-    one-subject tracked crops; with `subjects` a subjects.detection.SubjectsConfig of
-    N >= 2 as `monet process --subjects N`, with association / tracker its other configs,
-    None: that command's defaults) -> dict: stamps (R,) ns, subject (R,) int track
-    identities (None for one subject), X (R, C, 3) in the rig's unit, points2d
-    (R, V, C, 2) px: the 2D detections in `cameras` (Camera list; matched by name, NaN
-    for a camera the run lacks) - one row per processed instant, or per instant and track.
-    The one place `monet eval --reference` and `monet train --holdout-labelled` run a
-    model; raises as process_recording."""
-    from monet_ros.commands.process import process_recording
-    from monet_ros.io.export_tables import read_anipose_csv
-
-    several = subjects is not None and subjects.subjects > 1
-    with tempfile.TemporaryDirectory(prefix='monet-eval-') as tmp:
-        out = Path(tmp) / 'run'
-        figures = process_recording(bag, model, out, rig=rig, device=device, progress=False,
-                                    exports=() if several else ('csv', 'npz'),
-                                    camera_map=camera_map, rig_units=rig_units,
-                                    subjects=subjects if several else None,
-                                    association=association, tracker=tracker)
-        if several:
-            rows = figures['subjects']
-            frame = np.asarray(rows.frame, np.int64)
-            stamps = np.asarray(figures['subject_stamps'], np.int64)[frame]
-            ident, X, p2 = np.asarray(rows.subject, np.int64), rows.X, rows.points2d
-            names = list(figures['subject_cameras'])
-            X = np.asarray(X, float).reshape(len(stamps), len(figures['subject_keypoints']), 3)
-        else:
-            table = read_anipose_csv(out / 'keypoints3d.csv')
-            det = np.load(out / 'detections2d.npz')
-            stamps, ident, X = table['stamps_ns'], None, table['X']
-            p2, names = det['points2d'], list(det['cameras'])
-    C = X.shape[1]
-    points2d = np.full((len(stamps), len(cameras), C, 2), np.nan)
-    if len(stamps):
-        p2 = np.asarray(p2, float).reshape(len(stamps), len(names), C, 2)
-        for v, cam in enumerate(cameras):
-            if cam.name in names:
-                points2d[:, v] = p2[:, names.index(cam.name)]
-    return dict(stamps=np.asarray(stamps, np.int64), subject=ident, X=X, points2d=points2d)
-
-
-def score_run(references, run, px_thresholds, mm_thresholds, instants=None):
-    """evaluation.reference figures of a run_model result against load_references'
-    references: one subject's run by score (one reference), several subjects' by
-    score_subjects (pooled, with `subjects`: one dict per reference subject and its
-    matched track)."""
-    from monet_ros.evaluation.reference import score, score_subjects
-    if run['subject'] is None:
-        return score(references[0], run['stamps'], run['X'], run['points2d'], px_thresholds,
-                     mm_thresholds, instants=instants)
-    return score_subjects(references, run['stamps'], run['subject'], run['X'],
-                          run['points2d'], px_thresholds, mm_thresholds, instants=instants)
-
-
 def subject_configs_of(args, owner):
     """(subjects, association, tracker) of `monet eval --subjects N` (N >= 2: process.
     subject_configs on `monet process`' default ProcessConfig, the run's) or (None, None,
@@ -213,6 +155,7 @@ def run_reference(args):
         references = {}
         # the models run as `monet process` runs them: its default precision, said once
         print_precision(prog, 'auto', 'auto', args.device or None)
+        from monet_ros.commands.model_run import run_model, score_run
         for path in args.checkpoints:
             _, meta = load_checkpoint(path)
             keypoints = tuple(meta['keypoints'])

@@ -61,7 +61,7 @@ def hold_out(recording, n, out):
 def score_holdout(bag, rig, model, labels_path, recording, camera_map=(), rig_units=None,
                   subjects=None, association=None, tracker=None):
     """Figures (evaluation.reference.score) of `model` run as `monet process` runs it
-    (commands.eval_reference.run_model) on the held-out labels of `labels_path` (2D in px
+    (commands.model_run.run_model) on the held-out labels of `labels_path` (2D in px
     on the labelled views; 3D errors in mm against the labels' own triangulation whatever
     the rig's unit; rig_units: that of a rig file that states none). subjects (a
     subjects.detection.SubjectsConfig of N >= 2), association, tracker: the model runs as
@@ -69,7 +69,7 @@ def score_holdout(bag, rig, model, labels_path, recording, camera_map=(), rig_un
     matched to it (evaluation.reference.score_subjects: pooled figures plus `subjects`, one
     dict per labelled subject with its matched track and figures). Raises LabelError /
     ValueError / OSError as load_references and process_recording."""
-    from monet_ros.commands.eval_reference import run_model, score_run
+    from monet_ros.commands.model_run import run_model, score_run
     from monet_ros.evaluation.reference import (
         MM_THRESHOLDS,
         PX_THRESHOLDS,
