@@ -180,9 +180,17 @@ def check_subject_only_options(args, several, command,
     subjects)."""
     if several:
         return
-    for dest, (default, names) in (getattr(args, 'subject_only_defaults', None) or {}).items():
-        if getattr(args, dest) != default:
-            raise ValueError(f'{names} applies only with {needs}; {command} {without}')
+    check_applies([names for dest, (default, names) in
+                   (getattr(args, 'subject_only_defaults', None) or {}).items()
+                   if getattr(args, dest) != default], False, command, needs, without)
+
+
+def check_applies(given, applies, command, needs, without):
+    """ValueError '{option} applies only with {needs}; {command} {without}' naming the first
+    of `given` (the options the user gave, as typed names) when `applies` is false: a value
+    the run would ignore is refused, not dropped silently."""
+    if given and not applies:
+        raise ValueError(f'{given[0]} applies only with {needs}; {command} {without}')
 
 
 def changed_options(config, options):

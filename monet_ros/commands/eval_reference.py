@@ -24,11 +24,12 @@ stamp_ns, status: scored / labelled / no reference). Writes OUT/reference.csv an
 OUT/reference.json.
 """
 import csv
-import json
 from pathlib import Path
 import sys
 
 import numpy as np
+
+from monet_ros import json_text
 
 
 def add_reference_arguments(parser):
@@ -191,7 +192,7 @@ def run_reference(args):
         w = csv.DictWriter(f, fieldnames=keys, lineterminator='\n')
         w.writeheader()
         w.writerows(rows)
-    (out_dir / 'reference.json').write_text(json.dumps(rows, indent=1))
+    (out_dir / 'reference.json').write_text(json_text.dumps(rows, indent=1))
     refs, scored, labelled, labels_path = next(iter(references.values()))
     ref = refs[0]
     _write_instants(out_dir / 'reference_instants.csv', ref, scored, labelled)

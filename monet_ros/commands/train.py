@@ -1,11 +1,11 @@
 """`monet train`: semi-supervised training from a recording + labels (the paper's modes)."""
 import argparse
 from dataclasses import dataclass, fields
-import json
 import os
 from pathlib import Path
 import sys
 
+from monet_ros import json_text
 from monet_ros.config import setting, validate_config
 from monet_ros.learning.config import TrainConfig
 
@@ -23,6 +23,8 @@ class TrainRunOptions:
                                 maximum=100_000_000)
     threads: int = setting(0, 'torch CPU threads (0 = torch default)', minimum=0,
                            maximum=256)
+    holdout_labelled: int = setting(0, 'labelled instants left out of training and scored '
+                                    '(0 = off)', minimum=0, maximum=100_000_000)
 
     def __post_init__(self):
         validate_config(self)
@@ -135,9 +137,11 @@ def run(args):
     from monet_ros.models.device import check_device
     from monet_ros.skeleton import load_skeleton
 
-    options = TrainRunOptions(max_instants=args.max_instants, threads=args.threads)
+    options = TrainRunOptions(max_instants=args.max_instants, threads=args.threads,
+                               holdout_labelled=args.holdout_labelled)
     config = config_from_args(args)
-    check_teacher_options(args, config.distill_rounds > 0)      # before any file is read
+    check_distill_options(args, config)                          # before any file is read
+    check_teacher_options(args, config.distill_rounds > 0)
     check_device('monet train', None if config.device == 'auto' else config.device)
     check_threads('monet train', options.threads)
     world, device = distributed.init_from_env(config.device)     # a torchrun job, if any
@@ -193,6 +197,8 @@ def run(args):
                                                 probe.heatmap_size, holdout=held)
     except ValueError as error:
         raise ValueError(f'{error}; {_labels_text(recording, config)}') from None
+    if config.distill_rounds:
+        check_something_to_distil(data, config)
     if args.resume and (out / 'trainer_state.pt').exists():
         trainer = Trainer.resume(out, data, config=config, device=device)
         if world.writer:
@@ -203,6 +209,11 @@ def run(args):
                   f'every {config.checkpoint_every} steps); starting at step 0', file=sys.stderr)
         trainer = Trainer(config, data, out, device=device)
     trainer.skeleton_name = skeleton.name
+    if config.validation_labels > 0 and not len(data.validation_instants):
+        from monet_ros.learning.trainer import no_validation_text
+        trainer.warn(no_validation_text(config.validation_labels, '--validation-labels',
+                                        f'after --holdout-labelled {len(held)}' if len(held)
+                                        else '') + "; the summary's validation is null")
     if world.writer:
         print(f'{recording.name}: {recording.num_instants} instants x {recording.num_views} '
               f'views, {len(data.labelled_instants)} labelled'
@@ -211,11 +222,19 @@ def run(args):
                  'instant)' if data.num_other_labelled else '')
               + f', {len(data.unlabeled_instants)} '
               f'unlabeled{_rows_text(data)}, {len(data.held_out)} held out; mode {config.mode} '
-              f'({trainer.objective_text()}), '
+              f'({trainer.objective_text()}{_unused_terms_text(args, config)}), '
               f'{trainer.pseudo_label_count} pseudo-labels{_gate_text(data.pseudo_gate)}, '
               f'device {trainer.device}'
               + (f', {world.world_size} ranks ({world.backend}), {trainer.per_rank_batch} '
                  'crops per rank per step' if world.distributed else ''), file=sys.stderr)
+    # where the run ends: its steps and the distillation rounds it has reached
+    end = config.steps + trainer.distill_round * config.distill_round_steps
+    if trainer.step_count >= end and trainer.distill_round >= config.distill_rounds and \
+            world.writer:
+        print(f'monet train: already at step {trainer.step_count} >= --steps {config.steps}'
+              + (f' + {trainer.distill_round} distillation rounds x '
+                 f'{config.distill_round_steps} steps' if trainer.distill_round else '')
+              + ': nothing to train', file=sys.stderr)
     try:
         if config.distill_rounds:
             from monet_ros.commands.train_distill import train_with_distillation
@@ -290,18 +309,25 @@ def run(args):
                 track = f'track {p["track"]}' if p['track'] >= 0 else 'no track matched'
                 print(f'  subject {p["subject"]} ({track}): '
                       + holdout_text(p, recording.cameras[0].units), file=sys.stderr)
-    print(json.dumps(summary, indent=1))
+    print(json_text.dumps(summary, indent=1))
     distributed.shutdown()
     return 0
 
 
 def holdout_text(figures, units):
     """'2D median 3.1 px, PCK@10px 90% (12 views); 3D median 4.2 mm, mean 5.0 mm (rig in m),
-    coverage 100%' of evaluation.reference.score figures."""
-    return (f'2D median {figures["px_median"]:.1f} px, PCK@10px '
-            f'{100 * figures["pck2d@10px"]:.0f}% ({figures["views_2d"]} views); 3D median '
-            f'{figures["mm_median"]:.1f} mm, mean {figures["mm_mean"]:.1f} mm (rig in {units}), '
-            f'coverage {100 * figures["coverage"]:.0f}%')
+    coverage 100%' of evaluation.reference.score figures. A median that is not a number
+    says why: a miss counts as infinitely far (more than half of the labelled views missed:
+    an infinite median), no view or point scored (NaN)."""
+    import math
+    px, mm = figures['px_median'], figures['mm_median']
+    two_d = (f'2D median {px:.1f} px' if math.isfinite(px) else
+             '2D median: more than half of the labelled views missed' if px == math.inf else
+             '2D: no labelled view scored')
+    three_d = (f'3D median {mm:.1f} mm, mean {figures["mm_mean"]:.1f} mm' if math.isfinite(mm)
+               else '3D: no point scored')
+    return (f'{two_d}, PCK@10px {100 * figures["pck2d@10px"]:.0f}% ({figures["views_2d"]} '
+            f'views); {three_d} (rig in {units}), coverage {100 * figures["coverage"]:.0f}%')
 
 
 def scored_lines(what, figures, instants):
@@ -342,6 +368,53 @@ def check_teacher_options(args, distill, subjects=None):
         return {}
     return dict(zip(('subjects', 'association', 'tracker'),
                     teacher_subject_configs(args, subjects)))
+
+
+def check_distill_options(args, config):
+    """ValueError naming the first distillation setting (DISTILL_SETTINGS) given on the
+    command line without --distill-rounds N >= 1: the run has no round to use it."""
+    from monet_ros.commands.common import check_applies
+    from monet_ros.learning.config import DISTILL_SETTINGS
+    check_applies([_option(name) for name in DISTILL_SETTINGS
+                   if getattr(args, name, None) is not None], config.distill_rounds > 0,
+                  'monet train', needs='--distill-rounds N (N >= 1)',
+                  without='has no distillation round without it')
+
+
+def check_something_to_distil(data, config):
+    """ValueError naming --distill-rounds when every view x keypoint of the training
+    instants is labelled (train_distill.distill_cells: none left): the teacher would run
+    over the recording for nothing."""
+    import numpy as np
+
+    from monet_ros.commands.train_distill import distill_cells
+    if not distill_cells(data).any():
+        training = len(np.setdiff1d(data.train, data.validation_instants))
+        raise ValueError(f'--distill-rounds {config.distill_rounds}: every view x keypoint of '
+                         f'the {training} training '
+                         'instants is labelled: nothing unlabelled to distil (the teacher '
+                         'would run for nothing); train with --distill-rounds 0')
+
+
+def _option(name):
+    """The option of TrainConfig field `name` (--its-name)."""
+    return '--' + name.replace('_', '-')
+
+
+def _unused_terms_text(args, config):
+    """'; mode reprojection has no L_E (--lambda-e 3 not used), no L_T (...)' for the weights
+    of loss terms given on the command line that the mode does not train (TrainConfig is
+    shared by every mode: such a weight is legal, and unused: said, not refused), '' when
+    none."""
+    from monet_ros.learning.config import TERM_WEIGHTS
+    terms = config.spec.terms
+    unused = [(term, name) for term, name in TERM_WEIGHTS.items()
+              if term != 'D' and term not in terms and getattr(args, name, None) is not None]
+    if not unused:
+        return ''
+    return f'; mode {config.mode} has ' + ', '.join(
+        f'no L_{term} ({_option(name)} {getattr(config, name):g} not used)'
+        for term, name in unused)
 
 
 def skeleton_line(skeleton, given):

@@ -138,7 +138,7 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
                                 tracker=tracker if several else None)
     data = trainer.data
     recording = data.recording
-    T, V, C, _ = data.labels.shape
+    C = data.labels.shape[2]
     smoothed = figures['filter']
     if several:         # SmoothedSubjects: one row per frame and identity
         X, error, ncams, matched, unmatched = _subject_rows(data, figures)
@@ -152,11 +152,7 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
         X, matched = align_to_instants(recording.stamps, stamps, X)
         error = align_to_instants(recording.stamps, stamps, error)[0]
         ncams = align_to_instants(recording.stamps, stamps, ncams, fill=0)[0]
-    train = np.zeros(T, bool)
-    train[data.train] = True
-    train[data.validation_instants] = False
-    # by crop row (the instants with one subject): its unlabelled cells of training instants
-    cells = ~np.isfinite(data.row_labels[..., 0]) & train[data.row_instants][:, None, None]
+    cells = distill_cells(data)
     distilled = distilled_labels(X, error, ncams, recording.cameras, cells,
                                  units=figures['units'], gate_px=c.distill_gate_px,
                                  min_views=c.distill_min_views,
@@ -193,6 +189,16 @@ def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, 
                      f'{run_dir}, or raise distill_gate_px / lower distill_min_views)')
     return stats
 
+
+
+def distill_cells(data):
+    """(R, V, C) bool of a TrainingData (R = data.num_rows, by crop row: the instants with
+    one subject): the cells a distillation round can teach, the unlabelled view x keypoint
+    cells of rows of training instants (not the eval_fraction tail, not validation)."""
+    train = np.zeros(data.labels.shape[0], bool)
+    train[data.train] = True
+    train[data.validation_instants] = False
+    return ~np.isfinite(data.row_labels[..., 0]) & train[data.row_instants][:, None, None]
 
 
 def _subject_rows(data, figures):

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from monet_ros import json_text
 from monet_ros.evaluation.pck import PCKResult
 
 # The paper's rows, in its order.
@@ -59,11 +60,14 @@ class EvalSummary:
         p = data['pck']
         names = tuple(p['per_keypoint'].keys())
         per_kp = np.array([p['per_keypoint'][n] for n in names], dtype=np.float64).T
-        result = PCKResult(np.array(p['thresholds']), per_kp, np.array(p['overall']),
-                           np.array(p['counts']), names)
-        return cls(data['mode'], data['dataset'], data['reproj_mean_px'],
-                   data['reproj_std_px'], data['gt_reproj_mean_px'], data['gt_reproj_std_px'],
-                   result, int(data['instants']), data.get('extra', {}))
+        # null: a figure that was not finite (json_text writes NaN / inf as null)
+        result = PCKResult(np.array(p['thresholds']), per_kp,
+                           np.array(p['overall'], dtype=np.float64), np.array(p['counts']),
+                           names)
+        figures = [np.nan if data[k] is None else data[k] for k in (
+            'reproj_mean_px', 'reproj_std_px', 'gt_reproj_mean_px', 'gt_reproj_std_px')]
+        return cls(data['mode'], data['dataset'], *figures, result, int(data['instants']),
+                   data.get('extra', {}))
 
 
 def _ordered(values, order):
@@ -132,7 +136,7 @@ def write_report(out_dir, summaries, name='results'):
              'json': out / f'{name}.json'}
     paths['markdown'].write_text(markdown_table(summaries))
     paths['csv'].write_text(csv_table(summaries))
-    paths['json'].write_text(json.dumps([s.to_json() for s in summaries], indent=1))
+    paths['json'].write_text(json_text.dumps([s.to_json() for s in summaries], indent=1))
     for dataset in _ordered({s.dataset for s in summaries}, ()):
         png = out / f'pck_{dataset}.png'
         plot_pck_curves([s for s in summaries if s.dataset == dataset], png,

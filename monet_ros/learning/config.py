@@ -25,13 +25,20 @@ MODES = ('supervised', 'spatial', 'spatiotemporal', 'bootstrap1', 'bootstrap2', 
 LOSS_TERMS = ('L', 'E', 'B', 'T', 'R', 'D')
 # most distillation rounds (each runs the detector over the recording and trains on)
 MAX_DISTILL_ROUNDS = 5
+# the settings of the distillation rounds: used only with distill_rounds >= 1
+DISTILL_SETTINGS = ('distill_steps', 'batch_distill', 'lambda_d', 'distill_gate_px',
+                    'distill_min_views', 'distill_residual_px')
+# the weight of each loss term on pseudo-labels or unlabeled instants (LOSS_TERMS)
+TERM_WEIGHTS = {'B': 'lambda_p', 'E': 'lambda_e', 'T': 'lambda_t', 'R': 'lambda_r',
+                'D': 'lambda_d'}
 
 
 @dataclass(frozen=True)
 class ModeSpec:
     """Which ingredients a mode uses: spatial / spatiotemporal pseudo-labels, bootstrapping
-    rounds, and the losses on unlabeled instants: epipolar divergence L_E, temporal difference
-    L_T (consecutive frames), reprojection consistency L_R (triangulate-reproject targets)."""
+    rounds, and the losses on unlabeled instants: the anchored epipolar term L_E, temporal
+    difference L_T (consecutive frames), reprojection consistency L_R (triangulate-reproject
+    targets)."""
     spatial: bool
     temporal: bool
     bootstrap_rounds: int
@@ -43,6 +50,19 @@ class ModeSpec:
     def unlabeled(self):
         """The mode trains on unlabeled instants (the batch plan's part for them)."""
         return self.epipolar or self.temporal_difference or self.reprojection
+
+    @property
+    def uses_pseudo(self):
+        """The mode trains L_B (spatial / spatiotemporal / bootstrapped pseudo-labels)."""
+        return self.spatial or self.temporal or self.bootstrap_rounds > 0
+
+    @property
+    def terms(self):
+        """The loss terms of the mode (LOSS_TERMS, L_D apart: distillation rounds add it to
+        any mode), e.g. ('L', 'B', 'R')."""
+        return tuple(t for t, on in (('L', True), ('B', self.uses_pseudo),
+                                     ('E', self.epipolar), ('T', self.temporal_difference),
+                                     ('R', self.reprojection)) if on)
 
 
 # As in the paper: Bootstrapping I / II start from the spatiotemporal augmentation, and
@@ -67,6 +87,8 @@ MODE_SPECS = {
     # (its exact control: lambda_e = 0, the plan of `reprojection`)
     'reprojection_epipolar': ModeSpec(True, True, 0, True, reprojection=True),
 }
+# the modes with a loss on unlabeled instants (L_E, L_T or L_R), those epipolar_warmup delays
+UNLABELED_MODES = tuple(m for m, spec in MODE_SPECS.items() if spec.unlabeled)
 
 
 @dataclass(frozen=True)
@@ -124,9 +146,9 @@ class TrainConfig:
     lambda_r: float = setting(1.0, 'reprojection: weight of the reprojection-consistency loss '
                               "L_R (each view's heatmap towards the reprojection of the "
                               "views' RANSAC triangulation)", minimum=0.0)
-    epipolar_warmup: float = setting(0.3, 'monet, epipolar, temporal_difference, reprojection: '
-                                     'fraction of the steps trained without the loss on '
-                                     'unlabeled instants (L_E, L_T or L_R) before it starts',
+    epipolar_warmup: float = setting(0.3, f'{", ".join(UNLABELED_MODES)}: fraction of the '
+                                     'steps trained without the loss on unlabeled instants '
+                                     '(L_E, L_T or L_R) before it starts',
                                      minimum=0.0, maximum=0.95)
     lr: float = setting(1e-3, 'Adam learning rate (peak, after the warm-up)', minimum=0.0,
                         exclusive_minimum=True)
@@ -254,6 +276,11 @@ class TrainConfig:
         if self.pseudo_agreement_px and not self.pseudo_max_frames:
             raise ConfigError('TrainConfig', 'pseudo_agreement_px',
                               'applies beyond pseudo_max_frames: set pseudo_max_frames > 0 too')
+        if self.distill_rounds and not self.batch_distill:
+            raise ConfigError('TrainConfig', 'batch_distill',
+                              f'0 with distill_rounds {self.distill_rounds}: no distilled crop '
+                              "would be trained on (nothing would use the teacher's labels); "
+                              'give batch_distill >= 1, or distill_rounds 0')
         if self.width and self.width < 4:
             raise ConfigError('TrainConfig', 'width', f'must be 0 or >= 4, got {self.width}')
         if self.device not in ('auto', 'cpu', 'cuda') and not (

@@ -42,8 +42,10 @@ import time
 
 import numpy as np
 
+from monet_ros import json_text
 from monet_ros.atomic import atomic_write, sha256_file
 from monet_ros.config import MAX_THREADS, ConfigError, setting
+from monet_ros.json_text import finite_or_none
 from monet_ros.learning.config import LOSS_TERMS, MODES, TrainConfig
 from monet_ros.models.detector import PRECISIONS
 
@@ -143,11 +145,13 @@ class LearnerConfig(TrainConfig):
         return TrainConfig(**values)
 
 
-def publish_metric_key(publish_metric, validation_instants, warn=None):
+def publish_metric_key(publish_metric, validation_instants, warn=None, fraction=0.0):
     """The metrics key the criterion compares: PUBLISH_METRICS[publish_metric]; 'auto' ->
     labelled when `validation_instants` (the number of held-out labelled instants) > 0,
-    else reprojection, said through warn(message) (one line). Raises ConfigError naming
-    publish_metric / validation_labels when labelled is asked for and there is none."""
+    else reprojection, said through warn(message) (one line; why none was held out:
+    trainer.no_validation_text of `fraction`, the validation_labels setting). Raises
+    ConfigError naming publish_metric / validation_labels when labelled is asked for and
+    there is none."""
     if publish_metric not in ('auto', *PUBLISH_METRICS):
         raise ConfigError('LearnerConfig', 'publish_metric',
                           f'expected auto, labelled or reprojection, got {publish_metric!r}')
@@ -155,10 +159,9 @@ def publish_metric_key(publish_metric, validation_instants, warn=None):
         if validation_instants:
             return PUBLISH_METRICS['labelled']
         if warn is not None:
-            warn('publish_metric auto: no labelled instant can be held out for validation '
-                 '(validation_labels is 0, or only one labelled instant to train on): '
-                 'announcing on the held-out reprojection error, agreement between views, '
-                 'not accuracy')
+            from monet_ros.learning.trainer import no_validation_text
+            warn(f'publish_metric auto: {no_validation_text(fraction)}: announcing on the '
+                 'held-out reprojection error, agreement between views, not accuracy')
         return PUBLISH_METRICS['reprojection']
     if publish_metric == 'labelled' and not validation_instants:
         raise ConfigError('LearnerConfig', 'validation_labels', 'holds out no labelled '
@@ -197,20 +200,13 @@ class CheckpointResult:
 
     def announcement(self):
         """The /monet/model JSON text."""
-        return json.dumps({'path': self.path, 'step': self.step, 'sha256': self.sha256,
-                           'metrics': self.metrics}, allow_nan=False,
-                          default=lambda x: None)
-
-
-def _finite(metrics):
-    """JSON-safe metrics (NaN/inf -> None)."""
-    return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
-            for k, v in metrics.items()}
+        return json_text.dumps({'path': self.path, 'step': self.step, 'sha256': self.sha256,
+                                'metrics': self.metrics}, default=lambda x: None)
 
 
 def _write_json_atomic(path, payload):
     with atomic_write(path, 'w') as stream:
-        json.dump(payload, stream, indent=1)
+        stream.write(json_text.dumps(payload, indent=1))
 
 
 def concatenate_recordings(recordings):
@@ -304,7 +300,7 @@ class OnlineLearner:
         log(f'training {self.trainer.precision_note}')
         self.data = data
         self.metric = publish_metric_key(config.publish_metric, len(data.validation_instants),
-                                         self.trainer.warn)
+                                         self.trainer.warn, config.validation_labels)
         if not resume and config.model:
             self._check_start_model(meta)
         if not resume:             # a fresh run: an older run's announcement is no reference
@@ -364,7 +360,8 @@ class OnlineLearner:
         current = self.trainer.model
         self.trainer.model = model.to(self.trainer.device)
         try:
-            return _finite(self.trainer.validate(max_instants=self.config.validate_instants))
+            return finite_or_none(self.trainer.validate(
+                max_instants=self.config.validate_instants))
         finally:
             self.trainer.model = current
 
@@ -430,7 +427,7 @@ class OnlineLearner:
         metrics = self.trainer.validate(max_instants=self.config.validate_instants)
         metrics.update({f'loss_{k}': v for k, v in self.trainer.last_terms.items()
                         if k == 'loss' or k in LOSS_TERMS})
-        metrics = _finite(metrics)
+        metrics = finite_or_none(metrics)
         publish, reason = should_publish(metrics, self.reference_px,
                                          self.config.publish_tolerance_px, self.metric)
         result = CheckpointResult(str(Path(path).resolve()), self.step_count,

@@ -157,6 +157,18 @@ def validation_split(labelled, held_out, fraction):
     return np.sort(np.concatenate([tail, spread_instants(train, extra)])).astype(np.int64)
 
 
+def no_validation_text(fraction, option='validation_labels', after=''):
+    """Why validation_split held out no labelled instant at `fraction` (the one-line warning
+    of `monet train --validation-labels` and of the learner's publish_metric auto): none
+    asked for, or only one labelled instant to train on (one is always left to train on).
+    option: the setting as the caller's user spells it; after: what left one instant
+    (e.g. 'after --holdout-labelled 1')."""
+    why = (f'{option} is 0' if fraction <= 0 else
+           f'{option} {fraction:g}: only one labelled instant to train on'
+           + (f' {after}' if after else '') + ', and one is always left to train on')
+    return f'no labelled instant can be held out for validation ({why})'
+
+
 def crop_boxes(recording, source, aspect, margin, pseudo=None):
     """(T, V, 4) training crop boxes (crop_rule.recording_boxes). 'auto' = 'pseudo_labels'
     when `pseudo` (spatiotemporal tracks of the labels) is given, else 'labels': boxes a
@@ -675,7 +687,7 @@ class Trainer:
                       'no data' + ('' if others else ', this run is supervised only'))
         unlabeled = len(self.data.unlabeled_instants)
         for on, weight, term, name in (
-                (spec.epipolar, c.lambda_e, 'L_E', 'the epipolar divergence'),
+                (spec.epipolar, c.lambda_e, 'L_E', 'the anchored epipolar term'),
                 (spec.temporal_difference, c.lambda_t, 'L_T', 'the temporal-difference loss'),
                 (spec.reprojection, c.lambda_r, 'L_R', 'the reprojection-consistency loss')):
             if not (on and weight > 0):
@@ -851,7 +863,7 @@ class Trainer:
 
     @property
     def spec_uses_pseudo(self):
-        return self.spec.spatial or self.spec.temporal or self.spec.bootstrap_rounds > 0
+        return self.spec.uses_pseudo
 
     # ----------------------------------------------------------------- losses
     def _terms(self, parts, rng, augment):

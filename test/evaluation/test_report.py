@@ -32,3 +32,22 @@ def test_table_rows_are_modes_in_paper_order_and_columns_datasets(tmp_path):
     assert loaded[1].mode == 'supervised'
     np.testing.assert_array_equal(loaded[1].pck.per_keypoint, summaries[1].pck.per_keypoint)
     assert loaded[0].extra == {'seed': 1}
+
+
+def test_a_figure_that_is_not_a_number_is_null_in_the_json_and_reads_back(tmp_path):
+    """A mean of nothing (NaN) was written as the token NaN, not JSON: now null, and
+    load_summaries gives NaN again."""
+    import json
+    nan = summary('supervised', 'rigA', 0.1)
+    nan = EvalSummary('supervised', 'rigA', float('nan'), float('nan'), float('inf'), 2.0,
+                      nan.pck, 5, {'seed': 1, 'px': float('nan')})
+    paths = write_report(tmp_path, [nan])
+
+    def refuse(token):
+        raise ValueError(token)
+    data = json.loads(paths['json'].read_text(), parse_constant=refuse)
+    assert data[0]['reproj_mean_px'] is None and data[0]['gt_reproj_mean_px'] is None
+    assert data[0]['extra'] == {'seed': 1, 'px': None}
+    loaded, = load_summaries(paths['json'])
+    assert np.isnan(loaded.reprojection_mean) and np.isnan(loaded.gt_reprojection_mean)
+    assert loaded.gt_reprojection_std == 2.0

@@ -506,4 +506,4 @@ def test_monet_train_reports_the_holdout_error_per_subject(scene, repo_root, tmp
         assert held['subjects'][s]['joints_3d'] == 6
         track = held['subjects'][s]['track']            # -1: the 2-step model found none
         assert f'  subject {s} (' + (f'track {track}' if track >= 0 else 'no track matched') \
-            + '): 2D median ' in done.stderr
+            + '): 2D median' in done.stderr

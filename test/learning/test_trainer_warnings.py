@@ -51,7 +51,7 @@ def test_spatial_mode_without_two_labelled_views_warns_at_start():
 
 @pytest.mark.parametrize('options, expected', [
     (dict(mode='reprojection', batch_unlabeled=0), 'batch_unlabeled 0: the reprojection'),
-    (dict(mode='monet', batch_unlabeled=0), 'batch_unlabeled 0: the epipolar divergence'),
+    (dict(mode='monet', batch_unlabeled=0), 'batch_unlabeled 0: the anchored epipolar term L_E'),
     (dict(mode='reprojection', views_per_instant=2), 'gets 2 views of each unlabeled instant'),
     (dict(mode='reprojection', views_per_instant=0, bootstrap_min_views=5),
      'bootstrap_min_views 5 inlier views but gets 4 views'),
