@@ -316,6 +316,7 @@ def run_job(job):
         steps = max(20, int((budget_s - extra) / per_step))
     config = dataclasses.replace(config, steps=steps, checkpoint_every=10 ** 6)
     said = []
+    unlabelled = np.setdiff1d(np.arange(rec.num_instants), instants)
     start = time.monotonic()
     if config.distill_rounds:       # as `monet train --distill-rounds` runs them
         from monet_ros.commands.train_distill import train_with_distillation
@@ -325,7 +326,6 @@ def run_job(job):
             trainer, _STATE['bag'], skeleton='human14', progress=False,
             say=lambda line: print(f'[{count} labels {mode}] {line}', file=sys.stderr,
                                    flush=True))
-        unlabelled = np.setdiff1d(np.arange(rec.num_instants), instants)
         for stats in summary.get('distill') or []:    # before the round's folder goes
             stats['precision'] = teacher_precision(Path(stats['process']), config, recording,
                                                    reference, reference2d, unlabelled)
@@ -334,7 +334,6 @@ def run_job(job):
         trainer = Trainer(config, data, warn=said.append)
         summary = trainer.run(progress=False)
     train_s = time.monotonic() - start
-    unlabelled = np.setdiff1d(np.arange(rec.num_instants), instants)
     with tempfile.TemporaryDirectory(prefix='monet-real-') as tmp:
         checkpoint = Path(tmp) / 'model.pt'
         save_checkpoint(checkpoint, trainer.model, trainer.metadata())
