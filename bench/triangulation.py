@@ -5,7 +5,7 @@ Synthetic frames: 14 keypoints in a 1 m cube seen by V pinhole cameras on a 3 m 
 gross outliers (moved 50 px in a random direction). Prints time per frame (median of
 several runs, CPU time on one thread) and the 3D error against the ground truth.
 
-  plain DLT:  monet triangulate (one batched SVD)  vs  a per-keypoint numpy loop
+  plain DLT:  monet triangulate (one batched eigen-solve)  vs  a per-keypoint numpy loop
               (the way Pose2Sim / EasyMocap triangulate).
   robust:     monet triangulate_robust (exclusion, ransac)  vs  exhaustive RANSAC over
               view subsets, written here as aniposelib 0.8's triangulate_ransac /
@@ -156,7 +156,7 @@ def main(argv=None):
         print(f'{V} views: {args.frames} frames x {NUM_KEYPOINTS} keypoints ...',
               file=sys.stderr, flush=True)
         methods = [
-            ('DLT', 'ours: batched, 1 SVD', lambda o, c=cameras: triangulate(o, c)),
+            ('DLT', 'ours: batched, 1 eigen-solve', lambda o, c=cameras: triangulate(o, c)),
             ('DLT', 'per-keypoint loop', lambda o, p=projections: dlt_loop(o, p)),
             ('robust', 'ours: exclusion 1 px', lambda o, c=cameras: triangulate_robust(
                 o, c, threshold_px=1.0, method='exclusion')[0]),

@@ -1,4 +1,4 @@
-"""Multi-view triangulation: confidence-weighted DLT (one batched SVD), robust variants
+"""Multi-view triangulation: confidence-weighted DLT (one batched eigen-solve), robust variants
 (Pose2Sim-style worst-camera exclusion, RANSAC over views) and reprojection error.
 
 Shapes: points2d (V, N, 2) observed (distorted) pixels, NaN = missing; weights (V, N) >= 0
@@ -66,8 +66,12 @@ def dlt_rows(ideal, P):
 def solve_dlt(B, w, per_metre=1.0):
     """Weighted DLT from rows B (V, N, 2, 4) and weights w (..., V, N) -> X (..., N, 3).
 
-    Stacks A (..., N, 2V, 4) with zero rows for zero weights and solves all keypoints (and
-    leading batch entries) with ONE batched np.linalg.svd; NaN where < 2 weighted views.
+    The homogeneous least-squares point of each keypoint's rows A (2V, 4) (zero rows for
+    zero weights): the right singular vector of A's smallest singular value, taken as the
+    eigenvector of A^T A (4 x 4) of its smallest eigenvalue, all keypoints (and leading
+    batch entries) in ONE batched np.linalg.eigh (a third of the time of an SVD of A;
+    A^T A squares A's condition number, which in metres leaves the points within 1e-13 m
+    of the SVD's on the real rigs of test_real_data); NaN where < 2 weighted views.
     per_metre: the rig's length unit per metre (stack_cameras' 'per_metre'): the system is
     solved in metres and X returned in the rig's unit, so a rig in mm gives the points of
     the same rig in m x 1000 (a homogeneous DLT weighs X against its 4th coordinate by the
@@ -80,8 +84,7 @@ def solve_dlt(B, w, per_metre=1.0):
     n_views = (w > 0).sum(axis=-2)  # (..., N)
     if 2 * V < 4:
         return np.full((*n_views.shape, 3), np.nan)
-    _, _, vh = np.linalg.svd(A, full_matrices=False)
-    h = vh[..., -1, :]
+    h = np.linalg.eigh(A.swapaxes(-1, -2) @ A)[1][..., 0]  # eigenvalues ascending
     with np.errstate(divide='ignore', invalid='ignore'):
         X = h[..., :3] / h[..., 3:]
     if per_metre != 1.0:
@@ -108,7 +111,7 @@ def triangulate(points2d, cameras, weights=None):
 
     points2d: (V, N, 2) observed pixels (NaN = missing); weights: (V, N) >= 0 or None
     (rows of view v are scaled by weights[v], as Pose2Sim's weighted triangulation).
-    Points are undistorted first. One batched SVD over a (N, 2V, 4) stack.
+    Points are undistorted first. One batched eigen-solve over a (N, 2V, 4) stack (solve_dlt).
     Cheirality: views that put the point behind their camera are left out and the point is
     solved again from the rest; NaN if it is still behind a used view.
     Returns X (N, 3), NaN where fewer than 2 views (in front) are present."""
@@ -220,7 +223,7 @@ def _exclusion(obs, B, w, rig, threshold_px, min_views, max_subsets):
         else:
             # subsets within TIE_PX of each other are a tie, taken in subset order: an exact
             # tie (every view pair of a degenerate geometry meets with zero residual) is
-            # otherwise broken by the SVD's rounding, which differs between CPUs
+            # otherwise broken by the eigen-solver's rounding, which differs between CPUs
             best = np.argmin(np.round(mean / TIE_PX), axis=0)
             n = np.arange(todo.size)
             best_mean, best_X = mean[best, n], Xs[best, n]
@@ -308,7 +311,7 @@ def triangulate_robust(points2d, cameras, weights=None, threshold_px=15.0, min_v
     (else NaN) or fewer than min_views would remain. Every subset of k left-out views is
     tried while C(V, k) <= max_subsets (exactly Pose2Sim's search); beyond that the view
     with the largest reprojection error in the previous level's best subset is left out
-    (one candidate per keypoint). Each level is one batched SVD over all candidate
+    (one candidate per keypoint). Each level is one batched DLT solve over all candidate
     subsets x pending keypoints.
     method='ransac': two-view linear hypotheses (every pair when C(V, 2) <= max_hypotheses,
     otherwise max_hypotheses random pairs per keypoint, seeded), inliers = views with

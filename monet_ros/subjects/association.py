@@ -132,22 +132,28 @@ def pair_costs(ideal, present, view, F, min_common):
     ideal (M, C, 2) undistorted pixels; present (M, C) bool; view (M,) camera indices;
     F (V, V, 3, 3) of pair_fundamentals."""
     M, C = present.shape
-    h = np.concatenate([ideal, np.ones((M, C, 1))], axis=-1)         # (M, C, 3)
-    h = np.where(present[..., None], h, 0.0)
-    # the epipolar lines of every instance in every camera: (M, V, 3, C), one matmul
-    ht = h.swapaxes(-1, -2)                                           # (M, 3, C)
-    lines = F[view] @ ht[:, None]
+    V = len(F)
+    # homogeneous points (M, 3, C); a missing point's column (NaN or not) only reaches its
+    # own keypoint's distances, which `common` sets to inf below
+    ht = np.empty((M, 3, C))
+    ht[:, :2] = ideal.swapaxes(-1, -2)
+    ht[:, 2] = 1.0
+    # the epipolar lines of every instance in every camera: (M, V, 3, C), one matmul of
+    # an instance's (3V, 3) stacked fundamental matrices
+    lines = (F[view].reshape(M, 3 * V, 3) @ ht).reshape(M, V, 3, C)
     lines_b = lines[:, view]                                          # (M, M, 3, C) in b
     # |x_b^T F x_a|, the three terms added in order (cheaper than a sum over axis -2)
     num = np.abs(lines_b[:, :, 0] * ht[:, 0] + lines_b[:, :, 1] * ht[:, 1]
                  + lines_b[:, :, 2] * ht[:, 2])
-    with np.errstate(invalid='ignore', divide='ignore'):
+    with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
         # 1 / the norm of each line, per camera (M, V, C), then per instance b (M, M, C)
-        inv_b = (1 / np.hypot(lines[:, :, 0], lines[:, :, 1]))[:, view]
+        a, b = lines[:, :, 0], lines[:, :, 1]
+        inv_b = (1 / np.sqrt(a * a + b * b))[:, view]
         d = 0.5 * num * (inv_b + inv_b.swapaxes(0, 1))               # a's line of b
     common = present[:, None] & present[None, :]                      # (M, M, C)
     d = np.where(common & np.isfinite(d), d, np.inf)
-    k = common.sum(axis=-1)
+    counts = present.astype(np.float64)
+    k = (counts @ counts.T).astype(np.int64)                          # common keypoints
     d.sort(axis=-1)                                                   # inf (missing) last
     s, r = d.reshape(M * M, C), np.arange(M * M)
     lo = s[r, (np.maximum(k - 1, 0) // 2).ravel()]

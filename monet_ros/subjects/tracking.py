@@ -172,14 +172,18 @@ class SubjectTracker:
         return self._body_distance(np.asarray(X, np.float64).reshape(-1, self.C, 3),
                                    self._predict_body(stamp_ns)[0])
 
-    def _body_distance(self, X, b):
+    def _body_distance(self, X, b, finite=None):
+        """body_distance's numbers; finite (S, C): np.isfinite(X).all(-1) when at hand."""
+        if finite is None:
+            finite = np.isfinite(X).all(-1)
         disp = X[None] - self.ref[:, None]                               # (T, S, C, 3)
-        common = np.isfinite(disp).all(-1)
+        # (ref is NaN at the joints never measured, X at those not triangulated)
+        common = np.isfinite(self.ref[..., 0])[:, None] & finite[None]   # (T, S, C)
         n = common.sum(-1)
-        some = n > 0
         z = self.ref_body[:, None] + masked_median(disp, common)
+        gap = z - b[:, None]
         with np.errstate(invalid='ignore'):
-            dist = np.where(some, np.linalg.norm(z - b[:, None], axis=-1), np.inf)
+            dist = np.where(n > 0, np.sqrt(np.einsum('tsk,tsk->ts', gap, gap)), np.inf)
         return z, dist, n
 
     def step(self, X, stamp_ns):
@@ -194,7 +198,7 @@ class SubjectTracker:
         matched_t = np.zeros(T, bool)
         b, bP = self._predict_body(stamp_ns)
         if S and T:
-            z, dist, n = self._body_distance(X, b)
+            z, dist, n = self._body_distance(X, b, finite)
             lost_s = (self.stamp - self.last_seen) / 1e9 if self.stamp is not None else 0.0
             gate = self._gate + self._speed * np.asarray(lost_s, np.float64).reshape(-1, 1)
             allowed = (n > 0) & (dist <= gate)

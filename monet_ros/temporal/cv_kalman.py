@@ -21,10 +21,11 @@ V0 = 2.0     # m/s: velocity standard deviation of a joint when it (re)starts (c
 def predict(p, v, P, dt, q):
     """(p, P) after dt seconds: p (J, 3) m + v (J, 3) m/s dt; P (3, J) with the process
     noise q dt^4/4, q dt^3/2, q dt^2 added. New arrays; v is unchanged by the model."""
-    P00 = P[0] + 2 * dt * P[1] + dt * dt * P[2] + q * dt ** 4 / 4
-    P01 = P[1] + dt * P[2] + q * dt ** 3 / 2
-    P11 = P[2] + q * dt * dt
-    return p + v * dt, np.stack([P00, P01, P11])
+    new = np.empty(np.shape(P))                  # (cheaper than stacking three arrays)
+    new[0] = P[0] + 2 * dt * P[1] + dt * dt * P[2] + q * dt ** 4 / 4
+    new[1] = P[1] + dt * P[2] + q * dt ** 3 / 2
+    new[2] = P[2] + q * dt * dt
+    return p + v * dt, new
 
 
 def innovation(p, P, X, r2):
