@@ -126,16 +126,17 @@ class SubjectTracker:
         self._speed = from_m(c.max_speed_m_s, units)
         self.ids = np.zeros(0, np.int64)
         # the body model (module docstring step 2): each track's joints at its last match
-        # (ref, NaN: never measured), its body position measured then (ref_body) and the
-        # body's own constant-velocity filter (b, bv, bP)
+        # (ref, NaN: never measured) and its body position measured then (ref_body)
         self.ref = np.zeros((0, self.C, 3))
         self.ref_body = np.zeros((0, 3))
-        self.b = np.zeros((0, 3))
-        self.bv = np.zeros((0, 3))
-        self.bP = np.zeros((3, 0))
-        self.p = np.zeros((0, self.C, 3))
-        self.v = np.zeros((0, self.C, 3))
-        self.P = np.zeros((3, 0, self.C))
+        # the filters, one cv_kalman state of C + 1 rows per track: its C joints and, as
+        # row C, its body (one predict and one update for both; per row noise)
+        self.p = np.zeros((0, self.C + 1, 3))
+        self.v = np.zeros((0, self.C + 1, 3))
+        self.P = np.zeros((3, 0, self.C + 1))
+        self._q_rows = np.array([self._q] * self.C + [self._body_q])
+        self._r2_rows = np.array([self._r2] * self.C + [self._body_r2])
+        self._tiled = {}                                       # k -> r2 of k tracks' rows
         self.started = np.zeros((0, self.C), bool)
         self.last_seen = np.zeros(0, np.int64)
         self.joint_seen = np.zeros((0, self.C), np.int64)    # each joint's last measurement
@@ -147,22 +148,22 @@ class SubjectTracker:
     def predicted(self, stamp_ns):
         """Predicted joints (tracks, C, 3) at stamp_ns, NaN at joints not started."""
         p, _ = self._predict(stamp_ns)
-        return np.where(self.started[..., None], p, np.nan)
+        return np.where(self.started[..., None], p[:, :self.C], np.nan)
 
     def _predict(self, stamp_ns):
-        T = len(self.ids)
-        if self.stamp is None or T == 0:
+        """The joints' and bodies' prediction (p (T, C + 1, 3), P (3, T, C + 1)): new
+        arrays, row C the body."""
+        if self.stamp is None or not len(self.ids):
             return self.p.copy(), self.P.copy()
         dt = (int(stamp_ns) - self.stamp) / 1e9
-        p, P = cv_kalman.predict(self.p.reshape(-1, 3), self.v.reshape(-1, 3),
-                                 self.P.reshape(3, -1), dt, self._q)
-        return p.reshape(T, self.C, 3), P.reshape(3, T, self.C)
+        return cv_kalman.predict(self.p, self.v, self.P, dt, self._q_rows)
 
-    def _predict_body(self, stamp_ns):
-        if self.stamp is None or not len(self.ids):
-            return self.b.copy(), self.bP.copy()
-        dt = (int(stamp_ns) - self.stamp) / 1e9
-        return cv_kalman.predict(self.b, self.bv, self.bP, dt, self._body_q)
+    def _r2_tiled(self, k):
+        """The measurement variances (k (C + 1),) of k tracks' rows."""
+        r2 = self._tiled.get(k)
+        if r2 is None:
+            r2 = self._tiled[k] = np.tile(self._r2_rows, k)
+        return r2
 
     def body_distance(self, X, stamp_ns):
         """Step 2's numbers: (z (T, S, 3) each subject's body position measured against
@@ -170,7 +171,7 @@ class SubjectTracker:
         common joint), n (T, S) common joints) of subjects X (S, C, 3) (rig units) at
         stamp_ns."""
         return self._body_distance(np.asarray(X, np.float64).reshape(-1, self.C, 3),
-                                   self._predict_body(stamp_ns)[0])
+                                   self._predict(stamp_ns)[0][:, self.C])
 
     def _body_distance(self, X, b, finite=None):
         """body_distance's numbers; finite (S, C): np.isfinite(X).all(-1) when at hand."""
@@ -196,9 +197,8 @@ class SubjectTracker:
         finite = np.isfinite(X).all(-1)                                  # (S, C)
         out = np.full(S, -1, np.int64)
         matched_t = np.zeros(T, bool)
-        b, bP = self._predict_body(stamp_ns)
         if S and T:
-            z, dist, n = self._body_distance(X, b, finite)
+            z, dist, n = self._body_distance(X, p[:, self.C], finite)
             lost_s = (self.stamp - self.last_seen) / 1e9 if self.stamp is not None else 0.0
             gate = self._gate + self._speed * np.asarray(lost_s, np.float64).reshape(-1, 1)
             allowed = (n > 0) & (dist <= gate)
@@ -208,12 +208,10 @@ class SubjectTracker:
             rows, cols = rows[ok], cols[ok]
             out[cols] = self.ids[rows]
             matched_t[rows] = True
-            self._update(p, P, rows, X[cols], finite[cols])
+            self._update(p, P, rows, X[cols], finite[cols], z[rows, cols])
             self.joint_seen[rows] = np.where(finite[cols], stamp_ns, self.joint_seen[rows])
-            self._update_body(b, bP, rows, z[rows, cols], X[cols], finite[cols])
         else:
             self.p, self.P = p, P
-            self.b, self.bP = b, bP
         self.last_seen[matched_t] = stamp_ns
         born = (out < 0) & (finite.sum(-1) >= self.config.min_keypoints)
         if born.any() and self.max_tracks is not None:
@@ -234,45 +232,60 @@ class SubjectTracker:
         self.stamp = stamp_ns
         return out
 
-    def _update(self, p, P, rows, X, finite):
+    def _update(self, p, P, rows, X, finite, z):
         """Kalman update of the tracks `rows` with their subjects X (k, C, 3) (finite (k, C):
-        their triangulated keypoints); p, P: the prediction (new arrays, updated in place)."""
-        v = self.v
-        pr, vr, Pr = p[rows].reshape(-1, 3), v[rows].reshape(-1, 3), P[:, rows].reshape(3, -1)
-        Xr, fr = X.reshape(-1, 3), finite.reshape(-1)
-        started = self.started[rows].reshape(-1)
-        # innovation's `measured` is `fr`: a keypoint is finite in all 3 coordinates or missing
-        y, S, _, measured = cv_kalman.innovation(pr, Pr, Xr, self._r2)
-        pr, vr, Pr = cv_kalman.update(pr, vr, Pr, y, S, measured & started)
-        new = fr & ~started
+        their triangulated keypoints) and body measurements z (k, 3); p, P: the prediction
+        (new arrays, updated in place). A joint measured for the first time is started
+        (cv_kalman.start); the reference joints become the measured ones, the others moved
+        with the body."""
+        k, C = len(rows), self.C
+        Z = np.empty((k, C + 1, 3))
+        Z[:, :C], Z[:, C] = X, z
+        measured = np.ones((k, C + 1), bool)
+        measured[:, :C] = finite
+        accept = measured.copy()
+        accept[:, :C] &= self.started[rows]
+        r2 = self._r2_tiled(k)
+        pr, vr, Pr = p[rows].reshape(-1, 3), self.v[rows].reshape(-1, 3), P[:, rows]
+        Pr, Zr = Pr.reshape(3, -1), Z.reshape(-1, 3)
+        y, S, _, _ = cv_kalman.innovation(pr, Pr, Zr, r2, measured.reshape(-1))
+        pr, vr, Pr = cv_kalman.update(pr, vr, Pr, y, S, accept.reshape(-1))
+        new = measured & ~accept          # joints measured but not started (the body is)
         if new.any():  # (after a track's first frames, rarely)
-            cv_kalman.start(pr, vr, Pr, Xr, new, self._r2, self._v0)
-        p[rows], P[:, rows] = pr.reshape(-1, self.C, 3), Pr.reshape(3, -1, self.C)
-        v = v.copy()
-        v[rows] = vr.reshape(-1, self.C, 3)
+            cv_kalman.start(pr, vr, Pr, Zr, new.reshape(-1), r2, self._v0)
+        p[rows], P[:, rows] = pr.reshape(k, C + 1, 3), Pr.reshape(3, k, C + 1)
+        v = self.v.copy()
+        v[rows] = vr.reshape(k, C + 1, 3)
         self.p, self.v, self.P = p, v, P
         self.started[rows] |= finite
+        moved = self.ref[rows] + (z - self.ref_body[rows])[:, None]
+        ref = self.ref.copy()
+        ref[rows] = np.where(finite[..., None], X, moved)
+        self.ref = ref
+        ref_body = self.ref_body.copy()
+        ref_body[rows] = z
+        self.ref_body = ref_body
 
     # per-track state: the track axis of each array (the covariances keep theirs second)
     _STATE = dict(ids=0, p=0, v=0, P=1, started=0, last_seen=0, joint_seen=0, ref=0,
-                  ref_body=0, b=0, bv=0, bP=1)
+                  ref_body=0)
 
     def _fresh(self, X, finite, stamp_ns):
         """The state of tracks started at subjects X (k, C, 3) (finite (k, C)): every
         measured joint started (cv_kalman.start), its body at the median of its joints."""
-        k = len(X)
-        p, v = np.zeros((k * self.C, 3)), np.zeros((k * self.C, 3))
-        P = np.zeros((3, k * self.C))
-        cv_kalman.start(p, v, P, X.reshape(-1, 3), finite.reshape(-1), self._r2, self._v0)
+        k, C = len(X), self.C
         body = masked_median(X, finite)                                         # (k, 3)
-        b, bv, bP = body.copy(), np.zeros((k, 3)), np.zeros((3, k))
-        cv_kalman.start(b, bv, bP, body, np.ones(k, bool), self._body_r2, self._v0)
-        return dict(p=p.reshape(k, self.C, 3), v=v.reshape(k, self.C, 3),
-                    P=P.reshape(3, k, self.C), started=finite.copy(),
+        Z = np.concatenate([X, body[:, None]], axis=1)                 # (k, C + 1, 3)
+        which = np.concatenate([finite, np.ones((k, 1), bool)], axis=1)
+        p, v = np.zeros((k * (C + 1), 3)), np.zeros((k * (C + 1), 3))
+        P = np.zeros((3, k * (C + 1)))
+        cv_kalman.start(p, v, P, Z.reshape(-1, 3), which.reshape(-1), self._r2_tiled(k),
+                        self._v0)
+        return dict(p=p.reshape(k, C + 1, 3), v=v.reshape(k, C + 1, 3),
+                    P=P.reshape(3, k, C + 1), started=finite.copy(),
                     last_seen=np.full(k, stamp_ns, np.int64),
-                    joint_seen=np.full((k, self.C), stamp_ns, np.int64),
-                    ref=np.where(finite[..., None], X, np.nan), ref_body=body, b=b, bv=bv,
-                    bP=bP)
+                    joint_seen=np.full((k, C), stamp_ns, np.int64),
+                    ref=np.where(finite[..., None], X, np.nan), ref_body=body)
 
     def _birth(self, X, finite, stamp_ns):
         k = len(X)
@@ -289,21 +302,3 @@ class SubjectTracker:
         for name, axis in self._STATE.items():
             value = getattr(self, name)
             setattr(self, name, value[:, keep] if axis else value[keep])
-
-    def _update_body(self, b, bP, rows, z, X, finite):
-        """The body filter's update of the tracks `rows` with their body measurements z
-        (k, 3) and joints X (k, C, 3) (finite (k, C)); b, bP: all tracks' body prediction.
-        The reference joints: the measured ones, the others moved with the body."""
-        y, S, _, _ = cv_kalman.innovation(b[rows], bP[:, rows], z, self._body_r2)
-        br, bvr, bPr = cv_kalman.update(b[rows], self.bv[rows], bP[:, rows], y, S,
-                                        np.ones(len(rows), bool))
-        b, bP, bv = b.copy(), bP.copy(), self.bv.copy()
-        b[rows], bv[rows], bP[:, rows] = br, bvr, bPr
-        self.b, self.bv, self.bP = b, bv, bP
-        moved = self.ref[rows] + (z - self.ref_body[rows])[:, None]
-        ref = self.ref.copy()
-        ref[rows] = np.where(finite[..., None], X, moved)
-        self.ref = ref
-        ref_body = self.ref_body.copy()
-        ref_body[rows] = z
-        self.ref_body = ref_body

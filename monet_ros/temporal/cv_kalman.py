@@ -20,7 +20,9 @@ V0 = 2.0     # m/s: velocity standard deviation of a joint when it (re)starts (c
 
 def predict(p, v, P, dt, q):
     """(p, P) after dt seconds: p (J, 3) m + v (J, 3) m/s dt; P (3, J) with the process
-    noise q dt^4/4, q dt^3/2, q dt^2 added. New arrays; v is unchanged by the model."""
+    noise q dt^4/4, q dt^3/2, q dt^2 added. New arrays; v is unchanged by the model.
+    q scalar or (J,); (J,) may be any shape ((T, C) joints of T tracks: p, v (T, C, 3),
+    P (3, T, C), q broadcast against (T, C))."""
     new = np.empty(np.shape(P))                  # (cheaper than stacking three arrays)
     new[0] = P[0] + 2 * dt * P[1] + dt * dt * P[2] + q * dt ** 4 / 4
     new[1] = P[1] + dt * P[2] + q * dt ** 3 / 2
@@ -28,11 +30,13 @@ def predict(p, v, P, dt, q):
     return p + v * dt, new
 
 
-def innovation(p, P, X, r2):
+def innovation(p, P, X, r2, measured=None):
     """(y (J, 3) m: X - p, 0 where X is not finite; S (J,) m^2: innovation variance per
     axis P00 + r2; d2 (J,): squared Mahalanobis distance |y|^2 / S; measured (J,) bool: X
-    finite). X (J, 3) measurements (m, NaN = none); r2 scalar or (J,)."""
-    measured = np.isfinite(X).all(axis=1)
+    finite). X (J, 3) measurements (m, NaN = none); r2 scalar or (J,); measured: the
+    caller's np.isfinite(X).all(axis=1) when at hand (None: computed)."""
+    if measured is None:
+        measured = np.isfinite(X).all(axis=1)
     with np.errstate(invalid='ignore'):  # inf - inf where X is missing: replaced by 0
         y = np.where(measured[:, None], X - p, 0.0)
     S = P[0] + r2
