@@ -395,9 +395,9 @@ def stack_cameras(cameras):
     length unit per metre, geometry.units; ValueError when their units differ).
     The last few rigs are cached (Cameras are immutable): do not modify the arrays."""
     cameras = tuple(cameras)
-    key = tuple(id(c) for c in cameras)
+    key = tuple(map(id, cameras))
     hit = _STACK_CACHE.get(key)
-    if hit is not None and all(a is b for a, b in zip(hit[0], cameras)):
+    if hit is not None and hit[0] == cameras:  # Camera has eq=False: the same objects
         return hit[1]
     stacked = {'K': np.stack([c.K for c in cameras]), 'R': np.stack([c.R for c in cameras]),
                't': np.stack([c.t for c in cameras]), 'P': np.stack([c.P for c in cameras]),

@@ -150,7 +150,10 @@ def _errors_behind(rig, X, obs, used):
     behind is an outlier), from one projection."""
     err, z = _errors_and_depths(rig, X, obs)
     with np.errstate(invalid='ignore'):
-        err[used & ~(z > 0) & np.isfinite(X).all(axis=-1)[..., None, :]] = np.inf
+        behind = used & (z <= 0)                          # NaN depth (NaN X): not behind
+    if behind.any():  # (rarely: most frames have every point in front of its views)
+        behind &= np.isfinite(X).all(axis=-1)[..., None, :]
+        err[behind] = np.inf
     return err
 
 

@@ -175,7 +175,9 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     seen = [1 << v for v in view.tolist()]       # cameras of each cluster (bit mask)
     finite = np.isfinite(cost)
     # [..., 0]: cost sums between clusters (by label), [..., 1]: how many pairs have a cost
-    linkage = np.stack([np.where(finite, cost, 0.0), finite], axis=-1)
+    linkage = np.empty(cost.shape + (2,))
+    linkage[..., 0] = np.where(finite, cost, 0.0)
+    linkage[..., 1] = finite
     a, b = np.nonzero(cost <= threshold_px)
     upper = a < b
     a, b = a[upper], b[upper]
