@@ -24,6 +24,7 @@ stamp_ns, status: scored / labelled / no reference). Writes OUT/reference.csv an
 OUT/reference.json.
 """
 import csv
+import math
 from pathlib import Path
 import sys
 
@@ -105,6 +106,17 @@ def _scored_instants(args, references, bag_path):
                          f'labelled in {path} (the training labels); --include-labelled '
                          'scores them')
     return scored, labelled, path
+
+
+MISSED = 'missed'   # the table's word for an infinite median: more misses than detections
+
+
+def table_cell(value):
+    """The printed table's text of a reference.csv value: floats to 3 significant digits, an
+    infinite median of misses as MISSED (the csv keeps inf, reference.json null)."""
+    if isinstance(value, float):
+        return MISSED if value == math.inf else f'{value:.3g}'
+    return str(value)
 
 
 def _write_instants(path, reference, scored, labelled):
@@ -225,9 +237,10 @@ def run_reference(args):
     print('| ' + ' | '.join(['checkpoint', *cols]) + ' |')
     print('|' + '---|' * (len(cols) + 1))
     for r in rows:
-        cells = [r['checkpoint']] + [
-            f'{r.get(c):.3g}' if isinstance(r.get(c), float) else str(r.get(c, ''))
-            for c in cols]
-        print('| ' + ' | '.join(cells) + ' |')
+        print('| ' + ' | '.join([r['checkpoint']] + [table_cell(r.get(c, '')) for c in cols])
+              + ' |')
+    if any(r.get('px_median') == math.inf for r in rows):
+        print(f'{MISSED}: more than half of the labelled views have no detection (a miss '
+              'counts as infinitely far)')
     print('written: ' + str(out_dir / 'reference.csv'), file=sys.stderr)
     return 0

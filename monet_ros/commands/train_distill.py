@@ -61,13 +61,32 @@ def train_with_distillation(trainer, bag, rig=None, camera_map=(), rig_units=Non
         summary = trainer.run(end, progress=progress)
         if trainer.distill_round >= c.distill_rounds:
             break
-        rounds.append(distill_round(trainer, trainer.distill_round + 1, bag, rig=rig,
-                                    camera_map=camera_map, rig_units=rig_units,
-                                    skeleton=skeleton, progress=progress, say=say,
-                                    subjects=subjects, association=association,
-                                    tracker=tracker))
+        try:
+            rounds.append(distill_round(trainer, trainer.distill_round + 1, bag, rig=rig,
+                                        camera_map=camera_map, rig_units=rig_units,
+                                        skeleton=skeleton, progress=progress, say=say,
+                                        subjects=subjects, association=association,
+                                        tracker=tracker))
+        except KeyboardInterrupt:
+            _stopped_in_round(trainer)
+            raise
     summary['distill'] = rounds
     return summary
+
+
+def _stopped_in_round(trainer):
+    """A stop signal during a round's teacher run: what was trained is written (the round is
+    not done: --resume runs it again), as a stop between steps writes it (Trainer.run)."""
+    from monet_ros.stop_signals import stop_signals_deferred
+
+    if trainer.out_dir is None:
+        return
+    with stop_signals_deferred():             # a second signal: after the save
+        path = trainer.save()
+    print(f'stopped during distillation round {trainer.distill_round + 1} (its teacher run) '
+          f'at step {trainer.step_count}: wrote {path} and '
+          f'{trainer.out_dir / "trainer_state.pt"} (--resume runs the round again)',
+          file=sys.stderr, flush=True)
 
 
 def distill_round(trainer, index, bag, rig=None, camera_map=(), rig_units=None, skeleton=None,

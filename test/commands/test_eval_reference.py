@@ -139,3 +139,13 @@ def test_readme_eval_example_on_the_real_pose2sim_trc(shared_data, tmp_path, cap
     with open(tmp_path / 'report' / 'reference.csv') as f:
         row = next(csv.DictReader(f))
     assert int(row['joints_3d']) >= 0.99 * 100 * 14 and row['points2d_from'] == 'projection'
+
+
+def test_table_says_missed_for_an_infinite_median():
+    """More misses than detections make the 2D median infinite (a miss is infinitely far):
+    the printed table says so in words (reference.csv keeps inf, reference.json null)."""
+    from monet_ros.commands.eval_reference import MISSED, table_cell
+
+    assert table_cell(float('inf')) == MISSED
+    assert table_cell(12.3456) == '12.3' and table_cell(0.5) == '0.5'
+    assert table_cell(float('nan')) == 'nan' and table_cell(3) == '3'
