@@ -71,7 +71,7 @@ def test_a_distillation_round_trains_on_the_teachers_filtered_3d(folder, repo_ro
 # a stop signal that lands while a round's teacher runs (`monet process` over the
 # recording): sent by the process itself as the teacher run starts, so it lands there on
 # every run whatever the machine's speed
-INTERRUPTED_TEACHER = '''
+INTERRUPTED_TEACHER = """
 import os, signal, sys
 import monet_ros.commands.process as process
 teacher_run = process.process_recording
@@ -82,7 +82,7 @@ process.process_recording = interrupted
 from monet_ros.cli import console_main
 sys.argv[0] = 'monet'
 console_main()
-'''
+"""
 
 
 @pytest.mark.slow
@@ -97,8 +97,9 @@ def test_a_stop_during_the_teacher_run_keeps_the_training_and_resume_runs_the_ro
     skeleton = tmp_path / 'blobs.yaml'
     skeleton.write_text('name: blobs\nkeypoints: [k0, k1, k2]\nbones: [[k0, k1], [k1, k2]]\n')
     out = tmp_path / 'run'
-    args = ['train', data, '--out', out, '--skeleton', skeleton, '--steps', 60, '--distill-rounds', 1,
-            '--distill-steps', 10, '--distill-min-views', 2, '--precision', 'float32', *TRAIN]
+    args = ['train', data, '--out', out, '--skeleton', skeleton, '--steps', 60,
+            '--distill-rounds', 1, '--distill-steps', 10, '--distill-min-views', 2,
+            '--precision', 'float32', *TRAIN]
     env = dict(os.environ)
     env['PYTHONPATH'] = os.pathsep.join(filter(None, [str(repo_root), env.get('PYTHONPATH')]))
     proc = subprocess.run([sys.executable, '-c', INTERRUPTED_TEACHER.format(sig=sig),
