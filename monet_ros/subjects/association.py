@@ -167,17 +167,17 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     """Cluster labels (M,) of instances by the greedy rule of the module docstring (step
     2): candidate pairs (the `strong` (M, M) bool ones first, then the others) cheapest
     first, merged when their clusters share no camera and their average linkage (mean
-    finite cost between their members) is <= threshold_px. The linkage sums and counts
-    between clusters are kept up to date on each merge."""
+    finite cost between their members) is <= threshold_px. The linkage of two clusters is
+    summed over their members' costs when a candidate pair asks for it (Python floats: a
+    cluster holds at most one instance per camera, so these sums are short, and cheaper
+    than keeping a cluster x cluster matrix up to date with numpy)."""
     M = len(view)
     label = list(range(M))                       # cluster of each instance
     members = [[m] for m in range(M)]            # instances of each cluster
     seen = [1 << v for v in view.tolist()]       # cameras of each cluster (bit mask)
     finite = np.isfinite(cost)
-    # [..., 0]: cost sums between clusters (by label), [..., 1]: how many pairs have a cost
-    linkage = np.empty(cost.shape + (2,))
-    linkage[..., 0] = np.where(finite, cost, 0.0)
-    linkage[..., 1] = finite
+    costs = cost.tolist()
+    inf = float('inf')
     a, b = np.nonzero(cost <= threshold_px)
     upper = a < b
     a, b = a[upper], b[upper]
@@ -187,15 +187,19 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
         la, lb = label[i], label[j]
         if la == lb or seen[la] & seen[lb]:
             continue
-        total, count = linkage[la, lb].tolist()
+        total, count = 0.0, 0
+        for m in members[la]:
+            row = costs[m]
+            for n in members[lb]:
+                if row[n] < inf:
+                    total += row[n]
+                    count += 1
         if total > threshold_px * count:
             continue
         for m in members[lb]:
             label[m] = la
         members[la] += members[lb]
         seen[la] |= seen[lb]
-        linkage[la] += linkage[lb]
-        linkage[:, la] += linkage[:, lb]
     return _dissolve_pairs(np.array(label), cost, finite, view, num_views, threshold_px)
 
 
