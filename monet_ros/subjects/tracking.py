@@ -184,7 +184,7 @@ class SubjectTracker:
         z = self.ref_body[:, None] + masked_median(disp, common)
         gap = z - b[:, None]
         with np.errstate(invalid='ignore'):
-            dist = np.where(n > 0, np.sqrt(np.einsum('tsk,tsk->ts', gap, gap)), np.inf)
+            dist = np.where(n > 0, np.sqrt((gap * gap).sum(-1)), np.inf)
         return z, dist, n
 
     def step(self, X, stamp_ns):
