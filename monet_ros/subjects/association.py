@@ -33,6 +33,7 @@ accepted candidate pairs of step 2 (a few per subject and camera pair) and the r
 two-instance clusters of step 3.
 """
 from dataclasses import dataclass
+from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -124,15 +125,35 @@ def pair_fundamentals(cameras):
     return F
 
 
+@lru_cache(maxsize=64)
+def _upper_pairs(M):
+    """(a, b) index arrays of every pair a < b of M instances, read-only (cached: np.triu
+    costs more than the rest of a frame's pair selection)."""
+    pairs = np.triu_indices(M, 1)
+    for x in pairs:
+        x.setflags(write=False)
+    return pairs
+
+
 def pair_costs(ideal, present, view, F, min_common):
     """(cost (M, M), common (M, M) int) between M instances: the median symmetric epipolar
     distance (px) over the keypoints both see (inf for the same camera, itself, or
     < min_common common keypoints) and how many they both see.
 
     ideal (M, C, 2) undistorted pixels; present (M, C) bool; view (M,) camera indices;
-    F (V, V, 3, 3) of pair_fundamentals."""
+    F (V, V, 3, 3) of pair_fundamentals. The distances are computed for the pairs that can
+    have a cost only (two cameras, >= min_common common keypoints), each once (the cost is
+    symmetric: x_b^T F_ab x_a = x_a^T F_ba x_b)."""
     M, C = present.shape
     V = len(F)
+    counts = present.astype(np.float64)
+    k = (counts @ counts.T).astype(np.int64)                          # common keypoints
+    cost = np.full((M, M), np.inf)
+    ia, ib = _upper_pairs(M)
+    keep = (k[ia, ib] >= min_common) & (view[ia] != view[ib])
+    ia, ib = ia[keep], ib[keep]
+    if not len(ia):
+        return cost, k
     # homogeneous points (M, 3, C); a missing point's column (NaN or not) only reaches its
     # own keypoint's distances, which `common` sets to inf below
     ht = np.empty((M, 3, C))
@@ -141,25 +162,21 @@ def pair_costs(ideal, present, view, F, min_common):
     # the epipolar lines of every instance in every camera: (M, V, 3, C), one matmul of
     # an instance's (3V, 3) stacked fundamental matrices
     lines = (F[view].reshape(M, 3 * V, 3) @ ht).reshape(M, V, 3, C)
-    lines_b = lines[:, view]                                          # (M, M, 3, C) in b
+    va, vb = view[ia], view[ib]
+    line, hb = lines[ia, vb], ht[ib]                                  # (P, 3, C): a's in b
     # |x_b^T F x_a|, the three terms added in order (cheaper than a sum over axis -2)
-    num = np.abs(lines_b[:, :, 0] * ht[:, 0] + lines_b[:, :, 1] * ht[:, 1]
-                 + lines_b[:, :, 2] * ht[:, 2])
+    num = np.abs(line[:, 0] * hb[:, 0] + line[:, 1] * hb[:, 1] + line[:, 2] * hb[:, 2])
     with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
-        # 1 / the norm of each line, per camera (M, V, C), then per instance b (M, M, C)
+        # 1 / the norm of each line (M, V, C): the distance of b to a's line and of a to b's
         a, b = lines[:, :, 0], lines[:, :, 1]
-        inv_b = (1 / np.sqrt(a * a + b * b))[:, view]
-        d = 0.5 * num * (inv_b + inv_b.swapaxes(0, 1))               # a's line of b
-    common = present[:, None] & present[None, :]                      # (M, M, C)
-    d = np.where(common & np.isfinite(d), d, np.inf)
-    counts = present.astype(np.float64)
-    k = (counts @ counts.T).astype(np.int64)                          # common keypoints
+        inv = 1 / np.sqrt(a * a + b * b)
+        d = 0.5 * num * (inv[ia, vb] + inv[ib, va])                  # (P, C)
+    d = np.where(present[ia] & present[ib] & np.isfinite(d), d, np.inf)
     d.sort(axis=-1)                                                   # inf (missing) last
-    s, r = d.reshape(M * M, C), np.arange(M * M)
-    lo = s[r, (np.maximum(k - 1, 0) // 2).ravel()]
-    hi = s[r, np.minimum(k // 2, C - 1).ravel()]
-    cost = (0.5 * (lo + hi)).reshape(M, M)                            # k = 0: inf
-    cost[(k < min_common) | (view[:, None] == view[None, :])] = np.inf
+    n, r = k[ia, ib], np.arange(len(ia))
+    lo = d[r, np.maximum(n - 1, 0) // 2]
+    hi = d[r, np.minimum(n // 2, C - 1)]
+    cost[ia, ib] = cost[ib, ia] = 0.5 * (lo + hi)
     return cost, k
 
 
