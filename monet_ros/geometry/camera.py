@@ -168,6 +168,18 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
     return np.where(failed, np.nan, x), np.where(failed, np.nan, y)
 
 
+def _one_plus_cubic(c1, c2, c3, x):
+    """1 + x (c1 + x (c2 + x c3)) by Horner's rule, in place in one new array (x (M,),
+    coefficients scalars or (M,))."""
+    out = c3 * x
+    out += c2
+    out *= x
+    out += c1
+    out *= x
+    out += 1
+    return out
+
+
 def _radial_scale(k1, k2, k3, r0, iterations, tol):
     """The undistortion of a radial model (k1, k2, k3 only: most calibrations) as a scale
     per point: the distortion moves a point along its ray from the centre, so the 2D
@@ -175,26 +187,21 @@ def _radial_scale(k1, k2, k3, r0, iterations, tol):
     normalised; k1, k2, k3 scalars or (M,)), by Newton's method, and the ideal point is
     r / r0 times the distorted one -> (M,), NaN where the inversion fails. These are the
     2D Newton iterates of _undistort_newton in exact arithmetic (a 2D step of a radial
-    model stays on the ray) with its stopping rule and failures (the 2D residual is the
-    radial one, and the 2D Jacobian's determinant is radial x along: its eigenvalues
-    along and across the ray), in a third of its array operations."""
+    model stays on the ray) with its stopping rule, in a third of its array operations.
+    Failures: a residual above 1e-9 (relative) or a root past the fold: the 2D Jacobian's
+    eigenvalues along and across the ray (along, radial) must both be > 0, i.e. the root
+    on the branch that starts at the centre (the 2D solve asks only for their product,
+    and past the fold can land on the opposite ray where both are negative: a point the
+    model maps there, but from behind its fold). Inside the fold the iteration from r0 is
+    monotone (f = r radial - r0 is concave for barrel, convex for pincushion
+    distortion), so it finds that branch's root."""
     a1, a2, a3 = 3 * k1, 5 * k2, 7 * k3         # d (r radial(r^2)) / dr = 1 + r2 (a1 + ...)
     r = r0
     with np.errstate(all='ignore'):
         for _ in range(max(1, iterations)):
             r2 = r * r
-            radial = k3 * r2
-            radial += k2
-            radial *= r2
-            radial += k1
-            radial *= r2
-            radial += 1
-            along = a3 * r2
-            along += a2
-            along *= r2
-            along += a1
-            along *= r2
-            along += 1
+            radial = _one_plus_cubic(k1, k2, k3, r2)
+            along = _one_plus_cubic(a1, a2, a3, r2)
             f = r * radial
             f -= r0
             step = f / along
@@ -203,7 +210,7 @@ def _radial_scale(k1, k2, k3, r0, iterations, tol):
             if not ((change > tol) & (change < np.inf)).any():  # every finite step <= tol
                 break
         # the residual and Jacobian of the last evaluated iterate, as _undistort_newton
-        ok = (np.abs(f) <= 1e-9 * np.maximum(1.0, r0)) & (radial * along > 0)
+        ok = (np.abs(f) <= 1e-9 * np.maximum(1.0, r0)) & (radial > 0) & (along > 0)
         return np.where(ok, np.where(r0 > 0, r / r0, 1.0), np.nan)
 
 

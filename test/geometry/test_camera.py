@@ -172,6 +172,42 @@ def test_undistort_past_the_fold_is_nan():
     np.testing.assert_allclose(cam.distort_normalized(out[:1]), xy[:1], atol=1e-12)
 
 
+@pytest.mark.parametrize('d', [(-0.5, 0.0, 0.0), (-0.3, 0.12, -0.02), (0.2, -0.05, 0.01)])
+def test_radial_undistortion_is_the_2d_newton_solve(d):
+    """A radial model (k1, k2, k3 only) is undistorted by a 1D Newton solve of the radius;
+    inside the model's fold the general 2D solve (here run on the same model with its
+    tangential branch on and p1 = p2 = 0) gives the same points; past the fold (distorted
+    radii no ideal radius on the branch from the centre reaches, found by brute force on a
+    fine grid) the radial solve is NaN, and the 2D solve's answers there, if any, lie on
+    the opposite ray. A grid out to 1.5 in normalised coordinates."""
+    from monet_ros.geometry.camera import _model_terms, _undistort_newton
+
+    d12 = np.zeros(12)
+    d12[[0, 1, 4]] = d
+    g = np.linspace(-1.5, 1.5, 61)
+    x0, y0 = (a.ravel() for a in np.meshgrid(g, g))
+    x0[:2], y0[:2] = [np.nan, 0.0], [0.0, 0.0]         # a missing point and the centre
+    coeffs, rational, prism, _ = _model_terms(d12)
+    assert not rational and not prism
+    x, y = _undistort_newton(d12, x0, y0, 20, 1e-15)
+    x2, y2 = _undistort_newton(d12, x0, y0, 20, 1e-15, (coeffs, False, False, True))
+    # brute force: the largest distorted radius of the branch from the centre
+    r = np.linspace(0, 5, 500001)
+    k1, k2, k3 = d
+    rd = r * (1 + k1 * r**2 + k2 * r**4 + k3 * r**6)
+    fold = np.flatnonzero(np.diff(rd) <= 0)
+    rd_max = rd[fold[0]] if len(fold) else np.inf
+    r0 = np.hypot(x0, y0)
+    inside = r0 < rd_max * (1 - 1e-6)
+    assert np.isnan(x[0]) and x[1] == y[1] == 0.0
+    assert np.isfinite(x[inside]).all() and np.isnan(x[r0 > rd_max]).all()
+    np.testing.assert_allclose(x[inside], x2[inside], atol=1e-12)
+    np.testing.assert_allclose(y[inside], y2[inside], atol=1e-12)
+    beyond = (r0 > rd_max) & np.isfinite(x2)
+    assert (x2[beyond] * x0[beyond] + y2[beyond] * y0[beyond] < 0).all()
+    assert inside.mean() < 0.9 or not len(fold)
+
+
 def _valid_kwargs():
     return dict(name='c', K=np.array([[800.0, 0, 320], [0, 800, 240], [0, 0, 1]]),
                 dist=np.zeros(5), R=np.eye(3), t=np.zeros(3), width=640, height=480)
