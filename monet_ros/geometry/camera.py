@@ -109,10 +109,11 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
     past a fold of the model (Jacobian determinant <= 0): no unique inverse there."""
     terms = terms or _model_terms(d12)
     (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4), rational, prism, tangential = terms
+    if not (rational or prism or tangential):
+        scale = _radial_scale_of(k1, k2, k3, x0, y0, iterations, tol)
+        return x0 * scale, y0 * scale
     # twice the derivatives of the radial polynomials by r2
     dk1, dk2, dk3 = 2 * k1, 4 * k2, 6 * k3
-    if not (rational or prism or tangential):
-        return _undistort_radial(k1, k2, k3, x0, y0, iterations, tol)
     if rational:
         dk4, dk5, dk6 = 2 * k4, 4 * k5, 6 * k6
 
@@ -214,14 +215,15 @@ def _radial_scale(k1, k2, k3, r0, iterations, tol):
         return np.where(ok, np.where(r0 > 0, r / r0, 1.0), np.nan)
 
 
-def _undistort_radial(k1, k2, k3, x0, y0, iterations, tol):
-    """_undistort_newton's answer for a radial model (_radial_scale), on flat arrays with a
-    coefficient per point (a third faster than broadcasting a camera's over its points)."""
+def _radial_scale_of(k1, k2, k3, x0, y0, iterations, tol):
+    """_radial_scale of distorted normalised points (x0, y0) (any shape; k1, k2, k3 scalars
+    or broadcastable to it, e.g. (V, 1) per camera) -> scale of that shape: the ideal point
+    is scale x (x0, y0). Solved on flat arrays with a coefficient per point (a third faster
+    than broadcasting a camera's over its points)."""
     shape = np.shape(x0)
     k1, k2, k3 = (np.broadcast_to(k, shape).reshape(-1) for k in (k1, k2, k3))
-    scale = _radial_scale(k1, k2, k3, np.hypot(x0, y0).reshape(-1), iterations, tol)
-    scale = scale.reshape(shape)
-    return x0 * scale, y0 * scale
+    return _radial_scale(k1, k2, k3, np.hypot(x0, y0).reshape(-1), iterations,
+                         tol).reshape(shape)
 
 
 @dataclass(frozen=True, eq=False)
@@ -500,10 +502,7 @@ def undistort_views(cameras, uv):
         d = uv - c
         y0 = d[..., 1] / K[..., 1, 1]
         x0 = (d[..., 0] - K[..., 0, 1] * y0) / K[..., 0, 0]
-        shape = x0.shape
-        k1, k2, k3 = (np.broadcast_to(k, shape).reshape(-1) for k in (k1, k2, k3))
-        scale = _radial_scale(k1, k2, k3, np.hypot(x0, y0).reshape(-1), 20, 1e-15)
-        return c + scale.reshape(shape)[..., None] * d
+        return c + _radial_scale_of(k1, k2, k3, x0, y0, 20, 1e-15)[..., None] * d
     y0 = (uv[..., 1] - K[..., 1, 2]) / K[..., 1, 1]
     x0 = (uv[..., 0] - K[..., 0, 2] - K[..., 0, 1] * y0) / K[..., 0, 0]
     x, y = _undistort_newton(p['d12'], x0, y0, 20, 1e-15, model)

@@ -28,9 +28,10 @@ instead of by their convex relaxation:
    worst-view exclusion or RANSAC, cheirality), all subjects in one batched call.
 
 Epipolar distances are in pixels: the same for a rig in m or mm. Batched numpy: the
-costs of every instance pair and keypoint are one array; the only Python loop is over the
-accepted candidate pairs of step 2 (a few per subject and camera pair) and the rare
-two-instance clusters of step 3.
+costs of the instance pairs of different cameras and their keypoints are one array; the
+only Python loops are over the candidate pairs of step 2 (a few per subject and camera
+pair, each summing the linkage over its two clusters' members: at most one per camera)
+and the rare two-instance clusters of step 3.
 """
 from dataclasses import dataclass
 from functools import lru_cache
@@ -155,7 +156,7 @@ def pair_costs(ideal, present, view, F, min_common):
     if not len(ia):
         return cost, k
     # homogeneous points (M, 3, C); a missing point's column (NaN or not) only reaches its
-    # own keypoint's distances, which `common` sets to inf below
+    # own keypoint's distances, which are set to inf below (not present in both)
     ht = np.empty((M, 3, C))
     ht[:, :2] = ideal.swapaxes(-1, -2)
     ht[:, 2] = 1.0
