@@ -14,7 +14,7 @@ $(STAMP): requirements.txt setup.py
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --disable-pip-version-check -q -r requirements.txt
 	$(PY) -m pip install --disable-pip-version-check -q --no-deps --no-build-isolation -e .
-	$(PY) -c "import rclpy, torch, cv2, mcap, rosbags, h5py, pandas, pynwb, ndx_pose, flask, selenium; print('environment ready: torch', torch.__version__)"
+	$(PY) -c "import rclpy, torch, cv2, numba, mcap, rosbags, h5py, pandas, pynwb, ndx_pose, flask, selenium; print('environment ready: torch', torch.__version__)"
 	@if command -v cmake >/dev/null && command -v c++ >/dev/null; then \
 	    tools/build_tf2_msgs.sh $(VENV) || echo 'note: tf2_msgs not built: TF is off, its tests skip'; \
 	else echo 'note: no cmake / C++ compiler: tf2_msgs not built, TF is off, its tests skip'; fi

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from monet_ros.geometry.units import UNITS, per_metre, rig_units
+from monet_ros.jit import kernel
 
 # Accepted distortion vector lengths (OpenCV: 4, 5, 8, 12; 14 = tilted sensor, unsupported).
 DIST_LENGTHS = (0, 4, 5, 8, 12)
@@ -110,8 +111,7 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
     terms = terms or _model_terms(d12)
     (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4), rational, prism, tangential = terms
     if not (rational or prism or tangential):
-        scale = _radial_scale_of(k1, k2, k3, x0, y0, iterations, tol)
-        return x0 * scale, y0 * scale
+        return _radial_undistort_normalized(k1, k2, k3, x0, y0, iterations, tol)
     # twice the derivatives of the radial polynomials by r2
     dk1, dk2, dk3 = 2 * k1, 4 * k2, 6 * k3
     if rational:
@@ -169,61 +169,68 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
     return np.where(failed, np.nan, x), np.where(failed, np.nan, y)
 
 
-def _one_plus_cubic(c1, c2, c3, x):
-    """1 + x (c1 + x (c2 + x c3)) by Horner's rule, in place in one new array (x (M,),
-    coefficients scalars or (M,))."""
-    out = c3 * x
-    out += c2
-    out *= x
-    out += c1
-    out *= x
-    out += 1
+@kernel
+def _radial_undistort(uv, K, k, iterations, tol):
+    """The undistortion of a radial lens model (k1, k2, k3 only: most calibrations) of V
+    cameras: uv (V, n, 2) observed pixels of camera v (float64), K (V, 3, 3), k (V, 3)
+    its (k1, k2, k3) -> ideal pixels (V, n, 2) of the same K, NaN where the inversion fails
+    (and for NaN input). Compiled (monet_ros.jit): a loop over points.
+
+    The distortion moves a point along its ray from the principal point, so the 2D inverse
+    is the 1D one of the normalised radius, r radial(r^2) = r0, by Newton's method from
+    r0, and the ideal point is c + (r / r0) (uv - c). These are the 2D Newton iterates of
+    _undistort_newton in exact arithmetic (a 2D step of a radial model stays on the ray)
+    with its stopping rule per point (`iterations` at most, or a step <= tol or not
+    finite). Failures: a residual above 1e-9 (relative) at the last evaluated iterate or a
+    root past the fold: the 2D Jacobian's eigenvalues along and across the ray (along,
+    radial) must both be > 0, i.e. the root on the branch that starts at the centre (the
+    2D solve asks only for their product, and past the fold can land on the opposite ray
+    where both are negative: a point the model maps there, but from behind its fold).
+    Inside the fold the iteration from r0 is monotone (f = r radial - r0 is concave for
+    barrel, convex for pincushion distortion), so it finds that branch's root."""
+    V, n = uv.shape[0], uv.shape[1]
+    out = np.empty((V, n, 2))
+    for c in range(V):
+        fx, skew, cx, fy, cy = K[c, 0, 0], K[c, 0, 1], K[c, 0, 2], K[c, 1, 1], K[c, 1, 2]
+        k1, k2, k3 = k[c, 0], k[c, 1], k[c, 2]
+        a1, a2, a3 = 3 * k1, 5 * k2, 7 * k3     # d (r radial(r^2)) / dr = 1 + r2 (a1 + ...)
+        for i in range(n):
+            du, dv = uv[c, i, 0] - cx, uv[c, i, 1] - cy
+            y0 = dv / fy
+            x0 = (du - skew * y0) / fx
+            r0 = np.sqrt(x0 * x0 + y0 * y0)
+            r, f, radial, along = r0, np.nan, np.nan, np.nan
+            for _ in range(max(1, iterations)):
+                r2 = r * r
+                radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
+                along = 1 + r2 * (a1 + r2 * (a2 + r2 * a3))
+                f = r * radial - r0
+                step = f / along
+                r = r - step
+                if not (tol < abs(step) < np.inf):  # converged, or no finite step
+                    break
+            # the residual and Jacobian of the last evaluated iterate, as _undistort_newton
+            if abs(f) <= 1e-9 * max(1.0, r0) and radial > 0 and along > 0:
+                scale = r / r0 if r0 > 0 else 1.0
+                out[c, i, 0] = cx + scale * du
+                out[c, i, 1] = cy + scale * dv
+            else:
+                out[c, i, 0] = np.nan
+                out[c, i, 1] = np.nan
     return out
 
 
-def _radial_scale(k1, k2, k3, r0, iterations, tol):
-    """The undistortion of a radial model (k1, k2, k3 only: most calibrations) as a scale
-    per point: the distortion moves a point along its ray from the centre, so the 2D
-    inverse is the 1D one of the radius, r radial(r^2) = r0 (r0 (M,) the distorted radii,
-    normalised; k1, k2, k3 scalars or (M,)), by Newton's method, and the ideal point is
-    r / r0 times the distorted one -> (M,), NaN where the inversion fails. These are the
-    2D Newton iterates of _undistort_newton in exact arithmetic (a 2D step of a radial
-    model stays on the ray) with its stopping rule, in a third of its array operations.
-    Failures: a residual above 1e-9 (relative) or a root past the fold: the 2D Jacobian's
-    eigenvalues along and across the ray (along, radial) must both be > 0, i.e. the root
-    on the branch that starts at the centre (the 2D solve asks only for their product,
-    and past the fold can land on the opposite ray where both are negative: a point the
-    model maps there, but from behind its fold). Inside the fold the iteration from r0 is
-    monotone (f = r radial - r0 is concave for barrel, convex for pincushion
-    distortion), so it finds that branch's root."""
-    a1, a2, a3 = 3 * k1, 5 * k2, 7 * k3         # d (r radial(r^2)) / dr = 1 + r2 (a1 + ...)
-    r = r0
-    with np.errstate(all='ignore'):
-        for _ in range(max(1, iterations)):
-            r2 = r * r
-            radial = _one_plus_cubic(k1, k2, k3, r2)
-            along = _one_plus_cubic(a1, a2, a3, r2)
-            f = r * radial
-            f -= r0
-            step = f / along
-            r = r - step
-            change = np.abs(step, out=step)
-            if not ((change > tol) & (change < np.inf)).any():  # every finite step <= tol
-                break
-        # the residual and Jacobian of the last evaluated iterate, as _undistort_newton
-        ok = (np.abs(f) <= 1e-9 * np.maximum(1.0, r0)) & (radial > 0) & (along > 0)
-        return np.where(ok, np.where(r0 > 0, r / r0, 1.0), np.nan)
-
-
-def _radial_scale_of(k1, k2, k3, x0, y0, iterations, tol):
-    """_radial_scale of distorted normalised points (x0, y0) (any shape; k1, k2, k3 scalars
-    or broadcastable to it, e.g. (V, 1) per camera) -> scale of that shape: the ideal point
-    is scale x (x0, y0). Solved on flat arrays with a coefficient per point (a third faster
-    than broadcasting a camera's over its points)."""
-    shape = np.shape(x0)
-    k1, k2, k3 = (np.broadcast_to(k, shape).reshape(-1) for k in (k1, k2, k3))
-    return _radial_scale(k1, k2, k3, np.hypot(x0, y0).reshape(-1), iterations,
-                         tol).reshape(shape)
+def _radial_undistort_normalized(k1, k2, k3, x0, y0, iterations, tol):
+    """_radial_undistort of distorted normalised points (x0, y0) (any shape; k1, k2, k3
+    scalars or broadcastable to it) -> the ideal (x, y) of that shape (K = identity, a
+    camera per point)."""
+    x0, y0, k1, k2, k3 = np.broadcast_arrays(x0, y0, k1, k2, k3)
+    shape = x0.shape
+    uv = np.stack([x0, y0], axis=-1).reshape(-1, 1, 2)
+    K = np.tile(np.eye(3), (len(uv), 1, 1))
+    k = np.stack([k1, k2, k3], axis=-1).reshape(-1, 3)
+    out = _radial_undistort(uv, K, k, iterations, tol).reshape(shape + (2,))
+    return out[..., 0], out[..., 1]
 
 
 @dataclass(frozen=True, eq=False)
@@ -493,16 +500,12 @@ def undistort_views(cameras, uv):
         raise ValueError(f'uv must have shape (V={len(p["K"])}, N, 2), got {uv.shape}')
     if not p['d12'].any():
         return uv.copy()
-    K = p['K'][:, None]  # (V, 1, 3, 3)
     model = p.get('model') or _model_terms(p['d12'])
-    (k1, k2, _, _, k3, *_), rational, prism, tangential = model
+    _, rational, prism, tangential = model
     if not (rational or prism or tangential):
-        # radial: ideal = c + s (uv - c) about the principal point c, s = _radial_scale
-        c = K[..., :2, 2]                                             # (V, 1, 2)
-        d = uv - c
-        y0 = d[..., 1] / K[..., 1, 1]
-        x0 = (d[..., 0] - K[..., 0, 1] * y0) / K[..., 0, 0]
-        return c + _radial_scale_of(k1, k2, k3, x0, y0, 20, 1e-15)[..., None] * d
+        return _radial_undistort(np.ascontiguousarray(uv), p['K'],
+                                 p['d12'][:, [0, 1, 4]], 20, 1e-15)
+    K = p['K'][:, None]  # (V, 1, 3, 3)
     y0 = (uv[..., 1] - K[..., 1, 2]) / K[..., 1, 1]
     x0 = (uv[..., 0] - K[..., 0, 2] - K[..., 0, 1] * y0) / K[..., 0, 0]
     x, y = _undistort_newton(p['d12'], x0, y0, 20, 1e-15, model)

@@ -27,14 +27,13 @@ instead of by their convex relaxation:
    robust triangulation (geometry.triangulate_robust: confidence-weighted DLT with
    worst-view exclusion or RANSAC, cheirality), all subjects in one batched call.
 
-Epipolar distances are in pixels: the same for a rig in m or mm. Batched numpy: the
-costs of the instance pairs of different cameras and their keypoints are one array; the
-only Python loops are over the candidate pairs of step 2 (a few per subject and camera
-pair, each summing the linkage over its two clusters' members: at most one per camera)
-and the rare two-instance clusters of step 3.
+Epipolar distances are in pixels: the same for a rig in m or mm. The pair costs (a loop
+over instance pairs and their keypoints) and the greedy merging (a loop over candidate
+pairs) are compiled kernels (monet_ros.jit): a frame holds a few dozen instances, where
+numpy's cost per call, not the arithmetic, was the time. The rare two-instance clusters of
+step 3 are handled in numpy.
 """
 from dataclasses import dataclass
-from functools import lru_cache
 from itertools import combinations
 
 import numpy as np
@@ -43,6 +42,7 @@ from monet_ros.config import setting, validate_config
 from monet_ros.geometry.camera import stack_cameras, undistort_views
 from monet_ros.geometry.epipolar import fundamental_from_params
 from monet_ros.geometry.triangulation import triangulate_robust
+from monet_ros.jit import kernel
 
 METHODS = ('exclusion', 'ransac')
 
@@ -126,16 +126,6 @@ def pair_fundamentals(cameras):
     return F
 
 
-@lru_cache(maxsize=64)
-def _upper_pairs(M):
-    """(a, b) index arrays of every pair a < b of M instances, read-only (cached: np.triu
-    costs more than the rest of a frame's pair selection)."""
-    pairs = np.triu_indices(M, 1)
-    for x in pairs:
-        x.setflags(write=False)
-    return pairs
-
-
 def pair_costs(ideal, present, view, F, min_common):
     """(cost (M, M), common (M, M) int) between M instances: the median symmetric epipolar
     distance (px) over the keypoints both see (inf for the same camera, itself, or
@@ -144,90 +134,150 @@ def pair_costs(ideal, present, view, F, min_common):
     ideal (M, C, 2) undistorted pixels; present (M, C) bool; view (M,) camera indices;
     F (V, V, 3, 3) of pair_fundamentals. The distances are computed for the pairs that can
     have a cost only (two cameras, >= min_common common keypoints), each once (the cost is
-    symmetric: x_b^T F_ab x_a = x_a^T F_ba x_b)."""
+    symmetric: x_b^T F_ab x_a = x_a^T F_ba x_b). Compiled (_pair_costs)."""
+    return _pair_costs(np.ascontiguousarray(ideal, np.float64),
+                       np.ascontiguousarray(present, np.bool_),
+                       np.ascontiguousarray(view, np.int64), F, int(min_common))
+
+
+@kernel
+def _pair_costs(ideal, present, view, F, min_common):
+    """pair_costs compiled (monet_ros.jit): loops over instance pairs and keypoints. The
+    distance of keypoint c: 0.5 |x_b^T F x_a| (1 / |l_a| + 1 / |l_b|), l_a = F x_a the line
+    of a in b's image and l_b = F^T x_b that of b in a's, |l| the norm of its first two
+    terms; not finite (a degenerate line) counts as inf; the median of an even count is the
+    mean of the middle two."""
     M, C = present.shape
-    V = len(F)
-    counts = present.astype(np.float64)
-    k = (counts @ counts.T).astype(np.int64)                          # common keypoints
     cost = np.full((M, M), np.inf)
-    ia, ib = _upper_pairs(M)
-    keep = (k[ia, ib] >= min_common) & (view[ia] != view[ib])
-    ia, ib = ia[keep], ib[keep]
-    if not len(ia):
-        return cost, k
-    # homogeneous points (M, 3, C); a missing point's column (NaN or not) only reaches its
-    # own keypoint's distances, which are set to inf below (not present in both)
-    ht = np.empty((M, 3, C))
-    ht[:, :2] = ideal.swapaxes(-1, -2)
-    ht[:, 2] = 1.0
-    # the epipolar lines of every instance in every camera: (M, V, 3, C), one matmul of
-    # an instance's (3V, 3) stacked fundamental matrices
-    lines = (F[view].reshape(M, 3 * V, 3) @ ht).reshape(M, V, 3, C)
-    va, vb = view[ia], view[ib]
-    line, hb = lines[ia, vb], ht[ib]                                  # (P, 3, C): a's in b
-    # |x_b^T F x_a|, the three terms added in order (cheaper than a sum over axis -2)
-    num = np.abs(line[:, 0] * hb[:, 0] + line[:, 1] * hb[:, 1] + line[:, 2] * hb[:, 2])
-    with np.errstate(invalid='ignore', divide='ignore', over='ignore'):
-        # 1 / the norm of each line (M, V, C): the distance of b to a's line and of a to b's
-        a, b = lines[:, :, 0], lines[:, :, 1]
-        inv = 1 / np.sqrt(a * a + b * b)
-        d = 0.5 * num * (inv[ia, vb] + inv[ib, va])                  # (P, C)
-    d = np.where(present[ia] & present[ib] & np.isfinite(d), d, np.inf)
-    d.sort(axis=-1)                                                   # inf (missing) last
-    n, r = k[ia, ib], np.arange(len(ia))
-    lo = d[r, np.maximum(n - 1, 0) // 2]
-    hi = d[r, np.minimum(n // 2, C - 1)]
-    cost[ia, ib] = cost[ib, ia] = 0.5 * (lo + hi)
-    return cost, k
+    common = np.zeros((M, M), np.int64)
+    d = np.empty(C)
+    for a in range(M):
+        for b in range(a, M):
+            n = 0
+            for c in range(C):
+                if present[a, c] and present[b, c]:
+                    n += 1
+            common[a, b] = common[b, a] = n
+            if b == a or n < min_common or view[a] == view[b]:
+                continue
+            f = F[view[a], view[b]]                   # x_b^T f x_a = 0
+            j = 0
+            for c in range(C):
+                if not (present[a, c] and present[b, c]):
+                    continue
+                xa, ya, xb, yb = ideal[a, c, 0], ideal[a, c, 1], ideal[b, c, 0], ideal[b, c, 1]
+                la0 = f[0, 0] * xa + f[0, 1] * ya + f[0, 2]
+                la1 = f[1, 0] * xa + f[1, 1] * ya + f[1, 2]
+                la2 = f[2, 0] * xa + f[2, 1] * ya + f[2, 2]
+                lb0 = f[0, 0] * xb + f[1, 0] * yb + f[2, 0]
+                lb1 = f[0, 1] * xb + f[1, 1] * yb + f[2, 1]
+                num = abs(la0 * xb + la1 * yb + la2)
+                dist = 0.5 * num * (1 / np.sqrt(la0 * la0 + la1 * la1)
+                                    + 1 / np.sqrt(lb0 * lb0 + lb1 * lb1))
+                if not np.isfinite(dist):
+                    dist = np.inf
+                i = j                                     # insertion sort: n <= C, small
+                while i > 0 and d[i - 1] > dist:
+                    d[i] = d[i - 1]
+                    i -= 1
+                d[i] = dist
+                j += 1
+            cost[a, b] = cost[b, a] = 0.5 * (d[(n - 1) // 2] + d[n // 2])
+    return cost, common
 
 
 def cluster_instances(cost, view, num_views, threshold_px, strong=None):
-    """Cluster labels (M,) of instances by the greedy rule of the module docstring (step
-    2): candidate pairs (the `strong` (M, M) bool ones first, then the others) cheapest
-    first, merged when their clusters share no camera and their average linkage (mean
-    finite cost between their members) is <= threshold_px. The linkage of two clusters is
-    summed over their members' costs when a candidate pair asks for it (Python floats: a
-    cluster holds at most one instance per camera, so these sums are short, and cheaper
-    than keeping a cluster x cluster matrix up to date with numpy)."""
+    """Cluster labels (M,) of instances by the greedy rule of the module docstring (steps
+    2 and 3): candidate pairs (cost (M, M) <= threshold_px; the `strong` (M, M) bool ones
+    first, then the others) cheapest first, merged when their clusters share no camera and
+    their average linkage (mean finite cost between their members) is <= threshold_px;
+    then _dissolve_pairs. view (M,) camera indices < num_views. Step 2 is compiled
+    (_merge_clusters)."""
     M = len(view)
-    label = list(range(M))                       # cluster of each instance
-    members = [[m] for m in range(M)]            # instances of each cluster
-    seen = [1 << v for v in view.tolist()]       # cameras of each cluster (bit mask)
-    finite = np.isfinite(cost)
-    costs = cost.tolist()
-    inf = float('inf')
-    a, b = np.nonzero(cost <= threshold_px)
-    upper = a < b
-    a, b = a[upper], b[upper]
-    weak = np.zeros(len(a), bool) if strong is None else ~strong[a, b]
-    order = np.lexsort((cost[a, b], weak))
-    for i, j in zip(a[order].tolist(), b[order].tolist()):
-        la, lb = label[i], label[j]
-        if la == lb or seen[la] & seen[lb]:
+    strong = np.zeros((M, M), bool) if strong is None else strong
+    label = _merge_clusters(np.ascontiguousarray(cost, np.float64),
+                            np.ascontiguousarray(view, np.int64), int(num_views),
+                            float(threshold_px), np.ascontiguousarray(strong, np.bool_))
+    return _dissolve_pairs(label, cost, view, num_views, threshold_px)
+
+
+@kernel
+def _merge_clusters(cost, view, num_views, threshold_px, strong):
+    """Step 2 of cluster_instances compiled (monet_ros.jit) -> labels (M,) int64 (a cluster
+    is labelled by one of its instances). Candidate order: strong before weak, then by cost
+    (a stable sort: equal costs in row-major order of (a, b), a < b)."""
+    M = len(view)
+    n = 0
+    for a in range(M):
+        for b in range(a + 1, M):
+            if cost[a, b] <= threshold_px:
+                n += 1
+    pa = np.empty(n, np.int64)
+    pb = np.empty(n, np.int64)
+    pc = np.empty(n)
+    n = 0
+    for a in range(M):
+        for b in range(a + 1, M):
+            if cost[a, b] <= threshold_px:
+                pa[n], pb[n], pc[n] = a, b, cost[a, b]
+                n += 1
+    by_cost = np.argsort(pc, kind='mergesort')
+    order = np.empty(n, np.int64)
+    k = 0
+    for want_strong in (True, False):
+        for i in by_cost:
+            if strong[pa[i], pb[i]] == want_strong:
+                order[k] = i
+                k += 1
+    label = np.arange(M)
+    cams = np.zeros((M, num_views), np.bool_)            # cameras of each cluster, by label
+    for m in range(M):
+        cams[m, view[m]] = True
+    first = np.empty(M, np.int64)
+    second = np.empty(M, np.int64)
+    for i in order:
+        la, lb = label[pa[i]], label[pb[i]]
+        if la == lb:
             continue
+        shared = False
+        for v in range(num_views):
+            if cams[la, v] and cams[lb, v]:
+                shared = True
+                break
+        if shared:
+            continue
+        n1 = n2 = 0
+        for m in range(M):
+            if label[m] == la:
+                first[n1] = m
+                n1 += 1
+            elif label[m] == lb:
+                second[n2] = m
+                n2 += 1
         total, count = 0.0, 0
-        for m in members[la]:
-            row = costs[m]
-            for n in members[lb]:
-                if row[n] < inf:
-                    total += row[n]
+        for x in range(n1):
+            for y in range(n2):
+                c = cost[first[x], second[y]]
+                if c < np.inf:
+                    total += c
                     count += 1
         if total > threshold_px * count:
             continue
-        for m in members[lb]:
-            label[m] = la
-        members[la] += members[lb]
-        seen[la] |= seen[lb]
-    return _dissolve_pairs(np.array(label), cost, finite, view, num_views, threshold_px)
+        for y in range(n2):
+            label[second[y]] = la
+        for v in range(num_views):
+            cams[la, v] = cams[la, v] or cams[lb, v]
+    return label
 
 
-def _dissolve_pairs(label, cost, finite, view, num_views, threshold_px):
+def _dissolve_pairs(label, cost, view, num_views, threshold_px):
     """Step 3 of the module docstring: a two-instance cluster whose two instances each
     fit a different larger cluster (no shared camera, mean cost <= threshold_px) is split
     into them. Labels are changed in place and returned."""
     size = np.bincount(label, minlength=len(label))    # labels are instance indices
     if not (size == 2).any():
         return label
+    finite = np.isfinite(cost)
     cams = np.zeros((len(label), num_views), bool)     # cameras of each cluster, by label
     cams[label, view] = True
     big = np.flatnonzero(size > 2)

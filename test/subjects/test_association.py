@@ -268,3 +268,92 @@ def test_leaving_out_views_triangulates_from_the_others(crossing):
     assert leave_out_views(a, cams, np.zeros((S, V, C), bool)) == 0
     with pytest.raises(ValueError, match='drop must have shape'):
         leave_out_views(a, cams, np.zeros((S, V)))
+
+
+def _random_instances(rng, M, V, C):
+    """M instances on V cameras (each camera at least once when M >= V), C keypoints
+    each, a third of them missing: (ideal (M, C, 2) px, present (M, C), view (M,))."""
+    view = np.concatenate([np.arange(min(M, V)), rng.integers(0, V, max(0, M - V))])
+    ideal = rng.uniform(0, 640, (M, C, 2))
+    present = rng.random((M, C)) > 0.33
+    ideal[~present] = np.nan
+    return ideal, present, view
+
+
+def test_pair_costs_are_median_symmetric_epipolar_distances_from_opencv():
+    """pair_costs (compiled) against OpenCV: cv2.computeCorrespondEpilines gives each
+    point's epipolar line in the other image (normalised: a^2 + b^2 = 1), the distance of
+    the other point to it; the cost is np.median over the keypoints both see of the mean
+    of the two distances; inf for one camera, itself or < min_common common keypoints."""
+    import cv2
+
+    from monet_ros.subjects.association import pair_costs, pair_fundamentals
+
+    rng = np.random.default_rng(11)
+    cams = make_rig(RigConfig(num_cameras=5))
+    F = pair_fundamentals(cams)
+    for M, C, min_common in ((9, 14, 3), (12, 7, 1), (6, 4, 4)):
+        ideal, present, view = _random_instances(rng, M, len(cams), C)
+        cost, common = pair_costs(ideal, present, view, F, min_common)
+        for a in range(M):
+            for b in range(M):
+                both = present[a] & present[b]
+                assert common[a, b] == both.sum()
+                if a == b or view[a] == view[b] or both.sum() < min_common:
+                    assert cost[a, b] == np.inf
+                    continue
+                fab = F[view[a], view[b]]                     # x_b^T F x_a = 0
+                pa = ideal[a, both].reshape(-1, 1, 2)
+                pb = ideal[b, both].reshape(-1, 1, 2)
+                in_b = cv2.computeCorrespondEpilines(pa, 1, fab).reshape(-1, 3)
+                in_a = cv2.computeCorrespondEpilines(pb, 2, fab).reshape(-1, 3)
+                d_b = np.abs((in_b[:, :2] * pb[:, 0]).sum(-1) + in_b[:, 2])
+                d_a = np.abs((in_a[:, :2] * pa[:, 0]).sum(-1) + in_a[:, 2])
+                np.testing.assert_allclose(cost[a, b], np.median(0.5 * (d_a + d_b)),
+                                           rtol=1e-9, atol=1e-9)
+
+
+def _greedy_reference(cost, view, threshold_px, strong):
+    """Step 2 of the association's clustering, written plainly in Python (lists and
+    sets): candidate pairs a < b with cost <= threshold, strong first, then by cost
+    (ties: row-major order), merged when the clusters share no camera and the mean of the
+    finite costs between their members is <= threshold."""
+    M = len(view)
+    pairs = [(not strong[a, b], cost[a, b], a, b) for a in range(M) for b in range(a + 1, M)
+             if cost[a, b] <= threshold_px]
+    pairs.sort(key=lambda p: (p[0], p[1]))             # stable: row-major among ties
+    cluster = {m: {m} for m in range(M)}
+    for _, _, a, b in pairs:
+        ca, cb = cluster[a], cluster[b]
+        if ca is cb or {view[m] for m in ca} & {view[m] for m in cb}:
+            continue
+        linked = [cost[m, n] for m in ca for n in cb if np.isfinite(cost[m, n])]
+        if sum(linked) > threshold_px * len(linked):
+            continue
+        ca |= cb
+        for m in cb:
+            cluster[m] = ca
+    return [min(cluster[m]) for m in range(M)]
+
+
+def test_clustering_is_the_greedy_rule_written_plainly():
+    """The compiled clustering step against _greedy_reference on random symmetric costs
+    (some infinite, some ties, strong and weak pairs): the same partition."""
+    from monet_ros.subjects.association import _merge_clusters
+
+    rng = np.random.default_rng(5)
+    for trial in range(300):
+        M, V = int(rng.integers(2, 25)), int(rng.integers(2, 9))
+        view = rng.integers(0, V, M)
+        cost = np.round(rng.uniform(0, 30, (M, M)), 0 if trial % 3 == 0 else 6)  # ties
+        cost[rng.random((M, M)) < 0.2] = np.inf
+        cost = np.minimum(cost, cost.T)
+        cost[view[:, None] == view[None]] = np.inf
+        strong = rng.random((M, M)) < 0.5
+        strong = strong & strong.T
+        got = _merge_clusters(cost, view.astype(np.int64), V, 15.0, strong)
+        want = _greedy_reference(cost, view, 15.0, strong)
+        # the same partition (labels may name a cluster by another member)
+        first = {}
+        assert [first.setdefault(g, w) for g, w in zip(got.tolist(), want)] == want
+        assert len(set(got.tolist())) == len(set(want))

@@ -163,11 +163,18 @@ def test_offline_smoothing_per_identity(truth, tracked, method):
     assert smoothed_mm.units == 'mm'
     np.testing.assert_array_equal(smoothed_mm.rows.subject, out.subject)
     np.testing.assert_array_equal(smoothed_mm.rows.frame, out.frame)
-    # kalman: equal to 1 um; optim: least_squares stops by relative criteria, at another
-    # iterate in another unit (measured: 0.12 mm apart, the 2D noise gives ~10 mm)
-    atol = 1e-3 if method == 'kalman' else 0.5
-    np.testing.assert_allclose(smoothed_mm.rows.X, 1000.0 * out.X, rtol=0, atol=atol)
-    np.testing.assert_allclose(smoothed_mm.change_mm, smoothed.change_mm, atol=atol)
+    # kalman: equal to 1 um; optim: least_squares stops by relative criteria (ftol 1e-6),
+    # where the inputs' rounding (1e-12 mm here) moves its last iterate: measured median
+    # 3 um, 99.9th percentile 0.1 mm, largest 0.16-0.64 mm between code versions, where the
+    # 2D noise gives ~10 mm; a unit mistake (a setting not converted) moves every joint
+    if method == 'kalman':
+        np.testing.assert_allclose(smoothed_mm.rows.X, 1000.0 * out.X, rtol=0, atol=1e-3)
+        np.testing.assert_allclose(smoothed_mm.change_mm, smoothed.change_mm, atol=1e-3)
+    else:
+        for gap in (np.abs(smoothed_mm.rows.X - 1000.0 * out.X),
+                    np.abs(smoothed_mm.change_mm - smoothed.change_mm)):
+            assert np.nanmedian(gap) < 0.02 and np.nanmax(gap) < 2.0, (np.nanmedian(gap),
+                                                                         np.nanmax(gap))
 
 
 def test_offline_gap_in_a_track_is_bridged_for_that_identity_only(truth, tracked):
