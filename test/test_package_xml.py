@@ -19,6 +19,8 @@ ROSDEP_RULES = {
     # also checked at 8468e88: lab formats, the label app, the reliability and browser tests
     'python3-h5py', 'python3-pandas', 'python3-tables', 'python3-flask', 'python3-selenium',
     'python3-hypothesis',
+    # checked at 8468e88: the compiled kernels (monet_ros.jit)
+    'python3-numba',
 }
 # Keys the install guide's rosdep line (docs/install.md) skips (installed with a pinned pip
 # line instead).
@@ -28,7 +30,7 @@ THIRD_PARTY = {'numpy': 'python3-numpy', 'cv2': 'python3-opencv', 'yaml': 'pytho
                'scipy': 'python3-scipy', 'matplotlib': 'python3-matplotlib',
                'tqdm': 'python3-tqdm', 'torch': 'python3-torch',
                'rosbags': 'python3-rosbags-pip', 'h5py': 'python3-h5py',
-               'pandas': 'python3-pandas', 'flask': 'python3-flask'}
+               'pandas': 'python3-pandas', 'flask': 'python3-flask', 'numba': 'python3-numba'}
 
 
 def declared(repo_root, tags=('exec_depend', 'depend', 'test_depend')):

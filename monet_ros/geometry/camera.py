@@ -503,8 +503,7 @@ def undistort_views(cameras, uv):
     model = p.get('model') or _model_terms(p['d12'])
     _, rational, prism, tangential = model
     if not (rational or prism or tangential):
-        return _radial_undistort(np.ascontiguousarray(uv), p['K'],
-                                 p['d12'][:, [0, 1, 4]], 20, 1e-15)
+        return _radial_undistort(uv, p['K'], p['d12'][:, [0, 1, 4]], 20, 1e-15)
     K = p['K'][:, None]  # (V, 1, 3, 3)
     y0 = (uv[..., 1] - K[..., 1, 2]) / K[..., 1, 1]
     x0 = (uv[..., 0] - K[..., 0, 2] - K[..., 0, 1] * y0) / K[..., 0, 0]

@@ -135,9 +135,9 @@ def pair_costs(ideal, present, view, F, min_common):
     F (V, V, 3, 3) of pair_fundamentals. The distances are computed for the pairs that can
     have a cost only (two cameras, >= min_common common keypoints), each once (the cost is
     symmetric: x_b^T F_ab x_a = x_a^T F_ba x_b). Compiled (_pair_costs)."""
-    return _pair_costs(np.ascontiguousarray(ideal, np.float64),
-                       np.ascontiguousarray(present, np.bool_),
-                       np.ascontiguousarray(view, np.int64), F, int(min_common))
+    return _pair_costs(np.asarray(ideal, np.float64),
+                       np.asarray(present, np.bool_),
+                       np.asarray(view, np.int64), F, int(min_common))
 
 
 @kernel
@@ -195,9 +195,9 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     (_merge_clusters)."""
     M = len(view)
     strong = np.zeros((M, M), bool) if strong is None else strong
-    label = _merge_clusters(np.ascontiguousarray(cost, np.float64),
-                            np.ascontiguousarray(view, np.int64), int(num_views),
-                            float(threshold_px), np.ascontiguousarray(strong, np.bool_))
+    label = _merge_clusters(np.asarray(cost, np.float64),
+                            np.asarray(view, np.int64), int(num_views),
+                            float(threshold_px), np.asarray(strong, np.bool_))
     return _dissolve_pairs(label, cost, view, num_views, threshold_px)
 
 
