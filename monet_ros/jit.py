@@ -10,8 +10,11 @@ work. Array arguments are passed C-contiguous and writable (a copy where they ar
 so each kernel compiles once per dtype, not once per memory layout. Settings, the same
 for every kernel: cache=True (the machine code is kept in the source's __pycache__, or in
 numba's user cache where that is not writable, keyed by the CPU: a later process loads it
-instead of compiling), nogil (a live node's other threads run beside it) and IEEE
-arithmetic (no fastmath: the numbers of the loops as written, to rounding). A kernel is
+instead of compiling), nogil (a live node's other threads run beside it), numpy's error
+model (a division by zero gives inf or NaN as in numpy, never ZeroDivisionError) and IEEE
+arithmetic (no fastmath: the numbers of the loops as written, to rounding). numba's cache
+is keyed by the kernel's source file, not these settings: after changing them, delete the
+*.nbi / *.nbc files of __pycache__. A kernel is
 plain Python over numpy arrays: NUMBA_DISABLE_JIT=1 runs it uncompiled (slow; for
 debugging).
 """
@@ -22,12 +25,17 @@ import warnings
 import numpy as np
 
 _LOCK = threading.Lock()
+_KERNELS = []                    # every kernel, with its example arguments (warm_up)
 
 
-def kernel(fn):
-    """fn compiled by numba.njit(cache=True, nogil=True) on its first call (the module
-    docstring); the uncompiled function stays at .py_func, numba's dispatcher is at
-    .dispatcher once compiled."""
+def kernel(fn=None, *, example=None):
+    """fn compiled by numba.njit on its first call (the module docstring's settings); the
+    uncompiled function stays at .py_func, numba's dispatcher is at
+    .dispatcher once compiled. example: a function returning small arguments of the
+    types the callers pass (warm_up compiles with them). As @kernel or
+    @kernel(example=...)."""
+    if fn is None:
+        return functools.partial(kernel, example=example)
     compiled = None
 
     @functools.wraps(fn)
@@ -41,20 +49,35 @@ def kernel(fn):
 
     call.py_func = fn
     call.dispatcher = None        # numba's dispatcher once compiled (its .signatures)
+    call.example = example
+    _KERNELS.append(call)
     return call
 
 
+def warm_up():
+    """Compile (or load from the cache) every kernel of the modules imported so far that
+    has example arguments, by calling it on them: a live node does this at start so that
+    its first frame does not wait for it. -> seconds taken."""
+    import time
+    start = time.perf_counter()
+    for call in list(_KERNELS):
+        if call.example is not None:
+            call(*call.example())
+    return time.perf_counter() - start
+
+
 def _compile(fn):
-    """numba.njit(cache=True, nogil=True)(fn); without the cache (compiled again in every
-    process, and said once) where numba finds no writable place for it."""
+    """fn compiled with the module docstring's settings; without the cache (compiled again
+    in every process, and said once) where numba finds no writable place for it."""
     import numba
+    settings = dict(nogil=True, error_model='numpy')
     try:
-        return numba.njit(cache=True, nogil=True)(fn)
+        return numba.njit(cache=True, **settings)(fn)
     except RuntimeError as error:  # numba: 'cannot cache function ...: no locator available'
         warnings.warn(f'monet_ros.jit: {fn.__qualname__} compiled without a cache ({error}); '
                       'set NUMBA_CACHE_DIR to a writable folder to keep it', RuntimeWarning,
                       stacklevel=3)
-        return numba.njit(nogil=True)(fn)
+        return numba.njit(**settings)(fn)
 
 
 def _plain(arg):

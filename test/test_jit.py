@@ -62,3 +62,26 @@ def test_a_later_process_loads_the_cached_machine_code(tmp_path):
     K = np.array([[[800.0, 0, 320], [0, 800, 240], [0, 0, 1]]])
     here = _radial_undistort(uv, K, np.array([[-0.2, 0.05, 0.0]]), 20, 1e-15)
     assert repr(here.tolist()) == first[-1]
+
+
+def test_warm_up_compiles_what_the_first_frame_uses():
+    """warm_up compiles every kernel of the imported modules from its example arguments,
+    with the types the callers pass: a frame of two subjects (undistortion of a radial
+    lens model, the association's pair costs and merging) then compiles nothing more."""
+    from monet_ros.jit import _KERNELS, warm_up
+    from monet_ros.skeleton import load_skeleton
+    from monet_ros.subjects import associate
+    from monet_ros.synth.rig import RigConfig, make_rig
+    from monet_ros.synth.subjects import shuffled_instances, subjects_keypoints
+
+    warm_up()
+    examples = [k for k in _KERNELS if k.example is not None]
+    names = {k.__name__ for k in examples}
+    assert {'_radial_undistort', '_pair_costs', '_merge_clusters'} <= names
+    assert all(len(k.dispatcher.signatures) == 1 for k in examples)
+    cams = make_rig(RigConfig(num_cameras=4))
+    assert any(c.dist.any() for c in cams)                          # a radial lens model
+    X = subjects_keypoints(load_skeleton('human14'), 2, np.arange(2) / 30.0)
+    points, _ = shuffled_instances(X, cams, noise_px=1.0, seed=0)
+    assert len(associate(points[0], cams).X) == 2
+    assert all(len(k.dispatcher.signatures) == 1 for k in examples)

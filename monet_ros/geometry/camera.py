@@ -169,7 +169,7 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
     return np.where(failed, np.nan, x), np.where(failed, np.nan, y)
 
 
-@kernel
+@kernel(example=lambda: (np.zeros((1, 1, 2)), np.eye(3)[None], np.zeros((1, 3)), 20, 1e-15))
 def _radial_undistort(uv, K, k, iterations, tol):
     """The undistortion of a radial lens model (k1, k2, k3 only: most calibrations) of V
     cameras: uv (V, n, 2) observed pixels of camera v (float64), K (V, 3, 3), k (V, 3)

@@ -94,6 +94,7 @@ from monet_ros.io import (
 )
 from monet_ros.io.convert import delete_all_markers, marker_array
 from monet_ros.io.markers import frustum_marker_specs
+from monet_ros.jit import warm_up
 from monet_ros.nodes.names import (
     CROP_SLOT,
     DIAGNOSTICS,
@@ -283,6 +284,8 @@ class FusionNode(Node):
         self.skeleton = load_skeleton(config.skeleton)
         self.frame_id = config.frame_id or rig_frame
         self.subjects = self.subjects_core(config) if config.subjects > 1 else None
+        # the compiled kernels (undistortion, association) now, not on the first frame
+        self.get_logger().info(f'compiled kernels ready in {warm_up():.1f} s')
         # the message sources: the cameras, or with subjects >= 2 their crop slots
         sources = [heatmap_sources(cam.name, config.subjects, discovery_slots(
             cam.width, cam.height, config.discovery_tiles)) for cam in self.cameras]

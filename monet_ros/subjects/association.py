@@ -140,7 +140,8 @@ def pair_costs(ideal, present, view, F, min_common):
                        np.asarray(view, np.int64), F, int(min_common))
 
 
-@kernel
+@kernel(example=lambda: (np.zeros((2, 1, 2)), np.ones((2, 1), bool), np.arange(2),
+                         np.zeros((2, 2, 3, 3)), 1))
 def _pair_costs(ideal, present, view, F, min_common):
     """pair_costs compiled (monet_ros.jit): loops over instance pairs and keypoints. The
     distance of keypoint c: 0.5 |x_b^T F x_a| (1 / |l_a| + 1 / |l_b|), l_a = F x_a the line
@@ -201,7 +202,7 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     return _dissolve_pairs(label, cost, view, num_views, threshold_px)
 
 
-@kernel
+@kernel(example=lambda: (np.zeros((2, 2)), np.arange(2), 2, 1.0, np.zeros((2, 2), bool)))
 def _merge_clusters(cost, view, num_views, threshold_px, strong):
     """Step 2 of cluster_instances compiled (monet_ros.jit) -> labels (M,) int64 (a cluster
     is labelled by one of its instances). Candidate order: strong before weak, then by cost

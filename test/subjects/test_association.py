@@ -357,3 +357,17 @@ def test_clustering_is_the_greedy_rule_written_plainly():
         first = {}
         assert [first.setdefault(g, w) for g, w in zip(got.tolist(), want)] == want
         assert len(set(got.tolist())) == len(set(want))
+
+
+def test_degenerate_epipolar_geometry_gives_no_cost_not_an_error():
+    """Two cameras with one centre have no epipolar geometry (F = 0): every line is
+    degenerate, the distances are not finite, and the pair has no cost (inf), as numpy's
+    division by zero would give; the compiled loop raises nothing."""
+    from monet_ros.subjects.association import pair_costs
+
+    rng = np.random.default_rng(1)
+    ideal, present, view = _random_instances(rng, 6, 3, 5)
+    present[:] = True
+    ideal = rng.uniform(0, 640, ideal.shape)
+    cost, common = pair_costs(ideal, present, view, np.zeros((3, 3, 3, 3)), 1)
+    assert np.isinf(cost).all() and (common == 5).all()
