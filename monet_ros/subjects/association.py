@@ -134,10 +134,27 @@ def pair_costs(ideal, present, view, F, min_common):
     ideal (M, C, 2) undistorted pixels; present (M, C) bool; view (M,) camera indices;
     F (V, V, 3, 3) of pair_fundamentals. The distances are computed for the pairs that can
     have a cost only (two cameras, >= min_common common keypoints), each once (the cost is
-    symmetric: x_b^T F_ab x_a = x_a^T F_ba x_b). Compiled (_pair_costs)."""
-    return _pair_costs(np.asarray(ideal, np.float64),
-                       np.asarray(present, np.bool_),
-                       np.asarray(view, np.int64), F, int(min_common))
+    symmetric: x_b^T F_ab x_a = x_a^T F_ba x_b). Compiled (_pair_costs). Raises
+    ValueError for shapes that do not match or a camera index outside F (the compiled
+    loop does not check its indices)."""
+    ideal = np.asarray(ideal, np.float64)
+    present = np.asarray(present, np.bool_)
+    view = np.asarray(view, np.int64)
+    F = np.asarray(F, np.float64)
+    M, C = present.shape
+    if ideal.shape != (M, C, 2) or view.shape != (M,) or F.shape[1:] != (len(F), 3, 3):
+        raise ValueError(f'pair_costs: ideal {ideal.shape}, present {present.shape}, view '
+                         f'{view.shape} and F {F.shape} must be (M, C, 2), (M, C), (M,) and '
+                         '(V, V, 3, 3)')
+    _check_views(view, len(F))
+    return _pair_costs(ideal, present, view, F, int(min_common))
+
+
+def _check_views(view, num_views):
+    """ValueError unless every camera index of view (M,) is in [0, num_views)."""
+    if len(view) and not (0 <= view.min() and view.max() < num_views):
+        raise ValueError(f'camera indices must be in [0, {num_views}), got {view.min()} to '
+                         f'{view.max()}')
 
 
 @kernel(example=lambda: (np.zeros((2, 1, 2)), np.ones((2, 1), bool), np.arange(2),
@@ -193,12 +210,17 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
     first, then the others) cheapest first, merged when their clusters share no camera and
     their average linkage (mean finite cost between their members) is <= threshold_px;
     then _dissolve_pairs. view (M,) camera indices < num_views. Step 2 is compiled
-    (_merge_clusters)."""
+    (_merge_clusters). Raises ValueError for shapes that do not match or camera indices
+    outside [0, num_views)."""
+    view = np.asarray(view, np.int64)
     M = len(view)
-    strong = np.zeros((M, M), bool) if strong is None else strong
-    label = _merge_clusters(np.asarray(cost, np.float64),
-                            np.asarray(view, np.int64), int(num_views),
-                            float(threshold_px), np.asarray(strong, np.bool_))
+    cost = np.asarray(cost, np.float64)
+    strong = np.zeros((M, M), bool) if strong is None else np.asarray(strong, np.bool_)
+    if cost.shape != (M, M) or strong.shape != (M, M):
+        raise ValueError(f'cluster_instances: cost {cost.shape} and strong {strong.shape} '
+                         f'must be (M, M) for the M = {M} instances of view')
+    _check_views(view, num_views)
+    label = _merge_clusters(cost, view, int(num_views), float(threshold_px), strong)
     return _dissolve_pairs(label, cost, view, num_views, threshold_px)
 
 

@@ -371,3 +371,22 @@ def test_degenerate_epipolar_geometry_gives_no_cost_not_an_error():
     ideal = rng.uniform(0, 640, ideal.shape)
     cost, common = pair_costs(ideal, present, view, np.zeros((3, 3, 3, 3)), 1)
     assert np.isinf(cost).all() and (common == 5).all()
+
+
+def test_compiled_steps_refuse_indices_they_would_not_check():
+    """The compiled loops do not check indices: their callers refuse a camera index
+    outside the rig and shapes that do not match, naming what."""
+    from monet_ros.subjects.association import cluster_instances, pair_costs
+
+    ideal, present, view = np.zeros((3, 4, 2)), np.ones((3, 4), bool), np.array([0, 1, 2])
+    F = np.zeros((2, 2, 3, 3))
+    with pytest.raises(ValueError, match=r'camera indices must be in \[0, 2\), got 0 to 2'):
+        pair_costs(ideal, present, view, F, 1)
+    with pytest.raises(ValueError, match='must be'):
+        pair_costs(ideal[:2], present, view, F, 1)
+    with pytest.raises(ValueError, match=r'camera indices must be in \[0, 2\)'):
+        cluster_instances(np.zeros((3, 3)), view, 2, 15.0)
+    with pytest.raises(ValueError, match='must be \\(M, M\\)'):
+        cluster_instances(np.zeros((2, 2)), view, 3, 15.0)
+    with pytest.raises(ValueError, match='camera indices'):
+        cluster_instances(np.zeros((3, 3)), np.array([0, -1, 1]), 3, 15.0)
