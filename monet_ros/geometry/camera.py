@@ -222,13 +222,19 @@ def _radial_undistort(uv, K, k, iterations, tol):
 
 def _radial_undistort_normalized(k1, k2, k3, x0, y0, iterations, tol):
     """_radial_undistort of distorted normalised points (x0, y0) (any shape; k1, k2, k3
-    scalars or broadcastable to it) -> the ideal (x, y) of that shape (K = identity, a
-    camera per point)."""
-    x0, y0, k1, k2, k3 = np.broadcast_arrays(x0, y0, k1, k2, k3)
-    shape = x0.shape
-    uv = np.stack([x0, y0], axis=-1).reshape(-1, 1, 2)
-    K = np.tile(np.eye(3), (len(uv), 1, 1))
-    k = np.stack([k1, k2, k3], axis=-1).reshape(-1, 3)
+    scalars or broadcastable to it) -> the ideal (x, y) of that shape (K = identity: one
+    camera, or one per point where the coefficients are arrays)."""
+    x0, y0 = np.broadcast_arrays(x0, y0)
+    if all(np.ndim(k) == 0 for k in (k1, k2, k3)):
+        shape = x0.shape
+        uv = np.stack([x0, y0], axis=-1).reshape(1, -1, 2)
+        K, k = np.eye(3)[None], np.array([[k1, k2, k3]], np.float64)
+    else:  # a camera per point
+        x0, y0, k1, k2, k3 = np.broadcast_arrays(x0, y0, k1, k2, k3)
+        shape = x0.shape
+        uv = np.stack([x0, y0], axis=-1).reshape(-1, 1, 2)
+        K = np.tile(np.eye(3), (len(uv), 1, 1))
+        k = np.stack([k1, k2, k3], axis=-1).reshape(-1, 3)
     out = _radial_undistort(uv, K, k, iterations, tol).reshape(shape + (2,))
     return out[..., 0], out[..., 1]
 
