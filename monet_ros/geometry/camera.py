@@ -105,9 +105,10 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
     """Ideal normalised (x, y) with distort(x, y) = (x0, y0): Newton's method on the OpenCV
     model with its analytic 2x2 Jacobian, all points at once (d12: (12,) or, for V
     cameras, (V, 12) against x0, y0 (V, N); terms: _model_terms(d12) when known). Stops
-    after `iterations` (>= 1) or when every finite step is <= tol; NaN where the last
-    iterate before the final step misses (x0, y0) by more than 1e-9 (relative) or lies
-    past a fold of the model (Jacobian determinant <= 0): no unique inverse there."""
+    after `iterations` (>= 1) or when every finite step is <= tol; NaN where a point has
+    not converged (its last step above tol) and the last iterate before the final step
+    misses (x0, y0) by more than 1e-9 (relative), or where it lies past a fold of the
+    model (Jacobian determinant <= 0): no unique inverse there."""
     terms = terms or _model_terms(d12)
     (k1, k2, p1, p2, k3, k4, k5, k6, s1, s2, s3, s4), rational, prism, tangential = terms
     if not (rational or prism or tangential):
@@ -162,9 +163,11 @@ def _undistort_newton(d12, x0, y0, iterations, tol, terms=None):
             change = np.maximum(np.abs(step_x), np.abs(step_y))
             if not ((change > tol) & (change < np.inf)).any():  # every finite step <= tol
                 break
-        # the residual and Jacobian of the last evaluated iterate (the final step only
-        # refines it further): no extra evaluation of the model
-        failed = ~((np.hypot(fx, fy) <= 1e-9 * np.maximum(1.0, np.hypot(x0, y0)))
+        # converged (the last step <= tol: a caller's loose tol is not a failure) or the
+        # residual of the last evaluated iterate within 1e-9 (the final step only refines it
+        # further: no extra evaluation of the model), and its Jacobian not folded
+        failed = ~(((change <= tol)
+                    | (np.hypot(fx, fy) <= 1e-9 * np.maximum(1.0, np.hypot(x0, y0))))
                    & (det > 0))
     return np.where(failed, np.nan, x), np.where(failed, np.nan, y)
 
@@ -181,11 +184,12 @@ def _radial_undistort(uv, K, k, iterations, tol):
     r0, and the ideal point is c + (r / r0) (uv - c). These are the 2D Newton iterates of
     _undistort_newton in exact arithmetic (a 2D step of a radial model stays on the ray)
     with its stopping rule per point (`iterations` at most, or a step <= tol or not
-    finite). Failures: a residual above 1e-9 (relative) at the last evaluated iterate or a
-    root past the fold: the 2D Jacobian's eigenvalues along and across the ray (along,
-    radial) must both be > 0, i.e. the root on the branch that starts at the centre (the
-    2D solve asks only for their product, and past the fold can land on the opposite ray
-    where both are negative: a point the model maps there, but from behind its fold).
+    finite). Failures: not converged (a last step above tol) with a residual above 1e-9
+    (relative) at the last evaluated iterate, or a root past the fold: the 2D Jacobian's
+    eigenvalues along and across the ray (along, radial) must both be > 0, i.e. the root
+    on the branch that starts at the centre (the 2D solve asks only for their product, and
+    past the fold can land on the opposite ray where both are negative: a point the model
+    maps there, but from behind its fold).
     Inside the fold the iteration from r0 is monotone (f = r radial - r0 is concave for
     barrel, convex for pincushion distortion), so it finds that branch's root."""
     V, n = uv.shape[0], uv.shape[1]
@@ -199,7 +203,7 @@ def _radial_undistort(uv, K, k, iterations, tol):
             y0 = dv / fy
             x0 = (du - skew * y0) / fx
             r0 = np.sqrt(x0 * x0 + y0 * y0)
-            r, f, radial, along = r0, np.nan, np.nan, np.nan
+            r, f, radial, along, step = r0, np.nan, np.nan, np.nan, np.nan
             for _ in range(max(1, iterations)):
                 r2 = r * r
                 radial = 1 + r2 * (k1 + r2 * (k2 + r2 * k3))
@@ -209,8 +213,10 @@ def _radial_undistort(uv, K, k, iterations, tol):
                 r = r - step
                 if not (tol < abs(step) < np.inf):  # converged, or no finite step
                     break
-            # the residual and Jacobian of the last evaluated iterate, as _undistort_newton
-            if abs(f) <= 1e-9 * max(1.0, r0) and radial > 0 and along > 0:
+            # converged (the last step <= tol) or the residual of the last evaluated iterate
+            # within 1e-9, and its Jacobian on the branch from the centre (_undistort_newton)
+            if ((abs(step) <= tol or abs(f) <= 1e-9 * max(1.0, r0))
+                    and radial > 0 and along > 0):
                 scale = r / r0 if r0 > 0 else 1.0
                 out[c, i, 0] = cx + scale * du
                 out[c, i, 1] = cy + scale * dv

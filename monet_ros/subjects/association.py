@@ -135,8 +135,8 @@ def pair_costs(ideal, present, view, F, min_common):
     F (V, V, 3, 3) of pair_fundamentals. The distances are computed for the pairs that can
     have a cost only (two cameras, >= min_common common keypoints), each once (the cost is
     symmetric: x_b^T F_ab x_a = x_a^T F_ba x_b). Compiled (_pair_costs). Raises
-    ValueError for shapes that do not match or a camera index outside F (the compiled
-    loop does not check its indices)."""
+    ValueError for shapes that do not match, a camera index outside F (the compiled loop
+    does not check its indices) or min_common < 1."""
     ideal = np.asarray(ideal, np.float64)
     present = np.asarray(present, np.bool_)
     view = np.asarray(view, np.int64)
@@ -147,6 +147,8 @@ def pair_costs(ideal, present, view, F, min_common):
                          f'{view.shape} and F {F.shape} must be (M, C, 2), (M, C), (M,) and '
                          '(V, V, 3, 3)')
     _check_views(view, len(F))
+    if not int(min_common) >= 1:
+        raise ValueError(f'pair_costs: min_common must be >= 1, got {min_common}')
     return _pair_costs(ideal, present, view, F, int(min_common))
 
 
@@ -176,7 +178,7 @@ def _pair_costs(ideal, present, view, F, min_common):
                 if present[a, c] and present[b, c]:
                     n += 1
             common[a, b] = common[b, a] = n
-            if b == a or n < min_common or view[a] == view[b]:
+            if b == a or n == 0 or n < min_common or view[a] == view[b]:
                 continue
             f = F[view[a], view[b]]                   # x_b^T f x_a = 0
             j = 0

@@ -302,3 +302,22 @@ def test_crop_camera_projects_into_crop_pixels():
     np.testing.assert_allclose(
         heat.undistort_points(heat.project(X)),
         (np.hstack([cam.undistort_points(full), np.ones((100, 1))]) @ S.T)[:, :2], atol=1e-9)
+
+
+@pytest.mark.parametrize('dist', [(-0.3, 0.1, 0.0, 0.0, -0.02), (-0.3, 0.1, 0.01, -0.005, 0.0)])
+def test_a_loose_tolerance_gives_converged_points_not_nan(dist):
+    """undistort_normalized(tol=...) stops each point within the caller's tolerance: with
+    a loose tol the points are finite and within it of the tight solve (a radial model's
+    1D solve, and the 2D solve of a model with tangential terms), the same alone or in a
+    batch of other points (the iteration of one point does not depend on the others)."""
+    cam = random_camera(np.random.default_rng(4)).replace(dist=np.array(dist))
+    xy = np.random.default_rng(5).uniform(-0.5, 0.5, (400, 2))
+    tight = cam.undistort_normalized(xy)
+    assert np.isfinite(tight).all()
+    for tol in (1e-3, 1e-6, 1e-9):
+        loose = cam.undistort_normalized(xy, tol=tol)
+        assert np.isfinite(loose).all(), tol
+        np.testing.assert_allclose(loose, tight, atol=10 * tol)
+    if not any(dist[2:4]):
+        one = cam.undistort_normalized(xy[:1], tol=1e-3)
+        np.testing.assert_array_equal(one, cam.undistort_normalized(xy, tol=1e-3)[:1])

@@ -390,3 +390,13 @@ def test_compiled_steps_refuse_indices_they_would_not_check():
         cluster_instances(np.zeros((2, 2)), view, 3, 15.0)
     with pytest.raises(ValueError, match='camera indices'):
         cluster_instances(np.zeros((3, 3)), np.array([0, -1, 1]), 3, 15.0)
+
+
+def test_pair_costs_refuse_min_common_below_one():
+    """min_common < 1 would ask for the median of no keypoints (AssociationConfig refuses
+    it too): refused by name."""
+    from monet_ros.subjects.association import pair_costs
+
+    with pytest.raises(ValueError, match='min_common must be >= 1, got 0'):
+        pair_costs(np.zeros((2, 0, 2)), np.zeros((2, 0), bool), np.array([0, 1]),
+                   np.zeros((2, 2, 3, 3)), 0)
