@@ -285,7 +285,8 @@ class FusionNode(Node):
         self.frame_id = config.frame_id or rig_frame
         self.subjects = self.subjects_core(config) if config.subjects > 1 else None
         # the compiled kernels (undistortion, association) now, not on the first frame
-        self.get_logger().info(f'compiled kernels ready in {warm_up():.1f} s')
+        # (said in the start-up line: nothing is logged before every start check passed)
+        self.kernel_seconds = warm_up()
         # the message sources: the cameras, or with subjects >= 2 their crop slots
         sources = [heatmap_sources(cam.name, config.subjects, discovery_slots(
             cam.width, cam.height, config.discovery_tiles)) for cam in self.cameras]
@@ -368,7 +369,8 @@ class FusionNode(Node):
                f'..crop<k> (k < {"/".join(map(str, sorted(set(slots))))} per camera: '
                f'{config.subjects} subject crops, then the discovery maps of '
                f'discovery_tiles {config.discovery_tiles})' if self.subjects is not None
-               else ''))
+               else '')
+            + f'; compiled kernels ready in {self.kernel_seconds:.1f} s')
 
     @staticmethod
     def make_filter(config, derived):
