@@ -6,8 +6,9 @@ points, where each numpy call costs 1-5 us whatever its size (bench/subjects.py)
 command that never calls a kernel does not pay its import. A process's first kernel call
 takes ~0.7 s with the machine code cached (numba's import and start), ~2-5 s on a machine
 that has not compiled it yet (measured on a 2-core EPYC); later calls cost ~2 us plus the
-work. Array arguments are passed C-contiguous and writable (a copy where they are not),
-so each kernel compiles once per dtype, not once per memory layout. Settings, the same
+work. Array arguments are passed as read-only C-contiguous views (a copy only where they
+are not C-contiguous), so each kernel compiles once per dtype, not once per memory layout
+or flag, and cannot write to its inputs. Settings, the same
 for every kernel: cache=True (the machine code is kept in the source's __pycache__, or in
 numba's user cache where that is not writable, keyed by the CPU: a later process loads it
 instead of compiling), nogil (a live node's other threads run beside it), numpy's error
@@ -81,8 +82,12 @@ def _compile(fn):
 
 
 def _plain(arg):
-    """An array argument as a C-contiguous, writable array (numba types read-only and
-    strided arrays apart: each would be another compilation); others unchanged."""
-    if isinstance(arg, np.ndarray) and not (arg.flags.c_contiguous and arg.flags.writeable):
-        return np.array(arg, order='C')
-    return arg
+    """An array argument as a read-only, C-contiguous array: a read-only view (a copy only
+    where it is not C-contiguous), as numba types read-only and strided arrays apart (each
+    would be another compilation); kernels write only to the arrays they make. Others
+    unchanged."""
+    if not isinstance(arg, np.ndarray):
+        return arg
+    view = arg.view() if arg.flags.c_contiguous else np.ascontiguousarray(arg)
+    view.flags.writeable = False
+    return view

@@ -222,7 +222,12 @@ def cluster_instances(cost, view, num_views, threshold_px, strong=None):
         raise ValueError(f'cluster_instances: cost {cost.shape} and strong {strong.shape} '
                          f'must be (M, M) for the M = {M} instances of view')
     _check_views(view, num_views)
-    label = _merge_clusters(cost, view, int(num_views), float(threshold_px), strong)
+    return _clusters(cost, view, int(num_views), float(threshold_px), strong)
+
+
+def _clusters(cost, view, num_views, threshold_px, strong):
+    """cluster_instances of checked arrays (associate's own: no second check per frame)."""
+    label = _merge_clusters(cost, view, num_views, threshold_px, strong)
     return _dissolve_pairs(label, cost, view, num_views, threshold_px)
 
 
@@ -363,10 +368,12 @@ def associate(points2d, cameras, scores=None, config=None):
     M = len(view)
     if M < 2:
         return _empty(V, C, M)
-    cost, common = pair_costs(ideal[view, slot], present[view, slot], view,
-                              pair_fundamentals(cameras), config.min_common)
-    label = cluster_instances(cost, view, V, config.threshold_px,
-                              common >= min(config.strong_common, C))
+    # pair_costs and cluster_instances of arrays made here (no checks needed: view from
+    # np.nonzero, the config's min_common >= 1)
+    cost, common = _pair_costs(ideal[view, slot], present[view, slot], view,
+                               pair_fundamentals(cameras), config.min_common)
+    label = _clusters(cost, view, V, config.threshold_px,
+                      common >= min(config.strong_common, C))
     size = np.bincount(label, minlength=M)
     ids = np.flatnonzero(size >= config.min_views)
     if not len(ids):

@@ -48,24 +48,51 @@ from scipy.optimize import linear_sum_assignment
 
 from monet_ros.config import setting, validate_config
 from monet_ros.geometry.units import check_units, from_m, from_mm
+from monet_ros.jit import kernel
 from monet_ros.temporal import cv_kalman
 
 
 def masked_median(values, mask):
     """Per-axis median of values (..., C, 3) over the entries `mask` (..., C) -> (..., 3);
-    NaN where the mask is empty (np.nanmedian's numbers, by one sort; the middle entries
-    are taken by flat fancy indexing: take_along_axis costs more than the sort here)."""
-    C = values.shape[-2]
-    lead = values.shape[:-2]
-    if not C:
-        return np.full(lead + (3,), np.nan)
-    v = np.sort(np.where(mask[..., None], values, np.inf), axis=-2).reshape(-1, C, 3)
-    n = mask.sum(-1).reshape(-1)
-    rows = np.arange(len(n))
-    # (n - 1) // 2 and n // 2, both < C; n = 0 picks inf and is NaN below
-    out = 0.5 * (v[rows, np.maximum(n - 1, 0) // 2] + v[rows, n // 2])
-    out[n == 0] = np.nan
-    return out.reshape(lead + (3,))
+    NaN where the mask is empty (np.nanmedian's numbers). _displacement_medians against a
+    reference of zeros."""
+    values = np.asarray(values, np.float64)
+    lead, C = values.shape[:-2], values.shape[-2]
+    L = int(np.prod(lead))
+    med, _ = _displacement_medians(values.reshape(L, C, 3),
+                                   np.asarray(mask, np.bool_).reshape(L, C), np.zeros((1, C, 3)))
+    return med[0].reshape(lead + (3,))
+
+
+@kernel(example=lambda: (np.zeros((1, 2, 3)), np.ones((1, 2), bool), np.zeros((1, 2, 3))))
+def _displacement_medians(X, finite, ref):
+    """(med (T, S, 3), n (T, S)): the per-axis median over the keypoints common to subject
+    s and reference t (finite[s, c] and ref[t, c] not NaN) of X[s, c] - ref[t, c], NaN
+    where none is common (the mean of the middle two of an even count, as np.nanmedian),
+    and how many are common. X (S, C, 3), finite (S, C) bool, ref (T, C, 3) NaN where not
+    known. Compiled (monet_ros.jit): an insertion sort per axis (C is a skeleton's
+    keypoints: a few dozen)."""
+    S, C = finite.shape
+    T = ref.shape[0]
+    med = np.empty((T, S, 3))
+    count = np.zeros((T, S), np.int64)
+    buf = np.empty(C)
+    for t in range(T):
+        for s in range(S):
+            for axis in range(3):
+                n = 0
+                for c in range(C):
+                    if finite[s, c] and not np.isnan(ref[t, c, 0]):
+                        x = X[s, c, axis] - ref[t, c, axis]
+                        i = n
+                        while i > 0 and buf[i - 1] > x:
+                            buf[i] = buf[i - 1]
+                            i -= 1
+                        buf[i] = x
+                        n += 1
+                med[t, s, axis] = 0.5 * (buf[(n - 1) // 2] + buf[n // 2]) if n else np.nan
+                count[t, s] = n
+    return med, count
 
 
 @dataclass(frozen=True)
@@ -177,11 +204,9 @@ class SubjectTracker:
         """body_distance's numbers; finite (S, C): np.isfinite(X).all(-1) when at hand."""
         if finite is None:
             finite = np.isfinite(X).all(-1)
-        disp = X[None] - self.ref[:, None]                               # (T, S, C, 3)
         # (ref is NaN at the joints never measured, X at those not triangulated)
-        common = np.isfinite(self.ref[..., 0])[:, None] & finite[None]   # (T, S, C)
-        n = common.sum(-1)
-        z = self.ref_body[:, None] + masked_median(disp, common)
+        med, n = _displacement_medians(X, finite, self.ref)
+        z = self.ref_body[:, None] + med
         gap = z - b[:, None]
         with np.errstate(invalid='ignore'):
             dist = np.where(n > 0, np.sqrt((gap * gap).sum(-1)), np.inf)
